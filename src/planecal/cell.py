@@ -1,0 +1,165 @@
+"""The cell: sensor on the flange, plane(s) in the base frame, the distance model
+d(qe; params) (seed 6.14) and its analytic parameter Jacobian.
+
+Parameters (SI):
+  joint_offsets  delta (6,) rad, theta_i = q_i + delta_i + theta0_i
+  sensor_origin  o (3,) m in the flange frame
+  phi_y, phi_z   beam z_f = Rz(phi_z) Ry(phi_y) e_z = (cz sy, sz sy, cy) in the flange frame
+  planes         n~ (k, 3) 1/m in the base frame, n~ . p = 1 on plane k
+
+The parameter vector orders them [delta1..6, o_x, o_y, o_z, phi_y, phi_z, n1_x, n1_y,
+n1_z, n2_x, ...]: robot and sensor shared, one n~ per plane (seed 6.3).
+
+Jacobian (derived here, equal to the seed's 6.20-6.23): with p_m = o_b + d z_b the hit
+point and s = n~ . z_b,
+  dd/dn~      = -p_m / s
+  dd/do       = -(R^T n~) / s
+  dd/dphi     = -d (R^T n~) . dz_f/dphi / s
+  dd/ddelta_i = -n~ . (z_{i-1} x (p_m - o_{i-1})) / s
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planecal.encoder import counts_to_joints
+from planecal.robot import Robot, fk, fk_frames
+
+N_SHARED = 11  # 6 offsets + 3 origin + 2 angles
+
+
+@dataclass
+class CellParams:
+    joint_offsets: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    sensor_origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    phi_y: float = 0.0
+    phi_z: float = 0.0
+    planes: np.ndarray = field(default_factory=lambda: np.zeros((1, 3)))
+
+    def __post_init__(self):
+        self.joint_offsets = np.asarray(self.joint_offsets, float).reshape(6)
+        self.sensor_origin = np.asarray(self.sensor_origin, float).reshape(3)
+        self.planes = np.asarray(self.planes, float).reshape(-1, 3)
+        self.phi_y = float(self.phi_y)
+        self.phi_z = float(self.phi_z)
+
+    @property
+    def n_planes(self) -> int:
+        return len(self.planes)
+
+    def to_vector(self) -> np.ndarray:
+        return np.concatenate([self.joint_offsets, self.sensor_origin,
+                               [self.phi_y, self.phi_z], self.planes.ravel()])
+
+    @classmethod
+    def from_vector(cls, x: np.ndarray) -> "CellParams":
+        x = np.asarray(x, float)
+        return cls(x[:6], x[6:9], x[9], x[10], x[N_SHARED:].reshape(-1, 3))
+
+    def copy(self) -> "CellParams":
+        return CellParams.from_vector(self.to_vector())
+
+
+def parameter_names(n_planes: int) -> list[str]:
+    names = [f"delta{i}" for i in range(1, 7)] + ["o_x", "o_y", "o_z", "phi_y", "phi_z"]
+    for k in range(1, n_planes + 1):
+        names += [f"n{k}_x", f"n{k}_y", f"n{k}_z"]
+    return names
+
+
+def parameter_units(n_planes: int) -> list[str]:
+    return ["rad"] * 6 + ["m"] * 3 + ["rad"] * 2 + ["1/m"] * (3 * n_planes)
+
+
+def beam_direction(phi_y: float, phi_z: float) -> np.ndarray:
+    sy, cy, sz, cz = np.sin(phi_y), np.cos(phi_y), np.sin(phi_z), np.cos(phi_z)
+    return np.array([cz * sy, sz * sy, cy])
+
+
+def beam_direction_derivative(phi_y: float, phi_z: float) -> np.ndarray:
+    """d z_f / d(phi_y, phi_z): (3, 2)."""
+    sy, cy, sz, cz = np.sin(phi_y), np.cos(phi_y), np.sin(phi_z), np.cos(phi_z)
+    return np.array([[cz * cy, -sz * sy], [sz * cy, cz * sy], [-sy, 0.0]])
+
+
+def sensor_rotation(phi_y: float, phi_z: float) -> np.ndarray:
+    """Flange->sensor rotation Rz(phi_z) Ry(phi_y) (seed 6.7); its z column is the beam."""
+    sy, cy, sz, cz = np.sin(phi_y), np.cos(phi_y), np.sin(phi_z), np.cos(phi_z)
+    return np.array([[cz * cy, -sz, cz * sy], [sz * cy, cz, sz * sy], [-sy, 0.0, cy]])
+
+
+def sensor_in_base(robot: Robot, q: np.ndarray, params: CellParams):
+    """Sensor origin o_b (N,3) and beam z_b (N,3) in the base frame for joint angles q."""
+    T = fk(robot, q, params.joint_offsets)
+    R, p = T[..., :3, :3], T[..., :3, 3]
+    o_b = R @ params.sensor_origin + p
+    z_b = R @ beam_direction(params.phi_y, params.phi_z)
+    return o_b, z_b
+
+
+def plane_distance(n_tilde: np.ndarray, o_b: np.ndarray, z_b: np.ndarray) -> np.ndarray:
+    """Distance along the beam from o_b to the plane n~ . p = 1 (seed 6.14)."""
+    return (1.0 - np.sum(n_tilde * o_b, -1)) / np.sum(n_tilde * z_b, -1)
+
+
+def predict(robot: Robot, qe: np.ndarray, params: CellParams,
+            plane_index: np.ndarray | None = None) -> np.ndarray:
+    """Model distance [m] for encoder counts qe (N,6) on plane_index (N,) (default 0)."""
+    q = counts_to_joints(robot, qe)
+    o_b, z_b = sensor_in_base(robot, q, params)
+    n = params.planes[0 if plane_index is None else np.asarray(plane_index)]
+    return plane_distance(n, o_b, z_b)
+
+
+def predict_with_jacobian(robot: Robot, qe: np.ndarray, params: CellParams,
+                          plane_index: np.ndarray | None = None):
+    """Model distance d (N,) [m] and its Jacobian (N, 11 + 3k) w.r.t. to_vector()."""
+    qe = np.atleast_2d(qe)
+    N = len(qe)
+    pidx = np.zeros(N, int) if plane_index is None else np.asarray(plane_index, int)
+    q = counts_to_joints(robot, qe)
+    F = fk_frames(robot, q, params.joint_offsets)
+    R, p = F[:, -1, :3, :3], F[:, -1, :3, 3]
+    zf = beam_direction(params.phi_y, params.phi_z)
+    o_b = R @ params.sensor_origin + p
+    z_b = R @ zf
+    n = params.planes[pidx]
+    s = np.sum(n * z_b, -1)
+    d = (1.0 - np.sum(n * o_b, -1)) / s
+    p_m = o_b + d[:, None] * z_b
+    J = np.zeros((N, N_SHARED + 3 * params.n_planes))
+    # joint offsets: rotation about z_{i-1} through o_{i-1}
+    z_axes, origins = F[:, :-1, :3, 2], F[:, :-1, :3, 3]
+    moment = np.cross(z_axes, p_m[:, None, :] - origins)
+    J[:, :6] = -np.einsum("nk,njk->nj", n, moment) / s[:, None]
+    nf = np.einsum("nki,nk->ni", R, n)  # R^T n~
+    J[:, 6:9] = -nf / s[:, None]
+    J[:, 9:11] = -(d / s)[:, None] * (nf @ beam_direction_derivative(params.phi_y, params.phi_z))
+    cols = N_SHARED + 3 * pidx[:, None] + np.arange(3)
+    J[np.arange(N)[:, None], cols] = -p_m / s[:, None]
+    return d, J
+
+
+# ----- plane representations (seed 6.4.2, appendix D) -----
+
+def n_tilde_from_point_normal(point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """n~ = n (p.n)/|p.n|^2 for the plane through ``point`` with unit ``normal``."""
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    h = float(np.dot(point, n))
+    if abs(h) < 1e-9:
+        raise ValueError("plane passes through the base origin: n~ cannot describe it")
+    return n / h
+
+
+def point_normal_from_n_tilde(n_tilde: np.ndarray):
+    """Closest plane point to the origin and the unit normal pointing away from the origin."""
+    n_tilde = np.asarray(n_tilde, float)
+    nn = float(n_tilde @ n_tilde)
+    return n_tilde / nn, n_tilde / np.sqrt(nn)
+
+
+def transform_n_tilde(T: np.ndarray, n_tilde: np.ndarray) -> np.ndarray:
+    """Express a plane given in frame P by n~ in frame B, with T = B_T_P (appendix D)."""
+    p, nhat = point_normal_from_n_tilde(n_tilde)
+    return n_tilde_from_point_normal(T[:3, :3] @ p + T[:3, 3], T[:3, :3] @ nhat)

@@ -1,0 +1,234 @@
+"""Robot description (loaded from models/<robot>/robot.json), forward kinematics,
+geometric Jacobian and closed-form inverse kinematics.
+
+Convention (MODEL-NOTES): standard DH, ``T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``
+with ``theta_i = q_i + delta_i + theta0_i``; ``q`` are joint angles from the encoder
+model and ``delta`` the joint offsets that calibration identifies. SI units (m, rad).
+Every function is vectorized over leading axes of ``q``.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from planecal.errors import InputError
+from planecal.paths import data_path
+
+DEFAULT_ROBOT = "mc70"
+
+
+@dataclass(frozen=True)
+class Robot:
+    name: str
+    theta0: np.ndarray  # (6,) rad
+    d: np.ndarray  # (6,) m
+    a: np.ndarray  # (6,) m
+    alpha: np.ndarray  # (6,) rad
+    limits: np.ndarray  # (6, 2) rad, [lower, upper]
+    gains: np.ndarray  # (6,) counts/rad
+    qe0: np.ndarray  # (6,) counts at the zero reference
+    coupling: np.ndarray  # (6, 6) C with q = C x
+    encoder_bits: int
+    ik_kind: str | None
+    repeatability_m: float
+    tick_s: float
+    max_step_counts: int
+    trip_step_counts: int
+    home_counts: np.ndarray  # (6,) int64
+    source: Path | None = None
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.d)
+
+
+def load_robot(name_or_path: str | Path = DEFAULT_ROBOT) -> Robot:
+    """Load a robot description: a name under models/ (``mc70``) or a path to robot.json."""
+    p = Path(name_or_path)
+    if not p.suffix:
+        p = data_path("models") / str(name_or_path) / "robot.json"
+    try:
+        raw = json.loads(p.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{p}: robot description not found") from None
+    except json.JSONDecodeError as e:
+        raise InputError(f"{p}:{e.lineno}: invalid JSON: {e.msg}") from None
+    try:
+        dh = raw["dh"]
+        n = len(dh)
+        enc = raw["encoder"]
+        C = np.eye(n)
+        for row, col, value in enc.get("coupling", []):
+            C[row - 1, col - 1] = value
+        ctrl = raw["controller"]
+        robot = Robot(
+            name=raw["name"],
+            theta0=np.array([j["theta0_rad"] for j in dh], float),
+            d=np.array([j["d_m"] for j in dh], float),
+            a=np.array([j["a_m"] for j in dh], float),
+            alpha=np.array([j["alpha_rad"] for j in dh], float),
+            limits=np.deg2rad(np.array(raw["joint_limits_deg"], float)),
+            gains=np.array(enc["gain_counts_per_rad"], float),
+            qe0=np.array(enc["offset_counts"], float),
+            coupling=C,
+            encoder_bits=int(enc.get("bits", 24)),
+            ik_kind=raw.get("inverse_kinematics"),
+            repeatability_m=float(raw.get("repeatability_mm", 0.0)) * 1e-3,
+            tick_s=float(ctrl["tick_s"]),
+            max_step_counts=int(ctrl["max_step_counts"]),
+            trip_step_counts=int(ctrl["trip_step_counts"]),
+            home_counts=np.array(ctrl["home_counts"], np.int64),
+            source=p,
+        )
+    except (KeyError, TypeError, ValueError) as e:
+        raise InputError(f"{p}: bad robot description: {type(e).__name__}: {e}") from None
+    for name in ("theta0", "a", "alpha", "gains", "qe0", "home_counts"):
+        if len(getattr(robot, name)) != n:
+            raise InputError(f"{p}: '{name}' has {len(getattr(robot, name))} entries, dh has {n}")
+    if robot.limits.shape != (n, 2):
+        raise InputError(f"{p}: joint_limits_deg must hold {n} [lower, upper] pairs")
+    return robot
+
+
+def dh_transforms(robot: Robot, theta: np.ndarray) -> np.ndarray:
+    """Per-joint DH transforms A_i for full joint angles theta (...,6) -> (...,6,4,4)."""
+    theta = np.asarray(theta, float)
+    ct, st = np.cos(theta), np.sin(theta)
+    ca, sa = np.cos(robot.alpha), np.sin(robot.alpha)
+    A = np.zeros(theta.shape + (4, 4))
+    A[..., 0, 0] = ct
+    A[..., 0, 1] = -st * ca
+    A[..., 0, 2] = st * sa
+    A[..., 0, 3] = robot.a * ct
+    A[..., 1, 0] = st
+    A[..., 1, 1] = ct * ca
+    A[..., 1, 2] = -ct * sa
+    A[..., 1, 3] = robot.a * st
+    A[..., 2, 1] = sa
+    A[..., 2, 2] = ca
+    A[..., 2, 3] = robot.d
+    A[..., 3, 3] = 1.0
+    return A
+
+
+def full_angles(robot: Robot, q: np.ndarray, delta: np.ndarray | None = None) -> np.ndarray:
+    theta = np.asarray(q, float) + robot.theta0
+    return theta if delta is None else theta + delta
+
+
+def fk_frames(robot: Robot, q: np.ndarray, delta: np.ndarray | None = None) -> np.ndarray:
+    """Frames 0..n (base, after joint 1, ..., flange) in the base frame: (..., n+1, 4, 4)."""
+    A = dh_transforms(robot, full_angles(robot, q, delta))
+    n = robot.n_joints
+    F = np.empty(A.shape[:-3] + (n + 1, 4, 4))
+    F[..., 0, :, :] = np.eye(4)
+    for i in range(n):
+        F[..., i + 1, :, :] = F[..., i, :, :] @ A[..., i, :, :]
+    return F
+
+
+def fk(robot: Robot, q: np.ndarray, delta: np.ndarray | None = None) -> np.ndarray:
+    """Flange pose in the base frame, (..., 4, 4)."""
+    A = dh_transforms(robot, full_angles(robot, q, delta))
+    T = A[..., 0, :, :]
+    for i in range(1, robot.n_joints):
+        T = T @ A[..., i, :, :]
+    return T
+
+
+def jacobian(robot: Robot, q: np.ndarray, delta: np.ndarray | None = None) -> np.ndarray:
+    """Geometric Jacobian of the flange in the base frame, rows (v, w): (..., 6, n)."""
+    F = fk_frames(robot, q, delta)
+    z = F[..., :-1, :3, 2]  # axes z_{i-1}
+    o = F[..., :-1, :3, 3]
+    p = F[..., -1:, :3, 3]
+    Jv = np.cross(z, p - o)
+    return np.concatenate([np.swapaxes(Jv, -1, -2), np.swapaxes(z, -1, -2)], axis=-2)
+
+
+def within_limits(robot: Robot, q: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    q = np.asarray(q, float)
+    return np.all((q >= robot.limits[:, 0] - tol) & (q <= robot.limits[:, 1] + tol), axis=-1)
+
+
+def _wrap(x):
+    return (x + np.pi) % (2 * np.pi) - np.pi
+
+
+def ik_all(robot: Robot, T: np.ndarray, delta: np.ndarray | None = None,
+           within: bool = True) -> np.ndarray:
+    """All closed-form IK solutions (k, 6) for one flange pose T (4x4).
+
+    Only the spherical-wrist geometry of the MC70 family (a6 = a5 = a4 = 0, d2 = d3 = 0,
+    alpha = (+90, 0, +90, -90, +90, 0) deg) is supported. Joints with a range beyond
+    +-180 deg get every 2*pi-equivalent solution inside the limits.
+    """
+    if robot.ik_kind != "spherical_wrist":
+        raise InputError(f"{robot.name}: no closed-form inverse kinematics for this robot")
+    T = np.asarray(T, float)
+    d1, d4, d6 = robot.d[0], robot.d[3], robot.d[5]
+    a1, a2, a3 = robot.a[0], robot.a[1], robot.a[2]
+    off = robot.theta0 + (0.0 if delta is None else np.asarray(delta, float))
+    R, p = T[:3, :3], T[:3, 3]
+    w = p - d6 * R[:, 2]
+    L = np.hypot(a3, d4)
+    beta = np.arctan2(d4, a3)
+    sols = []
+    rho = np.hypot(w[0], w[1])
+    for front in (True, False):
+        th1 = np.arctan2(w[1], w[0]) if front else np.arctan2(-w[1], -w[0])
+        r = (rho if front else -rho) - a1
+        s = w[2] - d1
+        c = (r * r + s * s - a2 * a2 - L * L) / (2 * a2 * L)
+        if abs(c) > 1 + 1e-12:
+            continue
+        c = np.clip(c, -1.0, 1.0)
+        for phi in {np.arccos(c), -np.arccos(c)}:
+            th3 = phi + beta
+            th2 = np.arctan2(s, r) - np.arctan2(L * np.sin(phi), a2 + L * np.cos(phi))
+            th123 = np.array([th1, th2, th3, 0, 0, 0])
+            R03 = fk_frames(robot, th123 - off)[3, :3, :3]
+            R36 = R03.T @ R
+            s5 = np.hypot(R36[0, 2], R36[1, 2])
+            for sign in (1.0, -1.0):
+                th5 = np.arctan2(sign * s5, R36[2, 2])
+                if s5 < 1e-12:  # wrist singularity: only th4 + th6 is defined; keep th4 = 0
+                    th4 = 0.0
+                    th6 = np.arctan2(R36[1, 0], R36[0, 0])
+                else:
+                    th4 = np.arctan2(sign * R36[1, 2], sign * R36[0, 2])
+                    th6 = np.arctan2(sign * R36[2, 1], -sign * R36[2, 0])
+                sols.append(np.array([th1, th2, th3, th4, th5, th6]) - off)
+    out = []
+    for q in sols:
+        q = _wrap(q)
+        # every 2*pi-equivalent of each joint that fits within the limits
+        choices = []
+        for j in range(6):
+            lo, hi = robot.limits[j]
+            ks = np.arange(np.ceil((lo - q[j]) / (2 * np.pi) - 1e-12),
+                           np.floor((hi - q[j]) / (2 * np.pi) + 1e-12) + 1)
+            vals = q[j] + 2 * np.pi * ks
+            choices.append(vals if within else np.array([q[j]]))
+        grids = np.meshgrid(*choices, indexing="ij")
+        out.append(np.stack([g.ravel() for g in grids], axis=-1))
+    if not out:
+        return np.zeros((0, 6))
+    Q = np.concatenate(out)
+    if within:
+        Q = Q[within_limits(robot, Q)]
+    return Q
+
+
+def ik_nearest(robot: Robot, T: np.ndarray, q_near: np.ndarray,
+               delta: np.ndarray | None = None, weights: np.ndarray | None = None):
+    """The IK solution within limits nearest to q_near (weighted max-norm), or None."""
+    Q = ik_all(robot, T, delta)
+    if len(Q) == 0:
+        return None
+    w = np.ones(6) if weights is None else weights
+    cost = np.max(np.abs(Q - q_near) * w, axis=1)
+    return Q[np.argmin(cost)]
