@@ -1,0 +1,1 @@
+"""Subcommands of the planecal CLI (one module each)."""
