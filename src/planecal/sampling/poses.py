@@ -1,0 +1,147 @@
+"""Random sensor poses on the calibration plate(s) and their joint targets (seed 7.1.2).
+
+A pose is drawn in the plate's frame (``Plate.frame()``: origin at a corner on the measured
+face, x and y along the edges, z the facing normal, pointing to the side the sensor is on):
+
+- the laser spot p: uniform over the plate shrunk by ``margin_m`` on every edge;
+- the beam b (the sensor's +z, pointing from the sensor towards the plate): uniform over the
+  *solid angle* of a cone of half-angle ``cone_deg`` about -z (the plate's inward normal):
+  cos(theta) ~ U[cos(cone), 1], azimuth ~ U[0, 2 pi). (The seed adds +-30 deg independently
+  to roll, pitch and yaw; that spreads unevenly over the cone, and its cone is 60 deg wide,
+  i.e. a 30 deg half-angle, the default here.)
+- the distance d along the beam: U[lo, hi] mm (the scene's ``sampling.distance_mm``) or a
+  fixed value; the sensor origin is o = p - d b, so the beam hits p after d;
+- a rotation psi about the beam: U[-roll, +roll] (``roll_deg``, default 180: any roll)
+  measured from the plate's x edge projected normal to the beam.
+
+The sensor pose T_base_sensor = [x y b o] is turned into a flange pose with the *nominal*
+flange->sensor transform (``cell.sensor_rotation(phi_y, phi_z)``, scene sensor origin):
+T_base_flange = T_base_sensor inv(T_flange_sensor). Only the beam of the nominal sensor
+frame matters to the distance model; the sensor's own x axis is arbitrary but fixed.
+
+The joint target is ``robot.ik_nearest`` to the current configuration within the joint
+limits, nearest in the largest number of encoder counts any joint must travel (weights =
+|gains|, i.e. the fewest 10 ms ticks), with the nominal (zero) joint offsets.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planecal.cell import sensor_rotation
+from planecal.encoder import joints_to_counts
+from planecal.errors import InputError
+from planecal.robot import ik_nearest
+from planecal.scene import Scene
+
+PLATE_CHOICES = ("round_robin", "random")
+
+
+@dataclass
+class PoseSettings:
+    cone_deg: float = 30.0
+    distance_mm: tuple[float, float] = (70.0, 90.0)
+    fixed_distance_mm: float | None = None
+    margin_m: float = 0.025
+    roll_deg: float = 180.0
+    plate_choice: str = "round_robin"
+
+    def check(self, scene: Scene) -> None:
+        """Raise InputError for settings the scene cannot use."""
+        if not 0.0 <= self.cone_deg < 90.0:
+            raise InputError(f"cone half-angle must be in [0, 90) deg, got {self.cone_deg}")
+        if not 0.0 <= self.roll_deg <= 180.0:
+            raise InputError(f"roll range must be in [0, 180] deg, got {self.roll_deg}")
+        lo_r, hi_r = scene.laser_range_mm
+        if self.fixed_distance_mm is not None:
+            if not lo_r <= self.fixed_distance_mm <= hi_r:
+                raise InputError(f"fixed distance {self.fixed_distance_mm} mm is outside the "
+                                 f"laser range {lo_r}-{hi_r} mm")
+        else:
+            lo, hi = self.distance_mm
+            if not (lo_r <= lo <= hi <= hi_r):
+                raise InputError(f"distance range {lo}-{hi} mm is not within the laser range "
+                                 f"{lo_r}-{hi_r} mm")
+        if self.plate_choice not in PLATE_CHOICES:
+            raise InputError(f"plate choice must be one of {', '.join(PLATE_CHOICES)}, "
+                             f"got {self.plate_choice!r}")
+        for i, plate in enumerate(scene.plates):
+            if np.any(plate.size <= 2 * self.margin_m):
+                raise InputError(f"plate {i + 1} ({plate.name}) is smaller than twice the "
+                                 f"margin {self.margin_m * 1e3:.0f} mm")
+
+
+@dataclass
+class SensorPose:
+    plate: int  # 0-based plate index
+    point: np.ndarray  # (3,) laser spot on the nominal plane, base frame [m]
+    beam: np.ndarray  # (3,) unit beam direction, base frame
+    distance_m: float
+    T_sensor: np.ndarray  # (4,4) base <- sensor
+    T_flange: np.ndarray  # (4,4) base <- flange (nominal sensor mounting)
+    theta: float  # beam angle from the plate's inward normal [rad]
+
+
+class PoseGenerator:
+    """Draws random sensor poses on a scene's plates; see the module docstring."""
+
+    def __init__(self, scene: Scene, settings: PoseSettings | None = None):
+        self.scene = scene
+        self.robot = scene.robot
+        self.settings = settings or PoseSettings(cone_deg=scene.cone_deg,
+                                                 distance_mm=tuple(scene.distance_mm))
+        self.settings.check(scene)
+        self.frames = [p.frame() for p in scene.plates]
+        T_fs = np.eye(4)
+        T_fs[:3, :3] = sensor_rotation(scene.phi_y, scene.phi_z)
+        T_fs[:3, 3] = scene.sensor_origin
+        self.T_sf = np.linalg.inv(T_fs)  # sensor <- flange
+        self.weights = np.abs(self.robot.gains)
+
+    @property
+    def n_plates(self) -> int:
+        return len(self.frames)
+
+    def plate_for(self, index: int, rng: np.random.Generator) -> int:
+        """Plate for sample ``index``: round robin over the plates, or uniformly random."""
+        if self.n_plates == 1:
+            return 0
+        if self.settings.plate_choice == "random":
+            return int(rng.integers(self.n_plates))
+        return index % self.n_plates
+
+    def draw(self, rng: np.random.Generator, plate: int = 0) -> SensorPose:
+        s = self.settings
+        F = self.frames[plate]
+        size = self.scene.plates[plate].size
+        u = rng.uniform(s.margin_m, size[0] - s.margin_m)
+        v = rng.uniform(s.margin_m, size[1] - s.margin_m)
+        cos_t = rng.uniform(np.cos(np.deg2rad(s.cone_deg)), 1.0)
+        az = rng.uniform(0.0, 2 * np.pi)
+        psi = rng.uniform(-np.deg2rad(s.roll_deg), np.deg2rad(s.roll_deg))
+        if s.fixed_distance_mm is not None:
+            d = s.fixed_distance_mm * 1e-3
+        else:
+            d = rng.uniform(*s.distance_mm) * 1e-3
+        x_p, y_p, z_p, c = F[:3, 0], F[:3, 1], F[:3, 2], F[:3, 3]
+        sin_t = np.sqrt(max(0.0, 1.0 - cos_t * cos_t))
+        beam = -cos_t * z_p + sin_t * (np.cos(az) * x_p + np.sin(az) * y_p)
+        point = c + u * x_p + v * y_p
+        x0 = x_p - (x_p @ beam) * beam
+        x0 /= np.linalg.norm(x0)
+        y0 = np.cross(beam, x0)
+        T = np.eye(4)
+        T[:3, 0] = np.cos(psi) * x0 + np.sin(psi) * y0
+        T[:3, 1] = np.cross(beam, T[:3, 0])
+        T[:3, 2] = beam
+        T[:3, 3] = point - d * beam
+        return SensorPose(plate, point, beam, d, T, T @ self.T_sf, float(np.arccos(min(cos_t, 1.0))))
+
+    def joint_target(self, pose: SensorPose, q_near: np.ndarray):
+        """Joint angles (6,) reaching ``pose`` within the limits nearest to ``q_near``,
+        or None when unreachable."""
+        return ik_nearest(self.robot, pose.T_flange, q_near, weights=self.weights)
+
+    def counts_target(self, q: np.ndarray) -> np.ndarray:
+        return joints_to_counts(self.robot, q)

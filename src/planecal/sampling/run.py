@@ -1,0 +1,487 @@
+"""The sampling run loop (seed 7.1), shared by the twin rehearsal and the real cell.
+
+It only talks to a ``RobotLink``, a ``Laser``, an ``EnableSignal`` (``planecal.links.base``)
+and a collision checker (``check_config(q)`` / ``check_path(q0, q1)`` returning an object
+with ``.ok``, like ``planecal.collision.CollisionWorld``). Per sample:
+
+1. draw a random sensor pose (``poses.PoseGenerator``) on a plate, IK nearest to the
+   configuration last commanded -> joint target; none within limits: rejected
+   ``unreachable``;
+2. collision check of the target configuration and of the straight joint-space motion to it
+   (the step generator interpolates linearly in counts, hence in joint angles); not clear:
+   rejected ``collision``. A rejected pose is replaced by a new draw (the robot does not move);
+3. the step generator's rows (``steps.step_path``, <= 50 counts a tick, 5 dwell ticks) are
+   sent one per tick with ``link.exchange`` while ``enable.enabled()``;
+4. the laser is read, one reading per tick while the hold delta keeps being sent
+   (``laserread.read_stable``); no stable reading: rejected ``laser`` (the robot moves on);
+5. the sample -- current counts from the last reply and the distance in mm -- is appended
+   to the sample file (``SampleWriter``: flushed and fsynced), then the sidecar is updated.
+
+When the enable signal drops no further delta is sent; the run stops cleanly with
+``status = "stopped"``: the sample file holds every sample taken, the sidecar is current.
+
+Sidecar ``RUN.tsv.json`` (written atomically -- temp file, fsync, rename -- after every
+sample and when the run ends)::
+
+    {"format": "planecal-run/1",
+     "status": "running" | "complete" | "stopped" | "gave_up",
+     "stop_reason": str | null,
+     "scene": name, "scene_path": str, "robot": name, "seed": int,
+     "samples_target": N, "samples": taken so far,
+     "settings": {"pose": {cone_deg, distance_mm, fixed_distance_mm, margin_m, roll_deg,
+                           plate_choice},
+                  "laser": {buffer_len, spread_mm, max_out_of_range, max_reads},
+                  "dwell_ticks", "nominal_step_counts", "max_attempts", "clearance_m",
+                  "collision_checking": bool},
+     "rejected": {"collision": n, "laser": n, "unreachable": n},
+     "laser_give_ups": {"out_of_range": n, "not_stable": n},
+     "ticks", "robot_time_s", "wall_time_s", "max_step_counts",   (over all sessions)
+     "sessions": number of sessions (1 + resumes),
+     "rng_state": numpy PCG64 bit-generator state after the last sample,
+     "sample_file": file name, "plates": number of plates (plate column written if > 1),
+     "updated_utc": ISO time}
+
+``--resume`` reads the sidecar, takes scene and settings from it, counts the samples in the
+file (the file wins if a run died between writing a sample and the sidecar), restores the
+random generator, and goes on until ``samples_target`` -- from wherever the robot is.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable, Protocol
+
+import numpy as np
+
+from planecal.encoder import counts_to_joints, joints_to_counts
+from planecal.errors import InputError
+from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
+from planecal.sampling.poses import PoseGenerator, PoseSettings
+from planecal.sampling.steps import COUNT_LIMIT, DWELL_TICKS, NOMINAL_STEP, max_step, step_path
+from planecal.scene import Scene
+
+SIDECAR_FORMAT = "planecal-run/1"
+REJECT_KINDS = ("collision", "laser", "unreachable")
+
+
+# ----- observer -------------------------------------------------------------------------
+
+class Observer(Protocol):
+    """Hooks for logging (e.g. Rerun); the loop never depends on what they do.
+    ``q`` are joint angles [rad] (nominal encoder model), counts are int64[6]."""
+
+    def on_tick(self, tick: int, delta: np.ndarray, reference: np.ndarray,
+                current: np.ndarray, laser_mm: float | None) -> None: ...
+
+    def on_sample(self, index: int, qe: np.ndarray, d_mm: float, plate: int) -> None: ...
+
+    def on_reject(self, q_target: np.ndarray | None, reason: str) -> None: ...
+
+    def on_path(self, kind: str, q_start: np.ndarray, q_goal: np.ndarray,
+                rows: np.ndarray) -> None: ...
+
+
+class NullObserver:
+    """Does nothing. ``wants_ticks = False`` lets the driver skip the per-tick call; an
+    observer without that attribute (or with it True) gets ``on_tick`` every tick."""
+
+    wants_ticks = False
+
+    def on_tick(self, tick, delta, reference, current, laser_mm):
+        pass
+
+    def on_sample(self, index, qe, d_mm, plate):
+        pass
+
+    def on_reject(self, q_target, reason):
+        pass
+
+    def on_path(self, kind, q_start, q_goal, rows):
+        pass
+
+
+# ----- driver: the one owner of the link's delta ------------------------------------------
+
+class EnableDropped(Exception):
+    """The enable signal dropped: nothing more is sent."""
+
+
+class PathBlocked(RuntimeError):
+    """A requested move (home, calibration position) is not collision-free or reachable."""
+
+
+class Driver:
+    """Sends deltas to a RobotLink one tick at a time and remembers the last one sent, so
+    every path (home, calibration position, samples) starts where the last one ended and
+    no step ever exceeds the step limit. Before each tick it checks the enable signal and
+    raises ``EnableDropped`` instead of sending."""
+
+    def __init__(self, link, enable, robot, observer: Observer | None = None):
+        self.link = link
+        self.enable = enable
+        self.robot = robot
+        self.observer = observer or NullObserver()
+        self._on_tick = (self.observer.on_tick
+                         if getattr(self.observer, "wants_ticks", True) else None)
+        self.delta = np.zeros(robot.n_joints, np.int64)
+        self.reference: np.ndarray | None = None
+        self.current: np.ndarray | None = None
+        self.ticks = 0
+        self.max_step_counts = 0
+
+    def start(self) -> None:
+        """First exchange: zero delta (commanded = reference), learn reference and current."""
+        if self.reference is None:
+            self.send(np.zeros(self.robot.n_joints, np.int64))
+
+    def send(self, delta: np.ndarray, laser=None) -> float | None:
+        """One tick: send ``delta``; with ``laser``, read it once and return the reading."""
+        if not self.enable.enabled():
+            raise EnableDropped()
+        ref, cur = self.link.exchange(delta)
+        self.ticks += 1
+        self.delta = delta
+        self.reference = ref
+        self.current = cur
+        reading = laser.read() if laser is not None else None
+        if self._on_tick is not None:
+            self._on_tick(self.ticks, delta, ref, cur, reading)
+        return reading
+
+    def follow(self, rows: np.ndarray) -> None:
+        """Send each row, one per tick (stops, by ``EnableDropped``, when enable drops)."""
+        before = self.delta
+        sent = 0
+        try:
+            for row in rows:
+                self.send(row)
+                sent += 1
+        finally:
+            self.max_step_counts = max(self.max_step_counts, max_step(before, rows[:sent]))
+
+    def read_laser(self, laser, settings: LaserSettings) -> LaserResult:
+        hold = self.delta
+        return read_stable(lambda: self.send(hold, laser), settings)
+
+    @property
+    def commanded_counts(self) -> np.ndarray:
+        return self.reference.astype(np.int64) + self.delta
+
+    def commanded_q(self) -> np.ndarray:
+        return counts_to_joints(self.robot, self.commanded_counts)
+
+    @property
+    def robot_time_s(self) -> float:
+        return self.ticks * self.robot.tick_s
+
+
+def plan_move(driver: Driver, qe_goal: np.ndarray, nominal: int = NOMINAL_STEP,
+              dwell: int = DWELL_TICKS) -> np.ndarray | None:
+    """Rows taking the robot from the last delta to absolute counts ``qe_goal``, or None
+    when the goal is outside the 24-bit encoder range."""
+    qe_goal = np.asarray(qe_goal, np.int64)
+    if np.any(qe_goal < 0) or np.any(qe_goal >= COUNT_LIMIT):
+        return None
+    goal = qe_goal - driver.reference.astype(np.int64)
+    return step_path(driver.delta, goal, nominal, dwell)
+
+
+def move_to_counts(driver: Driver, qe_goal, checker, kind: str = "move",
+                   nominal: int = NOMINAL_STEP, dwell: int = DWELL_TICKS) -> int:
+    """A checked move to absolute encoder counts (home, calibration position). Raises
+    ``PathBlocked`` if the goal is out of range/limits or the motion is not collision-free;
+    ``EnableDropped`` if enable drops on the way. Returns the ticks used."""
+    driver.start()
+    robot = driver.robot
+    qe_goal = np.asarray(qe_goal, np.int64)
+    q_goal = counts_to_joints(robot, qe_goal)
+    rows = plan_move(driver, qe_goal, nominal, dwell)
+    if rows is None:
+        raise PathBlocked(f"{kind}: target counts outside the 24-bit encoder range")
+    from planecal.robot import within_limits
+    if not within_limits(robot, q_goal):
+        raise PathBlocked(f"{kind}: target outside the joint limits")
+    q0 = driver.commanded_q()
+    for what, res in (("target", checker.check_config(q_goal)),
+                      ("path", checker.check_path(q0, q_goal))):
+        if not res.ok:
+            pair = getattr(res, "pair", None)
+            raise PathBlocked(f"{kind}: {what} not collision-free"
+                              + (f" ({pair[0]} - {pair[1]})" if pair else ""))
+    driver.observer.on_path(kind, q0, q_goal, rows)
+    t0 = driver.ticks
+    driver.follow(rows)
+    return driver.ticks - t0
+
+
+def move_home(driver: Driver, scene: Scene, checker) -> int:
+    """To the scene's home counts (seed: hard-coded encoder values)."""
+    home = scene.home_counts if scene.home_counts is not None else scene.robot.home_counts
+    return move_to_counts(driver, home, checker, "home")
+
+
+def move_to_calibration(driver: Driver, scene: Scene, checker) -> int:
+    """To the scene's calibration position (near the plates)."""
+    if scene.calibration_q is None:
+        raise PathBlocked(f"scene {scene.name} defines no calibration position")
+    return move_to_counts(driver, joints_to_counts(scene.robot, scene.calibration_q), checker,
+                          "calibration")
+
+
+# ----- settings, sidecar -------------------------------------------------------------------
+
+@dataclass
+class RunSettings:
+    scene: str
+    samples: int = 150
+    seed: int = 0
+    pose: PoseSettings = field(default_factory=PoseSettings)
+    laser: LaserSettings = field(default_factory=LaserSettings)
+    dwell_ticks: int = DWELL_TICKS
+    nominal_step_counts: int = NOMINAL_STEP
+    max_attempts: int = 500  # poses rejected in a row before the run gives up
+    clearance_m: float = 0.01
+    collision_checking: bool = True
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["pose"]["distance_mm"] = list(self.pose.distance_mm)
+        for k in ("scene", "samples", "seed"):
+            d.pop(k)
+        return d
+
+    @classmethod
+    def from_sidecar(cls, side: dict, where: str = "<sidecar>") -> "RunSettings":
+        try:
+            s = side["settings"]
+            pose = dict(s["pose"])
+            pose["distance_mm"] = tuple(pose["distance_mm"])
+            return cls(scene=side["scene_path"] or side["scene"], samples=int(side["samples_target"]),
+                       seed=int(side["seed"]), pose=PoseSettings(**pose),
+                       laser=LaserSettings(**s["laser"]),
+                       **{k: s[k] for k in ("dwell_ticks", "nominal_step_counts", "max_attempts",
+                                            "clearance_m", "collision_checking")})
+        except (KeyError, TypeError, ValueError) as e:
+            raise InputError(f"{where}: not a planecal run sidecar ({type(e).__name__}: {e})") from None
+
+
+def sidecar_path(out: str | Path) -> Path:
+    out = Path(out)
+    return out.with_name(out.name + ".json")
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(json.dumps(data, indent=2) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def load_sidecar(out: str | Path) -> dict:
+    p = sidecar_path(out)
+    try:
+        side = json.loads(p.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{p}: no run sidecar to resume from") from None
+    except json.JSONDecodeError as e:
+        raise InputError(f"{p}:{e.lineno}: invalid JSON: {e.msg}") from None
+    if not isinstance(side, dict) or side.get("format") != SIDECAR_FORMAT:
+        raise InputError(f"{p}: not a planecal run sidecar (format {SIDECAR_FORMAT})")
+    return side
+
+
+def count_samples(path: Path) -> int:
+    """Complete sample lines in a sample file (header and a partial last line excluded)."""
+    if not path.exists():
+        return 0
+    data = path.read_bytes()
+    lines = data.split(b"\n")[:-1]  # the part after the last newline is incomplete
+    return sum(1 for ln in lines if ln.strip() and not ln.lstrip().lower().startswith(b"q1"))
+
+
+@dataclass
+class RunStats:
+    samples: int = 0
+    rejected: dict = field(default_factory=lambda: {k: 0 for k in REJECT_KINDS})
+    laser_give_ups: dict = field(default_factory=lambda: {"out_of_range": 0, "not_stable": 0})
+    ticks: int = 0
+    robot_time_s: float = 0.0
+    wall_time_s: float = 0.0
+    max_step_counts: int = 0
+    sessions: int = 1
+    status: str = "running"
+    stop_reason: str | None = None
+
+    def summary(self) -> dict:
+        return {"samples": self.samples, "rejected_collision": self.rejected["collision"],
+                "rejected_laser": self.rejected["laser"],
+                "rejected_unreachable": self.rejected["unreachable"],
+                "laser_out_of_range": self.laser_give_ups["out_of_range"],
+                "laser_not_stable": self.laser_give_ups["not_stable"],
+                "max_step_counts": self.max_step_counts, "ticks": self.ticks,
+                "robot_time_s": round(self.robot_time_s, 3),
+                "wall_time_s": round(self.wall_time_s, 3),
+                "status": self.status, "stop_reason": self.stop_reason,
+                "sessions": self.sessions}
+
+
+# ----- the run -------------------------------------------------------------------------------
+
+class SamplingRun:
+    """One sampling run into ``out`` (and its sidecar). ``driver`` may already have moved
+    (e.g. to the calibration position); the run's tick counts include only its own ticks.
+    ``resume=True`` continues the run recorded in the sidecar (``settings`` should come from
+    ``RunSettings.from_sidecar``)."""
+
+    def __init__(self, driver: Driver, laser, scene: Scene, settings: RunSettings, out,
+                 checker, *, resume: bool = False,
+                 progress: Callable[[RunStats], None] | None = None):
+        if checker is None:
+            raise ValueError("a collision checker is required")
+        self.driver = driver
+        self.laser = laser
+        self.scene = scene
+        self.robot = scene.robot
+        self.settings = settings
+        self.out = Path(out)
+        self.checker = checker
+        self.progress = progress
+        self.observer = driver.observer
+        self.poses = PoseGenerator(scene, settings.pose)
+        self.stats = RunStats()
+        self.rng = np.random.default_rng(settings.seed)
+        self.resume = resume
+        if settings.samples < 1:
+            raise InputError(f"number of samples must be at least 1, got {settings.samples}")
+        if resume:
+            side = load_sidecar(self.out)
+            st = self.stats
+            st.rejected.update(side.get("rejected", {}))
+            st.laser_give_ups.update(side.get("laser_give_ups", {}))
+            st.ticks = int(side.get("ticks", 0))
+            st.wall_time_s = float(side.get("wall_time_s", 0.0))
+            st.max_step_counts = int(side.get("max_step_counts", 0))
+            st.sessions = int(side.get("sessions", 1)) + 1
+            st.samples = count_samples(self.out)
+            if side.get("rng_state"):
+                self.rng.bit_generator.state = side["rng_state"]
+            st.robot_time_s = st.ticks * self.robot.tick_s
+
+    # -- sidecar
+    def sidecar(self) -> dict:
+        st = self.stats
+        return {
+            "format": SIDECAR_FORMAT, "status": st.status, "stop_reason": st.stop_reason,
+            "scene": self.scene.name,
+            "scene_path": str(self.scene.path) if self.scene.path else None,
+            "robot": self.robot.name, "seed": self.settings.seed,
+            "samples_target": self.settings.samples, "samples": st.samples,
+            "settings": self.settings.to_dict(),
+            "rejected": dict(st.rejected), "laser_give_ups": dict(st.laser_give_ups),
+            "ticks": st.ticks, "robot_time_s": round(st.robot_time_s, 3),
+            "wall_time_s": round(st.wall_time_s, 3), "max_step_counts": st.max_step_counts,
+            "sessions": st.sessions, "rng_state": self.rng.bit_generator.state,
+            "sample_file": self.out.name, "plates": len(self.scene.plates),
+            "updated_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        }
+
+    def _save(self) -> None:
+        write_json_atomic(sidecar_path(self.out), self.sidecar())
+
+    def _account(self) -> None:
+        st, drv = self.stats, self.driver
+        st.ticks = self._ticks0 + drv.ticks - self._drv_ticks0
+        st.robot_time_s = st.ticks * self.robot.tick_s
+        st.wall_time_s = self._wall0 + time.perf_counter() - self._t_wall
+        st.max_step_counts = max(self._step0, drv.max_step_counts)
+
+    def _reject(self, kind: str, q, reason: str) -> None:
+        self._account()
+        self.stats.rejected[kind] += 1
+        self._rejected_in_a_row += 1
+        self.observer.on_reject(q, reason)
+        if self.progress:
+            self.progress(self.stats)
+
+    # -- the loop
+    def run(self) -> RunStats:
+        from planecal.samples import SampleWriter
+
+        st, s, drv = self.stats, self.settings, self.driver
+        self._t_wall = time.perf_counter()
+        self._wall0, self._ticks0, self._step0 = st.wall_time_s, st.ticks, st.max_step_counts
+        self._drv_ticks0 = drv.ticks
+        drv.max_step_counts = 0
+        account = self._account
+        multi = len(self.scene.plates) > 1
+        writer = SampleWriter(self.out, append=self.resume, with_plate=multi)
+        self._rejected_in_a_row = 0
+
+        st.status = "running"
+        try:
+            drv.start()
+            self._save()
+            while st.samples < s.samples:
+                if self._rejected_in_a_row >= s.max_attempts:
+                    st.status = "gave_up"
+                    st.stop_reason = f"{s.max_attempts} poses rejected in a row"
+                    break
+                plate = self.poses.plate_for(st.samples, self.rng)
+                pose = self.poses.draw(self.rng, plate)
+                q0 = drv.commanded_q()
+                q = self.poses.joint_target(pose, q0)
+                if q is None:
+                    self._reject("unreachable", None, "unreachable: no IK solution within limits")
+                    continue
+                rows = plan_move(drv, joints_to_counts(self.robot, q), s.nominal_step_counts,
+                                 s.dwell_ticks)
+                if rows is None:
+                    self._reject("unreachable", q, "unreachable: counts outside the encoder range")
+                    continue
+                res = self.checker.check_config(q)
+                if res.ok:
+                    res = self.checker.check_path(q0, q)
+                    what = "path"
+                else:
+                    what = "target"
+                if not res.ok:
+                    pair = getattr(res, "pair", None)
+                    self._reject("collision", q, f"collision ({what})"
+                                 + (f": {pair[0]} - {pair[1]}" if pair else ""))
+                    continue
+                self.observer.on_path("sample", q0, q, rows)
+                drv.follow(rows)
+                lr = drv.read_laser(self.laser, s.laser)
+                if not lr.ok:
+                    st.laser_give_ups[lr.reason] = st.laser_give_ups.get(lr.reason, 0) + 1
+                    self._reject("laser", q, f"laser: {lr.describe()}")
+                    continue
+                qe = np.asarray(drv.current, np.int64).copy()
+                writer.write(qe, lr.value_mm, pose.plate)
+                self.observer.on_sample(st.samples, qe, lr.value_mm, pose.plate)
+                st.samples += 1
+                self._rejected_in_a_row = 0
+                account()
+                self._save()
+                if self.progress:
+                    self.progress(st)
+            else:
+                st.status = "complete"
+        except EnableDropped:
+            st.status = "stopped"
+            st.stop_reason = getattr(drv.enable, "reason", None) or "enable signal dropped"
+        except KeyboardInterrupt:
+            st.status = "stopped"
+            st.stop_reason = "interrupted"
+            raise
+        finally:
+            writer.close()
+            account()
+            self._save()
+        return st

@@ -1,0 +1,145 @@
+"""Random sensor poses (seed 7.1.2): spot on the plate within the margin, beam within the
+cone (uniform over its solid angle), distance in range; flange pose and IK consistent with
+the nominal sensor mounting."""
+import json
+
+import numpy as np
+import pytest
+
+from planecal.cell import predict, sensor_in_base
+from planecal.encoder import joints_to_counts
+from planecal.errors import InputError
+from planecal.robot import fk, within_limits
+from planecal.sampling.poses import PoseGenerator, PoseSettings
+from planecal.scene import load_scene, nominal_params
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("thesis_final")
+
+
+def two_plate_scene(tmp_path):
+    raw = json.loads(load_scene("thesis_final").path.read_text())
+    p2 = dict(raw["plates"][0], name="plate2", corner_m=[0.30, 0.80, 0.50],
+              n_tilde=[0.0, -0.9, 3.6])
+    raw["plates"].append(p2)
+    path = tmp_path / "two.json"
+    path.write_text(json.dumps(raw))
+    return load_scene(path)
+
+
+def draws(gen, n, seed=0, plate=0):
+    rng = np.random.default_rng(seed)
+    return [gen.draw(rng, plate) for _ in range(n)]
+
+
+def test_geometry_of_drawn_poses(scene):
+    s = PoseSettings(cone_deg=30.0, distance_mm=(70.0, 90.0), margin_m=0.025)
+    gen = PoseGenerator(scene, s)
+    F = scene.plates[0].frame()
+    size = scene.plates[0].size
+    inward = -F[:3, 2]
+    poses = draws(gen, 4000)
+    uv = np.array([F[:3, :2].T @ (p.point - F[:3, 3]) for p in poses])
+    off_plane = np.array([scene.plates[0].n_tilde @ p.point - 1 for p in poses])
+    cos_t = np.array([p.beam @ inward for p in poses])
+    d = np.array([p.distance_m for p in poses])
+    # spot on the plate, inside the margin, spread over it
+    assert np.max(np.abs(off_plane)) < 1e-12
+    assert uv[:, 0].min() >= 0.025 and uv[:, 0].max() <= size[0] - 0.025
+    assert uv[:, 1].min() >= 0.025 and uv[:, 1].max() <= size[1] - 0.025
+    assert uv[:, 0].max() - uv[:, 0].min() > 0.29 and uv[:, 1].max() - uv[:, 1].min() > 0.19
+    # beam within the cone, up to its rim
+    angle = np.rad2deg(np.arccos(np.clip(cos_t, -1, 1)))
+    assert angle.max() <= 30.0 + 1e-9 and angle.max() > 29.5
+    # uniform over the solid angle: cos(theta) ~ U[cos 30, 1]
+    c30 = np.cos(np.deg2rad(30))
+    u = (cos_t - c30) / (1 - c30)
+    assert abs(u.mean() - 0.5) < 0.015 and abs(np.mean(u < 0.25) - 0.25) < 0.025
+    # azimuth uniform: the mean tilt direction is near zero
+    tilt = np.array([p.beam - (p.beam @ inward) * inward for p in poses])
+    assert np.linalg.norm(tilt.mean(axis=0)) < 0.01
+    # distance in range and the sensor origin d before the spot along the beam
+    assert d.min() >= 0.070 and d.max() <= 0.090 and d.max() - d.min() > 0.019
+    for p in poses[:50]:
+        assert np.allclose(p.T_sensor[:3, 3] + p.distance_m * p.beam, p.point, atol=1e-12)
+        assert np.allclose(p.T_sensor[:3, :3].T @ p.T_sensor[:3, :3], np.eye(3), atol=1e-12)
+        assert np.linalg.det(p.T_sensor[:3, :3]) == pytest.approx(1.0)
+
+
+def test_fixed_distance_and_narrow_cone(scene):
+    gen = PoseGenerator(scene, PoseSettings(cone_deg=0.0, fixed_distance_mm=80.0, roll_deg=0.0))
+    inward = -scene.plates[0].frame()[:3, 2]
+    for p in draws(gen, 50):
+        assert p.distance_m == 0.080
+        assert np.allclose(p.beam, inward, atol=1e-12)
+
+
+def test_flange_pose_and_ik_meet_the_plate_at_the_drawn_distance(scene):
+    """IK target of the nominal flange pose: the nominal model predicts the drawn distance
+    (to the encoder's rounding) and the beam hits the drawn spot."""
+    gen = PoseGenerator(scene)
+    nom = nominal_params(scene)
+    rng = np.random.default_rng(5)
+    q = scene.calibration_q
+    n_ok = 0
+    for _ in range(60):
+        p = gen.draw(rng, 0)
+        qt = gen.joint_target(p, q)
+        if qt is None:
+            continue
+        n_ok += 1
+        assert within_limits(scene.robot, qt)
+        assert np.allclose(fk(scene.robot, qt), p.T_flange, atol=1e-9)
+        o_b, z_b = sensor_in_base(scene.robot, qt, nom)
+        assert np.allclose(o_b, p.T_sensor[:3, 3], atol=1e-9)
+        assert np.allclose(z_b, p.beam, atol=1e-9)
+        d = predict(scene.robot, joints_to_counts(scene.robot, qt)[None], nom)[0]
+        assert abs(d - p.distance_m) < 2e-4  # counts rounding: < 0.2 mm
+        q = qt
+    assert n_ok >= 50
+
+
+def test_ik_nearest_prefers_short_moves(scene):
+    """Among IK solutions the target needs the fewest ticks from the current configuration."""
+    from planecal.robot import ik_all
+    gen = PoseGenerator(scene)
+    rng = np.random.default_rng(2)
+    q = scene.calibration_q
+    for _ in range(20):
+        p = gen.draw(rng, 0)
+        qt = gen.joint_target(p, q)
+        if qt is None:
+            continue
+        all_q = ik_all(scene.robot, p.T_flange)
+        cost = np.max(np.abs(all_q - q) * np.abs(scene.robot.gains), axis=1)
+        assert np.max(np.abs(qt - q) * np.abs(scene.robot.gains)) == pytest.approx(cost.min())
+
+
+def test_plate_choice(tmp_path):
+    sc = two_plate_scene(tmp_path)
+    rng = np.random.default_rng(0)
+    rr = PoseGenerator(sc, PoseSettings(plate_choice="round_robin"))
+    assert [rr.plate_for(i, rng) for i in range(5)] == [0, 1, 0, 1, 0]
+    rnd = PoseGenerator(sc, PoseSettings(plate_choice="random"))
+    picks = [rnd.plate_for(i, rng) for i in range(400)]
+    assert 150 < sum(picks) < 250
+    for k in (0, 1):
+        for p in draws(rr, 20, plate=k):
+            assert p.plate == k
+            assert abs(sc.plates[k].n_tilde @ p.point - 1) < 1e-12
+
+
+@pytest.mark.parametrize("kw, msg", [
+    (dict(cone_deg=95.0), "cone"),
+    (dict(fixed_distance_mm=100.0), "laser range"),
+    (dict(distance_mm=(60.0, 90.0)), "laser range"),
+    (dict(plate_choice="nearest"), "plate choice"),
+    (dict(margin_m=0.2), "margin"),
+    (dict(roll_deg=200.0), "roll"),
+])
+def test_bad_settings_are_one_line_input_errors(scene, kw, msg):
+    with pytest.raises(InputError, match=msg) as e:
+        PoseGenerator(scene, PoseSettings(**kw))
+    assert "\n" not in str(e.value)

@@ -1,0 +1,296 @@
+"""The run loop on a fake cell (ideal servo + analytic distance model): samples written and
+flushed, the step limit kept, enable dropping mid-path stops the run with a valid file,
+--resume continues to N without duplicates, rejections counted, home/calibration moves."""
+import json
+
+import numpy as np
+import pytest
+from test_sampling_fakes import Clear, DropAfter, FakeCell, NullChecker
+
+from planecal.encoder import joints_to_counts
+from planecal.links.base import AlwaysEnabled
+from planecal.samples import read_samples
+from planecal.sampling import (Driver, FollowingMonitor, NullObserver, PathBlocked,
+                               PoseSettings, RunSettings, SamplingRun, load_sidecar,
+                               move_home, move_to_calibration, sidecar_path)
+from planecal.sampling.run import count_samples
+from planecal.scene import load_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("thesis_final")
+
+
+def settings(n, seed=1, **pose):
+    # a narrow roll range keeps the fake runs short; the loop does not care
+    return RunSettings(scene="thesis_final", samples=n, seed=seed,
+                       pose=PoseSettings(roll_deg=pose.pop("roll_deg", 30.0), **pose))
+
+
+class Recorder(NullObserver):
+    wants_ticks = True
+
+    def __init__(self, out=None):
+        self.out = out
+        self.samples, self.rejects, self.paths = [], [], []
+        self.ticks = 0
+        self.lines_on_disk = []
+        self.laser_ticks = 0
+
+    def on_tick(self, tick, delta, reference, current, laser_mm):
+        self.ticks = tick
+        self.laser_ticks += laser_mm is not None
+
+    def on_sample(self, index, qe, d_mm, plate):
+        self.samples.append((index, qe.copy(), d_mm, plate))
+        if self.out is not None:
+            self.lines_on_disk.append(count_samples(self.out))
+
+    def on_reject(self, q_target, reason):
+        self.rejects.append(reason)
+
+    def on_path(self, kind, q_start, q_goal, rows):
+        self.paths.append((kind, self.ticks, len(rows)))
+
+
+def run(scene, out, n, cell=None, enable=None, checker=None, observer=None, resume=False,
+        st=None):
+    cell = cell or FakeCell(scene)
+    drv = Driver(cell, enable or AlwaysEnabled(), scene.robot, observer)
+    st = st or settings(n)
+    r = SamplingRun(drv, cell, scene, st, out, checker or NullChecker(), resume=resume)
+    return r.run(), cell, drv
+
+
+def test_samples_written_flushed_and_step_limit_kept(scene, tmp_path):
+    out = tmp_path / "RUN.tsv"
+    obs = Recorder(out)
+    stats, cell, drv = run(scene, out, 8, observer=obs)
+    assert stats.status == "complete" and stats.samples == 8
+    # each sample was on disk (flushed) when on_sample fired
+    assert obs.lines_on_disk == list(range(1, 9))
+    s = read_samples(out)
+    assert len(s) == 8 and s.n_zero == 0
+    for (i, qe, d, plate), q_file, d_file in zip(obs.samples, s.qe, s.d_mm):
+        assert np.array_equal(qe, q_file)
+        assert d_file == pytest.approx(d, abs=1e-4)
+        # the reading belongs to the counts recorded with it (ideal servo, no noise)
+        assert d == pytest.approx(cell.true_mm(qe), abs=1e-9)
+        assert 65 <= d <= 95
+    # never more than 51 counts per joint per tick on the wire; the tracked max agrees
+    assert cell.max_jump <= 51
+    assert stats.max_step_counts == cell.max_jump
+    # robot time is ticks x 10 ms; each sample waited exactly 100 laser reads (no noise)
+    assert stats.ticks == len(cell.sent) and stats.robot_time_s == pytest.approx(stats.ticks * 0.01)
+    assert obs.laser_ticks == 8 * 100
+    side = load_sidecar(out)
+    assert side["samples"] == 8 and side["status"] == "complete" and side["seed"] == 1
+    assert side["settings"]["pose"]["cone_deg"] == 30.0
+    assert side["rejected"] == {"collision": 0, "laser": 0, "unreachable": stats.rejected["unreachable"]}
+    assert side["ticks"] == stats.ticks and side["wall_time_s"] > 0
+    # each path ends with 5 identical dwell deltas before the laser is read
+    sent = np.array(cell.sent)
+    for kind, t0, n in obs.paths:
+        assert np.all(sent[t0 + n - 5:t0 + n] == sent[t0 + n - 1])
+
+
+def _probe_path_ticks(scene, tmp_path, n, seed=1):
+    obs = Recorder()
+    run(scene, tmp_path / "probe.tsv", n, observer=obs, st=settings(n, seed))
+    return obs.paths
+
+
+def test_enable_dropped_mid_path_sends_nothing_more_and_leaves_a_valid_file(scene, tmp_path):
+    paths = _probe_path_ticks(scene, tmp_path, 5)
+    kind, t0, n = paths[3]  # the 4th path: 3 samples are taken by then
+    assert n > 40
+    drop = t0 + n // 2  # mid-path
+    out = tmp_path / "RUN.tsv"
+    stats, cell, _ = run(scene, out, 5, enable=DropAfter(drop))
+    assert len(cell.sent) == drop  # not one exchange after the drop
+    assert stats.status == "stopped" and "dead-man" in stats.stop_reason
+    # the last delta sent is mid-path (not at the target): the robot stopped on the way
+    assert not np.array_equal(cell.sent[-1], cell.sent[-2])
+    s = read_samples(out)
+    assert len(s) == 3
+    side = load_sidecar(out)
+    assert side["samples"] == 3 and side["status"] == "stopped"
+
+
+def test_resume_continues_to_n_without_duplicates(scene, tmp_path):
+    paths = _probe_path_ticks(scene, tmp_path, 6)
+    out = tmp_path / "RUN.tsv"
+    _, t0, n = paths[2]
+    stats1, cell1, _ = run(scene, out, 6, enable=DropAfter(t0 + n // 3))
+    assert stats1.samples == 2 and stats1.status == "stopped"
+    first = read_samples(out)
+    # a run killed while writing leaves a partial line: it is cut off on resume
+    with open(out, "a") as f:
+        f.write("8388608\t83886")
+    assert count_samples(out) == 2
+    side = load_sidecar(out)
+    st = RunSettings.from_sidecar(side)
+    assert st.samples == 6 and st.seed == 1 and st.pose.roll_deg == 30.0
+    # the robot starts from wherever it stopped (the fresh link's reference is there)
+    cell2 = FakeCell(scene, start_counts=cell1.cur)
+    stats2, cell2, _ = run(scene, out, 6, cell=cell2, resume=True, st=st)
+    assert stats2.status == "complete" and stats2.samples == 6 and stats2.sessions == 2
+    s = read_samples(out)
+    assert len(s) == 6
+    assert np.array_equal(s.qe[:2], first.qe) and np.array_equal(s.d_mm[:2], first.d_mm)
+    assert len({tuple(r) for r in s.qe}) == 6
+    assert out.read_text().count("q1\t") == 1  # one header
+    assert stats2.ticks == stats1.ticks + len(cell2.sent)
+    side = load_sidecar(out)
+    assert side["samples"] == 6 and side["sessions"] == 2 and side["status"] == "complete"
+    # the rng continued from the sidecar state: the new poses are not the first run's again
+    for qe, d in zip(s.qe[2:], s.d_mm[2:]):
+        assert d == pytest.approx(cell2.true_mm(qe), abs=1e-4)
+
+
+def test_resume_of_a_complete_run_takes_no_sample(scene, tmp_path):
+    out = tmp_path / "RUN.tsv"
+    run(scene, out, 2)
+    st = RunSettings.from_sidecar(load_sidecar(out))
+    stats, cell, _ = run(scene, out, 2, resume=True, st=st)
+    assert stats.samples == 2 and stats.status == "complete" and len(read_samples(out)) == 2
+    assert len(cell.sent) == 1  # just the first exchange that learns the reference
+
+
+class Picky:
+    """Rejects every third configuration and every fourth path."""
+
+    def __init__(self):
+        self.nc = self.np = 0
+
+    def check_config(self, q):
+        self.nc += 1
+        return Clear(ok=self.nc % 3 != 0, pair=("link6", "plate") if self.nc % 3 == 0 else None)
+
+    def check_path(self, q0, q1):
+        self.np += 1
+        return Clear(ok=self.np % 4 != 0)
+
+
+def test_rejections_are_counted_and_replaced(scene, tmp_path):
+    out = tmp_path / "RUN.tsv"
+    obs = Recorder()
+    # a laser window narrower than the drawn distances: some poses read out of range
+    cell = FakeCell(scene, window=(65.0, 80.0))
+    checker = Picky()
+    stats, cell, _ = run(scene, out, 10, cell=cell, checker=checker, observer=obs)
+    assert stats.samples == 10 and len(read_samples(out)) == 10
+    r = stats.rejected
+    assert r["collision"] == checker.nc // 3 + checker.np // 4 > 0
+    assert r["laser"] > 0 and stats.laser_give_ups["out_of_range"] == r["laser"]
+    assert len(obs.rejects) == sum(r.values())
+    assert any("link6 - plate" in x for x in obs.rejects)
+    assert any(x.startswith("laser: gave up: 400 out-of-range") for x in obs.rejects)
+    assert load_sidecar(out)["rejected"] == r
+
+
+def test_gives_up_when_every_pose_is_rejected(scene, tmp_path):
+    class Wall:
+        def check_config(self, q):
+            return Clear(ok=False)
+
+        def check_path(self, q0, q1):
+            return Clear(ok=False)
+
+    out = tmp_path / "RUN.tsv"
+    st = settings(3)
+    st.max_attempts = 40
+    stats, cell, _ = run(scene, out, 3, checker=Wall(), st=st)
+    assert stats.status == "gave_up" and stats.samples == 0
+    assert sum(stats.rejected.values()) == 40
+    assert count_samples(out) == 0 and out.read_text().startswith("q1\t")
+    assert len(cell.sent) == 1
+
+
+def test_following_monitor_drops_enable_when_the_robot_stops_following(scene, tmp_path):
+    class Brakes(FakeCell):
+        """The dead-man switch is released after tick ``at``: the robot stands still."""
+
+        def __init__(self, *a, at=0, **k):
+            super().__init__(*a, **k)
+            self.at = at
+
+        def exchange(self, delta):
+            frozen = self.cur.copy()
+            ref, cur = super().exchange(delta)
+            if len(self.sent) > self.at:
+                self.cur = frozen
+            return ref, self.cur.copy()
+
+    paths = _probe_path_ticks(scene, tmp_path, 3)
+    _, t0, n = paths[1]
+    cell = Brakes(scene, at=t0 + 5)
+    mon = FollowingMonitor(cell, tolerance_counts=600, ticks=5)
+    drv = Driver(mon, mon, scene.robot)
+    out = tmp_path / "RUN.tsv"
+    stats = SamplingRun(drv, cell, scene, settings(3), out, NullChecker()).run()
+    assert stats.status == "stopped" and "dead-man" in stats.stop_reason
+    assert stats.samples == 1 and len(read_samples(out)) == 1
+    # detected within tolerance/50 + ticks of the brakes; nothing sent after that
+    lag_ticks = len(cell.sent) - (t0 + 5)
+    assert 600 // 50 + 5 - 1 <= lag_ticks <= 600 // 50 + 5 + 1
+    assert mon.last_lag > 600
+
+
+def test_following_monitor_tolerates_a_lagging_but_following_servo(scene, tmp_path):
+    class Lagging(FakeCell):
+        """Follows the command 3 ticks late (150 counts behind at full speed)."""
+
+        def exchange(self, delta):
+            ref, _ = super().exchange(delta)
+            k = len(self.sent)
+            self.cur = ref + self.sent[max(0, k - 4)]
+            return ref, self.cur.copy()
+
+    cell = Lagging(scene)
+    mon = FollowingMonitor(cell)
+    stats = SamplingRun(Driver(mon, mon, scene.robot), cell, scene, settings(3),
+                        tmp_path / "RUN.tsv", NullChecker()).run()
+    assert stats.status == "complete" and mon.enabled()
+
+
+def test_home_and_calibration_moves(scene, tmp_path):
+    cell = FakeCell(scene)
+    obs = Recorder()
+    drv = Driver(cell, AlwaysEnabled(), scene.robot, obs)
+    n = move_home(drv, scene, NullChecker())
+    assert np.array_equal(cell.cur, scene.home_counts)
+    assert n == len(cell.sent) - 1
+    move_to_calibration(drv, scene, NullChecker())
+    assert np.array_equal(cell.cur, joints_to_counts(scene.robot, scene.calibration_q))
+    assert [p[0] for p in obs.paths] == ["home", "calibration"]
+    assert cell.max_jump <= 50 and drv.max_step_counts == cell.max_jump
+
+    class Blocked(NullChecker):
+        def check_path(self, q0, q1):
+            return Clear(ok=False, pair=("link3", "stand"))
+
+    with pytest.raises(PathBlocked, match="home: path not collision-free .link3 - stand."):
+        move_home(drv, scene, Blocked())
+
+
+def test_multi_plate_run_records_the_plate(scene, tmp_path):
+    raw = json.loads(scene.path.read_text())
+    # a second plate beside the first, on a parallel plane 10 mm nearer
+    p2 = dict(raw["plates"][0], name="plate2", corner_m=[0.729, 0.40, 0.39])
+    n1 = np.array(raw["plates"][0]["n_tilde"])
+    p2["n_tilde"] = list(n1 / (1 - 0.010 * np.linalg.norm(n1)))
+    raw["plates"].append(p2)
+    path = tmp_path / "two.json"
+    path.write_text(json.dumps(raw))
+    sc2 = load_scene(path)
+    out = tmp_path / "RUN.tsv"
+    obs = Recorder()
+    st = settings(6)
+    stats, cell, _ = run(sc2, out, 6, cell=FakeCell(sc2), observer=obs, st=st)
+    assert stats.samples == 6
+    s = read_samples(out)
+    assert list(s.plate) == [0, 1, 0, 1, 0, 1] == [x[3] for x in obs.samples]
+    assert load_sidecar(out)["plates"] == 2
+    assert sidecar_path(out).name == "RUN.tsv.json"
