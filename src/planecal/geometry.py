@@ -14,7 +14,7 @@ Conventions
 
 Robot envelope (``kind="collision"``)
 -------------------------------------
-Each link is one or two convex pieces, the convex hull of a few cylinders placed from
+Each link is one or two convex pieces (``name`` unique), the convex hull of a few cylinders placed from
 the DH dimensions of the MC70 (base column to 0.6 m, shoulder offset 0.15 m, upper arm
 0.9 m, elbow 0.15 m, forearm 0.99 m, wrist to flange 0.175 m). The collision pieces use
 polygons circumscribed about the nominal radius plus ``COLLISION_MARGIN`` and cylinder
@@ -88,6 +88,9 @@ class _Cyl:
     r: float
 
 
+_MC70_D = (0.600, 0.0, 0.0, 0.990, 0.0, 0.175)
+_MC70_A = (0.150, 0.900, 0.150, 0.0, 0.0, 0.0)
+
 # (name, body, [cylinders whose convex hull is the piece]) in the body's DH frame.
 # Frame notes at q = 0: frame 1 has y1 = base up, z1 = joint-2 axis; frame 2 has x2 from
 # shoulder to elbow; frame 3 has z3 along the forearm, y3 = joint-3 axis; frame 4 sits at
@@ -101,8 +104,9 @@ _LINKS = [
                       _Cyl((0, 0, -0.15), (0, 0, 0.15), 0.16)]),
     ("elbow", 3, [_Cyl((-0.15, -0.16, 0), (-0.15, 0.16, 0), 0.17),
                   _Cyl((0, 0, -0.30), (0, 0, 0.35), 0.15)]),
-    ("forearm", 4, [_Cyl((0, 0.64, 0), (0, 0.14, 0), 0.12),
-                    _Cyl((0, 0, -0.11), (0, 0, 0.11), 0.10)]),
+    ("forearm", 4, [_Cyl((0, 0.64, 0), (0, 0.22, 0), 0.12)]),
+    ("wrist_fork", 4, [_Cyl((0, 0, -0.10), (0, 0, 0.10), 0.08),
+                       _Cyl((0, 0.05, 0), (0, 0.22, 0), 0.08)]),
     ("wrist", 5, [_Cyl((0, -0.09, 0), (0, 0.09, 0), 0.09),
                   _Cyl((0, 0, 0), (0, 0, 0.14), 0.085)]),
     ("flange", 6, [_Cyl((0, 0, -0.035), (0, 0, 0.0), 0.0625)]),
@@ -162,11 +166,12 @@ def _rpy_matrix(rpy) -> np.ndarray:
 def robot_link_meshes(robot=None, kind: str = "collision") -> list[LinkMesh]:
     """Convex link pieces of the MC70 envelope, one per DH frame 0..6.
 
-    ``robot`` is accepted for the contract (and checked to be a 6-joint robot); the
-    dimensions are the MC70's (see the module docstring)."""
+    The shapes are drawn for the MC70's DH dimensions (module docstring); a ``robot``
+    whose DH differs gets an InputError rather than wrong shapes."""
     _check_kind(kind)
-    if robot is not None and robot.n_joints != 6:
-        raise InputError(f"geometry: {robot.name} has {robot.n_joints} joints, shapes exist for 6")
+    if robot is not None and (robot.n_joints != 6 or not (
+            np.allclose(robot.d, _MC70_D) and np.allclose(robot.a, _MC70_A))):
+        raise InputError(f"geometry: no link shapes for {robot.name} (drawn for the MC70's DH)")
     out = []
     for name, body, cyls in _LINKS:
         pts = np.concatenate([_cylinder_points(c, kind) for c in cyls])

@@ -1,0 +1,16 @@
+"""The MuJoCo digital twin of the MC70 cell (robot behind an FD11 link + ZS-LD80 laser).
+
+    from planecal.twin import Twin, TwinOptions
+    twin = Twin("thesis_final", seed=3)            # hidden truth drawn from seed 3
+    ref, cur = twin.exchange(np.zeros(6, np.int64))  # one 10 ms tick
+    mm = twin.read()                                 # laser reading or None
+
+Modules: ``core`` (Twin), ``mjcf`` (MjSpec builders), ``truth`` (hidden truth),
+``servo`` (servo and joint errors), ``laser`` (ray + sensor model), ``aim`` (IK helper
+that points the beam at a plate point), ``export`` (scene MJCF for a viewer).
+"""
+from planecal.twin.core import EncoderJumpError, Hit, Twin, TwinOptions
+from planecal.twin.truth import Tolerances, draw_truth, load_truth
+
+__all__ = ["Twin", "TwinOptions", "Hit", "EncoderJumpError", "Tolerances", "draw_truth",
+           "load_truth"]

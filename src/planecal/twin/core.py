@@ -1,0 +1,291 @@
+"""The digital twin: the robot behind an FD11 real-time link and the ZS-LD80 laser, in
+process, on a virtual clock (one ``exchange`` = one 10 ms tick; no wall-clock sleeps).
+
+FD11 semantics (appendix C): the reference counts are fixed at start (the robot's
+counts then); each tick the host sends ``delta`` and the controller commands
+``reference + delta``; consecutive deltas that differ by more than ``trip_step_counts``
+(60) on a joint trip an encoder-jump error and brake the robot (``EncoderJumpError``;
+the twin then refuses further ticks).
+
+State and truth: the twin holds integer encoder counts (int64). The joint angles are
+``counts_to_joints(robot, counts)`` (nominal qe0, the coupling C) and the true joint
+offsets are added in MuJoCo's qpos, ``qpos = q + delta_true (+ joint errors)``; the model's
+bodies carry the nominal DH (``mjcf``), so MuJoCo's link frames equal
+``robot.fk_frames(robot, q, delta_true)``. The laser site and the plates sit at the
+truth's sensor pose and planes. With noise and joint errors off, ``read()`` equals
+``cell.predict(robot, counts, truth, plate) * 1000`` (mm).
+
+Kinematics and the ray are recomputed lazily, only when the counts (or joint errors)
+changed since the last reading: a robot at rest costs a laser-noise draw per reading.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from planecal.cell import CellParams
+from planecal.encoder import counts_in_range, joints_to_counts
+from planecal.errors import InputError
+from planecal.scene import Scene, load_scene
+from planecal.twin.laser import LaserModel, RayCaster
+from planecal.twin.mjcf import (FLANGE_SITE, LASER_SITE, TOOL_BODY, plate_geom_names,
+                                 scene_spec)
+from planecal.twin.servo import JointErrors, Servo
+from planecal.twin.truth import resolve_truth
+
+
+class EncoderJumpError(RuntimeError):
+    """The commanded counts jumped more than the FD11 allows in one tick: robot braked."""
+
+
+@dataclass(frozen=True)
+class TwinOptions:
+    """Behaviour of the twin. ``exact()`` turns every error source off.
+
+    servo: 'ideal' or 'lag' (first order, ``tau_s``); laser_noise_mm: Gaussian std of a
+    reading; repeatability_mm: None = the robot's (robot.json), 0 = off;
+    stiffness_nm_per_rad: (k2, k3) joint 2/3 stiffness for gravity compliance, None = off;
+    backlash_rad: (6,) backlash, None = off; noise_seed: seed of the noise streams
+    (None: derived from the truth seed)."""
+    servo: str = "lag"
+    tau_s: float = 0.03
+    laser_noise_mm: float = 0.001
+    laser_quantum_mm: float | None = None
+    repeatability_mm: float | None = None
+    stiffness_nm_per_rad: tuple | None = None
+    backlash_rad: tuple | None = None
+    noise_seed: int | None = None
+    check_steps: bool = True
+
+    @classmethod
+    def exact(cls, **kw) -> "TwinOptions":
+        base = cls(servo="ideal", laser_noise_mm=0.0, repeatability_mm=0.0)
+        return replace(base, **kw)
+
+
+@dataclass
+class Hit:
+    distance_m: float | None
+    geom: int
+    name: str | None
+    plate: int | None  # index into scene.plates, None if not a plate
+
+
+class Twin:
+    """In-process robot link (``RobotLink``) and laser (``Laser``) over a MuJoCo model.
+
+    Twin(scene="thesis_final" | Scene | path, truth=None | CellParams | path | "nominal",
+         seed=0, options=TwinOptions(), start_counts=None)
+
+    ``truth`` None draws the hidden truth from ``seed`` (``truth.draw_truth``).
+    ``start_counts`` default: the scene's calibration position (nominal encoder model),
+    else its home counts. The reference counts of the FD11 link are these.
+    """
+
+    def __init__(self, scene: Scene | str | Path = "thesis_final", truth=None, seed: int = 0,
+                 options: TwinOptions | None = None, start_counts=None):
+        self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
+        self.robot = self.scene.robot
+        self.options = options or TwinOptions()
+        self.seed = seed
+        self._truth = resolve_truth(self.scene, truth, seed)
+        robot = self.robot
+        start = self._start_counts(start_counts)
+        cal_qpos = None
+        if self.scene.calibration_q is not None:
+            cal_qpos = self.scene.calibration_q + self._truth.joint_offsets
+        self.spec = scene_spec(self.scene, self._truth, calibration_qpos=cal_qpos)
+        self.model = self.spec.compile()
+        self.data = mujoco.MjData(self.model)
+        self.laser_site = self.model.site(LASER_SITE).id
+        self.flange_site = self.model.site(FLANGE_SITE).id
+        self.tool_body = self.model.body(TOOL_BODY).id
+        self._plate_of_geom = {self.model.geom(name).id: i
+                               for i, name in enumerate(plate_geom_names(self.scene))}
+        self._ray = RayCaster(self.model, self.data, self.laser_site, self.tool_body)
+        opt = self.options
+        noise_seed = opt.noise_seed if opt.noise_seed is not None else (seed * 7919 + 1)
+        ss = np.random.SeedSequence(noise_seed)
+        rng_laser, rng_joint = (np.random.default_rng(s) for s in ss.spawn(2))
+        self._laser = LaserModel(self.scene.laser_range_mm, opt.laser_noise_mm,
+                                 opt.laser_quantum_mm, rng_laser)
+        rep_m = robot.repeatability_m if opt.repeatability_mm is None else opt.repeatability_mm * 1e-3
+        self._errors = JointErrors(robot, rng_joint, rep_m, opt.stiffness_nm_per_rad,
+                                   opt.backlash_rad)
+        try:
+            self._servo = Servo(start, opt.servo, opt.tau_s, robot.tick_s)
+        except ValueError as e:
+            raise InputError(f"twin: {e}") from None
+        # q = (counts - qe0) @ M.T, M = C diag(1/g); qe0 nominal (the controller's)
+        self._M_T = (robot.coupling / robot.gains[None, :]).T.copy()
+        self._qe0 = robot.qe0.astype(np.int64)
+        self._delta_true = self._truth.joint_offsets.copy()
+        self._reference = start.copy()
+        self._last_delta = np.zeros(6, np.int64)
+        self._commanded = start.copy()
+        self._ticks = 0
+        self._moving = False
+        self._tripped = False
+        self._dirty = True
+        self._hit = Hit(None, -1, None, None)
+        self._errors.on_settle()  # the robot starts at rest
+        self._update()
+
+    # ----- construction helpers -----
+    def _start_counts(self, start_counts) -> np.ndarray:
+        robot, scene = self.robot, self.scene
+        if start_counts is None:
+            if scene.calibration_q is not None:
+                start = joints_to_counts(robot, scene.calibration_q)
+            else:
+                start = scene.home_counts
+        else:
+            start = _as_counts(start_counts, "start_counts")
+        if not counts_in_range(robot, start):
+            raise InputError(f"twin: start counts {start.tolist()} outside the "
+                             f"{robot.encoder_bits}-bit encoder range")
+        return np.array(start, np.int64)
+
+    # ----- RobotLink -----
+    def exchange(self, delta) -> tuple[np.ndarray, np.ndarray]:
+        """One 10 ms tick: command reference + delta; returns (reference, current) counts."""
+        if self._tripped:
+            raise EncoderJumpError("twin: the robot braked after an encoder jump; make a new Twin")
+        d = _as_counts(delta, "delta")
+        if self.options.check_steps:
+            jump = np.abs(d - self._last_delta).max()
+            if jump > self.robot.trip_step_counts:
+                self._tripped = True
+                raise EncoderJumpError(f"twin: delta changed by {int(jump)} counts in one tick "
+                                       f"(trip at {self.robot.trip_step_counts})")
+        self._last_delta = d
+        np.add(self._reference, d, out=self._commanded)
+        servo = self._servo
+        before = servo.current.copy() if self._errors.backlash is not None else None
+        if servo.step(self._commanded):
+            self._moving = True
+            self._dirty = True
+            if before is not None:
+                self._errors.on_move(servo.current - before)
+        elif self._moving:  # first tick at rest after a move
+            self._moving = False
+            if self._errors.sigma > 0:
+                self._errors.on_settle()
+                self._dirty = True
+        self._ticks += 1
+        return self._reference.copy(), servo.current.copy()
+
+    # ----- Laser -----
+    def read(self) -> float | None:
+        """Laser reading [mm] at the current state; None out of range or no hit."""
+        if self._dirty:
+            self._update()
+        return self._laser.reading(self._hit.distance_m)
+
+    def close(self) -> None:
+        pass
+
+    # ----- state -----
+    def _update(self) -> None:
+        q = (self._servo.current - self._qe0) @ self._M_T
+        qpos = q + self._delta_true
+        if self._errors.active:
+            qpos = qpos + self._errors.extra(q, self._delta_true)
+        self.data.qpos[:] = qpos
+        mujoco.mj_kinematics(self.model, self.data)
+        dist, geom = self._ray.cast()
+        if geom != self._hit.geom:
+            name = None if geom < 0 else self.model.geom(geom).name
+            self._hit = Hit(dist, geom, name, self._plate_of_geom.get(geom))
+        else:
+            self._hit.distance_m = dist
+        self._dirty = False
+
+    def set_counts(self, counts) -> None:
+        """Put the robot at ``counts`` at once, at rest (tests, benchmarks, fast sampling;
+        not something the FD11 can do). The reference counts stay; the next delta must be
+        within a trip step of ``counts - reference``."""
+        c = _as_counts(counts, "counts")
+        if not counts_in_range(self.robot, c):
+            raise InputError(f"twin: counts {c.tolist()} outside the encoder range")
+        self._servo.current[:] = c
+        self._commanded[:] = c
+        self._last_delta = c - self._reference
+        self._moving = False
+        self._errors.on_settle()
+        self._dirty = True
+
+    def hit(self) -> Hit:
+        """What the beam hits now: true distance [m] (no noise, no window), geom, plate."""
+        if self._dirty:
+            self._update()
+        return self._hit
+
+    @property
+    def ticks(self) -> int:
+        return self._ticks
+
+    @property
+    def robot_time_s(self) -> float:
+        return self._ticks * self.robot.tick_s
+
+    @property
+    def current_counts(self) -> np.ndarray:
+        return self._servo.current.copy()
+
+    @property
+    def reference_counts(self) -> np.ndarray:
+        return self._reference.copy()
+
+    @property
+    def commanded_counts(self) -> np.ndarray:
+        return self._commanded.copy()
+
+    @property
+    def truth(self) -> CellParams:
+        """The hidden truth (a copy). Calibration code must not read it."""
+        return self._truth.copy()
+
+    @property
+    def true_params(self) -> CellParams:
+        return self.truth
+
+    @property
+    def qpos(self) -> np.ndarray:
+        """The true joint angles q + delta (+ joint errors) in MuJoCo, rad."""
+        if self._dirty:
+            self._update()
+        return self.data.qpos.copy()
+
+    def flange_pose(self) -> np.ndarray:
+        return self._site_pose(self.flange_site)
+
+    def sensor_pose(self) -> np.ndarray:
+        """True sensor frame in the base frame (z = beam)."""
+        return self._site_pose(self.laser_site)
+
+    def _site_pose(self, sid: int) -> np.ndarray:
+        if self._dirty:
+            self._update()
+        T = np.eye(4)
+        T[:3, :3] = self.data.site_xmat[sid].reshape(3, 3)
+        T[:3, 3] = self.data.site_xpos[sid]
+        return T
+
+    def to_xml(self) -> str:
+        """The twin's scene (truth poses) as MJCF text for a viewer."""
+        from planecal.twin.mjcf import to_xml_exact
+        return to_xml_exact(self.spec)
+
+
+def _as_counts(v, what: str) -> np.ndarray:
+    a = np.asarray(v)
+    if a.shape != (6,):
+        raise InputError(f"twin: {what} must be 6 integer counts, got shape {a.shape}")
+    if a.dtype.kind not in "iu":
+        if a.dtype.kind != "f" or not np.all(np.isfinite(a)) or np.any(a != np.rint(a)):
+            raise InputError(f"twin: {what} must be integers, got {a.tolist()}")
+    return a.astype(np.int64)

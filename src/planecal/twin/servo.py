@@ -1,0 +1,116 @@
+"""Servo and joint-error models of the twin (all in encoder counts / joint radians).
+
+Servo (``Servo``): the controller's position loop as seen through the encoders.
+* ``ideal``: current = commanded at every tick.
+* ``lag``: first order with time constant ``tau_s``: each tick the current counts move
+  by ``rint((commanded - current) * (1 - exp(-tick/tau)))``, at least one count towards
+  the command, so the integer counts settle exactly on the command (a 30 ms lag settles
+  a 50-count step in ~10 ticks).
+
+Joint errors added to the joint angle the encoders imply (``JointErrors``):
+* repeatability: each time the robot comes to rest (the first tick whose current counts
+  equal the previous tick's after a move) a new joint perturbation ``eps ~ N(0, s^2 I)``
+  is drawn and held until the next rest. ``s = (r / 3) / ||J_v(q = 0)||_F`` makes the
+  flange position's 3-sigma spread about ``r`` (robot.json ``repeatability_mm``, JIS
+  B 8432 +-0.07 mm for the MC70). Small: for the MC70, s ~ 1.1e-5 rad (~0.5 count).
+* compliance (off by default): joints 2 and 3 yield to the gravity torque of a lumped
+  mass model, ``dq_j = tau_j / k_j``; ``LUMPED_MASSES`` lists the masses.
+* backlash (off by default): joint j's output trails its motor by ``b_j / 2`` against
+  the direction of its last motion.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from planecal.robot import Robot, fk_frames, jacobian
+
+SERVO_MODES = ("ideal", "lag")
+# (DH frame, point in that frame [m], mass [kg]): an MC70-sized arm (~570 kg in all)
+LUMPED_MASSES = [
+    (2, (-0.45, 0.0, 0.0), 110.0),  # upper arm
+    (3, (0.0, 0.0, 0.05), 90.0),  # elbow housing, J4 motor
+    (4, (0.0, 0.45, 0.0), 45.0),  # forearm tube
+    (5, (0.0, 0.0, 0.05), 20.0),  # wrist and tool
+]
+GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+class Servo:
+    """Integer encoder counts (int64) following integer commands."""
+
+    def __init__(self, start_counts: np.ndarray, mode: str = "ideal", tau_s: float = 0.03,
+                 tick_s: float = 0.01):
+        if mode not in SERVO_MODES:
+            raise ValueError(f"servo mode must be one of {SERVO_MODES}, got {mode!r}")
+        self.mode = mode
+        self.current = np.array(start_counts, np.int64)
+        self.gain = 1.0 - np.exp(-tick_s / tau_s) if mode == "lag" else 1.0
+
+    def step(self, commanded: np.ndarray) -> bool:
+        """Advance one tick towards ``commanded``; True when the counts changed."""
+        diff = commanded - self.current
+        if not diff.any():
+            return False
+        if self.mode == "ideal":
+            self.current[:] = commanded
+        else:
+            move = np.rint(diff * self.gain).astype(np.int64)
+            small = (move == 0) & (diff != 0)
+            move[small] = np.sign(diff[small])
+            self.current += move
+        return True
+
+
+def repeatability_sigma(robot: Robot, repeatability_m: float) -> float:
+    """Joint-angle std [rad] that gives a flange 3-sigma spread of ``repeatability_m``."""
+    Jv = jacobian(robot, np.zeros(robot.n_joints))[:3]
+    return float(repeatability_m / 3.0 / np.linalg.norm(Jv))
+
+
+def gravity_torque(robot: Robot, theta_q: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Gravity torque (6,) [N m] about each joint axis for the lumped masses."""
+    F = fk_frames(robot, theta_q, delta)
+    tau = np.zeros(robot.n_joints)
+    for frame, p, m in LUMPED_MASSES:
+        c = F[frame, :3, :3] @ np.asarray(p) + F[frame, :3, 3]
+        f = m * GRAVITY
+        for j in range(frame):  # joints 1..frame move this mass
+            z, o = F[j, :3, 2], F[j, :3, 3]
+            tau[j] += z @ np.cross(c - o, f)
+    return tau
+
+
+class JointErrors:
+    """Non-encoder joint errors; ``extra(q)`` is added to qpos (rad)."""
+
+    def __init__(self, robot: Robot, rng: np.random.Generator, repeatability_m: float = 0.0,
+                 stiffness=None, backlash_rad=None):
+        self.robot = robot
+        self.rng = rng
+        self.sigma = repeatability_sigma(robot, repeatability_m) if repeatability_m > 0 else 0.0
+        self.stiffness = None if stiffness is None else np.asarray(stiffness, float).reshape(2)
+        self.backlash = None if backlash_rad is None else np.asarray(backlash_rad, float).reshape(6)
+        self.eps = np.zeros(robot.n_joints)
+        self.direction = np.zeros(robot.n_joints)
+
+    @property
+    def active(self) -> bool:
+        return self.sigma > 0 or self.stiffness is not None or self.backlash is not None
+
+    def on_move(self, step_counts: np.ndarray) -> None:
+        if self.backlash is not None:
+            s = np.sign(step_counts / self.robot.gains)  # joint-side direction
+            self.direction = np.where(s != 0, s, self.direction)
+
+    def on_settle(self) -> None:
+        if self.sigma > 0:
+            self.eps = self.rng.normal(0.0, self.sigma, self.robot.n_joints)
+
+    def extra(self, q: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        out = self.eps.copy()
+        if self.backlash is not None:
+            out -= 0.5 * self.backlash * self.direction
+        if self.stiffness is not None:
+            tau = gravity_torque(self.robot, q + out, delta)
+            out[1:3] += tau[1:3] / self.stiffness
+        return out

@@ -1,0 +1,89 @@
+"""The twin's hidden truth: the cell's real parameters (a ``CellParams``), drawn from a
+seed around a scene's nominal values, or read from a parameter file (params.py format).
+
+Calibration code never reads this; tests compare its result with it.
+
+Default tolerances (``Tolerances``), each a hard bound, drawn uniformly:
+* joint offsets delta_2..delta_5: |delta_i| <= 3 mrad. delta_1 and delta_6 stay 0
+  (no plane calibration can see them: delta_1 is a rotation of the plates about the
+  base axis, delta_6 a roll of the sensor) unless ``offsets_all=True``.
+* sensor origin: a displacement of length <= 10 mm in a uniformly random direction.
+* sensor angles: phi_y and phi_z each moved by <= 0.035 rad, so the beam direction
+  moves by <= 0.05 rad.
+* each plane: its point (the plate centre on the nominal plane) moved by <= 10 mm, its
+  normal tilted by <= 0.05 rad about a random in-plane axis; n~ recomputed from those.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planecal.cell import CellParams, n_tilde_from_point_normal, point_normal_from_n_tilde
+from planecal.errors import InputError
+from planecal.params import load_params
+from planecal.scene import Scene, nominal_params
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    offset_rad: float = 3e-3
+    offsets_all: bool = False  # also perturb delta_1 and delta_6
+    origin_m: float = 0.010
+    angle_rad: float = 0.035
+    plane_point_m: float = 0.010
+    plane_normal_rad: float = 0.05
+
+
+def _ball(rng, radius):
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v) * radius * rng.uniform() ** (1 / 3)
+
+
+def _tilt(rng, n, max_angle):
+    """Rotate unit n by an angle <= max_angle about a random axis perpendicular to it."""
+    a = rng.normal(size=3)
+    a -= (a @ n) * n
+    a /= np.linalg.norm(a)
+    ang = rng.uniform(0, max_angle)
+    return np.cos(ang) * n + np.sin(ang) * np.cross(a, n)
+
+
+def draw_truth(scene: Scene, seed: int = 0, tol: Tolerances = Tolerances()) -> CellParams:
+    """Hidden truth around the scene's nominal parameters (see the module docstring)."""
+    rng = np.random.default_rng(seed)
+    nom = nominal_params(scene)
+    delta = rng.uniform(-tol.offset_rad, tol.offset_rad, 6)
+    if not tol.offsets_all:
+        delta[0] = delta[5] = 0.0
+    origin = nom.sensor_origin + _ball(rng, tol.origin_m)
+    phi_y = nom.phi_y + rng.uniform(-tol.angle_rad, tol.angle_rad)
+    phi_z = nom.phi_z + rng.uniform(-tol.angle_rad, tol.angle_rad)
+    planes = []
+    for plate in scene.plates:
+        _, nhat = point_normal_from_n_tilde(plate.n_tilde)
+        p = plate.center() + _ball(rng, tol.plane_point_m)
+        planes.append(n_tilde_from_point_normal(p, _tilt(rng, nhat, tol.plane_normal_rad)))
+    return CellParams(delta, origin, phi_y, phi_z, np.array(planes))
+
+
+def load_truth(scene: Scene, path) -> CellParams:
+    """A truth file (params.py format); it must hold one plane per plate."""
+    p = load_params(path)
+    if p.n_planes != len(scene.plates):
+        raise InputError(f"{path}: {p.n_planes} planes for a scene with {len(scene.plates)} plates")
+    return p
+
+
+def resolve_truth(scene: Scene, truth=None, seed: int = 0) -> CellParams:
+    """``truth`` as given: None -> draw_truth(scene, seed); a CellParams; a path; or
+    the string 'nominal' (truth = the nominal values)."""
+    if truth is None:
+        return draw_truth(scene, seed)
+    if isinstance(truth, CellParams):
+        if truth.n_planes != len(scene.plates):
+            raise InputError(f"truth: {truth.n_planes} planes for {len(scene.plates)} plates")
+        return truth.copy()
+    if isinstance(truth, str) and truth == "nominal":
+        return nominal_params(scene)
+    return load_truth(scene, truth)
