@@ -193,7 +193,7 @@ def test_rejections_are_counted_and_replaced(scene, tmp_path):
 def test_gives_up_when_every_pose_is_rejected(scene, tmp_path):
     class Wall:
         def check_config(self, q):
-            return Clear(ok=False)
+            return Clear()
 
         def check_path(self, q0, q1):
             return Clear(ok=False)
@@ -206,6 +206,49 @@ def test_gives_up_when_every_pose_is_rejected(scene, tmp_path):
     assert sum(stats.rejected.values()) == 40
     assert count_samples(out) == 0 and out.read_text().startswith("q1\t")
     assert len(cell.sent) == 1
+
+
+def test_start_configuration_in_collision_stops_at_once(scene, tmp_path):
+    class Stuck(NullChecker):
+        def check_config(self, q):
+            return Clear(ok=False, pair=("forearm", "flange"))
+
+    out = tmp_path / "RUN.tsv"
+    stats, cell, _ = run(scene, out, 3, checker=Stuck())
+    assert stats.status == "gave_up" and "forearm - flange" in stats.stop_reason
+    assert len(cell.sent) == 1 and count_samples(out) == 0
+    assert load_sidecar(out)["status"] == "gave_up"
+
+
+class Hashy:
+    """Stateless (like CollisionWorld): rejects about a third of the configurations and of
+    the paths, by a hash of the joint angles."""
+
+    def check_config(self, q):
+        return Clear(ok=int(abs(np.sum(q)) * 1e6) % 3 != 0)
+
+    def check_path(self, q0, q1):
+        return Clear(ok=int(abs(np.sum(q1 - q0)) * 1e6) % 3 != 1)
+
+
+@pytest.mark.parametrize("two_plates", [False, True])
+def test_background_planning_gives_the_same_run(scene, tmp_path, two_plates):
+    """Planning the next pose in a forked process while the robot moves changes nothing:
+    same samples, same rejections, same random state (also when a laser rejection
+    invalidates a round-robin plate guess)."""
+    sc = _two_plates(scene, tmp_path) if two_plates else scene
+    results = []
+    for bg in (False, True):
+        out = tmp_path / f"RUN{bg}.tsv"
+        cell = FakeCell(sc, window=(65.0, 82.0))  # some laser rejections
+        obs = Recorder()
+        drv = Driver(cell, AlwaysEnabled(), sc.robot, obs)
+        stats = SamplingRun(drv, cell, sc, settings(8), out, Hashy(), background=bg).run()
+        assert stats.status == "complete"
+        results.append((out.read_text(), stats.rejected, obs.rejects,
+                        load_sidecar(out)["rng_state"], len(cell.sent)))
+    assert results[0][1]["laser"] > 0 and results[0][1]["collision"] > 0
+    assert results[0] == results[1]
 
 
 def test_following_monitor_drops_enable_when_the_robot_stops_following(scene, tmp_path):
@@ -275,7 +318,7 @@ def test_home_and_calibration_moves(scene, tmp_path):
         move_home(drv, scene, Blocked())
 
 
-def test_multi_plate_run_records_the_plate(scene, tmp_path):
+def _two_plates(scene, tmp_path):
     raw = json.loads(scene.path.read_text())
     # a second plate beside the first, on a parallel plane 10 mm nearer
     p2 = dict(raw["plates"][0], name="plate2", corner_m=[0.729, 0.40, 0.39])
@@ -284,7 +327,11 @@ def test_multi_plate_run_records_the_plate(scene, tmp_path):
     raw["plates"].append(p2)
     path = tmp_path / "two.json"
     path.write_text(json.dumps(raw))
-    sc2 = load_scene(path)
+    return load_scene(path)
+
+
+def test_multi_plate_run_records_the_plate(scene, tmp_path):
+    sc2 = _two_plates(scene, tmp_path)
     out = tmp_path / "RUN.tsv"
     obs = Recorder()
     st = settings(6)

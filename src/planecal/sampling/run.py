@@ -60,7 +60,7 @@ import numpy as np
 from planecal.encoder import counts_to_joints, joints_to_counts
 from planecal.errors import InputError
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
-from planecal.sampling.poses import PoseGenerator, PoseSettings
+from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.steps import COUNT_LIMIT, DWELL_TICKS, NOMINAL_STEP, max_step, step_path
 from planecal.scene import Scene
 
@@ -151,6 +151,10 @@ class Driver:
         if self._on_tick is not None:
             self._on_tick(self.ticks, delta, ref, cur, reading)
         return reading
+
+    def hold(self) -> None:
+        """One tick holding the last delta."""
+        self.send(self.delta)
 
     def follow(self, rows: np.ndarray) -> None:
         """Send each row, one per tick (stops, by ``EnableDropped``, when enable drops)."""
@@ -274,12 +278,16 @@ def sidecar_path(out: str | Path) -> Path:
     return out.with_name(out.name + ".json")
 
 
-def write_json_atomic(path: Path, data: dict) -> None:
+def write_json_atomic(path: Path, data: dict, fsync: bool = False) -> None:
+    """Write to a temp file and rename it over ``path``: a reader (or a resumed run) sees
+    the old or the new sidecar, never a torn one. The sample file is fsynced per line;
+    the sidecar needs no fsync, since resume recounts the samples from the file."""
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", encoding="utf-8") as f:
         f.write(json.dumps(data, indent=2) + "\n")
-        f.flush()
-        os.fsync(f.fileno())
+        if fsync:
+            f.flush()
+            os.fsync(f.fileno())
     os.replace(tmp, path)
 
 
@@ -331,19 +339,168 @@ class RunStats:
                 "sessions": self.sessions}
 
 
+# ----- planning: pose -> IK -> collision checks ---------------------------------------------
+
+@dataclass
+class Plan:
+    """The outcome of planning one sample from ``q_start``: the rejected draws (in order:
+    (kind, q or None, reason)) and the accepted target (``q`` None when ``budget`` draws
+    were all rejected). ``rng_after`` is the generator state after the last draw."""
+    index: int
+    q_start: np.ndarray
+    rejections: list
+    rng_after: dict
+    q: np.ndarray | None = None
+    qe_goal: np.ndarray | None = None
+    pose: SensorPose | None = None
+    check_time_s: float = 0.0
+
+
+class Planner:
+    """Draws poses until one is reachable and collision-free (configuration and the straight
+    joint-space path from ``q_start``), at most ``budget`` draws. Pure: the random state comes
+    in and goes out with the plan, so the same request gives the same plan anywhere."""
+
+    def __init__(self, scene: Scene, settings: RunSettings, checker):
+        self.robot = scene.robot
+        self.poses = PoseGenerator(scene, settings.pose)
+        self.checker = checker
+
+    def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int) -> Plan:
+        rng = np.random.default_rng()
+        rng.bit_generator.state = rng_state
+        rejections = []
+        t0 = time.perf_counter()
+        out = Plan(index, q_start, rejections, rng_state)
+        for _ in range(budget):
+            plate = self.poses.plate_for(index, rng)
+            pose = self.poses.draw(rng, plate)
+            q = self.poses.joint_target(pose, q_start)
+            if q is None:
+                rejections.append(("unreachable", None, "unreachable: no IK solution within limits"))
+                continue
+            qe = joints_to_counts(self.robot, q)
+            if np.any(qe < 0) or np.any(qe >= COUNT_LIMIT):
+                rejections.append(("unreachable", q, "unreachable: counts outside the encoder range"))
+                continue
+            res = self.checker.check_config(q)
+            what = "target"
+            if res.ok:
+                res = self.checker.check_path(q_start, q)
+                what = "path"
+            if not res.ok:
+                pair = getattr(res, "pair", None)
+                rejections.append(("collision", q, f"collision ({what})"
+                                   + (f": {pair[0]} - {pair[1]}" if pair else "")))
+                continue
+            out.q, out.qe_goal, out.pose = q, qe, pose
+            break
+        out.rng_after = rng.bit_generator.state
+        out.check_time_s = time.perf_counter() - t0
+        return out
+
+    def index_matters(self) -> bool:
+        """Whether a plan depends on the sample index (round robin over several plates)."""
+        return self.poses.n_plates > 1 and self.poses.settings.plate_choice == "round_robin"
+
+
+def _planner_worker(conn, planner: Planner) -> None:
+    while True:
+        try:
+            req = conn.recv()
+        except EOFError:
+            break
+        if req is None:
+            break
+        try:
+            plan = planner.plan(*req)
+        except Exception as e:  # report it in the run's process
+            plan = RuntimeError(f"planner: {type(e).__name__}: {e}")
+        conn.send(plan)
+
+
+class BackgroundPlanner:
+    """Plans in a forked process. The run asks for the next sample's plan as soon as the
+    current target is known (the next path starts there) and the robot moves meanwhile.
+    The request is speculative only in the sample index, which matters for round-robin
+    plate choice after a laser rejection: a plan made for another request is dropped and
+    the right one is planned. Results are identical to foreground planning (same requests,
+    same random states; the checker must be stateless, as CollisionWorld is).
+
+    ``take(req, idle)`` calls ``idle()`` while it waits (the real cell keeps ticking the
+    hold delta so the RT link never goes quiet); with ``idle=None`` it just blocks."""
+
+    def __init__(self, planner: Planner):
+        import multiprocessing as mp
+        ctx = mp.get_context("fork")
+        self.planner = planner
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_planner_worker, args=(child, planner), daemon=True)
+        self._proc.start()
+        child.close()
+        self._pending = None
+
+    def submit(self, *req) -> None:
+        self.discard()
+        self._conn.send(req)
+        self._pending = req
+
+    def take(self, *req, idle: Callable[[], None] | None = None) -> Plan:
+        if self._pending is None or not _same_request(self._pending, req):
+            self.submit(*req)
+        if idle is not None:
+            while not self._conn.poll():
+                idle()
+        self._pending = None
+        plan = self._conn.recv()
+        if isinstance(plan, BaseException):
+            raise plan
+        return plan
+
+    def discard(self) -> None:
+        if self._pending is not None:
+            self._pending = None
+            self._conn.recv()
+
+    def close(self) -> None:
+        try:
+            self._pending = None
+            self._conn.send(None)
+        except (BrokenPipeError, OSError):
+            pass
+        self._proc.join(timeout=2)
+        if self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join()
+        self._conn.close()
+
+
+def _same_request(a, b) -> bool:
+    # the budget (a[3]) may differ: giving up early is decided while consuming the plan
+    return np.array_equal(a[0], b[0]) and a[1] == b[1] and a[2] == b[2]
+
+
 # ----- the run -------------------------------------------------------------------------------
 
 class SamplingRun:
     """One sampling run into ``out`` (and its sidecar). ``driver`` may already have moved
     (e.g. to the calibration position); the run's tick counts include only its own ticks.
     ``resume=True`` continues the run recorded in the sidecar (``settings`` should come from
-    ``RunSettings.from_sidecar``)."""
+    ``RunSettings.from_sidecar``). ``background=True`` plans the next pose in a forked
+    process while the robot moves (same results, less wall time on a multi-core machine);
+    with ``hold_while_planning`` the hold delta keeps being sent, one per tick, whenever the
+    loop waits for a plan (the real cell: the RT link is never left without a message;
+    the twin's robot time then includes that wait)."""
 
     def __init__(self, driver: Driver, laser, scene: Scene, settings: RunSettings, out,
-                 checker, *, resume: bool = False,
-                 progress: Callable[[RunStats], None] | None = None):
+                 checker, *, resume: bool = False, background: bool = False,
+                 hold_while_planning: bool = False,
+                 progress: Callable[[RunStats], None] | None = None,
+                 extra: dict | None = None):
         if checker is None:
             raise ValueError("a collision checker is required")
+        if settings.samples < 1:
+            raise InputError(f"number of samples must be at least 1, got {settings.samples}")
         self.driver = driver
         self.laser = laser
         self.scene = scene
@@ -352,13 +509,15 @@ class SamplingRun:
         self.out = Path(out)
         self.checker = checker
         self.progress = progress
+        self.extra = dict(extra or {})
         self.observer = driver.observer
-        self.poses = PoseGenerator(scene, settings.pose)
+        self.planner = Planner(scene, settings, checker)
+        self.background = background or hold_while_planning
+        self.hold_while_planning = hold_while_planning
         self.stats = RunStats()
-        self.rng = np.random.default_rng(settings.seed)
+        self.rng_state = np.random.default_rng(settings.seed).bit_generator.state
+        self.plan_time_s = 0.0
         self.resume = resume
-        if settings.samples < 1:
-            raise InputError(f"number of samples must be at least 1, got {settings.samples}")
         if resume:
             side = load_sidecar(self.out)
             st = self.stats
@@ -370,13 +529,13 @@ class SamplingRun:
             st.sessions = int(side.get("sessions", 1)) + 1
             st.samples = count_samples(self.out)
             if side.get("rng_state"):
-                self.rng.bit_generator.state = side["rng_state"]
+                self.rng_state = side["rng_state"]
             st.robot_time_s = st.ticks * self.robot.tick_s
 
     # -- sidecar
     def sidecar(self) -> dict:
         st = self.stats
-        return {
+        side = {
             "format": SIDECAR_FORMAT, "status": st.status, "stop_reason": st.stop_reason,
             "scene": self.scene.name,
             "scene_path": str(self.scene.path) if self.scene.path else None,
@@ -386,10 +545,12 @@ class SamplingRun:
             "rejected": dict(st.rejected), "laser_give_ups": dict(st.laser_give_ups),
             "ticks": st.ticks, "robot_time_s": round(st.robot_time_s, 3),
             "wall_time_s": round(st.wall_time_s, 3), "max_step_counts": st.max_step_counts,
-            "sessions": st.sessions, "rng_state": self.rng.bit_generator.state,
+            "sessions": st.sessions, "rng_state": self.rng_state,
             "sample_file": self.out.name, "plates": len(self.scene.plates),
             "updated_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         }
+        side.update(self.extra)
+        return side
 
     def _save(self) -> None:
         write_json_atomic(sidecar_path(self.out), self.sidecar())
@@ -409,6 +570,13 @@ class SamplingRun:
         if self.progress:
             self.progress(self.stats)
 
+    def _give_up(self) -> bool:
+        if self._rejected_in_a_row >= self.settings.max_attempts:
+            self.stats.status = "gave_up"
+            self.stats.stop_reason = f"{self.settings.max_attempts} poses rejected in a row"
+            return True
+        return False
+
     # -- the loop
     def run(self) -> RunStats:
         from planecal.samples import SampleWriter
@@ -418,56 +586,60 @@ class SamplingRun:
         self._wall0, self._ticks0, self._step0 = st.wall_time_s, st.ticks, st.max_step_counts
         self._drv_ticks0 = drv.ticks
         drv.max_step_counts = 0
-        account = self._account
         multi = len(self.scene.plates) > 1
         writer = SampleWriter(self.out, append=self.resume, with_plate=multi)
         self._rejected_in_a_row = 0
-
+        bg = None
         st.status = "running"
+        st.stop_reason = None
         try:
             drv.start()
             self._save()
-            while st.samples < s.samples:
-                if self._rejected_in_a_row >= s.max_attempts:
-                    st.status = "gave_up"
-                    st.stop_reason = f"{s.max_attempts} poses rejected in a row"
-                    break
-                plate = self.poses.plate_for(st.samples, self.rng)
-                pose = self.poses.draw(self.rng, plate)
-                q0 = drv.commanded_q()
-                q = self.poses.joint_target(pose, q0)
-                if q is None:
-                    self._reject("unreachable", None, "unreachable: no IK solution within limits")
-                    continue
-                rows = plan_move(drv, joints_to_counts(self.robot, q), s.nominal_step_counts,
-                                 s.dwell_ticks)
-                if rows is None:
-                    self._reject("unreachable", q, "unreachable: counts outside the encoder range")
-                    continue
-                res = self.checker.check_config(q)
-                if res.ok:
-                    res = self.checker.check_path(q0, q)
-                    what = "path"
-                else:
-                    what = "target"
+            q0 = drv.commanded_q()
+            if st.samples < s.samples:
+                res = self.checker.check_config(q0)
                 if not res.ok:
                     pair = getattr(res, "pair", None)
-                    self._reject("collision", q, f"collision ({what})"
-                                 + (f": {pair[0]} - {pair[1]}" if pair else ""))
-                    continue
-                self.observer.on_path("sample", q0, q, rows)
+                    st.status = "gave_up"
+                    st.stop_reason = ("the robot's configuration is not collision-free in the "
+                                      "model" + (f" ({pair[0]} - {pair[1]})" if pair else "")
+                                      + ": no path from it can be certified")
+                    return st
+                if self.background:
+                    bg = BackgroundPlanner(self.planner)
+            idle = drv.hold if self.hold_while_planning else None
+            while st.samples < s.samples:
+                req = (q0, st.samples, self.rng_state, s.max_attempts - self._rejected_in_a_row)
+                plan = bg.take(*req, idle=idle) if bg else self.planner.plan(*req)
+                self.plan_time_s += plan.check_time_s
+                gave_up = False
+                for kind, q, reason in plan.rejections:
+                    self._reject(kind, q, reason)
+                    if self._give_up():
+                        gave_up = True
+                        break
+                if gave_up or plan.q is None:
+                    self._give_up()
+                    break
+                self.rng_state = plan.rng_after
+                rows = plan_move(drv, plan.qe_goal, s.nominal_step_counts, s.dwell_ticks)
+                q_goal = plan.q
+                if bg:  # plan the next pose while the robot moves (assuming this one succeeds)
+                    bg.submit(q_goal, st.samples + 1, self.rng_state, s.max_attempts)
+                self.observer.on_path("sample", q0, q_goal, rows)
                 drv.follow(rows)
+                q0 = q_goal
                 lr = drv.read_laser(self.laser, s.laser)
                 if not lr.ok:
                     st.laser_give_ups[lr.reason] = st.laser_give_ups.get(lr.reason, 0) + 1
-                    self._reject("laser", q, f"laser: {lr.describe()}")
+                    self._reject("laser", q_goal, f"laser: {lr.describe()}")
                     continue
                 qe = np.asarray(drv.current, np.int64).copy()
-                writer.write(qe, lr.value_mm, pose.plate)
-                self.observer.on_sample(st.samples, qe, lr.value_mm, pose.plate)
+                writer.write(qe, lr.value_mm, plan.pose.plate)
+                self.observer.on_sample(st.samples, qe, lr.value_mm, plan.pose.plate)
                 st.samples += 1
                 self._rejected_in_a_row = 0
-                account()
+                self._account()
                 self._save()
                 if self.progress:
                     self.progress(st)
@@ -480,8 +652,14 @@ class SamplingRun:
             st.status = "stopped"
             st.stop_reason = "interrupted"
             raise
+        except Exception as e:  # link or laser failure: keep the record straight, re-raise
+            st.status = "error"
+            st.stop_reason = f"{type(e).__name__}: {e}"
+            raise
         finally:
+            if bg:
+                bg.close()
             writer.close()
-            account()
+            self._account()
             self._save()
         return st

@@ -1,0 +1,101 @@
+"""`planecal rehearse`: a whole sampling run (seed 7.1) on the MuJoCo twin.
+
+    planecal rehearse [--scene S] [--samples N] [--seed K] [--cone-deg A]
+                      [--fixed-distance-mm D] --out RUN.tsv [--truth TRUTH.json]
+                      [--rrd FILE] [--resume]
+
+The same loop as ``planecal sample`` (``planecal.sampling.run``), with the twin as robot
+link and laser, on its virtual clock (no sleeps), and collision checking always on
+(``planecal.collision.CollisionWorld``). The twin's hidden truth is drawn from
+``--twin-seed`` (default: ``--seed``); ``--truth`` writes it in the parameter-file format
+(``planecal.params``) for comparison with a calibration. The twin starts at the scene's
+calibration position.
+
+Writes the sample file, its sidecar ``RUN.tsv.json`` (with ``"twin": {"seed", "options"}``
+so ``--resume`` rebuilds the same twin), shows progress on stderr, and prints a JSON
+summary on stdout: samples, rejected_collision, rejected_laser, rejected_unreachable,
+max_step_counts, robot_time_s, wall_time_s (over all sessions of the run), speedup (this
+session's robot time over its wall time), ...
+Exit 0 when all samples were taken, 1 when the run stopped or gave up (files valid).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+
+from planecal.errors import InputError
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from planecal.sampling.session import add_sampling_arguments
+
+    add_sampling_arguments(p)
+    p.add_argument("--truth", default=None, metavar="TRUTH.json",
+                   help="write the twin's true parameters here (parameter-file format)")
+    p.add_argument("--twin-seed", type=int, default=None,
+                   help="seed of the twin's hidden truth and noise (default: --seed)")
+    p.add_argument("--exact", action="store_true",
+                   help="twin without error sources (ideal servo, no laser noise, no "
+                        "repeatability error)")
+
+
+def make_twin(scene, seed: int, exact: bool):
+    try:
+        from planecal.twin import Twin, TwinOptions
+    except ModuleNotFoundError as e:
+        if e.name and e.name.startswith("planecal.twin"):
+            raise InputError("the MuJoCo twin (planecal.twin) is not available in this version") from None
+        raise
+    return Twin(scene, seed=seed, options=TwinOptions.exact() if exact else TwinOptions())
+
+
+def make_checker(scene, clearance_m: float):
+    try:
+        from planecal.collision import CollisionWorld
+    except ModuleNotFoundError as e:
+        if e.name == "planecal.collision":
+            raise InputError("collision checking (planecal.collision) is not available in this "
+                             "version; rehearse does not run without it") from None
+        raise
+    return CollisionWorld(scene, clearance_m=clearance_m)
+
+
+def run(args) -> int:
+    from planecal.links.base import AlwaysEnabled
+    from planecal.params import save_params
+    from planecal.sampling.session import prepare, print_summary, rerun_observer, run_session
+
+    scene, settings, side = prepare(args)
+    if side is not None:
+        twin_info = side.get("twin") or {}
+        twin_seed = int(twin_info.get("seed", settings.seed))
+        exact = bool(twin_info.get("exact", False))
+    else:
+        twin_seed = settings.seed if args.twin_seed is None else args.twin_seed
+        exact = args.exact
+    twin = make_twin(scene, twin_seed, exact)
+    checker = make_checker(scene, settings.clearance_m)
+    if args.truth:
+        save_params(args.truth, twin.truth)
+    observer = rerun_observer(args.rrd, scene, twin) if args.rrd else None
+    extra = {"twin": {"seed": twin_seed, "exact": exact}}
+    try:
+        code, summary = run_session(args, scene, settings, twin, twin, AlwaysEnabled(), checker,
+                                    observer=observer, extra=extra)
+    finally:
+        if observer is not None and hasattr(observer, "close"):
+            observer.close()
+        twin.close()
+    wall = summary["session_wall_time_s"]
+    robot_s = summary["session_robot_time_s"]
+    summary["speedup"] = round(robot_s / wall, 1) if wall > 0 else None
+    summary["twin_seed"] = twin_seed
+    if args.foreground and hasattr(checker, "summary"):
+        summary["collision"] = checker.summary()
+    summary["cpu_count"] = os.cpu_count()
+    if args.truth:
+        summary["truth"] = str(args.truth)
+    if args.rrd:
+        summary["rrd"] = str(args.rrd)
+    print_summary(summary)
+    return code
