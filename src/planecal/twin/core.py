@@ -119,18 +119,31 @@ class Twin:
             self._servo = Servo(start, opt.servo, opt.tau_s, robot.tick_s)
         except ValueError as e:
             raise InputError(f"twin: {e}") from None
-        # q = (counts - qe0) @ M.T, M = C diag(1/g); qe0 nominal (the controller's)
-        self._M_T = (robot.coupling / robot.gains[None, :]).T.copy()
-        self._qe0 = robot.qe0.astype(np.int64)
-        self._delta_true = self._truth.joint_offsets.copy()
-        self._reference = start.copy()
-        self._last_delta = np.zeros(6, np.int64)
-        self._commanded = start.copy()
+        # q_j = sum_k M[j,k] (counts_k - qe0_k), M = C diag(1/g), qe0 nominal (the
+        # controller's); kept as Python (k, M[j,k]) lists for the per-tick path
+        M = robot.coupling / robot.gains[None, :]
+        self._M_rows = [[(k, float(M[j, k])) for k in range(6) if M[j, k] != 0.0]
+                        for j in range(6)]
+        self._qe0 = [int(v) for v in robot.qe0]
+        self._qe0_arr = robot.qe0.astype(np.int64)
+        self._M_T = M.T.copy()
+        self._delta_true_arr = self._truth.joint_offsets.copy()
+        self._delta_true = [float(v) for v in self._truth.joint_offsets]
+        self._reference = [int(v) for v in start]
+        self._reference_arr = np.array(start, np.int64)
+        self._reference_arr.flags.writeable = False
+        self._last_delta = [0] * 6
+        self._commanded = list(self._reference)
+        self._trip = robot.trip_step_counts
+        self._check = self.options.check_steps
         self._ticks = 0
         self._moving = False
         self._tripped = False
         self._dirty = True
-        self._hit = Hit(None, -1, None, None)
+        self._errors_active = self._errors.active
+        self._qpos = self.data.qpos  # views into MjData's buffers (stable)
+        self._dist: float | None = None
+        self._geom = -1
         self._errors.on_settle()  # the robot starts at rest
         self._update()
 
@@ -151,57 +164,151 @@ class Twin:
 
     # ----- RobotLink -----
     def exchange(self, delta) -> tuple[np.ndarray, np.ndarray]:
-        """One 10 ms tick: command reference + delta; returns (reference, current) counts."""
+        """One 10 ms tick: command reference + delta; returns (reference, current) counts
+        as int64[6] (the reference array is read-only and shared)."""
         if self._tripped:
             raise EncoderJumpError("twin: the robot braked after an encoder jump; make a new Twin")
-        d = _as_counts(delta, "delta")
-        if self.options.check_steps:
-            jump = np.abs(d - self._last_delta).max()
-            if jump > self.robot.trip_step_counts:
-                self._tripped = True
-                raise EncoderJumpError(f"twin: delta changed by {int(jump)} counts in one tick "
-                                       f"(trip at {self.robot.trip_step_counts})")
+        if delta.__class__ is np.ndarray and delta.dtype == _INT64 and delta.shape == (6,):
+            d = delta.tolist()
+        else:
+            d = _as_counts(delta, "delta").tolist()
+        if self._check:
+            trip = self._trip
+            for a, b in zip(d, self._last_delta):
+                if a - b > trip or b - a > trip:
+                    self._tripped = True
+                    raise EncoderJumpError(
+                        f"twin: delta changed by {abs(a - b)} counts in one tick "
+                        f"(trip at {trip})")
         self._last_delta = d
-        np.add(self._reference, d, out=self._commanded)
+        cmd = [r + x for r, x in zip(self._reference, d)]
+        self._commanded = cmd
         servo = self._servo
-        before = servo.current.copy() if self._errors.backlash is not None else None
-        if servo.step(self._commanded):
+        before = servo.current
+        if servo.step(cmd):
             self._moving = True
             self._dirty = True
-            if before is not None:
-                self._errors.on_move(servo.current - before)
+            if self._errors.backlash is not None:
+                self._errors.on_move(np.subtract(servo.current, before))
         elif self._moving:  # first tick at rest after a move
             self._moving = False
             if self._errors.sigma > 0:
                 self._errors.on_settle()
                 self._dirty = True
         self._ticks += 1
-        return self._reference.copy(), servo.current.copy()
+        return self._reference_arr, np.array(servo.current, np.int64)
+
+    def run(self, deltas) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Many ticks at once: for each row of ``deltas`` (N, 6) one ``exchange`` then one
+        ``read``. Returns (reference int64[6], current counts int64[N, 6], readings
+        float[N] in mm with NaN where read() gives None). Same results and random
+        streams as the loop; faster (vectorised counts -> joints, no per-tick checks).
+        An encoder jump runs the ticks before it, then raises EncoderJumpError."""
+        if self._tripped:
+            raise EncoderJumpError("twin: the robot braked after an encoder jump; make a new Twin")
+        D = _as_count_rows(deltas)
+        errors = self._errors
+        if errors.stiffness is not None or errors.backlash is not None:
+            return self._run_loop(D)
+        n = len(D)
+        trip_at = None
+        if self._check and n:
+            steps = np.diff(np.vstack([np.array(self._last_delta, np.int64), D]), axis=0)
+            bad = np.flatnonzero(np.abs(steps).max(axis=1) > self._trip)
+            if bad.size:
+                trip_at = int(bad[0])
+                D = D[:trip_at]
+                n = trip_at
+        if n:
+            cmd = self._reference_arr + D
+            servo = self._servo
+            before = np.array(servo.current, np.int64)
+            cur = servo.run(cmd)
+            changed = np.any(cur != np.vstack([before, cur[:-1]]), axis=1)
+            Q = (cur - self._qe0_arr) @ self._M_T + self._delta_true_arr
+            dists = np.empty(n)  # true distance per tick, NaN: no hit
+            qpos, model, data = self._qpos, self.model, self.data
+            ray, pnt, zcol = mujoco.mj_ray, self._ray._pnt, self._ray._mat[2::3]
+            mask, exclude, geomid = self._ray.mask, self._ray.exclude_body, self._ray.geomid
+            kinematics = mujoco.mj_kinematics
+            moving, dirty, dist = self._moving, self._dirty, self._dist
+            sigma = errors.sigma
+            change_at = np.flatnonzero(changed).tolist() + [n]
+            nxt = 0  # index into change_at: the next changed tick >= i
+            i = 0
+            while i < n:
+                j = i + 1
+                if change_at[nxt] == i:  # a tick that moved
+                    moving = dirty = True
+                    nxt += 1
+                elif moving:  # first tick at rest after a move
+                    moving = False
+                    if sigma > 0:
+                        errors.on_settle()
+                        dirty = True
+                else:  # at rest until the next move: one state for ticks i..j-1
+                    j = change_at[nxt]
+                if dirty:
+                    qpos[:] = Q[i] + errors.eps if sigma > 0 else Q[i]
+                    kinematics(model, data)
+                    dist = ray(model, data, pnt, zcol, mask, 1, exclude, geomid)
+                    if dist < 0:
+                        dist = None
+                    dirty = False
+                dists[i:j] = np.nan if dist is None else dist
+                i = j
+            self._geom = int(geomid[0]) if dist is not None else -1
+            readings = self._laser.readings(dists)
+            self._moving, self._dirty, self._dist = moving, dirty, dist
+            self._last_delta = D[-1].tolist()
+            self._commanded = cmd[-1].tolist()
+            self._ticks += n
+        else:
+            cur, readings = np.zeros((0, 6), np.int64), np.zeros(0)
+        if trip_at is not None:
+            self._tripped = True
+            raise EncoderJumpError(f"twin: delta jumped by more than {self._trip} counts "
+                                   f"at row {trip_at}")
+        return self._reference_arr, cur, readings
+
+    def _run_loop(self, D):
+        cur = np.empty_like(D)
+        readings = np.full(len(D), np.nan)
+        for i, d in enumerate(D):
+            _, cur[i] = self.exchange(d)
+            r = self.read()
+            if r is not None:
+                readings[i] = r
+        return self._reference_arr, cur, readings
 
     # ----- Laser -----
     def read(self) -> float | None:
         """Laser reading [mm] at the current state; None out of range or no hit."""
         if self._dirty:
             self._update()
-        return self._laser.reading(self._hit.distance_m)
+        return self._laser.reading(self._dist)
 
     def close(self) -> None:
         pass
 
     # ----- state -----
+    def _joint_angles(self) -> list:
+        """q (encoder side, no offsets) from the current counts, Python floats."""
+        x = [c - z for c, z in zip(self._servo.current, self._qe0)]
+        return [sum(m * x[k] for k, m in row) for row in self._M_rows]
+
     def _update(self) -> None:
-        q = (self._servo.current - self._qe0) @ self._M_T
-        qpos = q + self._delta_true
-        if self._errors.active:
-            qpos = qpos + self._errors.extra(q, self._delta_true)
-        self.data.qpos[:] = qpos
-        mujoco.mj_kinematics(self.model, self.data)
-        dist, geom = self._ray.cast()
-        if geom != self._hit.geom:
-            name = None if geom < 0 else self.model.geom(geom).name
-            self._hit = Hit(dist, geom, name, self._plate_of_geom.get(geom))
+        q = self._joint_angles()
+        qpos = self._qpos
+        if self._errors_active:
+            extra = self._errors.extra(np.array(q), np.array(self._delta_true))
+            for j in range(6):
+                qpos[j] = q[j] + self._delta_true[j] + extra[j]
         else:
-            self._hit.distance_m = dist
+            for j in range(6):
+                qpos[j] = q[j] + self._delta_true[j]
+        mujoco.mj_kinematics(self.model, self.data)
+        self._dist, self._geom = self._ray.cast()
         self._dirty = False
 
     def set_counts(self, counts) -> None:
@@ -211,9 +318,9 @@ class Twin:
         c = _as_counts(counts, "counts")
         if not counts_in_range(self.robot, c):
             raise InputError(f"twin: counts {c.tolist()} outside the encoder range")
-        self._servo.current[:] = c
-        self._commanded[:] = c
-        self._last_delta = c - self._reference
+        self._servo.set(c)
+        self._commanded = c.tolist()
+        self._last_delta = (c - self._reference_arr).tolist()
         self._moving = False
         self._errors.on_settle()
         self._dirty = True
@@ -222,7 +329,9 @@ class Twin:
         """What the beam hits now: true distance [m] (no noise, no window), geom, plate."""
         if self._dirty:
             self._update()
-        return self._hit
+        g = self._geom
+        return Hit(self._dist, g, None if g < 0 else self.model.geom(g).name,
+                   self._plate_of_geom.get(g))
 
     @property
     def ticks(self) -> int:
@@ -234,15 +343,15 @@ class Twin:
 
     @property
     def current_counts(self) -> np.ndarray:
-        return self._servo.current.copy()
+        return np.array(self._servo.current, np.int64)
 
     @property
     def reference_counts(self) -> np.ndarray:
-        return self._reference.copy()
+        return self._reference_arr.copy()
 
     @property
     def commanded_counts(self) -> np.ndarray:
-        return self._commanded.copy()
+        return np.array(self._commanded, np.int64)
 
     @property
     def truth(self) -> CellParams:
@@ -279,6 +388,19 @@ class Twin:
         """The twin's scene (truth poses) as MJCF text for a viewer."""
         from planecal.twin.mjcf import to_xml_exact
         return to_xml_exact(self.spec)
+
+
+_INT64 = np.dtype(np.int64)
+
+
+def _as_count_rows(v) -> np.ndarray:
+    a = np.asarray(v)
+    if a.ndim != 2 or a.shape[1] != 6:
+        raise InputError(f"twin: deltas must be an (N, 6) array of integer counts, got shape {a.shape}")
+    if a.dtype.kind not in "iu":
+        if a.dtype.kind != "f" or not np.all(np.isfinite(a)) or np.any(a != np.rint(a)):
+            raise InputError("twin: deltas must be integers")
+    return a.astype(np.int64)
 
 
 def _as_counts(v, what: str) -> np.ndarray:

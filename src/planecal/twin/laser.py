@@ -32,6 +32,32 @@ class LaserModel:
             self._noise = (self.rng.normal(0.0, self.noise_mm, NOISE_BLOCK)).tolist()
         return self._noise.pop()
 
+    def _take_noise(self, n: int) -> np.ndarray:
+        """The next ``n`` noise values in the order ``n`` calls of ``reading`` use them."""
+        out = np.empty(n)
+        i = 0
+        while i < n:
+            if not self._noise:
+                self._noise = (self.rng.normal(0.0, self.noise_mm, NOISE_BLOCK)).tolist()
+            k = min(n - i, len(self._noise))
+            out[i:i + k] = self._noise[:-k - 1:-1]  # pop() order
+            del self._noise[-k:]
+            i += k
+        return out
+
+    def readings(self, distance_m: np.ndarray) -> np.ndarray:
+        """Readings [mm] for true distances [m] (NaN: no hit), NaN where ``reading``
+        gives None. Same values and noise stream as one ``reading`` call per element."""
+        d = np.asarray(distance_m, float)
+        hit = ~np.isnan(d)
+        mm = d * 1000.0
+        if self.noise_mm > 0.0:
+            mm[hit] += self._take_noise(int(hit.sum()))
+        if self.quantum_mm:
+            mm = np.round(mm / self.quantum_mm) * self.quantum_mm
+        mm[~((mm >= self.lo) & (mm <= self.hi))] = np.nan
+        return mm
+
     def reading(self, distance_m: float | None) -> float | None:
         """mm reading for a true distance [m] (None: no hit)."""
         if distance_m is None:
