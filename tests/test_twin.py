@@ -335,3 +335,35 @@ def test_export_scene(tmp_path):
         assert np.abs(m.geom_pos[m.geom(name).id] - twin.model.geom_pos[twin.model.geom(name).id]).max() < 1e-15
     assert main(["no_such_scene", str(out)]) == 2
 
+
+
+# ----- batch API -----
+
+def test_run_equals_exchange_and_read_loop():
+    # default options: lag servo, laser noise, repeatability: same counts, same readings
+    a, b = Twin("thesis_final", seed=6), Twin("thesis_final", seed=6)
+    base = a.current_counts - a.reference_counts
+    out = base + np.cumsum(np.tile([[30, -30, 30, 40, -20, 10]], (40, 1)), axis=0)
+    D = np.vstack([out, np.repeat(out[-1:], 120, axis=0), out[::-1], np.repeat(base[None], 60, axis=0)])
+    ref, cur, mm = a.run(D[:100])
+    ref2, cur_b, mm_b = a.run(D[100:])
+    cur, mm = np.vstack([cur, cur_b]), np.concatenate([mm, mm_b])
+    loop_cur, loop_mm = [], []
+    for d in D:
+        r, c = b.exchange(d)
+        loop_cur.append(c)
+        x = b.read()
+        loop_mm.append(np.nan if x is None else x)
+    assert np.array_equal(ref, b.reference_counts) and np.array_equal(cur, np.array(loop_cur))
+    assert np.array_equal(np.isnan(mm), np.isnan(loop_mm))
+    assert np.nanmax(np.abs(mm - np.array(loop_mm))) < 1e-9
+    assert a.ticks == b.ticks == len(D) and a.read() == b.read()
+
+
+def test_run_trips_at_the_jump():
+    twin = Twin("thesis_final", seed=6, options=TwinOptions.exact())
+    D = np.zeros((10, 6), np.int64)
+    D[5:, 0] = 61
+    with pytest.raises(EncoderJumpError):
+        twin.run(D)
+    assert twin.ticks == 5

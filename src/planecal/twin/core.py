@@ -17,10 +17,13 @@ truth's sensor pose and planes. With noise and joint errors off, ``read()`` equa
 
 Kinematics and the ray are recomputed lazily, only when the counts (or joint errors)
 changed since the last reading: a robot at rest costs a laser-noise draw per reading.
+``Twin.run(deltas)`` does many ticks (exchange + read each) in one call with the same
+results; see scripts/bench_twin.py for the throughput and what bounds it (one MuJoCo
+kinematics + one ray per moving tick).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import mujoco
@@ -165,7 +168,7 @@ class Twin:
     # ----- RobotLink -----
     def exchange(self, delta) -> tuple[np.ndarray, np.ndarray]:
         """One 10 ms tick: command reference + delta; returns (reference, current) counts
-        as int64[6] (the reference array is read-only and shared)."""
+        as new int64[6] arrays."""
         if self._tripped:
             raise EncoderJumpError("twin: the robot braked after an encoder jump; make a new Twin")
         if delta.__class__ is np.ndarray and delta.dtype == _INT64 and delta.shape == (6,):
@@ -196,7 +199,7 @@ class Twin:
                 self._errors.on_settle()
                 self._dirty = True
         self._ticks += 1
-        return self._reference_arr, np.array(servo.current, np.int64)
+        return self._reference_arr.copy(), np.array(servo.current, np.int64)
 
     def run(self, deltas) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Many ticks at once: for each row of ``deltas`` (N, 6) one ``exchange`` then one
@@ -269,7 +272,7 @@ class Twin:
             self._tripped = True
             raise EncoderJumpError(f"twin: delta jumped by more than {self._trip} counts "
                                    f"at row {trip_at}")
-        return self._reference_arr, cur, readings
+        return self._reference_arr.copy(), cur, readings
 
     def _run_loop(self, D):
         cur = np.empty_like(D)
@@ -279,7 +282,7 @@ class Twin:
             r = self.read()
             if r is not None:
                 readings[i] = r
-        return self._reference_arr, cur, readings
+        return self._reference_arr.copy(), cur, readings
 
     # ----- Laser -----
     def read(self) -> float | None:
