@@ -1,0 +1,152 @@
+"""`planecal rehearse` and `planecal sample` end to end (twin; FD11 and ZS-LD80 emulators)."""
+import json
+
+import numpy as np
+import pytest
+
+from planecal.cli import main
+from planecal.params import load_params
+from planecal.samples import read_samples
+from planecal.sampling.run import load_sidecar
+from planecal.sampling.session import Progress
+from planecal.sampling.run import RunStats
+
+pytest.importorskip("planecal.twin")
+
+
+def run_cli(argv, capsys):
+    code = main(argv)
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def test_rehearse_writes_samples_sidecar_truth_and_summary(tmp_path, capsys):
+    out, truth = tmp_path / "RUN.tsv", tmp_path / "TRUTH.json"
+    code, stdout, stderr = run_cli(["rehearse", "--samples", "6", "--seed", "4", "--out", str(out),
+                                    "--truth", str(truth)], capsys)
+    assert code == 0, stderr
+    summary = json.loads(stdout)
+    for key in ("samples", "rejected_collision", "rejected_laser", "rejected_unreachable",
+                "max_step_counts", "robot_time_s", "wall_time_s"):
+        assert key in summary
+    assert summary["samples"] == 6 and summary["status"] == "complete"
+    assert 0 < summary["max_step_counts"] <= 51
+    assert summary["robot_time_s"] == pytest.approx(summary["ticks"] * 0.01)
+    s = read_samples(out)
+    assert len(s) == 6 and np.all((s.d_mm > 65) & (s.d_mm < 95))
+    side = load_sidecar(out)
+    assert side["samples"] == 6 and side["twin"] == {"seed": 4, "exact": False}
+    assert side["settings"]["collision_checking"] is True
+    t = load_params(truth)
+    assert np.any(t.joint_offsets != 0)
+    # stderr is not a TTY here: plain progress lines
+    assert "samples 6/6" in stderr
+
+
+def test_rehearse_resume_extends_the_run(tmp_path, capsys):
+    out = tmp_path / "RUN.tsv"
+    code, _, _ = run_cli(["rehearse", "--samples", "3", "--seed", "5", "--out", str(out)], capsys)
+    assert code == 0
+    first = read_samples(out)
+    code, stdout, stderr = run_cli(["rehearse", "--resume", "--samples", "5", "--cone-deg", "10",
+                                    "--out", str(out)], capsys)
+    assert code == 0, stderr
+    assert "ignoring --cone-deg" in stderr
+    s = read_samples(out)
+    assert len(s) == 5 and np.array_equal(s.qe[:3], first.qe)
+    assert len({tuple(r) for r in s.qe}) == 5
+    summary = json.loads(stdout)
+    assert summary["sessions"] == 2 and summary["samples"] == 5
+
+
+@pytest.mark.parametrize("argv, msg", [
+    (["--samples", "0"], "--samples must be at least 1"),
+    (["--cone-deg", "95"], "cone half-angle"),
+    (["--fixed-distance-mm", "120"], "laser range"),
+    (["--distance-mm", "90", "70"], "LO 90.0 is above HI 70.0"),
+    (["--scene", "no_such_scene"], "not found"),
+    (["--resume"], "no run sidecar"),
+])
+def test_rehearse_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, msg):
+    code, stdout, stderr = run_cli(["rehearse", "--out", str(tmp_path / "R.tsv")] + argv, capsys)
+    assert code == 2
+    assert msg in stderr and len(stderr.strip().splitlines()) == 1
+
+
+def test_rehearse_refuses_to_overwrite_a_run(tmp_path, capsys):
+    out = tmp_path / "RUN.tsv"
+    out.write_text("q1\tq2\tq3\tq4\tq5\tq6\tDm\n")
+    code, _, stderr = run_cli(["rehearse", "--samples", "1", "--out", str(out)], capsys)
+    assert code == 2 and "use --resume" in stderr
+
+
+def test_rehearse_rrd_without_rerun_log_says_so(tmp_path, capsys):
+    try:
+        import planecal.rerun_log  # noqa: F401
+        pytest.skip("planecal.rerun_log exists")
+    except ModuleNotFoundError:
+        pass
+    code, _, stderr = run_cli(["rehearse", "--samples", "1", "--out", str(tmp_path / "R.tsv"),
+                               "--rrd", str(tmp_path / "r.rrd")], capsys)
+    assert code == 2 and "Rerun logging is not available" in stderr
+    assert not (tmp_path / "R.tsv").exists()
+
+
+def test_sample_against_the_emulators(tmp_path, capsys):
+    """The real-cell command over UDP and a pty, with the twin behind the emulators."""
+    from planecal.links.emulators import Emulators
+    from planecal.twin import Twin
+
+    twin = Twin("thesis_final", seed=2)
+    out = tmp_path / "RUN.tsv"
+    with Emulators(twin, rt_port=0, reply_port=None) as emu:
+        code, stdout, stderr = run_cli([
+            "sample", "--rt", "127.0.0.1", "--rt-port", str(emu.fd11.rt_port), "--local-port", "0",
+            "--rt-tick-s", "0", "--laser", emu.laser.port, "--samples", "3", "--seed", "2",
+            "--out", str(out)], capsys)
+        assert not emu.fd11.tripped
+    assert code == 0, stderr
+    summary = json.loads(stdout)
+    assert summary["samples"] == 3 and summary["max_step_counts"] <= 51
+    assert summary["link"]["timeouts"] == 0 and summary["laser_read_errors"] == 0
+    s = read_samples(out)
+    assert len(s) == 3
+    # the samples are the twin's: its reading at those counts (noise ~1 um)
+    assert np.array_equal(s.qe[-1], twin.current_counts)
+    assert abs(twin.hit().distance_m * 1e3 - s.d_mm[-1]) < 0.01
+    assert load_sidecar(out)["real_cell"]["rt"] == "127.0.0.1"
+
+
+def test_sample_unreachable_controller_is_an_input_error(tmp_path, capsys):
+    code, _, stderr = run_cli(["sample", "--rt", "no.such.host.invalid", "--out",
+                               str(tmp_path / "R.tsv")], capsys)
+    assert code == 2 and "--rt no.such.host.invalid" in stderr
+
+
+def test_progress_plain_lines_every_tenth():
+    import io
+    buf = io.StringIO()
+    p = Progress(20, stream=buf)
+    st = RunStats()
+    for k in range(1, 21):
+        st.samples = k
+        p(st)
+    st.status = "complete"
+    p.done(st)
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 10 and lines[-1].startswith("samples 20/20")
+
+
+def test_progress_bar_on_a_tty():
+    import io
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    buf = Tty()
+    p = Progress(4, stream=buf, every_s=0.0)
+    st = RunStats()
+    st.samples = 2
+    p(st)
+    assert buf.getvalue().startswith("\r[############............] samples 2/4")
