@@ -367,3 +367,21 @@ def test_run_trips_at_the_jump():
     with pytest.raises(EncoderJumpError):
         twin.run(D)
     assert twin.ticks == 5
+
+
+# ----- non-geometric errors (off by default) -----
+
+def test_compliance_sags_under_gravity_and_backlash_trails():
+    stiff = Twin("thesis_final", seed=6, options=TwinOptions.exact(stiffness_nm_per_rad=(2e6, 2e6)))
+    rigid = Twin("thesis_final", seed=6, options=TwinOptions.exact())
+    dz = stiff.flange_pose()[2, 3] - rigid.flange_pose()[2, 3]
+    assert -2e-3 < dz < -1e-5  # the arm sags by a fraction of a mm
+    dq = stiff.qpos - rigid.qpos
+    assert dq[0] == 0 and dq[3:].tolist() == [0, 0, 0] and abs(dq[1]) > 0
+    lash = Twin("thesis_final", seed=6, options=TwinOptions.exact(backlash_rad=(1e-4,) * 6))
+    base = lash.current_counts - lash.reference_counts
+    lash.exchange(base + [10, 0, 0, 0, 0, 0])
+    up = lash.qpos[0]
+    lash.exchange(base + [20, 0, 0, 0, 0, 0])
+    lash.exchange(base + [10, 0, 0, 0, 0, 0])
+    assert lash.qpos[0] - up == pytest.approx(1e-4, rel=1e-6)  # same counts, other side of the gap
