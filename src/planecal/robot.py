@@ -190,7 +190,7 @@ def ik_all(robot: Robot, T: np.ndarray, delta: np.ndarray | None = None,
             th3 = phi + beta
             th2 = np.arctan2(s, r) - np.arctan2(L * np.sin(phi), a2 + L * np.cos(phi))
             th123 = np.array([th1, th2, th3, 0, 0, 0])
-            R03 = fk_frames(robot, th123 - off)[3, :3, :3]
+            R03 = fk_frames(robot, th123 - robot.theta0)[3, :3, :3]
             R36 = R03.T @ R
             s5 = np.hypot(R36[0, 2], R36[1, 2])
             for sign in (1.0, -1.0):

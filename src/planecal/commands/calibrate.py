@@ -1,0 +1,139 @@
+"""planecal calibrate SAMPLES... [--initial P.json] [--out R.json] [--max-iter N]
+[--improvement-limit X] [--outlier-sigma K] [--method gn|lm] [--free NAMES] [--rrd FILE]
+
+Several sample files may be given; a file's samples are on the plate named in its 8th
+column, or on plate 1. Without --initial the default scene's nominal values (the thesis
+cell's measured initial values) are the starting point.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from planecal.cell import parameter_names, parameter_units
+from planecal.errors import InputError
+from planecal.fit import FitOptions, FitResult, calibrate, default_free
+from planecal.params import load_params, params_to_dict, save_json
+from planecal.samples import read_many
+from planecal.scene import DEFAULT_SCENE, load_scene, nominal_params
+
+
+def add_arguments(p):
+    p.add_argument("samples", nargs="+", help="sample file(s), seed format (7.1.4)")
+    p.add_argument("--initial", help="initial parameter file (JSON); default: the scene's nominal values")
+    p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values and robot (default %(default)s)")
+    p.add_argument("--out", help="write the result (JSON) here")
+    p.add_argument("--max-iter", type=int, default=30)
+    p.add_argument("--improvement-limit", type=float, default=1e-12,
+                   help="stop when the mean absolute correction falls below this (default %(default)g)")
+    p.add_argument("--outlier-sigma", type=float, default=None,
+                   help="drop samples whose error is more than K standard deviations from the mean "
+                        "(the seed used 4); off by default")
+    p.add_argument("--method", choices=["gn", "lm"], default="gn",
+                   help="gn: Gauss-Newton with SVD pseudo-inverse (seed); lm: Levenberg-Marquardt")
+    p.add_argument("--no-scale", action="store_true", help="no column scaling of the Jacobian")
+    p.add_argument("--free", help="comma-separated parameter names to fit (default: all but delta1, delta6)")
+    p.add_argument("--rrd", help="write a Rerun recording of the fit (file name or directory)")
+
+
+def free_mask(spec: str | None, n_planes: int) -> np.ndarray:
+    if not spec:
+        return default_free(n_planes)
+    names = parameter_names(n_planes)
+    mask = np.zeros(len(names), bool)
+    for name in (s.strip() for s in spec.split(",") if s.strip()):
+        if name == "all":
+            mask[:] = True
+        elif name in names:
+            mask[names.index(name)] = True
+        else:
+            raise InputError(f"--free: unknown parameter {name!r}; known: {', '.join(names)}")
+    return mask
+
+
+def result_dict(res: FitResult) -> dict:
+    out = params_to_dict(res.params)
+    std = res.std
+    def s(i):
+        return None if not np.isfinite(std[i]) else float(std[i])
+    k = res.params.n_planes
+    out["std"] = {
+        "joint_offsets_rad": [s(i) for i in range(6)],
+        "planes": [{"n_tilde": [s(11 + 3 * j + c) for c in range(3)]} for j in range(k)],
+        "sensor": {"origin_m": [s(6), s(7), s(8)], "phi_y_rad": s(9), "phi_z_rad": s(10)},
+    }
+    out["residual_rms_mm"] = res.rms_mm()
+    out["residual_rms_initial_mm"] = res.rms_mm(initial=True)
+    out["residual_max_mm"] = float(np.max(np.abs(res.residuals_m[res.used])) * 1e3)
+    out["iterations"] = res.iterations
+    out["converged"] = res.converged
+    out["outliers"] = [int(i) for i in res.outliers]
+    out["samples_used"] = int(res.used.sum())
+    out["identifiability"] = res.identifiability
+    out["free"] = [n for n, f in zip(res.names, res.free) if f]
+    return out
+
+
+def format_report(res: FitResult, n_zero: int = 0) -> str:
+    lines = []
+    units = parameter_units(res.params.n_planes)
+    x0, x = res.initial.to_vector(), res.params.to_vector()
+    ident = res.identifiability
+    lines.append(f"{'parameter':<10} {'value':>14} {'std':>11} {'correction':>13}  unit")
+    for i, name in enumerate(res.names):
+        if not res.free[i]:
+            std = "fixed"
+        elif name in ident["not_identifiable"]:
+            std = "NOT IDENT."
+        else:
+            std = f"{res.std[i]:.3e}"
+        lines.append(f"{name:<10} {x[i]:>14.7g} {std:>11} {x[i] - x0[i]:>13.4e}  {units[i]}")
+    lines.append("")
+    lines.append(f"samples used {int(res.used.sum())} of {len(res.used)}"
+                 + (f", {n_zero} laser zeros skipped" if n_zero else ""))
+    lines.append(f"residual RMS  before {res.rms_mm(True):.4f} mm   after {res.rms_mm():.4f} mm"
+                 f"   max after {np.max(np.abs(res.residuals_m[res.used])) * 1e3:.4f} mm")
+    lines.append(f"iterations {res.iterations}" + ("" if res.converged else " (not converged)"))
+    lines.append("outliers " + (", ".join(str(i) for i in res.outliers) if res.outliers else "none"))
+    lines.append(f"sigma {ident['sigma_mm']:.4g} mm   scaled condition number "
+                 f"{ident['condition_number_scaled']:.4g}   O1 {ident['observability']['O1']:.3g}"
+                 f"  O2 {ident['observability']['O2']:.3g}")
+    for d in ident["unidentifiable_directions"]:
+        mix = " ".join(f"{v:+.3f}*{k}" for k, v in d.items())
+        lines.append(f"WARNING not identifiable: {', '.join(d)} move together without changing "
+                     f"any distance (direction {mix})")
+    for w in ident["weak_directions"]:
+        mix = " ".join(f"{v:+.3f}*{k}" for k, v in w["direction"].items())
+        lines.append(f"WARNING weakly identifiable (scaled singular value ratio "
+                     f"{w['scaled_singular_ratio']:.2e}): {mix}")
+    for pr in ident["correlated_pairs"]:
+        lines.append(f"WARNING strongly correlated: {pr['a']} ~ {pr['b']} (rho {pr['rho']:+.4f})")
+    for n in res.notes:
+        lines.append(f"NOTE {n}")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    samples = read_many(args.samples)
+    scene = load_scene(args.scene)
+    initial = load_params(args.initial) if args.initial else nominal_params(scene)
+    if samples.plate.max() >= initial.n_planes:
+        raise InputError(f"samples refer to plate {samples.plate.max() + 1} but the initial "
+                         f"parameters hold {initial.n_planes} plane(s)")
+    if args.max_iter < 1:
+        raise InputError("--max-iter must be at least 1")
+    opts = FitOptions(max_iter=args.max_iter, improvement_limit=args.improvement_limit,
+                      outlier_sigma=args.outlier_sigma, method=args.method,
+                      scale=not args.no_scale, free=free_mask(args.free, initial.n_planes))
+    try:
+        res = calibrate(scene.robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate, opts)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    print(format_report(res, samples.n_zero))
+    if args.out:
+        save_json(args.out, result_dict(res))
+        print(f"result written to {args.out}")
+    if args.rrd:
+        from planecal.rerun_log import log_fit_to_file
+        path = log_fit_to_file(args.rrd, res, samples, scene)
+        print(f"recording written to {path}")
+    return 0

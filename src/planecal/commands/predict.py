@@ -1,0 +1,34 @@
+"""planecal predict SAMPLES --params P.json
+
+Prints one tab-separated line per sample: index, measured_mm, predicted_mm, error_mm
+(error = measured - predicted). Index is 0-based over the samples kept (laser zeros are
+skipped, as in calibrate).
+"""
+from __future__ import annotations
+
+import sys
+
+from planecal.cell import predict
+from planecal.errors import InputError
+from planecal.params import load_params
+from planecal.robot import load_robot
+from planecal.samples import read_samples
+
+
+def add_arguments(p):
+    p.add_argument("samples", help="sample file, seed format (7.1.4)")
+    p.add_argument("--params", required=True, help="parameter file (JSON)")
+    p.add_argument("--robot", default="mc70", help="robot description (default %(default)s)")
+
+
+def run(args) -> int:
+    s = read_samples(args.samples)
+    params = load_params(args.params)
+    if s.plate.max() >= params.n_planes:
+        raise InputError(f"{args.samples}: samples refer to plate {s.plate.max() + 1}, "
+                         f"{args.params} holds {params.n_planes} plane(s)")
+    d = predict(load_robot(args.robot), s.qe, params, s.plate) * 1e3
+    out = sys.stdout
+    for i, (m, p) in enumerate(zip(s.d_mm, d)):
+        out.write(f"{i}\t{m:.4f}\t{p:.4f}\t{m - p:.4f}\n")
+    return 0

@@ -1,0 +1,243 @@
+"""Identification: Gauss-Newton with an SVD pseudo-inverse (seed 6.2.1, 7.2), optional
+Levenberg-Marquardt damping and column scaling, k-sigma outlier elimination, a mask of
+free parameters, and an honest account of what the data can and cannot identify.
+
+Residual r = d_model - d_measured [m]. One iteration: J dx = -r solved in the least-squares
+sense on the free columns. Iteration stops after ``max_iter`` corrections or when the mean
+absolute correction falls below ``improvement_limit`` (the seed's end condition, 7.2).
+
+Uncertainty (at the solution, on the samples used):
+  sigma^2 = |r|^2 / (m - p),  cov = sigma^2 (J^T J)^-1   (on the identifiable subspace)
+Identifiability is judged on the column-scaled Jacobian (unit-norm columns, so units do not
+matter): a scaled singular value below ``unidentifiable_ratio`` x the largest is a direction
+the data cannot see; the parameters that make up that direction are named, and their
+standard deviations are reported as missing (NaN / null), not as numbers. Directions below
+``weak_ratio`` are reported as weakly identifiable. Observability indices (Sun & Hollerbach
+1997) O1 = (s_1...s_p)^(1/p) / sqrt(m), O2 = s_min/s_max, O3 = s_min, O4 = s_min^2/s_max, on
+the scaled Jacobian.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planecal.cell import CellParams, parameter_names, predict_with_jacobian
+from planecal.robot import Robot
+
+
+def default_free(n_planes: int) -> np.ndarray:
+    """Everything but delta1 and delta6, which no plane calibration can separate from the
+    plane's rotation about the base z axis and the sensor's roll (seed 6.2)."""
+    free = np.ones(11 + 3 * n_planes, bool)
+    free[[0, 5]] = False
+    return free
+
+
+@dataclass
+class FitOptions:
+    max_iter: int = 30
+    improvement_limit: float = 1e-12
+    outlier_sigma: float | None = None
+    method: str = "gn"  # "gn": Gauss-Newton (SVD pseudo-inverse); "lm": Levenberg-Marquardt
+    scale: bool = True  # column scaling of the Jacobian
+    free: np.ndarray | None = None  # bool mask over CellParams.to_vector(); None: default_free
+    rcond: float = 1e-10  # pseudo-inverse cut-off relative to the largest scaled singular value
+    lm_lambda0: float = 1e-3
+    unidentifiable_ratio: float = 1e-7
+    weak_ratio: float = 1e-3
+    correlation_limit: float = 0.95
+
+
+@dataclass
+class FitResult:
+    params: CellParams
+    initial: CellParams
+    names: list[str]
+    free: np.ndarray
+    std: np.ndarray  # full-vector std; NaN for fixed or unidentifiable parameters
+    cov: np.ndarray  # (p, p) over the free parameters (NaN rows for unidentifiable ones)
+    residuals_m: np.ndarray  # final model - measured, all samples
+    initial_residuals_m: np.ndarray
+    used: np.ndarray  # bool mask: samples kept (not outliers)
+    outliers: list[int]
+    iterations: int
+    history: list[dict]
+    identifiability: dict
+    sigma_m: float
+    converged: bool = True
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def correction(self) -> np.ndarray:
+        return self.params.to_vector() - self.initial.to_vector()
+
+    def rms_mm(self, initial: bool = False) -> float:
+        r = self.initial_residuals_m if initial else self.residuals_m
+        return float(np.sqrt(np.mean(r[self.used] ** 2)) * 1e3)
+
+
+def _solve_step(A: np.ndarray, r: np.ndarray, rcond: float) -> np.ndarray:
+    """Minimum-norm least-squares solution of A dx = -r by SVD pseudo-inverse."""
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    keep = s > rcond * s[0]
+    return -(Vt[keep].T @ ((U[:, keep].T @ r) / s[keep]))
+
+
+def _scales(J: np.ndarray, on: bool) -> np.ndarray:
+    if not on:
+        return np.ones(J.shape[1])
+    norms = np.linalg.norm(J, axis=0)
+    return np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
+
+
+def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams,
+              plane_index: np.ndarray | None = None,
+              options: FitOptions | None = None) -> FitResult:
+    """Fit the cell parameters to samples (encoder counts qe (N,6), distances d_m (N,) [m])."""
+    opt = options or FitOptions()
+    qe = np.asarray(qe)
+    d_m = np.asarray(d_m, float)
+    N = len(d_m)
+    pidx = np.zeros(N, int) if plane_index is None else np.asarray(plane_index, int)
+    if pidx.size and pidx.max() >= initial.n_planes:
+        raise ValueError(f"samples refer to plate {pidx.max() + 1}, parameters hold "
+                         f"{initial.n_planes} plane(s)")
+    names = parameter_names(initial.n_planes)
+    free = default_free(initial.n_planes) if opt.free is None else np.asarray(opt.free, bool)
+    p = int(free.sum())
+    if N <= p:
+        raise ValueError(f"{N} samples cannot determine {p} free parameters")
+    x = initial.to_vector()
+    used = np.ones(N, bool)
+    history = []
+    outliers: list[int] = []
+    lam = opt.lm_lambda0
+    iterations = 0
+    converged = False
+
+    def evaluate(xv, mask):
+        d, J = predict_with_jacobian(robot, qe[mask], CellParams.from_vector(xv), pidx[mask])
+        return d - d_m[mask], J[:, free]
+
+    r, Jf = evaluate(x, used)
+    initial_r = r.copy()
+    history.append({"iteration": 0, "rms_m": float(np.sqrt(np.mean(r ** 2))),
+                    "max_m": float(np.max(np.abs(r))), "samples": int(used.sum())})
+    for it in range(1, opt.max_iter + 1):
+        S = _scales(Jf, opt.scale)
+        A = Jf * S
+        if opt.method == "gn":
+            dx = S * _solve_step(A, r, opt.rcond)
+        elif opt.method == "lm":
+            cost = r @ r
+            H = A.T @ A
+            g = A.T @ r
+            for _ in range(30):
+                step = np.linalg.lstsq(H + lam * np.diag(np.maximum(np.diag(H), 1e-30)), -g,
+                                       rcond=None)[0]
+                xt = x.copy()
+                xt[free] += S * step
+                rt, _ = evaluate(xt, used)
+                if rt @ rt <= cost:
+                    lam = max(lam / 10, 1e-12)
+                    break
+                lam *= 10
+            else:
+                step = np.zeros(p)
+            dx = S * step
+        else:
+            raise ValueError(f"unknown method {opt.method!r} (gn or lm)")
+        x[free] += dx
+        iterations = it
+        r, Jf = evaluate(x, used)
+        if opt.outlier_sigma is not None:
+            e = r
+            dev = np.abs(e - e.mean())
+            bad = dev > opt.outlier_sigma * e.std()
+            if bad.any() and used.sum() - bad.sum() > p + 1:
+                idx = np.flatnonzero(used)[bad]
+                outliers.extend(int(i) for i in idx)
+                used[idx] = False
+                r, Jf = evaluate(x, used)
+        history.append({"iteration": it, "rms_m": float(np.sqrt(np.mean(r ** 2))),
+                        "max_m": float(np.max(np.abs(r))), "samples": int(used.sum()),
+                        "mean_abs_correction": float(np.mean(np.abs(dx)))})
+        if np.mean(np.abs(dx)) < opt.improvement_limit:
+            converged = True
+            break
+    params = CellParams.from_vector(x)
+    # final residuals over all samples, for reporting
+    d_all, _ = predict_with_jacobian(robot, qe, params, pidx)
+    d0, _ = predict_with_jacobian(robot, qe, initial, pidx)
+    ident, std_free, cov, sigma = uncertainty(Jf, r, free, names, opt)
+    std = np.full(len(x), np.nan)
+    std[free] = std_free
+    notes = []
+    if not converged:
+        notes.append(f"stopped after {iterations} iterations (max_iter) before the mean "
+                     f"correction fell below {opt.improvement_limit:g}")
+    return FitResult(params, initial.copy(), names, free, std, cov, d_all - d_m, d0 - d_m, used,
+                     sorted(outliers), iterations, history, ident, sigma, converged, notes)
+
+
+def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str],
+                opt: FitOptions | None = None):
+    """Covariance, standard deviations and the identifiability report at a solution."""
+    opt = opt or FitOptions()
+    m, p = Jf.shape
+    free_names = [n for n, f in zip(names, free) if f]
+    S = _scales(Jf, True)
+    A = Jf * S
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    ratio = s / s[0]
+    null = ratio < opt.unidentifiable_ratio
+    weak = (~null) & (ratio < opt.weak_ratio)
+    sigma2 = float(r @ r) / max(m - p, 1)
+    keep = ~null
+    cov_scaled = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
+    cov = sigma2 * cov_scaled * np.outer(S, S)
+
+    def direction(v):
+        big = np.abs(v) >= 0.1 * np.abs(v).max()
+        order = np.argsort(-np.abs(v))
+        return {free_names[j]: round(float(v[j]), 4) for j in order if big[j]}
+
+    unidentifiable = [direction(Vt[i]) for i in np.flatnonzero(null)]
+    weak_dirs = [{"scaled_singular_ratio": float(ratio[i]), "direction": direction(Vt[i])}
+                 for i in np.flatnonzero(weak)]
+    not_ident = sorted({k for d in unidentifiable for k in d}, key=free_names.index)
+    bad = np.array([n in not_ident for n in free_names])
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    std[bad] = np.nan
+    cov[bad, :] = np.nan
+    cov[:, bad] = np.nan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(std, std)
+    pairs = []
+    for i in range(p):
+        for j in range(i + 1, p):
+            if np.isfinite(corr[i, j]) and abs(corr[i, j]) > opt.correlation_limit:
+                pairs.append({"a": free_names[i], "b": free_names[j], "rho": round(float(corr[i, j]), 5)})
+    sk = s[keep]
+    ident = {
+        "free": free_names,
+        "not_identifiable": not_ident,
+        "unidentifiable_directions": unidentifiable,
+        "weak_directions": weak_dirs,
+        "correlated_pairs": pairs,
+        "singular_values": [float(v) for v in np.linalg.svd(Jf, compute_uv=False)],
+        "scaled_singular_values": [float(v) for v in s],
+        "condition_number_scaled": float(s[0] / s[-1]) if s[-1] > 0 else float("inf"),
+        "observability": {
+            "O1": float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))) / np.sqrt(m)),
+            "O2": float(s[-1] / s[0]),
+            "O3": float(s[-1]),
+            "O4": float(s[-1] ** 2 / s[0]),
+        },
+        "sigma_mm": float(np.sqrt(sigma2) * 1e3),
+        "samples": int(m),
+        "rank": int(keep.sum()),
+        "identifiable_min_scaled_ratio": float(sk[-1] / s[0]) if len(sk) else 0.0,
+    }
+    return ident, std, cov, float(np.sqrt(sigma2))

@@ -1,0 +1,95 @@
+"""The command-line contracts: output formats, exit codes, one-line errors."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import INITIAL, perturbed, synthetic_counts
+from planecal.cli import main
+from planecal.params import save_params
+from planecal.paths import data_path
+from planecal.samples import write_samples
+
+SEED = str(data_path("examples", "seed_samples.tsv"))
+TABLE10 = str(data_path("examples", "table10_params.json"))
+
+
+def test_predict_prints_index_measured_predicted_error(capsys):
+    assert main(["predict", SEED, "--params", TABLE10]) == 0
+    rows = [line.split("\t") for line in capsys.readouterr().out.splitlines()]
+    assert len(rows) == 5 and all(len(r) == 4 for r in rows)
+    pred = [float(r[2]) for r in rows]
+    np.testing.assert_allclose(pred, [89.776, 85.318, 68.221, 68.017, 71.580], atol=0.01)
+    assert rows[0][0] == "0" and float(rows[0][1]) == 92.52
+    assert abs(float(rows[0][3]) - (92.52 - pred[0])) < 1e-3
+
+
+@pytest.fixture(scope="module")
+def run_file(robot, tmp_path_factory):
+    rng = np.random.default_rng(21)
+    truth = perturbed(INITIAL, rng)
+    qe, d = synthetic_counts(robot, truth, 150, rng)
+    d = d + rng.normal(0, 2e-6, len(d))
+    path = tmp_path_factory.mktemp("cli") / "run.tsv"
+    write_samples(path, qe, d * 1e3)
+    return path, truth
+
+
+def test_calibrate_writes_result_json(run_file, tmp_path, capsys):
+    path, truth = run_file
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "--out", str(out), "--outlier-sigma", "4"]) == 0
+    text = capsys.readouterr().out
+    assert "residual RMS" in text and "delta2" in text and "fixed" in text
+    r = json.loads(out.read_text())
+    for key in ("joint_offsets_rad", "planes", "sensor", "std", "residual_rms_mm",
+                "iterations", "outliers", "identifiability"):
+        assert key in r
+    assert r["std"]["joint_offsets_rad"][0] is None  # delta1 fixed: no number
+    assert 0.001 < r["residual_rms_mm"] < 0.003
+    err = np.array(r["joint_offsets_rad"]) - truth.joint_offsets
+    std = np.array(r["std"]["joint_offsets_rad"][1:5], float)
+    assert np.all(np.abs(err[1:5]) < 4 * std)
+
+
+def test_calibrate_with_initial_file_and_free_list(run_file, tmp_path, capsys):
+    path, _ = run_file
+    p = tmp_path / "init.json"
+    save_params(p, INITIAL)
+    assert main(["calibrate", str(path), "--initial", str(p), "--free",
+                 "all", "--max-iter", "5"]) == 0
+    out = capsys.readouterr().out
+    assert "NOT IDENT." in out and "WARNING not identifiable" in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["calibrate", "nope.tsv"], "nope.tsv: file not found"),
+    (["calibrate", SEED], "5 samples cannot determine 12 free parameters"),
+    (["predict", SEED, "--params", "missing.json"], "missing.json: file not found"),
+    (["calibrate", SEED, "--free", "delta9"], "unknown parameter 'delta9'"),
+])
+def test_errors_are_one_line_exit_2(argv, message, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_bad_parameter_file(tmp_path, capsys):
+    p = tmp_path / "p.json"
+    p.write_text('{"joint_offsets_rad": [0, 0, 0], "planes": [], "sensor": {}}')
+    assert main(["predict", SEED, "--params", str(p)]) == 2
+    assert "'joint_offsets_rad' must be a list of 6 numbers" in capsys.readouterr().err
+    p.write_text('{"joint_offsets_rad": [0, 0,')
+    assert main(["predict", SEED, "--params", str(p)]) == 2
+    assert "p.json:1: invalid JSON" in capsys.readouterr().err
+
+
+def test_console_script_runs_without_traceback(tmp_path):
+    bad = tmp_path / "bad.tsv"
+    bad.write_text("1\t2\t3\n")
+    proc = subprocess.run([sys.executable, "-m", "planecal.cli", "calibrate", str(bad)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().endswith("bad.tsv:1: expected 7 tab-separated columns (q1..q6, Dm), found 3")

@@ -1,0 +1,125 @@
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from conftest import INITIAL, perturbed, synthetic_counts
+from planecal.cell import CellParams, predict
+from planecal.fit import FitOptions, calibrate, default_free
+from planecal.scene import load_scene, nominal_params
+
+
+@pytest.fixture(scope="module")
+def problem(robot):
+    rng = np.random.default_rng(11)
+    truth = perturbed(INITIAL, rng)
+    qe, d = synthetic_counts(robot, truth, 150, rng)
+    return truth, qe, d
+
+
+def test_noise_free_recovery_from_thesis_initial_values(robot, problem):
+    truth, qe, d = problem
+    res = calibrate(robot, qe, d, INITIAL)
+    err = res.params.to_vector() - truth.to_vector()
+    assert np.abs(err[1:5]).max() < 1e-9  # delta2..delta5 [rad]
+    assert np.abs(err[default_free(1)]).max() < 1e-9
+    assert res.converged and res.iterations < 10
+    assert res.rms_mm() < 1e-9 and res.rms_mm(initial=True) > 0.5
+    assert res.identifiability["not_identifiable"] == []
+
+
+def test_levenberg_marquardt_and_unscaled_reach_the_same_solution(robot, problem):
+    truth, qe, d = problem
+    for opts in (FitOptions(method="lm"), FitOptions(scale=False)):
+        res = calibrate(robot, qe, d, INITIAL, options=opts)
+        assert np.abs(res.params.joint_offsets - truth.joint_offsets).max() < 1e-9
+
+
+def test_same_solution_as_scipy_least_squares(robot, problem):
+    truth, qe, d = problem
+    rng = np.random.default_rng(3)
+    dn = d + rng.normal(0, 2e-6, len(d))
+    free = default_free(1)
+    x0 = INITIAL.to_vector()
+
+    def f(xf):
+        x = x0.copy()
+        x[free] = xf
+        return predict(robot, qe, CellParams.from_vector(x)) - dn
+
+    sp = least_squares(f, x0[free], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    res = calibrate(robot, qe, dn, INITIAL)
+    np.testing.assert_allclose(res.params.to_vector()[free], sp.x, atol=1e-9)
+
+
+def test_offsets_within_three_sigma_over_seeds(robot):
+    """With 2 um laser noise the reported std is honest: errors within 3 sigma, and the
+    normalized errors have about unit variance over seeds."""
+    z = []
+    for seed in range(8):
+        rng = np.random.default_rng(100 + seed)
+        truth = perturbed(INITIAL, rng)
+        qe, d = synthetic_counts(robot, truth, 150, rng)
+        res = calibrate(robot, qe, d + rng.normal(0, 2e-6, len(d)), INITIAL)
+        zs = (res.params.joint_offsets - truth.joint_offsets)[1:5] / res.std[1:5]
+        assert np.all(np.abs(zs) < 3.5), zs
+        assert 1.4e-6 < res.sigma_m < 2.6e-6
+        z.extend(zs)
+    assert 0.4 < np.std(z) < 1.6
+
+
+def test_outliers_are_dropped_and_named(robot, problem):
+    truth, qe, d = problem
+    rng = np.random.default_rng(4)
+    dn = d + rng.normal(0, 2e-6, len(d))
+    dn[[7, 42]] += 0.5e-3  # two 0.5 mm blunders
+    res = calibrate(robot, qe, dn, INITIAL, options=FitOptions(outlier_sigma=4))
+    assert res.outliers == [7, 42]
+    assert res.used.sum() == len(d) - 2
+    assert np.abs(res.params.joint_offsets - truth.joint_offsets).max() < 1e-4
+    assert res.rms_mm() < 0.004
+
+
+def test_freed_delta1_delta6_are_named_not_numbered(robot, problem):
+    truth, qe, d = problem
+    res = calibrate(robot, qe, d, INITIAL, options=FitOptions(free=np.ones(14, bool)))
+    ni = res.identifiability["not_identifiable"]
+    assert "delta1" in ni and "delta6" in ni
+    assert np.isnan(res.std[0]) and np.isnan(res.std[5])
+    dirs = res.identifiability["unidentifiable_directions"]
+    mixes = [set(d) for d in dirs]
+    assert any("delta6" in m and "phi_z" in m for m in mixes)  # roll of the sensor
+    assert any("delta1" in m and ({"n1_x", "n1_y"} & m) for m in mixes)  # plane about base z
+    # the identifiable offsets are still right
+    assert np.abs(res.params.joint_offsets[1:5] - truth.joint_offsets[1:5]).max() < 1e-9
+
+
+def test_several_planes_share_robot_and_sensor(robot):
+    rng = np.random.default_rng(7)
+    nominal = CellParams(np.zeros(6), INITIAL.sensor_origin, INITIAL.phi_y, INITIAL.phi_z,
+                         [[0, -1.02511, 3.62708], [0.3, -0.9, 3.2]])
+    truth = perturbed(nominal, rng)
+    qe0, d0 = synthetic_counts(robot, truth, 80, rng, plane=0)
+    qe1, d1 = synthetic_counts(robot, truth, 80, rng, plane=1)
+    qe = np.vstack([qe0, qe1])
+    d = np.concatenate([d0, d1])
+    pidx = np.r_[np.zeros(len(d0), int), np.ones(len(d1), int)]
+    res = calibrate(robot, qe, d, nominal, plane_index=pidx)
+    assert np.abs(res.params.to_vector() - truth.to_vector())[default_free(2)].max() < 1e-9
+    assert len(res.names) == 17
+
+
+def test_max_iter_reports_not_converged(robot, problem):
+    truth, qe, d = problem
+    res = calibrate(robot, qe, d, INITIAL, options=FitOptions(max_iter=1))
+    assert res.iterations == 1 and not res.converged and res.notes
+
+
+def test_too_few_samples(robot, problem):
+    _, qe, d = problem
+    with pytest.raises(ValueError, match="cannot determine 12 free parameters"):
+        calibrate(robot, qe[:12], d[:12], INITIAL)
+
+
+def test_scene_nominal_values_are_thesis_initial_values():
+    p = nominal_params(load_scene())
+    np.testing.assert_array_equal(p.to_vector(), INITIAL.to_vector())
