@@ -402,3 +402,70 @@ def test_emulate_command_without_twin_fails_in_one_line(capsys, monkeypatch):
     assert main(["emulate", "--rt-port", "0"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "twin" in err
+
+
+# --- the twin behind the wires --------------------------------------------------------------
+
+def test_twin_over_udp_and_pty_matches_in_process_twin():
+    pytest.importorskip("mujoco")
+    twin_mod = pytest.importorskip("planecal.twin")
+    from planecal.links.zs_ld80 import ZSLD80, decode_reply, encode_reply
+
+    local = twin_mod.Twin("thesis_final", seed=3)     # default options: lag servo, laser noise
+    remote = twin_mod.Twin("thesis_final", seed=3)
+    move = ramp(20, joints=(1, 0, 0, 0, 1, -1))
+    path = [np.zeros(6, np.int64)] + move + [move[-1]] * 10   # move 1000 counts, then dwell
+    with Emulators(remote, host=LO, rt_port=0, reply_port=None) as emus, \
+            link_to(emus.fd11.rt_port) as link, ZSLD80(emus.laser.port, timeout_s=T) as laser:
+        for d in path:
+            ref_w, cur_w = link.exchange(d)
+            mm_w = laser.read()
+            ref_l, cur_l = local.exchange(d)
+            mm_l = local.read()
+            np.testing.assert_array_equal(ref_w, ref_l)
+            np.testing.assert_array_equal(cur_w, cur_l)
+            assert mm_w == decode_reply(encode_reply(mm_l))  # identical at the wire's 1e-6 mm
+        assert mm_w is not None
+        assert link.counters.timeouts == 0 and laser.counters.malformed == 0
+    assert remote.ticks == local.ticks == len(path)
+
+
+def test_planecal_emulate_serves_the_twin():
+    pytest.importorskip("mujoco")
+    twin_mod = pytest.importorskip("planecal.twin")
+    import os
+    import re
+    import signal
+    import subprocess
+    import sys
+    from planecal.links.zs_ld80 import ZSLD80, decode_reply, encode_reply
+
+    env = dict(os.environ, MUJOCO_GL="disable")
+    proc = subprocess.Popen([sys.executable, "-m", "planecal.cli", "emulate", "--seed", "3",
+                             "--rt-port", "0", "--reply-port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    guard = threading.Timer(60, proc.kill)  # never hang the suite
+    guard.start()
+    try:
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            if line.startswith("running"):
+                break
+        text = "".join(lines)
+        assert "running" in text, text + proc.stderr.read()
+        port = int(re.search(r"UDP 127\.0\.0\.1:(\d+)", text).group(1))
+        tty_path = re.search(r"serial device (\S+)", text).group(1)
+        local = twin_mod.Twin("thesis_final", seed=3)
+        with link_to(port, timeout_s=1.0) as link, ZSLD80(tty_path, timeout_s=1.0) as laser:
+            for d in [np.zeros(6, np.int64)] + ramp(3, joints=(1, 0, 0, 0, 0, 0)):
+                ref_w, cur_w = link.exchange(d)
+                ref_l, cur_l = local.exchange(d)
+                np.testing.assert_array_equal(ref_w, ref_l)
+                np.testing.assert_array_equal(cur_w, cur_l)
+                assert laser.read() == decode_reply(encode_reply(local.read()))
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+        guard.cancel()
+    assert proc.returncode == 130 and "interrupted" in err
