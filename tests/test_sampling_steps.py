@@ -46,13 +46,13 @@ def check_path(start, goal, dwell=0):
     assert np.all(rows[n:] == goal)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=80, deadline=None)  # paths of up to 335 000 ticks: keep it brisk
 @given(counts, counts)
 def test_any_start_goal_in_24_bit_range(start, goal):
     check_path(start, goal)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=400, deadline=None)
 @given(counts, near)
 def test_short_moves_with_dwell(start, off):
     goal = np.clip(start + off, 0, LIMIT)
