@@ -385,3 +385,11 @@ def test_compliance_sags_under_gravity_and_backlash_trails():
     lash.exchange(base + [20, 0, 0, 0, 0, 0])
     lash.exchange(base + [10, 0, 0, 0, 0, 0])
     assert lash.qpos[0] - up == pytest.approx(1e-4, rel=1e-6)  # same counts, other side of the gap
+
+
+def test_view_scene_file():
+    from planecal.twin.mjcf import view_scene_path, view_scene_xml
+    path = view_scene_path(ROBOT)
+    assert path.read_text() == view_scene_xml(ROBOT), "run scripts/build_mjcf.py"
+    m = mujoco.MjModel.from_xml_path(str(path))  # includes mc70.xml
+    assert m.njnt == 6 and m.geom("floor").id >= 0

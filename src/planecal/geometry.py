@@ -32,8 +32,8 @@ The adapter is the convex hull of a disc on the flange face and the head's back 
 Cell
 ----
 Plates are boxes: the measured face on the plane, the body (``thickness``) behind it
-(``Plate.frame``). A stand is a ``STAND_SIDE`` square column from the floor up to the
-plate's lowest point, under the plate's centre. The floor is a ``FLOOR_SIZE`` slab whose
+(``Plate.frame``). A stand is a ``STAND_SIDE`` square column under the plate's centre,
+from the floor up to the plate's lower face (it touches the plate, never enters it). The floor is a ``FLOOR_SIZE`` slab whose
 top is at ``scene.floor_z``. Obstacles are the scene's boxes (R = Rz(yaw) Ry(pitch) Rx(roll)).
 """
 from __future__ import annotations
@@ -231,6 +231,22 @@ def plate_box(plate, n_tilde=None) -> tuple[np.ndarray, np.ndarray]:
     return ext, F @ _translation((plate.size[0] / 2, plate.size[1] / 2, -plate.thickness / 2))
 
 
+def _stand_top(pose: np.ndarray, ext: np.ndarray) -> float:
+    """Height of a stand's top under a plate box (centre pose, extents): the plate's lower
+    large face above the column's four top corners, lowest of them (the column touches
+    the plate without entering it); for a steep plate (|n_z| < 0.3) its lowest point."""
+    z = pose[:3, 2]
+    corners = pose[:3, 3] + (np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                                       for sz in (-1, 1)]) * ext / 2) @ pose[:3, :3].T
+    low = float(corners[:, 2].min())
+    if abs(z[2]) < 0.3:
+        return low
+    p0 = pose[:3, 3] - np.sign(z[2]) * z * ext[2] / 2  # a point of the lower large face
+    xy = pose[:2, 3] + STAND_SIDE / 2 * np.array([[sx, sy] for sx in (-1, 1) for sy in (-1, 1)])
+    heights = p0[2] - ((xy - p0[:2]) @ z[:2]) / z[2]
+    return max(low, float(heights.min()))
+
+
 def scene_meshes(scene, plates_n_tilde=None) -> list[StaticMesh]:
     """Plates (on ``plates_n_tilde`` (k,3) if given, else the nominal planes), their
     stands, the floor and the obstacles, in the base frame."""
@@ -245,8 +261,8 @@ def scene_meshes(scene, plates_n_tilde=None) -> list[StaticMesh]:
         mesh = box_mesh(ext, pose)
         out.append(StaticMesh(plate.name, mesh, "plate", ext, pose))
         if plate.stand:
-            low = float(mesh.vertices[:, 2].min())
-            h = low - scene.floor_z
+            top = _stand_top(pose, ext)
+            h = top - scene.floor_z
             if h > 1e-3:
                 c = pose[:3, 3]
                 sp = _translation((c[0], c[1], scene.floor_z + h / 2))
