@@ -220,6 +220,13 @@ def test_encoder_jump_trips():
         twin.exchange(np.array([60, 0, 0, 0, 0, 0]))
 
 
+def test_bad_options_are_input_errors():
+    for kw in ({"servo": "fast"}, {"tau_s": 0.0}, {"laser_noise_mm": -1.0},
+               {"repeatability_mm": float("nan")}):
+        with pytest.raises(InputError):
+            TwinOptions(**kw)
+
+
 def test_bad_delta_is_input_error():
     twin = Twin("thesis_final", seed=2, options=TwinOptions.exact())
     with pytest.raises(InputError):

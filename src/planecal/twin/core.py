@@ -63,6 +63,15 @@ class TwinOptions:
     noise_seed: int | None = None
     check_steps: bool = True
 
+    def __post_init__(self):
+        if self.servo not in ("ideal", "lag"):
+            raise InputError(f"twin: servo must be 'ideal' or 'lag', got {self.servo!r}")
+        for name in ("tau_s", "laser_noise_mm", "laser_quantum_mm", "repeatability_mm"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v >= 0 and (v > 0 or name != "tau_s")):
+                raise InputError(f"twin: {name} must be a finite number >= 0"
+                                 f"{' (> 0)' if name == 'tau_s' else ''}, got {v!r}")
+
     @classmethod
     def exact(cls, **kw) -> "TwinOptions":
         base = cls(servo="ideal", laser_noise_mm=0.0, repeatability_mm=0.0)
