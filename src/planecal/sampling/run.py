@@ -20,14 +20,18 @@ with ``.ok``, like ``planecal.collision.CollisionWorld``). Per sample:
 When the enable signal drops no further delta is sent; the run stops cleanly with
 ``status = "stopped"``: the sample file holds every sample taken, the sidecar is current.
 
-Sidecar ``RUN.tsv.json`` (written atomically -- temp file, fsync, rename -- after every
-sample and when the run ends)::
+Planning (steps 1-2) can run in a forked process for the next sample while the robot
+moves to the current one (``background=True``); the results are the same.
+
+Sidecar ``RUN.tsv.json`` (written atomically -- temp file renamed over it -- after every
+sample and when the run ends; the commands add ``"twin"`` or ``"real_cell"``)::
 
     {"format": "planecal-run/1",
-     "status": "running" | "complete" | "stopped" | "gave_up",
+     "status": "running" | "complete" | "stopped" | "gave_up" | "error",
      "stop_reason": str | null,
      "scene": name, "scene_path": str, "robot": name, "seed": int,
      "samples_target": N, "samples": taken so far,
+     "cone_deg": beam cone half-angle, "distance_mm": [lo, hi] or the fixed distance,
      "settings": {"pose": {cone_deg, distance_mm, fixed_distance_mm, margin_m, roll_deg,
                            plate_choice},
                   "laser": {buffer_len, spread_mm, max_out_of_range, max_reads},
@@ -35,6 +39,7 @@ sample and when the run ends)::
                   "collision_checking": bool},
      "rejected": {"collision": n, "laser": n, "unreachable": n},
      "laser_give_ups": {"out_of_range": n, "not_stable": n},
+     "recent_rejections": the last 50 as {"sample": index, "kind", "reason"},
      "ticks", "robot_time_s", "wall_time_s", "max_step_counts",   (over all sessions)
      "sessions": number of sessions (1 + resumes),
      "rng_state": numpy PCG64 bit-generator state after the last sample,
@@ -50,6 +55,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections import deque
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -66,6 +72,7 @@ from planecal.scene import Scene
 
 SIDECAR_FORMAT = "planecal-run/1"
 REJECT_KINDS = ("collision", "laser", "unreachable")
+RECENT_REJECTIONS = 50  # kept in the sidecar with their reasons
 
 
 # ----- observer -------------------------------------------------------------------------
@@ -264,7 +271,10 @@ class RunSettings:
             s = side["settings"]
             pose = dict(s["pose"])
             pose["distance_mm"] = tuple(pose["distance_mm"])
-            return cls(scene=side["scene_path"] or side["scene"], samples=int(side["samples_target"]),
+            scene = side.get("scene_path")
+            if not scene or not Path(scene).exists():  # moved checkout: the scene by name
+                scene = side["scene"]
+            return cls(scene=scene, samples=int(side["samples_target"]),
                        seed=int(side["seed"]), pose=PoseSettings(**pose),
                        laser=LaserSettings(**s["laser"]),
                        **{k: s[k] for k in ("dwell_ticks", "nominal_step_counts", "max_attempts",
@@ -517,6 +527,7 @@ class SamplingRun:
         self.stats = RunStats()
         self.rng_state = np.random.default_rng(settings.seed).bit_generator.state
         self.plan_time_s = 0.0
+        self.recent_rejections: deque = deque(maxlen=RECENT_REJECTIONS)
         self.resume = resume
         if resume:
             side = load_sidecar(self.out)
@@ -528,6 +539,7 @@ class SamplingRun:
             st.max_step_counts = int(side.get("max_step_counts", 0))
             st.sessions = int(side.get("sessions", 1)) + 1
             st.samples = count_samples(self.out)
+            self.recent_rejections.extend(side.get("recent_rejections", []))
             if side.get("rng_state"):
                 self.rng_state = side["rng_state"]
             st.robot_time_s = st.ticks * self.robot.tick_s
@@ -541,8 +553,13 @@ class SamplingRun:
             "scene_path": str(self.scene.path) if self.scene.path else None,
             "robot": self.robot.name, "seed": self.settings.seed,
             "samples_target": self.settings.samples, "samples": st.samples,
+            "cone_deg": self.settings.pose.cone_deg,
+            "distance_mm": (self.settings.pose.fixed_distance_mm
+                            if self.settings.pose.fixed_distance_mm is not None
+                            else list(self.settings.pose.distance_mm)),
             "settings": self.settings.to_dict(),
             "rejected": dict(st.rejected), "laser_give_ups": dict(st.laser_give_ups),
+            "recent_rejections": list(self.recent_rejections),
             "ticks": st.ticks, "robot_time_s": round(st.robot_time_s, 3),
             "wall_time_s": round(st.wall_time_s, 3), "max_step_counts": st.max_step_counts,
             "sessions": st.sessions, "rng_state": self.rng_state,
@@ -566,6 +583,8 @@ class SamplingRun:
         self._account()
         self.stats.rejected[kind] += 1
         self._rejected_in_a_row += 1
+        self.recent_rejections.append({"sample": self.stats.samples, "kind": kind,
+                                       "reason": reason})
         self.observer.on_reject(q, reason)
         if self.progress:
             self.progress(self.stats)
