@@ -60,15 +60,17 @@ per unit s, so dist(x, axis k) <= min(r_kj, D_k + G_k |t - s|) and the displacem
 certified by a measured gap g = d - c is the larger of g / L and the root of that
 quadratic (``_step_sizes``): on it the pair stays farther than c.
 
-Procedure: (1) all pairs on a grid of ``coarse_samples`` + 2 configurations (target
-first): cheap lower bounds (bounding sphere against the static part's box, or sphere
-against sphere), exact distances only where a bound is within the clearance: a measured
-distance <= c + ``resolution_m`` rejects the path (most rejected paths end here);
-(2) a grid interval [a, b] of a pair is certified when the steps from its ends cover it
-(exact distances are measured where the bounds do not suffice); (3) each open interval
-shrinks by the steps of its ends to [a', b'] and is split at its midpoint; a', the
-midpoint and b' are measured exactly, and so on until every interval is certified, a
-measurement rejects the path, or a pair exceeds ``max_steps`` refinements ('undecided').
+Procedure: (1a) every pair at both ends, the target first: cheap lower bounds (bounding
+sphere against the static part's box, or sphere against sphere), exact distances only
+where a bound is within the clearance; a measured distance <= c + ``resolution_m``
+rejects the path; pairs whose end bounds already certify [0, 1] are done. (1b) the other
+pairs on ``coarse_samples`` interior grid points, likewise (most rejected paths end in 1a
+or 1b); a grid interval [a, b] of a pair is certified when the steps from its ends cover
+it, measuring exact distances at the ends of intervals the bounds leave open.
+(2) each open interval shrinks by the steps of its ends to [a', b'] and is split at its
+midpoint; a', the midpoint and b' are measured exactly, and so on until every interval
+is certified, a measurement rejects the path, or a pair exceeds ``max_steps``
+refinement rounds ('undecided').
 Rejection is always safe; acceptance means every checked pair stays farther than c
 everywhere on the segment, in the nominal model with the geometry as given: no false
 "clear". ``resolution_m`` ends the slow convergence of steps toward a point where the
@@ -551,43 +553,67 @@ class CollisionWorld:
         L = self._W @ adq
         self._best = (float("inf"), None)
 
-        # 1. every pair on a coarse grid: bounds everywhere, exact distances where the
-        #    bound is within the clearance (most rejected paths fail here, cheaply)
         grid = np.linspace(0.0, 1.0, self.coarse_samples + 2)
         K = len(grid)
         Fg = self._frames(q0 + grid[:, None] * dq)
-        idx = np.tile(np.arange(P), K)
-        gi = np.repeat(np.arange(K), P)
-        lb, cu = self._lower_bounds(Fg[gi], idx)
-        d = lb.copy()
-        exact = np.zeros(len(d), bool)
-        near = np.flatnonzero(lb <= c_meas)
-        near = near[np.argsort(-grid[gi[near]], kind="stable")]  # target first
-        for e in near:
-            bad = self._measure(int(idx[e]), Fg[gi[e]], c_meas, float(grid[gi[e]]))
-            if isinstance(bad, CheckResult):
+        D = np.zeros((K, P))  # distance or lower bound at grid point k of pair n
+        G = np.zeros((K, P))  # the step it certifies
+        X = np.zeros((K, P), bool)  # D is exact
+        CU = np.zeros((K, P, 3))  # centre of the pair's moving part
+
+        def bound(rows, cols):
+            D[rows, cols], CU[rows, cols] = self._lower_bounds(Fg[rows], cols)
+
+        def exact(rows, cols):
+            for k, n in zip(rows, cols):
+                if not X[k, n]:
+                    d = self._measure(int(n), Fg[k], c_meas, float(grid[k]))
+                    if isinstance(d, CheckResult):
+                        return d
+                    D[k, n], X[k, n] = d, True
+            return None
+
+        def steps(rows, cols):
+            G[rows, cols] = self._step_sizes(Fg[rows], CU[rows, cols], cols, D[rows, cols] - c,
+                                             adq, L[cols])
+
+        # 1a. both ends of every pair (the target first: colliding targets are common);
+        #     exact distances where the bound is within the clearance; pairs whose end
+        #     bounds certify the whole path are done
+        rows, cols = np.repeat([K - 1, 0], P), np.tile(np.arange(P), 2)
+        bound(rows, cols)
+        sel = D[rows, cols] <= c_meas
+        bad = exact(rows[sel], cols[sel])
+        if bad is not None:
+            return bad
+        steps(rows, cols)
+        R = np.flatnonzero(~(G[0] + G[K - 1] > 1.0))
+        # 1b. the pairs still open on the interior grid points: bounds, exact distances
+        #     where a bound is within the clearance (most rejected paths end here)
+        unc = np.zeros((K - 1, P), bool)
+        if len(R) and K > 2:
+            rows, cols = np.repeat(np.arange(1, K - 1), len(R)), np.tile(R, K - 2)
+            bound(rows, cols)
+            sel = D[rows, cols] <= c_meas
+            bad = exact(rows[sel], cols[sel])
+            if bad is not None:
                 return bad
-            d[e], exact[e] = bad, True
-        g = self._step_sizes(Fg[gi], cu, idx, d - c, adq, L[idx])
-        D, G, X = d.reshape(K, P), g.reshape(K, P), exact.reshape(K, P)
-        h = np.diff(grid)[:, None]
-        unc = ~(G[:-1] + G[1:] > h)  # (K-1, P) intervals the bounds do not certify
-        if unc.any():
-            # exact distances at their ends, then test again
+            steps(rows, cols)
+            h = np.diff(grid)[:, None]
+            unc[:, R] = ~(G[:-1, R] + G[1:, R] > h)
+            # exact distances at the ends of the grid intervals still open, test again
             ends = np.zeros((K, P), bool)
             ends[:-1] |= unc
             ends[1:] |= unc
-            ends &= ~X
-            kk, nn = np.nonzero(ends)
-            if len(kk):
-                for k, n in zip(kk, nn):
-                    bad = self._measure(int(n), Fg[k], c_meas, float(grid[k]))
-                    if isinstance(bad, CheckResult):
-                        return bad
-                    D[k, n] = bad
-                G[kk, nn] = self._step_sizes(Fg[kk], cu.reshape(K, P, 3)[kk, nn], nn,
-                                             D[kk, nn] - c, adq, L[nn])
-            unc = ~(G[:-1] + G[1:] > h)
+            rows, cols = np.nonzero(ends & ~X)
+            if len(rows):
+                bad = exact(rows, cols)
+                if bad is not None:
+                    return bad
+                steps(rows, cols)
+            unc[:, R] = ~(G[:-1, R] + G[1:, R] > h)
+        elif len(R):
+            unc[0, R] = True
         # 2. refine the intervals still open: shrink each by the steps its ends certify
         #    and split the rest at its midpoint, measuring the three new points exactly
         kk, nn = np.nonzero(unc)
