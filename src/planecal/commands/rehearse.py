@@ -76,7 +76,10 @@ def run(args) -> int:
     twin = make_twin(scene, twin_seed, exact)
     checker = make_checker(scene, settings.clearance_m)
     if args.truth:
-        save_params(args.truth, twin.truth)
+        try:
+            save_params(args.truth, twin.truth)
+        except OSError as e:
+            raise InputError(f"--truth {args.truth}: cannot write ({e.strerror})") from None
     observer = rerun_observer(args.rrd, scene, twin) if args.rrd else None
     extra = {"twin": {"seed": twin_seed, "exact": exact}}
     try:

@@ -642,6 +642,8 @@ class SamplingRun:
                     break
                 self.rng_state = plan.rng_after
                 rows = plan_move(drv, plan.qe_goal, s.nominal_step_counts, s.dwell_ticks)
+                if rows is None:  # the planner checks the range; this cannot happen
+                    raise RuntimeError("planned target outside the encoder range")
                 q_goal = plan.q
                 if bg:  # plan the next pose while the robot moves (assuming this one succeeds)
                     bg.submit(q_goal, st.samples + 1, self.rng_state, s.max_attempts)
