@@ -8,7 +8,8 @@ repeatability):
 * moving:   the delta changes every tick: every tick recomputes joints, kinematics, ray;
 * holding:  the robot at rest, one reading per tick (kinematics and ray are cached);
 * sampling: the thesis' sampling loop (7.1.3): ramp to a new pose at <= 50 counts/tick,
-            then hold for 105 ticks while 100 readings fill the buffer.
+            then hold for 105 ticks while 100 readings fill the buffer (the batch API
+            gets one ``run`` call per ramp and one per hold, as a sampler would).
 Each through the per-tick API (``exchange`` + ``read``, what the sampling loop calls)
 and through the batch API (``Twin.run``), timed in wall seconds and in this process's
 CPU seconds (on a shared machine the two differ). The last line,
@@ -36,18 +37,20 @@ def moving_traj(base, n):
 
 
 def sampling_traj(base, n_samples, rng):
-    rows, delta = [], base.copy()
+    """Segments as a sampler would send them: a ramp to a new pose, then a hold."""
+    segments, delta = [], base.copy()
     for _ in range(n_samples):
         target = base + rng.integers(-2500, 2500, 6)
+        ramp = []
         while not np.array_equal(delta, target):
             delta = delta + np.clip(target - delta, -50, 50)
-            rows.append(delta)
-        rows.extend([delta] * 105)
-    return np.array(rows)
+            ramp.append(delta)
+        segments += [np.array(ramp), np.repeat(delta[None], 105, axis=0)]
+    return segments
 
 
 def per_tick(twin, D):
-    rows = list(D)
+    rows = [d for seg in (D if isinstance(D, list) else [D]) for d in seg]
     exchange, read = twin.exchange, twin.read
     t0, c0 = time.perf_counter(), time.process_time()
     for d in rows:
@@ -57,10 +60,13 @@ def per_tick(twin, D):
 
 
 def batch(twin, D, chunk=1000):
+    """One Twin.run per segment (a list of arrays) or per ``chunk`` ticks of one array."""
+    segments = D if isinstance(D, list) else [D[i:i + chunk] for i in range(0, len(D), chunk)]
+    n = sum(len(seg) for seg in segments)
     t0, c0 = time.perf_counter(), time.process_time()
-    for i in range(0, len(D), chunk):
-        twin.run(D[i:i + chunk])
-    return len(D) / (time.perf_counter() - t0), len(D) / (time.process_time() - c0)
+    for seg in segments:
+        twin.run(seg)
+    return n / (time.perf_counter() - t0), n / (time.process_time() - c0)
 
 
 def fresh():
@@ -72,6 +78,8 @@ def main() -> int:
     rng = np.random.default_rng(0)
     results = {}
     for api, fn in (("per-tick", per_tick), ("batch", batch)):
+        twin, base = fresh()
+        fn(twin, moving_traj(base, 2000))  # warm up
         twin, base = fresh()
         results[api, "moving"] = fn(twin, moving_traj(base, 40_000))
         twin, base = fresh()

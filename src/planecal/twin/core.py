@@ -149,7 +149,7 @@ class Twin:
         self._trip = robot.trip_step_counts
         self._check = self.options.check_steps
         self._ticks = 0
-        self._moving = False
+        self._at_rest = True
         self._tripped = False
         self._dirty = True
         self._errors_active = self._errors.active
@@ -194,19 +194,19 @@ class Twin:
                         f"(trip at {trip})")
         self._last_delta = d
         cmd = [r + x for r, x in zip(self._reference, d)]
+        holding = cmd == self._commanded
         self._commanded = cmd
         servo = self._servo
         before = servo.current
         if servo.step(cmd):
-            self._moving = True
             self._dirty = True
             if self._errors.backlash is not None:
                 self._errors.on_move(np.subtract(servo.current, before))
-        elif self._moving:  # first tick at rest after a move
-            self._moving = False
-            if self._errors.sigma > 0:
-                self._errors.on_settle()
-                self._dirty = True
+        at_rest = holding and servo.current == cmd
+        if at_rest and not self._at_rest and self._errors.sigma > 0:  # came to rest
+            self._errors.on_settle()
+            self._dirty = True
+        self._at_rest = at_rest
         self._ticks += 1
         return self._reference_arr.copy(), np.array(servo.current, np.int64)
 
@@ -237,41 +237,49 @@ class Twin:
             before = np.array(servo.current, np.int64)
             cur = servo.run(cmd)
             changed = np.any(cur != np.vstack([before, cur[:-1]]), axis=1)
+            prev_cmd = np.vstack([np.array(self._commanded, np.int64), cmd[:-1]])
+            at_rest = np.all(cur == cmd, axis=1) & np.all(cmd == prev_cmd, axis=1)
+            sigma = errors.sigma
+            settle = at_rest & ~np.concatenate([[self._at_rest], at_rest[:-1]]) if sigma > 0 \
+                else np.zeros(n, bool)
             Q = (cur - self._qe0_arr) @ self._M_T + self._delta_true_arr
+            if sigma > 0:
+                Q += errors.eps
             dists = np.empty(n)  # true distance per tick, NaN: no hit
             qpos, model, data = self._qpos, self.model, self.data
             ray, pnt, zcol = mujoco.mj_ray, self._ray._pnt, self._ray._mat[2::3]
             mask, exclude, geomid = self._ray.mask, self._ray.exclude_body, self._ray.geomid
             kinematics = mujoco.mj_kinematics
-            moving, dirty, dist = self._moving, self._dirty, self._dist
-            sigma = errors.sigma
-            change_at = np.flatnonzero(changed).tolist() + [n]
-            nxt = 0  # index into change_at: the next changed tick >= i
+            dirty = self._dirty
+            dist = -1.0 if self._dist is None else self._dist
+            events = np.flatnonzero(changed | settle).tolist() + [n]
+            settle_l = settle.tolist()
             i = 0
-            while i < n:
-                j = i + 1
-                if change_at[nxt] == i:  # a tick that moved
-                    moving = dirty = True
-                    nxt += 1
-                elif moving:  # first tick at rest after a move
-                    moving = False
-                    if sigma > 0:
-                        errors.on_settle()
-                        dirty = True
-                else:  # at rest until the next move: one state for ticks i..j-1
-                    j = change_at[nxt]
-                if dirty:
-                    qpos[:] = Q[i] + errors.eps if sigma > 0 else Q[i]
-                    kinematics(model, data)
-                    dist = ray(model, data, pnt, zcol, mask, 1, exclude, geomid)
-                    if dist < 0:
-                        dist = None
-                    dirty = False
-                dists[i:j] = np.nan if dist is None else dist
-                i = j
+            for e in events:  # ticks i..e-1: nothing changes; tick e: counts move or settle
+                if i < e:
+                    if dirty:
+                        qpos[:] = Q[i]
+                        kinematics(model, data)
+                        dist = ray(model, data, pnt, zcol, mask, 1, exclude, geomid)
+                        dirty = False
+                    dists[i:e] = dist if dist >= 0 else np.nan
+                if e == n:
+                    break
+                if settle_l[e]:
+                    old = errors.eps
+                    errors.on_settle()
+                    Q[e:] += errors.eps - old
+                qpos[:] = Q[e]
+                kinematics(model, data)
+                dist = ray(model, data, pnt, zcol, mask, 1, exclude, geomid)
+                dirty = False
+                dists[e] = dist if dist >= 0 else np.nan
+                i = e + 1
+            dist = None if dist < 0 else dist
             self._geom = int(geomid[0]) if dist is not None else -1
             readings = self._laser.readings(dists)
-            self._moving, self._dirty, self._dist = moving, dirty, dist
+            self._dirty, self._dist = dirty, dist
+            self._at_rest = bool(at_rest[-1])
             self._last_delta = D[-1].tolist()
             self._commanded = cmd[-1].tolist()
             self._ticks += n
@@ -307,18 +315,21 @@ class Twin:
     def _joint_angles(self) -> list:
         """q (encoder side, no offsets) from the current counts, Python floats."""
         x = [c - z for c, z in zip(self._servo.current, self._qe0)]
-        return [sum(m * x[k] for k, m in row) for row in self._M_rows]
+        q = []
+        for row in self._M_rows:
+            acc = 0.0
+            for k, m in row:
+                acc += m * x[k]
+            q.append(acc)
+        return q
 
     def _update(self) -> None:
         q = self._joint_angles()
-        qpos = self._qpos
         if self._errors_active:
             extra = self._errors.extra(np.array(q), np.array(self._delta_true))
-            for j in range(6):
-                qpos[j] = q[j] + self._delta_true[j] + extra[j]
+            self._qpos[:] = [a + b + c for a, b, c in zip(q, self._delta_true, extra)]
         else:
-            for j in range(6):
-                qpos[j] = q[j] + self._delta_true[j]
+            self._qpos[:] = [a + b for a, b in zip(q, self._delta_true)]
         mujoco.mj_kinematics(self.model, self.data)
         self._dist, self._geom = self._ray.cast()
         self._dirty = False
@@ -333,7 +344,7 @@ class Twin:
         self._servo.set(c)
         self._commanded = c.tolist()
         self._last_delta = (c - self._reference_arr).tolist()
-        self._moving = False
+        self._at_rest = True
         self._errors.on_settle()
         self._dirty = True
 

@@ -7,8 +7,8 @@ Servo (``Servo``): the controller's position loop as seen through the encoders.
   command (see ``Servo``).
 
 Joint errors added to the joint angle the encoders imply (``JointErrors``):
-* repeatability: each time the robot comes to rest (the first tick whose current counts
-  equal the previous tick's after a move) a new joint perturbation ``eps ~ N(0, s^2 I)``
+* repeatability: each time the robot comes to rest (the first tick at which the counts
+  are on the command and the command holds) a new joint perturbation ``eps ~ N(0, s^2 I)``
   is drawn and held until the next rest. ``s = (r / 3) / ||J_v(q = 0)||_F`` makes the
   flange position's 3-sigma spread about ``r`` (robot.json ``repeatability_mm``, JIS
   B 8432 +-0.07 mm for the MC70). Small: for the MC70, s ~ 1.1e-5 rad (~0.5 count).
@@ -20,6 +20,7 @@ Joint errors added to the joint angle the encoders imply (``JointErrors``):
 from __future__ import annotations
 
 import numpy as np
+from scipy.signal import lfilter
 
 from planecal.robot import Robot, fk_frames, jacobian
 
@@ -83,7 +84,6 @@ class Servo:
         if self.ideal:
             cur = commanded.copy()
         else:
-            from scipy.signal import lfilter
             zi = self.keep * np.array(self.y)[None, :]
             y = lfilter([self.gain], [1.0, -self.keep], commanded.astype(float), axis=0, zi=zi)[0]
             self.y = y[-1].tolist()
