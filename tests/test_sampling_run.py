@@ -29,8 +29,6 @@ def settings(n, seed=1, **pose):
 
 
 class Recorder(NullObserver):
-    wants_ticks = True
-
     def __init__(self, out=None):
         self.out = out
         self.samples, self.rejects, self.paths = [], [], []
@@ -296,6 +294,24 @@ def test_following_monitor_tolerates_a_lagging_but_following_servo(scene, tmp_pa
     stats = SamplingRun(Driver(mon, mon, scene.robot), cell, scene, settings(3),
                         tmp_path / "RUN.tsv", NullChecker()).run()
     assert stats.status == "complete" and mon.enabled()
+
+
+def test_observer_ticks_only_when_wanted(scene):
+    class Quiet(NullObserver):
+        def on_sample(self, *a):
+            pass
+
+    class Explicit(NullObserver):
+        wants_ticks = False
+
+        def on_tick(self, *a):
+            raise AssertionError("not wanted")
+
+    cell = FakeCell(scene)
+    assert Driver(cell, AlwaysEnabled(), scene.robot, Quiet())._on_tick is None
+    assert Driver(cell, AlwaysEnabled(), scene.robot, Explicit())._on_tick is None
+    assert Driver(cell, AlwaysEnabled(), scene.robot, Recorder())._on_tick is not None
+    assert Driver(cell, AlwaysEnabled(), scene.robot)._on_tick is None
 
 
 def test_home_and_calibration_moves(scene, tmp_path):

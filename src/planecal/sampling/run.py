@@ -93,10 +93,8 @@ class Observer(Protocol):
 
 
 class NullObserver:
-    """Does nothing. ``wants_ticks = False`` lets the driver skip the per-tick call; an
-    observer without that attribute (or with it True) gets ``on_tick`` every tick."""
-
-    wants_ticks = False
+    """Does nothing; subclass it and override what you need. The driver skips the per-tick
+    call unless ``on_tick`` is overridden (or ``wants_ticks`` is set True)."""
 
     def on_tick(self, tick, delta, reference, current, laser_mm):
         pass
@@ -132,8 +130,10 @@ class Driver:
         self.enable = enable
         self.robot = robot
         self.observer = observer or NullObserver()
-        self._on_tick = (self.observer.on_tick
-                         if getattr(self.observer, "wants_ticks", True) else None)
+        wants = getattr(self.observer, "wants_ticks", None)
+        if wants is None:
+            wants = getattr(type(self.observer), "on_tick", None) is not NullObserver.on_tick
+        self._on_tick = self.observer.on_tick if wants else None
         self.delta = np.zeros(robot.n_joints, np.int64)
         self.reference: np.ndarray | None = None
         self.current: np.ndarray | None = None
@@ -442,7 +442,7 @@ class BackgroundPlanner:
 
     def __init__(self, planner: Planner):
         import multiprocessing as mp
-        ctx = mp.get_context("fork")
+        ctx = mp.get_context("fork")  # the planner (with its FCL model) is inherited, not pickled
         self.planner = planner
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_planner_worker, args=(child, planner), daemon=True)
@@ -522,7 +522,11 @@ class SamplingRun:
         self.extra = dict(extra or {})
         self.observer = driver.observer
         self.planner = Planner(scene, settings, checker)
-        self.background = background or hold_while_planning
+        import multiprocessing as mp
+        can_fork = "fork" in mp.get_all_start_methods()
+        if hold_while_planning and not can_fork:
+            raise RuntimeError("holding the RT link while planning needs a forking platform")
+        self.background = (background or hold_while_planning) and can_fork
         self.hold_while_planning = hold_while_planning
         self.stats = RunStats()
         self.rng_state = np.random.default_rng(settings.seed).bit_generator.state
