@@ -296,6 +296,18 @@ def test_following_monitor_tolerates_a_lagging_but_following_servo(scene, tmp_pa
     assert stats.status == "complete" and mon.enabled()
 
 
+def test_driver_refuses_a_path_with_a_step_above_51(scene):
+    cell = FakeCell(scene)
+    drv = Driver(cell, AlwaysEnabled(), scene.robot)
+    drv.start()
+    rows = np.array([[10, 0, 0, 0, 0, 0], [62, 0, 0, 0, 0, 0]], np.int64)
+    with pytest.raises(ValueError, match="step of 52 counts"):
+        drv.follow(rows)
+    assert len(cell.sent) == 1  # only the first handshake tick
+    drv.follow(rows[:1])
+    assert drv.max_step_counts == 10
+
+
 def test_observer_ticks_only_when_wanted(scene):
     class Quiet(NullObserver):
         def on_sample(self, *a):

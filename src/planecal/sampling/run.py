@@ -164,8 +164,14 @@ class Driver:
         self.send(self.delta)
 
     def follow(self, rows: np.ndarray) -> None:
-        """Send each row, one per tick (stops, by ``EnableDropped``, when enable drops)."""
+        """Send each row, one per tick (stops, by ``EnableDropped``, when enable drops).
+        A path with a step above the robot's limit (51 counts) is refused before anything
+        is sent; the step generator never makes one, this is a second line of defence."""
         before = self.delta
+        worst = max_step(before, rows)
+        if worst > self.robot.max_step_counts:
+            raise ValueError(f"refusing a path with a step of {worst} counts "
+                             f"(limit {self.robot.max_step_counts})")
         sent = 0
         try:
             for row in rows:
