@@ -99,6 +99,7 @@ def test_twin_flange_includes_true_offsets(twins):
         c = joints_to_counts(ROBOT, rng.uniform(-1, 1, 6))
         twin.set_counts(c)
         q = counts_to_joints(ROBOT, c)
+        assert np.abs(twin.qpos - (q + twin.truth.joint_offsets)).max() < 1e-14
         assert np.abs(twin.flange_pose() - fk(ROBOT, q, twin.truth.joint_offsets)).max() < 1e-12
 
 

@@ -52,7 +52,7 @@ class TwinOptions:
     reading; repeatability_mm: None = the robot's (robot.json), 0 = off;
     stiffness_nm_per_rad: (k2, k3) joint 2/3 stiffness for gravity compliance, None = off;
     backlash_rad: (6,) backlash, None = off; noise_seed: seed of the noise streams
-    (None: derived from the truth seed)."""
+    (None: derived from the truth seed); check_steps: trip on FD11 encoder jumps."""
     servo: str = "lag"
     tau_s: float = 0.03
     laser_noise_mm: float = 0.001
@@ -95,10 +95,21 @@ class Twin:
     ``truth`` None draws the hidden truth from ``seed`` (``truth.draw_truth``).
     ``start_counts`` default: the scene's calibration position (nominal encoder model),
     else its home counts. The reference counts of the FD11 link are these.
+
+    RobotLink / Laser: ``exchange(delta)`` (one tick), ``read()``, ``close()``.
+    More ticks at once: ``run(deltas)``. Tests and tools: ``set_counts(counts)`` (jump
+    there, at rest), ``hit()`` (true distance, geom, plate), ``flange_pose()``,
+    ``sensor_pose()``, ``qpos``, ``to_xml()``. State: ``ticks``, ``robot_time_s``,
+    ``current_counts``, ``reference_counts``, ``commanded_counts``. For others (collision
+    cross-checks, Rerun): ``model``, ``data`` (MjModel/MjData, last kinematics: call
+    ``hit()`` or ``read()`` first), ``spec``, ``laser_site``, ``flange_site``,
+    ``tool_body``. ``truth`` / ``true_params``: the hidden truth, never for calibration.
     """
 
     def __init__(self, scene: Scene | str | Path = "thesis_final", truth=None, seed: int = 0,
                  options: TwinOptions | None = None, start_counts=None):
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise InputError(f"twin: seed must be a non-negative integer, got {seed!r}")
         self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
         self.robot = self.scene.robot
         self.options = options or TwinOptions()
