@@ -4,6 +4,7 @@
     twin = Twin("thesis_final", seed=3)            # hidden truth drawn from seed 3
     ref, cur = twin.exchange(np.zeros(6, np.int64))  # one 10 ms tick
     mm = twin.read()                                 # laser reading or None
+    ref, counts, mm = twin.run(deltas)               # many ticks: (N, 6) deltas
 
 Modules: ``core`` (Twin), ``mjcf`` (MjSpec builders), ``truth`` (hidden truth),
 ``servo`` (servo and joint errors), ``laser`` (ray + sensor model), ``aim`` (IK helper
