@@ -80,6 +80,53 @@ def test_rehearse_refuses_to_overwrite_a_run(tmp_path, capsys):
     assert code == 2 and "use --resume" in stderr
 
 
+def test_a_second_run_on_the_same_file_is_refused(tmp_path, capsys):
+    from planecal.sampling.run import RunLock
+
+    out = tmp_path / "RUN.tsv"
+    lock = RunLock(out)  # as a run in another process holds it
+    try:
+        code, _, stderr = run_cli(["rehearse", "--samples", "1", "--out", str(out), "--force"],
+                                  capsys)
+        assert code == 2 and "another run is writing this file" in stderr
+        assert out.read_text() == ""  # nothing truncated or written
+    finally:
+        lock.close()
+    code, _, _ = run_cli(["rehearse", "--samples", "1", "--out", str(out), "--force"], capsys)
+    assert code == 0
+
+
+def test_ctrl_c_stops_cleanly(tmp_path):
+    """SIGINT to the whole process group (as Ctrl-C does): the run stops, the sidecar says
+    so, the file is valid, the planner process does not print a traceback."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "RUN.tsv"
+    p = subprocess.Popen([sys.executable, "-m", "planecal.cli", "rehearse", "--samples", "5000",
+                          "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            time.sleep(0.2)
+            if out.exists() and out.read_text().count("\n") >= 4:
+                break
+        os.killpg(p.pid, signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    side = load_sidecar(out)
+    assert side["status"] == "stopped" and side["stop_reason"] == "interrupted"
+    assert len(read_samples(out)) == side["samples"] >= 3
+
+
 def test_rehearse_rrd_without_rerun_log_says_so(tmp_path, capsys):
     try:
         import planecal.rerun_log  # noqa: F401

@@ -65,6 +65,7 @@ import numpy as np
 
 from planecal.encoder import counts_to_joints, joints_to_counts
 from planecal.errors import InputError
+from planecal.robot import within_limits
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.steps import COUNT_LIMIT, DWELL_TICKS, NOMINAL_STEP, max_step, step_path
@@ -219,7 +220,6 @@ def move_to_counts(driver: Driver, qe_goal, checker, kind: str = "move",
     rows = plan_move(driver, qe_goal, nominal, dwell)
     if rows is None:
         raise PathBlocked(f"{kind}: target counts outside the 24-bit encoder range")
-    from planecal.robot import within_limits
     if not within_limits(robot, q_goal):
         raise PathBlocked(f"{kind}: target outside the joint limits")
     q0 = driver.commanded_q()
@@ -298,13 +298,37 @@ def write_json_atomic(path: Path, data: dict, fsync: bool = False) -> None:
     """Write to a temp file and rename it over ``path``: a reader (or a resumed run) sees
     the old or the new sidecar, never a torn one. The sample file is fsynced per line;
     the sidecar needs no fsync, since resume recounts the samples from the file."""
-    tmp = path.with_name(path.name + ".tmp")
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
     with open(tmp, "w", encoding="utf-8") as f:
         f.write(json.dumps(data, indent=2) + "\n")
         if fsync:
             f.flush()
             os.fsync(f.fileno())
     os.replace(tmp, path)
+
+
+class RunLock:
+    """An exclusive advisory lock (flock) on the sample file, held for a whole session, so
+    two runs can never write the same file (one would truncate or interleave the other's
+    samples). Taken without truncating; released when closed or when the process ends."""
+
+    def __init__(self, out: str | Path):
+        import fcntl
+        self.path = Path(out)
+        try:
+            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as e:
+            raise InputError(f"{self.path}: cannot open ({e.strerror})") from None
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(self._fd)
+            raise InputError(f"{self.path}: another run is writing this file") from None
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # releases the lock
+            self._fd = None
 
 
 def load_sidecar(out: str | Path) -> dict:
@@ -421,6 +445,8 @@ class Planner:
 
 
 def _planner_worker(conn, planner: Planner) -> None:
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle, not ours
     while True:
         try:
             req = conn.recv()
@@ -512,7 +538,7 @@ class SamplingRun:
                  checker, *, resume: bool = False, background: bool = False,
                  hold_while_planning: bool = False,
                  progress: Callable[[RunStats], None] | None = None,
-                 extra: dict | None = None):
+                 extra: dict | None = None, lock: RunLock | None = None):
         if checker is None:
             raise ValueError("a collision checker is required")
         if settings.samples < 1:
@@ -526,6 +552,7 @@ class SamplingRun:
         self.checker = checker
         self.progress = progress
         self.extra = dict(extra or {})
+        self.lock = lock  # the caller's, held for its session; else taken in run()
         self.observer = driver.observer
         self.planner = Planner(scene, settings, checker)
         import multiprocessing as mp
@@ -616,7 +643,13 @@ class SamplingRun:
         self._drv_ticks0 = drv.ticks
         drv.max_step_counts = 0
         multi = len(self.scene.plates) > 1
-        writer = SampleWriter(self.out, append=self.resume, with_plate=multi)
+        own_lock = RunLock(self.out) if self.lock is None else None
+        try:
+            writer = SampleWriter(self.out, append=self.resume, with_plate=multi)
+        except BaseException:
+            if own_lock:
+                own_lock.close()
+            raise
         self._rejected_in_a_row = 0
         bg = None
         st.status = "running"
@@ -693,4 +726,6 @@ class SamplingRun:
             writer.close()
             self._account()
             self._save()
+            if own_lock:
+                own_lock.close()
         return st

@@ -18,9 +18,9 @@ from pathlib import Path
 from planecal.errors import InputError
 from planecal.sampling.laserread import LaserSettings
 from planecal.sampling.poses import PLATE_CHOICES, PoseSettings
-from planecal.sampling.run import (Driver, EnableDropped, PathBlocked, RunSettings, RunStats,
-                                   SamplingRun, load_sidecar, move_home, move_to_calibration,
-                                   sidecar_path)
+from planecal.sampling.run import (Driver, EnableDropped, PathBlocked, RunLock, RunSettings,
+                                   RunStats, SamplingRun, load_sidecar, move_home,
+                                   move_to_calibration, sidecar_path)
 
 
 def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 150) -> None:
@@ -211,6 +211,16 @@ def run_session(args, scene, settings: RunSettings, link, laser, enable, checker
                 observer=None, extra=None, hold_while_planning=False) -> tuple[int, dict]:
     """Start move, the sampling run, end move. Returns (exit code, summary): 0 when the run
     completed, 1 when it stopped or gave up (the files are valid either way)."""
+    lock = RunLock(args.out)  # before anything moves: no second run on the same file
+    try:
+        return _session(args, scene, settings, link, laser, enable, checker, observer, extra,
+                        hold_while_planning, lock)
+    finally:
+        lock.close()
+
+
+def _session(args, scene, settings, link, laser, enable, checker, observer, extra,
+             hold_while_planning, lock):
     drv = Driver(link, enable, scene.robot, observer)
     progress = Progress(settings.samples)
     moves = {}
@@ -225,7 +235,7 @@ def run_session(args, scene, settings: RunSettings, link, laser, enable, checker
         raise InputError(f"--start {args.start}: enable dropped on the way; nothing sampled") from None
     run = SamplingRun(drv, laser, scene, settings, args.out, checker, resume=args.resume,
                       background=not args.foreground, hold_while_planning=hold_while_planning,
-                      progress=progress, extra=extra)
+                      progress=progress, extra=extra, lock=lock)
     t0 = time.perf_counter()
     ticks0 = drv.ticks
     try:
