@@ -164,6 +164,43 @@ def test_sample_against_the_emulators(tmp_path, capsys):
     assert load_sidecar(out)["real_cell"]["rt"] == "127.0.0.1"
 
 
+def test_sample_stops_cleanly_when_the_dead_man_switch_is_released(tmp_path, capsys):
+    """Behind the emulator the robot stops following after 1500 ticks (switch released):
+    the command notices by the following lag, sends nothing more, exits 1, files valid."""
+    from planecal.links.emulators import Emulators
+    from planecal.twin import Twin
+
+    class Released:
+        def __init__(self, twin, at):
+            self.twin, self.at, self.n, self.frozen = twin, at, 0, None
+
+        def exchange(self, delta):
+            self.n += 1
+            if self.n <= self.at:
+                return self.twin.exchange(delta)
+            if self.frozen is None:
+                self.frozen = self.twin.current_counts
+            return self.twin.reference_counts, self.frozen.copy()
+
+        def close(self):
+            pass
+
+    twin = Twin("thesis_final", seed=2)
+    robot = Released(twin, 1500)
+    out = tmp_path / "RUN.tsv"
+    with Emulators(robot, twin, rt_port=0, reply_port=None) as emu:
+        code, stdout, stderr = run_cli([
+            "sample", "--rt", "127.0.0.1", "--rt-port", str(emu.fd11.rt_port), "--local-port", "0",
+            "--rt-tick-s", "0", "--laser", emu.laser.port, "--samples", "5", "--seed", "2",
+            "--out", str(out)], capsys)
+    assert code == 1
+    summary = json.loads(stdout)
+    assert summary["status"] == "stopped" and "dead-man" in summary["stop_reason"]
+    assert robot.n - 1500 <= 600 // 50 + 5 + 1  # noticed within ~17 ticks
+    assert len(read_samples(out)) == summary["samples"] >= 1
+    assert load_sidecar(out)["status"] == "stopped"
+
+
 def test_sample_unreachable_controller_is_an_input_error(tmp_path, capsys):
     code, _, stderr = run_cli(["sample", "--rt", "no.such.host.invalid", "--out",
                                str(tmp_path / "R.tsv")], capsys)
