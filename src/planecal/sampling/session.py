@@ -226,7 +226,7 @@ def _session(args, scene, settings, link, laser, enable, checker, observer, extr
     moves = {}
     try:
         drv.start()
-        if args.start != "here" and not args.resume:
+        if args.start != "here":
             move = move_home if args.start == "home" else move_to_calibration
             moves["start_ticks"] = move(drv, scene, checker)
     except PathBlocked as e:
