@@ -207,6 +207,25 @@ def test_sample_unreachable_controller_is_an_input_error(tmp_path, capsys):
     assert code == 2 and "--rt no.such.host.invalid" in stderr
 
 
+def test_sample_with_a_silent_controller_stops_with_one_line(tmp_path, capsys):
+    import os
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]  # bound but never answering
+        master, slave = os.openpty()
+        try:
+            code, _, stderr = run_cli(["sample", "--rt", "127.0.0.1", "--rt-port", str(port),
+                                       "--local-port", "0", "--laser", os.ttyname(slave),
+                                       "--out", str(tmp_path / "R.tsv")], capsys)
+        finally:
+            os.close(master)
+            os.close(slave)
+    assert code == 2 and "no reply" in stderr and "nothing sampled" in stderr
+    assert len(stderr.strip().splitlines()) == 1
+
+
 def test_progress_plain_lines_every_tenth():
     import io
     buf = io.StringIO()

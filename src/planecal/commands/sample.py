@@ -27,6 +27,7 @@ Exit 0 when all samples were taken, 1 when the run stopped or gave up (files val
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from planecal.errors import InputError
 
@@ -86,6 +87,7 @@ def run(args) -> int:
     from planecal.links.fd11 import FD11Link, LinkError
     from planecal.links.zs_ld80 import ZSLD80, LaserError
     from planecal.sampling.enable import FollowingMonitor
+    from planecal.sampling.run import count_samples, sidecar_path
     from planecal.sampling.session import prepare, print_summary, rerun_observer, run_session
 
     if args.lag_tolerance_counts <= 0 or args.lag_ticks <= 0:
@@ -114,8 +116,10 @@ def run(args) -> int:
                                         observer=observer, extra=extra,
                                         hold_while_planning=True)
         except (LinkError, LaserError) as e:
-            raise InputError(f"run stopped: {e} (samples so far are in {args.out}; "
-                             f"continue with --resume)") from None
+            n = count_samples(Path(args.out)) if sidecar_path(args.out).exists() else 0
+            where = (f"{n} samples so far are in {args.out}; continue with --resume" if n
+                     else "nothing sampled")
+            raise InputError(f"run stopped: {e} ({where})") from None
         finally:
             laser.close()
     finally:
