@@ -464,9 +464,9 @@ def _planner_worker(conn, planner: Planner) -> None:
 class BackgroundPlanner:
     """Plans in a forked process. The run asks for the next sample's plan as soon as the
     current target is known (the next path starts there) and the robot moves meanwhile.
-    The request is speculative only in the sample index, which matters for round-robin
-    plate choice after a laser rejection: a plan made for another request is dropped and
-    the right one is planned. Results are identical to foreground planning (same requests,
+    The request is speculative only in the sample index, which matters only for
+    round-robin plate choice (after a laser rejection): then the plan made for the other
+    index is dropped and the right one is planned. Results are identical to foreground planning (same requests,
     same random states; the checker must be stateless, as CollisionWorld is).
 
     ``take(req, idle)`` calls ``idle()`` while it waits (the real cell keeps ticking the
@@ -488,7 +488,8 @@ class BackgroundPlanner:
         self._pending = req
 
     def take(self, *req, idle: Callable[[], None] | None = None) -> Plan:
-        if self._pending is None or not _same_request(self._pending, req):
+        if self._pending is None or not _same_request(self._pending, req,
+                                                      self.planner.index_matters()):
             self.submit(*req)
         if idle is not None:
             while not self._conn.poll():
@@ -517,9 +518,10 @@ class BackgroundPlanner:
         self._conn.close()
 
 
-def _same_request(a, b) -> bool:
+def _same_request(a, b, index_matters: bool) -> bool:
     # the budget (a[3]) may differ: giving up early is decided while consuming the plan
-    return np.array_equal(a[0], b[0]) and a[1] == b[1] and a[2] == b[2]
+    return (np.array_equal(a[0], b[0]) and a[2] == b[2]
+            and (a[1] == b[1] or not index_matters))
 
 
 # ----- the run -------------------------------------------------------------------------------
