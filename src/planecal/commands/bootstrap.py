@@ -1,0 +1,58 @@
+"""planecal bootstrap SAMPLES... [--sizes 30,50,100,150] [--repeats 10] [--seed K]
+[--initial P.json] [--scene S] [--free NAMES] [--jobs J] [--out B.json]
+
+Seed 9.3's result analysis: random subsets of each size drawn from the pool of samples,
+each calibrated from the same initial parameters; per size the spread (std, min, max) of
+every free parameter, next to the std the fits report. Subsets that are a large share of
+the pool (> 30 %) are flagged with their expected overlap, and every size also shows the
+spread corrected to independent sets (see planecal.studies.bootstrap).
+"""
+from __future__ import annotations
+
+from planecal.errors import InputError
+
+
+def add_arguments(p):
+    from planecal.scene import DEFAULT_SCENE
+    p.add_argument("samples", nargs="+", help="sample file(s): the pool")
+    p.add_argument("--sizes", default="30,50,100,150",
+                   help="comma-separated subset sizes (default %(default)s)")
+    p.add_argument("--repeats", type=int, default=10, help="subsets per size (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the subsets")
+    p.add_argument("--initial", help="initial parameter file (default: the scene's nominal values)")
+    p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values (default %(default)s)")
+    p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
+    p.add_argument("--max-iter", type=int, default=30)
+    p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--out", help="write the result (JSON) here")
+
+
+def run(args) -> int:
+    from planecal.commands.calibrate import free_mask
+    from planecal.fit import FitOptions
+    from planecal.params import load_params, save_json
+    from planecal.samples import read_many
+    from planecal.scene import load_scene, nominal_params
+    from planecal.studies.bootstrap import BootstrapSettings, bootstrap, format_bootstrap
+    from planecal.studies.common import check_jobs, parse_int_list
+
+    sizes = parse_int_list(args.sizes, "--sizes")
+    if args.seed < 0:
+        raise InputError(f"--seed must be >= 0, got {args.seed}")
+    if args.max_iter < 1:
+        raise InputError("--max-iter must be at least 1")
+    samples = read_many(args.samples)
+    scene = load_scene(args.scene)
+    initial = load_params(args.initial) if args.initial else nominal_params(scene)
+    if samples.plate.max() >= initial.n_planes:
+        raise InputError(f"samples refer to plate {samples.plate.max() + 1} but the initial "
+                         f"parameters hold {initial.n_planes} plane(s)")
+    opts = FitOptions(max_iter=args.max_iter, free=free_mask(args.free, initial.n_planes))
+    res = bootstrap(scene.robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate,
+                    BootstrapSettings(tuple(sizes), args.repeats, args.seed), opts,
+                    jobs=check_jobs(args.jobs))
+    print(format_bootstrap(res))
+    if args.out:
+        save_json(args.out, res)
+        print(f"result written to {args.out}")
+    return 0

@@ -1,0 +1,157 @@
+"""Subset resampling of one sample pool (seed 9.3, "Result analysis").
+
+From a pool of n samples draw ``repeats`` random subsets (without replacement within a
+subset) of each size s, calibrate each from the same initial parameters, and report per
+size and parameter the mean, the spread (std, min, max) and the mean of the std each fit
+reports for itself.
+
+Overlap (the seed's own caveat: 10 subsets of 200 out of 500 "become similar"): two
+random subsets of size s from n share on average s^2/n samples, a share s/n of each.
+Relative to the pool's own estimate, the spread of subset estimates is that of
+independent sets times sqrt((n - s)/(n - 1)) (finite-population correction, exact for a
+linear estimator): it shrinks to zero as s -> n however good or bad the calibration is.
+Each size reports the observed std and the std corrected by that factor (what
+independent sets of size s would show); above ``overlap_warn`` (0.3) the size is flagged.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planecal.cell import CellParams, parameter_names
+from planecal.errors import InputError
+from planecal.fit import FitOptions, calibrate, default_free
+from planecal.robot import Robot
+from planecal.studies.common import Progress, display_scale, parallel_map, table
+
+OVERLAP_WARN = 0.3
+
+
+@dataclass
+class BootstrapSettings:
+    sizes: tuple = (30, 50, 100, 150)
+    repeats: int = 10
+    seed: int = 0
+    overlap_warn: float = OVERLAP_WARN
+
+
+def _fit_one(job):
+    robot, qe, d_m, plate, initial, options = job
+    try:
+        res = calibrate(robot, qe, d_m, initial, plate, options)
+    except (ValueError, np.linalg.LinAlgError) as e:
+        return {"ok": False, "error": str(e)}
+    return {"ok": True, "x": res.params.to_vector(), "std": res.std,
+            "converged": res.converged, "rms_mm": res.rms_mm(),
+            "not_identifiable": res.identifiability["not_identifiable"]}
+
+
+def overlap(s: int, n: int) -> dict:
+    """Expected overlap of two random s-subsets of n and the finite-population factor."""
+    share = s / n
+    fpc = np.sqrt((n - s) / (n - 1)) if n > 1 else 0.0
+    return {"share": share, "expected_common_samples": s * s / n,
+            "finite_population_factor": float(fpc)}
+
+
+def bootstrap(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams,
+              plate: np.ndarray | None = None, settings: BootstrapSettings | None = None,
+              options: FitOptions | None = None, jobs: int = 1, quiet: bool = False) -> dict:
+    """The study (module docstring); a pure function of its inputs. Returns a dict with
+    ``pool``, ``names``, ``free``, ``sizes``: one entry per size with per-parameter
+    ``mean``, ``std``, ``std_independent``, ``min``, ``max``, ``reported_std``,
+    ``overlap`` and ``warning``."""
+    st = settings or BootstrapSettings()
+    opts = options or FitOptions()
+    qe = np.asarray(qe)
+    d_m = np.asarray(d_m, float)
+    n = len(d_m)
+    plate = np.zeros(n, int) if plate is None else np.asarray(plate, int)
+    names = parameter_names(initial.n_planes)
+    free = default_free(initial.n_planes) if opts.free is None else np.asarray(opts.free, bool)
+    p = int(free.sum())
+    if st.repeats < 2:
+        raise InputError(f"--repeats must be at least 2 to measure a spread, got {st.repeats}")
+    for s in st.sizes:
+        if s > n:
+            raise InputError(f"--sizes: subset size {s} exceeds the pool of {n} samples")
+        if s <= p:
+            raise InputError(f"--sizes: subset size {s} cannot determine {p} free parameters")
+    rng = np.random.default_rng(st.seed)
+    jobs_list, where = [], []
+    for s in st.sizes:
+        for r in range(st.repeats):
+            idx = np.sort(rng.choice(n, s, replace=False))
+            jobs_list.append((robot, qe[idx], d_m[idx], plate[idx], initial, opts))
+            where.append(s)
+    prog = Progress("bootstrap fits", len(jobs_list), quiet=quiet)
+    results = parallel_map(_fit_one, jobs_list, jobs, prog)
+    full = _fit_one((robot, qe, d_m, plate, initial, opts))
+    out = {"pool": n, "names": names, "free": [nm for nm, f in zip(names, free) if f],
+           "repeats": st.repeats, "seed": st.seed,
+           "pool_fit": {"x": full.get("x"), "std": full.get("std")} if full["ok"] else None,
+           "sizes": []}
+    for s in st.sizes:
+        rs = [r for r, w in zip(results, where) if w == s]
+        ok = [r for r in rs if r["ok"]]
+        ov = overlap(s, n)
+        entry = {"size": s, "fits": len(ok), "failed": len(rs) - len(ok),
+                 "not_converged": sum(1 for r in ok if not r["converged"]),
+                 "overlap": ov, "warning": None, "params": {}}
+        if ov["share"] > st.overlap_warn:
+            entry["warning"] = (
+                f"subsets of {s} from a pool of {n}: each is {ov['share']:.0%} of the pool; two "
+                f"share {ov['expected_common_samples']:.0f} samples on average, so their spread "
+                f"is {ov['finite_population_factor']:.2f} x that of independent sets (shown "
+                f"corrected in std_indep); use a bigger pool or smaller subsets")
+        if len(ok) >= 2:
+            X = np.array([r["x"] for r in ok])
+            SD = np.array([r["std"] for r in ok])
+            mean, sd = X.mean(0), X.std(0, ddof=1)
+            fpc = ov["finite_population_factor"]
+            indep = sd / fpc if fpc > 0 else np.full_like(sd, np.nan)
+            fin = np.isfinite(SD)
+            cnt = fin.sum(0)
+            rep = np.where(cnt > 0, np.where(fin, SD, 0.0).sum(0) / np.maximum(cnt, 1), np.nan)
+            for i, nm in enumerate(names):
+                if not free[i]:
+                    continue
+                entry["params"][nm] = {
+                    "mean": float(mean[i]), "std": float(sd[i]),
+                    "std_independent": float(indep[i]), "min": float(X[:, i].min()),
+                    "max": float(X[:, i].max()),
+                    "reported_std": None if not np.isfinite(rep[i]) else float(rep[i])}
+        out["sizes"].append(entry)
+    return out
+
+
+def format_bootstrap(res: dict) -> str:
+    """Terminal report: per size a table of the free parameters' spread (display units)."""
+    lines = [f"pool: {res['pool']} samples; {res['repeats']} random subsets per size "
+             f"(seed {res['seed']})"]
+    for e in res["sizes"]:
+        ov = e["overlap"]
+        lines.append("")
+        lines.append(f"subset size {e['size']}: {e['fits']} fits"
+                     + (f", {e['failed']} failed" if e['failed'] else "")
+                     + (f", {e['not_converged']} not converged" if e['not_converged'] else "")
+                     + f"; share of pool {ov['share']:.0%}, two subsets share "
+                     f"{ov['expected_common_samples']:.1f} samples on average")
+        rows = []
+        for nm, v in e["params"].items():
+            k, unit = display_scale(nm)
+
+            def f(x):
+                return "-" if x is None or not np.isfinite(x) else f"{x * k:.4g}"
+            ratio = (v["std_independent"] / v["reported_std"]
+                     if v["reported_std"] else float("nan"))
+            rows.append([nm, unit, f"{v['mean']:.7g}", f(v["std"]), f(v["std_independent"]),
+                         f(v["min"] - v["mean"]), f(v["max"] - v["mean"]), f(v["reported_std"]),
+                         "-" if not np.isfinite(ratio) else f"{ratio:.2f}"])
+        if rows:
+            lines.append(table(["param", "spread in", "mean (SI)", "std", "std_indep", "min-mean", "max-mean",
+                                "fit_std", "indep/fit"], rows))
+        if e["warning"]:
+            lines.append(f"WARNING {e['warning']}")
+    return "\n".join(lines)

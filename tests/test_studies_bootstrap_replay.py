@@ -1,0 +1,91 @@
+"""Studies: subset resampling of a pool (seed 9.3) and replaying recorded samples in the twin."""
+import json
+
+import numpy as np
+import pytest
+from conftest import SEED_DM, SEED_QE, TABLE10
+
+from planecal.cli import main
+from planecal.fit import FitOptions
+from planecal.samples import write_samples
+from planecal.scene import load_scene, nominal_params
+from planecal.studies.bootstrap import BootstrapSettings, bootstrap, overlap
+from planecal.synthetic import synthetic_samples
+from planecal.twin.truth import draw_truth
+
+
+@pytest.fixture(scope="module")
+def pool():
+    scene = load_scene("thesis_final")
+    truth = draw_truth(scene, 3)
+    qe, d, plate = synthetic_samples(scene, truth, 240, np.random.default_rng(1), noise_m=20e-6)
+    return scene, truth, qe, d, plate
+
+
+def test_overlap_formula():
+    ov = overlap(200, 500)
+    assert ov["share"] == pytest.approx(0.4)
+    assert ov["expected_common_samples"] == pytest.approx(80.0)
+    assert ov["finite_population_factor"] == pytest.approx(np.sqrt(300 / 499))
+
+
+def test_bootstrap_spread_shrinks_and_brackets_the_truth(pool):
+    scene, truth, qe, d, plate = pool
+    res = bootstrap(scene.robot, qe, d, nominal_params(scene), plate,
+                    BootstrapSettings((30, 120), 8, seed=2), FitOptions(), quiet=True)
+    small, big = res["sizes"]
+    assert small["fits"] == big["fits"] == 8
+    for k, name in enumerate(["delta2", "delta3", "delta4", "delta5"], start=1):
+        s, b = small["params"][name], big["params"][name]
+        assert b["std_independent"] < s["std_independent"]
+        # the subset estimates scatter around the truth
+        assert s["min"] - 3 * s["std"] < truth.joint_offsets[k] < s["max"] + 3 * s["std"]
+        # 20 um noise: the spread agrees with the fits' reported std within a factor 2.5
+        assert 0.4 < s["std_independent"] / s["reported_std"] < 2.5
+    assert small["warning"] is None
+    assert big["warning"] is not None and "50%" in big["warning"]  # 120 of 240
+
+
+def test_bootstrap_command(pool, tmp_path, capsys):
+    scene, truth, qe, d, plate = pool
+    f = tmp_path / "pool.tsv"
+    write_samples(f, qe, d * 1e3)
+    out = tmp_path / "B.json"
+    assert main(["bootstrap", str(f), "--sizes", "40,100", "--repeats", "3",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "subset size 40" in text and "WARNING" in text  # 100 of 240 > 30 %
+    data = json.loads(out.read_text())
+    assert [e["size"] for e in data["sizes"]] == [40, 100]
+    assert main(["bootstrap", str(f), "--sizes", "300"]) == 2
+    assert "exceeds the pool" in capsys.readouterr().err
+    assert main(["bootstrap", str(f), "--sizes", "5"]) == 2
+    assert main(["bootstrap", str(f), "--sizes", "30", "--repeats", "1"]) == 2
+
+
+def test_replay_seed_samples_in_the_twin():
+    from planecal.studies.replay import replay
+    res = replay(load_scene("thesis_final"), TABLE10, SEED_QE, SEED_DM)
+    twin = np.array([r["twin_mm"] for r in res["rows"]])
+    # the analytic model's figures (MODEL-NOTES); the twin's ray cast agrees to 1e-6 mm
+    assert all(r["on_plate"] for r in res["rows"])
+    np.testing.assert_allclose(twin, [89.776, 85.318, 68.221, 68.017, 71.580], atol=6e-4)
+    analytic = np.array([r["analytic_mm"] for r in res["rows"]])
+    assert np.max(np.abs(twin - analytic)) < 1e-6
+    s = res["summary"]
+    assert s["plate_hits"] == 5 and s["misses"] == 0
+    assert s["mean_diff_mm"] == pytest.approx(1.2114, abs=1e-3)
+    assert s["std_diff_mm"] == pytest.approx(1.4960, abs=1e-3)
+    assert s["max_abs_diff_mm"] == pytest.approx(2.7436, abs=1e-3)
+    assert s["min_edge_margin_mm"] > 15  # the plate is big enough for these rays
+
+
+def test_replay_command(tmp_path, capsys):
+    from planecal.paths import data_path
+    ex = data_path("examples")
+    out = tmp_path / "R.json"
+    assert main(["replay", str(ex / "seed_samples.tsv"), "--params",
+                 str(ex / "table10_params.json"), "--out", str(out)]) == 0
+    assert "5 of 5 rays hit their plate" in capsys.readouterr().out
+    assert json.loads(out.read_text())["summary"]["plate_hits"] == 5
+    assert main(["replay", str(ex / "seed_samples.tsv"), "--params", str(tmp_path / "no.json")]) == 2
