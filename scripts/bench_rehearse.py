@@ -56,11 +56,8 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--foreground", action="store_true", help="no background pose planning")
     args = ap.parse_args()
-    try:
-        import planecal.rerun_log  # noqa: F401
-        have_rrd = True
-    except ModuleNotFoundError:
-        have_rrd = False
+    import importlib.util
+    have_rrd = importlib.util.find_spec("planecal.rerun_log") is not None
     print(f"cpus {os.cpu_count()}, load average {os.getloadavg()[0]:.1f}, "
           f"background planning {'off' if args.foreground else 'on'}")
     results = {False: [], True: []}

@@ -264,6 +264,13 @@ class RunSettings:
     clearance_m: float = 0.01
     collision_checking: bool = True
 
+    @classmethod
+    def for_scene(cls, scene: Scene, samples: int = 150, seed: int = 0) -> "RunSettings":
+        """Defaults with the scene's own sampling cone and distance range."""
+        return cls(scene=str(scene.path), samples=samples, seed=seed,
+                   pose=PoseSettings(cone_deg=scene.cone_deg,
+                                     distance_mm=tuple(scene.distance_mm)))
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["pose"]["distance_mm"] = list(self.pose.distance_mm)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from planecal.errors import InputError
 from planecal.sampling.laserread import LaserSettings
-from planecal.sampling.poses import PLATE_CHOICES, PoseSettings
+from planecal.sampling.poses import PLATE_CHOICES
 from planecal.sampling.run import (Driver, EnableDropped, PathBlocked, RunLock, RunSettings,
                                    RunStats, SamplingRun, load_sidecar, move_home,
                                    move_to_calibration, sidecar_path)
@@ -69,7 +69,8 @@ SETTING_FLAGS = ("scene", "seed", "cone_deg", "fixed_distance_mm", "distance_mm"
 
 def settings_from_args(args, scene) -> RunSettings:
     """Run settings for a new run: the scene's sampling defaults, overridden by flags."""
-    pose = PoseSettings(cone_deg=scene.cone_deg, distance_mm=tuple(scene.distance_mm))
+    st = RunSettings.for_scene(scene, seed=0 if args.seed is None else args.seed)
+    pose = st.pose
     if args.cone_deg is not None:
         pose.cone_deg = args.cone_deg
     if args.distance_mm is not None:
@@ -91,8 +92,7 @@ def settings_from_args(args, scene) -> RunSettings:
         if args.laser_max_reads < laser.buffer_len:
             raise InputError(f"--laser-max-reads must be at least {laser.buffer_len} (the buffer)")
         laser.max_reads = args.laser_max_reads
-    st = RunSettings(scene=str(scene.path), samples=150, seed=0 if args.seed is None else args.seed,
-                     pose=pose, laser=laser)
+    st.laser = laser
     if args.samples is not None:
         st.samples = args.samples
     if st.samples < 1:
