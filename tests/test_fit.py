@@ -4,7 +4,7 @@ from scipy.optimize import least_squares
 
 from conftest import INITIAL, perturbed, synthetic_counts
 from planecal.cell import CellParams, predict
-from planecal.fit import FitOptions, calibrate, default_free
+from planecal.fit import FitOptions, analyze, calibrate, default_free
 from planecal.scene import load_scene, nominal_params
 
 
@@ -123,3 +123,51 @@ def test_too_few_samples(robot, problem):
 def test_scene_nominal_values_are_thesis_initial_values():
     p = nominal_params(load_scene())
     np.testing.assert_array_equal(p.to_vector(), INITIAL.to_vector())
+
+
+def _scene_problem(name, n, seed, **pose):
+    from planecal.sampling.poses import PoseSettings
+    from planecal.synthetic import synthetic_samples
+    from planecal.twin.truth import draw_truth
+    scene = load_scene(name)
+    nominal = nominal_params(scene)
+    settings = PoseSettings(**{"cone_deg": scene.cone_deg,
+                               "distance_mm": tuple(scene.distance_mm), **pose})
+    rng = np.random.default_rng(seed)
+    truth = draw_truth(scene, seed)
+    qe, d, plate = synthetic_samples(scene, truth, n, rng, noise_m=2e-6, settings=settings)
+    return scene, nominal, truth, qe, d, plate
+
+
+def test_fixed_perpendicular_orientation_cannot_see_the_beam_angles(robot):
+    """Seed 8.2, 'random orientation OFF': with the beam always along the plate normal the
+    beam angles do not change any distance (first order); the analysis must say so."""
+    scene, nominal, truth, qe, d, plate = _scene_problem("thesis_final", 60, 4, cone_deg=0.0)
+    # at the nominal values every beam is exactly perpendicular to the (nominal) plate
+    ident, std = analyze(robot, qe, nominal, plate)
+    # not exactly zero columns: whole encoder counts tilt each beam by ~1e-5 rad
+    poor = {p["parameter"]: p["std"] for p in ident["poorly_determined"]}
+    assert poor["phi_y"] > 0.05 and poor["phi_z"] > 0.05
+    assert {"phi_y", "phi_z"} <= set(ident["not_identifiable"])
+    assert np.isnan(std[9]) and np.isnan(std[10])
+    # with the default 30 deg cone they are identified
+    scene, nominal, truth, qe, d, plate = _scene_problem("thesis_final", 60, 4)
+    ident, std = analyze(robot, qe, nominal, plate)
+    assert ident["not_identifiable"] == [] and np.all(std[9:11] < 1e-3)
+
+
+def test_parallel_plate_delta1_has_no_effect(robot):
+    """Seed appendix D: with the plate parallel to the base a base rotation (delta1) moves
+    no distance at all — a zero Jacobian column, named as such — while with the tilted
+    final plate delta1 mixes with the plane's rotation about the base z axis."""
+    scene, nominal, truth, qe, d, plate = _scene_problem("appendix_d", 80, 5)
+    free = np.ones(14, bool)
+    free[5] = False
+    ident, _ = analyze(robot, qe, nominal, plate, free)  # at the exactly parallel nominal plate
+    assert ident["no_effect"] == ["delta1"] and "delta1" in ident["not_identifiable"]
+    assert {"delta1": 1.0} in ident["unidentifiable_directions"] or \
+        {"delta1": -1.0} in ident["unidentifiable_directions"]
+    scene, nominal, truth, qe, d, plate = _scene_problem("thesis_final", 80, 5)
+    ident, _ = analyze(robot, qe, nominal, plate, free)
+    assert "delta1" not in ident["no_effect"] and "delta1" in ident["not_identifiable"]
+    assert any("delta1" in d and "n1_x" in d for d in ident["unidentifiable_directions"])

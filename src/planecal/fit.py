@@ -11,7 +11,8 @@ Uncertainty (at the solution, on the samples used):
 Identifiability is judged on the column-scaled Jacobian (unit-norm columns, so units do not
 matter): a scaled singular value below ``unidentifiable_ratio`` x the largest is a direction
 the data cannot see; the parameters that make up that direction are named, and their
-standard deviations are reported as missing (NaN / null), not as numbers. Directions below
+standard deviations are reported as missing (NaN / null), not as numbers; a parameter whose
+Jacobian column vanishes is listed under ``no_effect`` as well. Directions below
 ``weak_ratio`` are reported as weakly identifiable. Observability indices (Sun & Hollerbach
 1997) O1 = (s_1...s_p)^(1/p) / sqrt(m), O2 = s_min/s_max, O3 = s_min, O4 = s_min^2/s_max, on
 the scaled Jacobian.
@@ -47,6 +48,10 @@ class FitOptions:
     unidentifiable_ratio: float = 1e-7
     weak_ratio: float = 1e-3
     correlation_limit: float = 0.95
+    # a standard deviation above these says "not identifiable in practice" (std not reported)
+    practical_std_rad: float = 0.01
+    practical_std_m: float = 0.01
+    practical_std_plane: float = 0.1  # 1/m, n~ components (|n~| ~ 1/distance to the plane)
 
 
 @dataclass
@@ -192,12 +197,40 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
                      sorted(outliers), iterations, history, ident, sigma, converged, notes)
 
 
+def analyze(robot: Robot, qe: np.ndarray, params: CellParams, plane_index=None,
+            free: np.ndarray | None = None, sigma_m: float = 2e-6,
+            options: FitOptions | None = None):
+    """Identifiability and predicted standard deviations of a pose set *before* fitting:
+    the Jacobian at ``params`` (e.g. the nominal values) and an assumed distance noise
+    ``sigma_m``. Returns (identifiability dict, std over the full parameter vector)."""
+    opt = options or FitOptions()
+    free = default_free(params.n_planes) if free is None else np.asarray(free, bool)
+    _, J = predict_with_jacobian(robot, qe, params, plane_index)
+    Jf = J[:, free]
+    m, p = Jf.shape
+    r = np.full(m, sigma_m * np.sqrt(max(m - p, 1) / m))  # |r|^2/(m-p) = sigma^2
+    ident, std_free, _, _ = uncertainty(Jf, r, free, parameter_names(params.n_planes), opt)
+    std = np.full(len(free), np.nan)
+    std[free] = std_free
+    return ident, std
+
+
+def _practical_limit(name: str, opt: FitOptions) -> float:
+    if name.startswith("n"):
+        return opt.practical_std_plane
+    if name.startswith("o_"):
+        return opt.practical_std_m
+    return opt.practical_std_rad
+
+
 def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str],
                 opt: FitOptions | None = None):
     """Covariance, standard deviations and the identifiability report at a solution."""
     opt = opt or FitOptions()
     m, p = Jf.shape
     free_names = [n for n, f in zip(names, free) if f]
+    norms = np.linalg.norm(Jf, axis=0)
+    no_effect = [free_names[j] for j in np.flatnonzero(norms <= 1e-10 * norms.max())]
     S = _scales(Jf, True)
     A = Jf * S
     # A = Q R: the singular values and right singular vectors of A are those of the small
@@ -223,6 +256,15 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str
     not_ident = sorted({k for d in unidentifiable for k in d}, key=free_names.index)
     bad = np.array([n in not_ident for n in free_names])
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    # identifiable in theory but not in practice: the data barely depends on it
+    poorly = []
+    for j, name in enumerate(free_names):
+        limit = _practical_limit(name, opt)
+        if not bad[j] and std[j] > limit:
+            poorly.append({"parameter": name, "std": float(std[j]), "limit": limit})
+    not_ident += [p_["parameter"] for p_ in poorly]
+    not_ident = sorted(set(not_ident), key=free_names.index)
+    bad = np.array([n in not_ident for n in free_names])
     std[bad] = np.nan
     cov[bad, :] = np.nan
     cov[:, bad] = np.nan
@@ -237,6 +279,8 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str
     ident = {
         "free": free_names,
         "not_identifiable": not_ident,
+        "no_effect": no_effect,
+        "poorly_determined": poorly,
         "unidentifiable_directions": unidentifiable,
         "weak_directions": weak_dirs,
         "correlated_pairs": pairs,

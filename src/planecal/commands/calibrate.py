@@ -97,6 +97,11 @@ def format_report(res: FitResult, n_zero: int = 0) -> str:
     lines.append(f"sigma {ident['sigma_mm']:.4g} mm   scaled condition number "
                  f"{ident['condition_number_scaled']:.4g}   O1 {ident['observability']['O1']:.3g}"
                  f"  O2 {ident['observability']['O2']:.3g}")
+    for name in ident.get("no_effect", []):
+        lines.append(f"WARNING no effect: {name} does not change any distance in this data")
+    for pd in ident.get("poorly_determined", []):
+        lines.append(f"WARNING not identifiable in practice: {pd['parameter']} (std "
+                     f"{pd['std']:.3g} above {pd['limit']:g}): the data barely depends on it")
     for d in ident["unidentifiable_directions"]:
         mix = " ".join(f"{v:+.3f}*{k}" for k, v in d.items())
         lines.append(f"WARNING not identifiable: {', '.join(d)} move together without changing "
