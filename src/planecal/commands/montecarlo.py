@@ -1,0 +1,79 @@
+"""planecal montecarlo [--scene S] [--runs R] [--samples N] [--jobs J] [--out M.json]
+[--mode twin|rehearse|synthetic] [--seed K] [--truth-seed T] [--vary-truth]
+[--offsets-all] [--laser-noise-mm X] [--repeatability-mm X] [--quantization]
+[--free NAMES] [--slope 50,100,200] [--slope-runs R]
+
+Repeated rehearsals on the twin with fresh poses and noise, each calibrated from the
+scene's nominal values: per parameter the bias, the empirical std, the Cramer-Rao bound
+(white-noise form sigma^2 (J^T J)^-1 and the heteroscedastic form (J^T V^-1 J)^-1), the
+sandwich covariance of the unweighted fit and the std the fit reports; the chi-square
+consistency of the reported covariance; with --slope the spread vs the number of samples
+and its log-log slope. Runs go to --jobs worker processes (default: all cores).
+See planecal.studies.montecarlo for the modes and the noise model.
+"""
+from __future__ import annotations
+
+from planecal.errors import InputError
+
+
+def add_arguments(p):
+    from planecal.scene import DEFAULT_SCENE
+    from planecal.studies.montecarlo import MODES
+    p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
+    p.add_argument("--runs", type=int, default=50, help="Monte Carlo runs (default 50)")
+    p.add_argument("--samples", type=int, default=150, help="samples per run (default 150)")
+    p.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
+    p.add_argument("--out", help="write the summary (JSON) here")
+    p.add_argument("--mode", choices=MODES, default="twin",
+                   help="twin: the sampling run's planner + twin at rest (default); rehearse: "
+                        "full tick-by-tick rehearsal; synthetic: analytic model + noise model")
+    p.add_argument("--seed", type=int, default=1000, help="run k uses seed + k (default 1000)")
+    p.add_argument("--truth-seed", type=int, default=0, help="seed of the fixed truth (default 0)")
+    p.add_argument("--vary-truth", action="store_true", help="draw a new truth for every run")
+    p.add_argument("--offsets-all", action="store_true", help="truth with delta1, delta6 != 0 too")
+    p.add_argument("--laser-noise-mm", type=float, default=0.001,
+                   help="laser noise per reading (default 0.001; a sample averages 100)")
+    p.add_argument("--repeatability-mm", type=float, default=None,
+                   help="robot repeatability (3-sigma flange; default the robot's 0.07; 0 = off)")
+    p.add_argument("--quantization", action="store_true",
+                   help="synthetic mode: add +-0.5 count encoder quantisation noise")
+    p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
+    p.add_argument("--slope", help="also measure the spread at these sample counts (e.g. 50,100,200)")
+    p.add_argument("--slope-runs", type=int, default=None, help="runs per slope point (default --runs)")
+
+
+def run(args) -> int:
+    from dataclasses import replace
+
+    from planecal.params import save_json
+    from planecal.scene import load_scene
+    from planecal.studies.common import check_jobs, parse_int_list
+    from planecal.studies.montecarlo import (MCSettings, analyze, format_montecarlo,
+                                             format_slope, run_many, slope_study)
+
+    scene = load_scene(args.scene)  # InputError for a bad scene before any work
+    free = None if not args.free else tuple(s.strip() for s in args.free.split(",") if s.strip())
+    st = MCSettings(scene=str(scene.path), samples=args.samples, runs=args.runs, seed=args.seed,
+                    mode=args.mode, truth_seed=args.truth_seed, vary_truth=args.vary_truth,
+                    offsets_all=args.offsets_all, laser_noise_mm=args.laser_noise_mm,
+                    repeatability_mm=args.repeatability_mm, quantization=args.quantization,
+                    free=free)
+    st.check()
+    jobs = check_jobs(args.jobs)
+    slope_counts = parse_int_list(args.slope, "--slope", 20) if args.slope else None
+    if slope_counts is not None and len(slope_counts) < 2:
+        raise InputError("--slope needs at least two sample counts")
+    res = analyze(run_many(st, jobs), st)
+    res["settings"]["scene"] = scene.name
+    print(format_montecarlo(res))
+    if slope_counts:
+        s2 = replace(st, runs=args.slope_runs or st.runs)
+        s2.check()
+        sl = slope_study(s2, slope_counts, jobs)
+        res["slope"] = sl
+        print()
+        print(format_slope(sl))
+    if args.out:
+        save_json(args.out, res)
+        print(f"result written to {args.out}")
+    return 0

@@ -1,0 +1,484 @@
+"""Monte Carlo on the twin: repeated runs with fresh poses and noise, one calibration each,
+compared with the truth and with the Cramer-Rao bound.
+
+One run (``run_one``, a pure function of (settings, run index)) samples, calibrates from
+the scene's nominal parameters and evaluates, at the truth and on the run's own samples,
+the covariances of ``studies.common.covariances``. Sampling modes:
+
+* ``twin`` (default): the rehearsal machinery without the tick-by-tick motion: the
+  sampling run's own ``Planner`` (pose draw, IK, collision check of the target and of the
+  straight joint path from the previous pose, with the run's random stream), the twin put
+  at rest at the planned counts (``Twin.set_counts``: a repeatability draw, as when the
+  robot settles at the end of a move) and the laser read through ``read_stable`` (100
+  readings). Poses, rejections, counts and readings are those of ``planecal rehearse``
+  with the same seeds (tests/test_studies_montecarlo.py checks it sample for sample);
+  it only skips simulating the ticks of each move (the servo always settles exactly on
+  the commanded counts, so the sample is the same).
+* ``rehearse``: the full ``SamplingRun`` on the twin, tick by tick (slow; for checking).
+* ``synthetic``: the analytic model (``planecal.synthetic``'s poses, no collision check:
+  a slightly different pose distribution) with the twin's noise model added in numpy:
+  Gaussian joint repeatability, buffer-mean laser noise and, optionally, the encoder's
+  quantisation (uniform +-0.5 count per actuator). For fast tests.
+
+Truth: by default one truth for all runs, ``draw_truth(scene, truth_seed)`` (bias is a
+property of the estimator at a truth); ``vary_truth`` draws one per run. Run k uses seed
+``seed + k`` for its poses and noise.
+
+Summary (``analyze``) per free parameter: bias, empirical std, and, as the RMS over runs
+of each run's value: the white-noise bound ``mean(v) (J^T J)^-1``, the sandwich (the true
+covariance of the unweighted fit under the noise model), the Cramer-Rao bound
+``(J^T V^-1 J)^-1`` and the std the fit reports. Chi-square: per run
+T = e^T C^-1 e over the identifiable free joint offsets with C the fit's reported
+covariance (and, separately, with the sandwich); T ~ chi2(k) if the reported covariance is
+honest: the mean must be within 3 standard errors of k and a KS test against chi2(k)
+must not reject at 1 %.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from planecal.cell import parameter_names, predict_with_jacobian
+from planecal.errors import InputError
+from planecal.studies.common import (BUFFER_LEN, Progress, covariances, noise_variance,
+                                     parallel_map, table)
+
+MODES = ("twin", "rehearse", "synthetic")
+TARGET_RATIO = 0.15  # issue 6: empirical spread within 15 % of the bound
+TARGET_BIAS = 0.2  # bias under a fifth of the bound
+
+_CACHE: dict = {}
+
+
+@dataclass(frozen=True)
+class MCSettings:
+    scene: str = "thesis_final"
+    samples: int = 150
+    runs: int = 20
+    seed: int = 1000
+    mode: str = "twin"
+    truth_seed: int = 0
+    vary_truth: bool = False
+    offsets_all: bool = False  # truth with delta1, delta6 != 0 too
+    laser_noise_mm: float = 0.001
+    repeatability_mm: float | None = None  # None: the robot's (0.07 mm)
+    quantization: bool = False  # synthetic mode only
+    free: tuple | None = None  # parameter names; None: all but delta1, delta6
+    clearance_m: float = 0.01
+    poses: tuple | None = None  # fixed encoder counts (planning study): replayed in order
+
+    def check(self) -> None:
+        if self.mode not in MODES:
+            raise InputError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if self.samples < 20:
+            raise InputError(f"--samples must be at least 20, got {self.samples}")
+        if self.runs < 2:
+            raise InputError(f"--runs must be at least 2, got {self.runs}")
+        if self.seed < 0 or self.truth_seed < 0:
+            raise InputError("seeds must be >= 0")
+        if self.laser_noise_mm < 0 or (self.repeatability_mm or 0) < 0:
+            raise InputError("noise levels must be >= 0")
+        if self.quantization and self.mode != "synthetic":
+            raise InputError("encoder quantisation noise exists in the synthetic mode only "
+                             "(the twin's joints sit exactly on their counts)")
+
+
+def _scene(name):
+    from planecal.scene import load_scene
+    key = ("scene", name)
+    if key not in _CACHE:
+        _CACHE[key] = load_scene(name)
+    return _CACHE[key]
+
+
+def _world(name, clearance):
+    key = ("world", name, clearance)
+    if key not in _CACHE:
+        from planecal.collision import CollisionWorld
+        _CACHE[key] = CollisionWorld(_scene(name), clearance_m=clearance)
+    return _CACHE[key]
+
+
+def free_mask(names: list[str], free) -> np.ndarray:
+    from planecal.fit import default_free
+    n_planes = (len(names) - 11) // 3
+    if free is None:
+        return default_free(n_planes)
+    mask = np.zeros(len(names), bool)
+    for f in free:
+        if f == "all":
+            mask[:] = True
+        elif f in names:
+            mask[names.index(f)] = True
+        else:
+            raise InputError(f"--free: unknown parameter {f!r}; known: {', '.join(names)}")
+    return mask
+
+
+def truth_for(st: MCSettings, k: int):
+    from planecal.twin.truth import Tolerances, draw_truth
+    seed = st.seed + k if st.vary_truth else st.truth_seed
+    return draw_truth(_scene(st.scene), seed, Tolerances(offsets_all=st.offsets_all))
+
+
+def joint_sigma(robot, st: MCSettings) -> float:
+    from planecal.twin.servo import repeatability_sigma
+    rep = robot.repeatability_m if st.repeatability_mm is None else st.repeatability_mm * 1e-3
+    return repeatability_sigma(robot, rep) if rep > 0 else 0.0
+
+
+# ----- sampling -----------------------------------------------------------------------------
+
+def twin_samples(scene, truth, st: MCSettings, seed: int):
+    """The ``twin`` mode (module docstring): (qe, d_m, plate, rejected dict)."""
+    from planecal.encoder import counts_to_joints
+    from planecal.sampling.laserread import LaserSettings, read_stable
+    from planecal.sampling.run import Planner, RunSettings
+    from planecal.twin import Twin, TwinOptions
+
+    twin = Twin(scene, truth=truth, seed=seed,
+                options=TwinOptions(laser_noise_mm=st.laser_noise_mm,
+                                    repeatability_mm=st.repeatability_mm))
+    rs = RunSettings(scene=str(scene.path), samples=st.samples, seed=seed,
+                     clearance_m=st.clearance_m)
+    rs.pose.cone_deg, rs.pose.distance_mm = scene.cone_deg, tuple(scene.distance_mm)
+    planner = Planner(scene, rs, _world(st.scene, st.clearance_m))
+    rng_state = np.random.default_rng(seed).bit_generator.state
+    q0 = counts_to_joints(scene.robot, twin.current_counts)
+    qe, d, plate = [], [], []
+    rejected = {"collision": 0, "laser": 0, "unreachable": 0}
+    in_a_row = 0
+    laser = LaserSettings()
+    while len(qe) < st.samples:
+        plan = planner.plan(q0, len(qe), rng_state, rs.max_attempts - in_a_row)
+        for kind, _, _ in plan.rejections:
+            rejected[kind] += 1
+        in_a_row += len(plan.rejections)
+        if plan.q is None:
+            raise RuntimeError(f"run with seed {seed}: {rs.max_attempts} poses rejected in a row")
+        rng_state = plan.rng_after
+        twin.set_counts(plan.qe_goal)
+        q0 = plan.q
+        lr = read_stable(twin.read, laser)
+        if not lr.ok:
+            rejected["laser"] += 1
+            in_a_row += 1
+            continue
+        qe.append(twin.current_counts)
+        d.append(lr.value_mm * 1e-3)
+        plate.append(plan.pose.plate)
+        in_a_row = 0
+    return np.array(qe), np.array(d), np.array(plate, int), rejected
+
+
+def pose_list_samples(scene, truth, st: MCSettings, seed: int):
+    """Fixed counts (a planned pose list) measured on the twin in order."""
+    from planecal.sampling.laserread import LaserSettings, read_stable
+    from planecal.twin import Twin, TwinOptions
+
+    twin = Twin(scene, truth=truth, seed=seed,
+                options=TwinOptions(laser_noise_mm=st.laser_noise_mm,
+                                    repeatability_mm=st.repeatability_mm))
+    qe, d, plate = [], [], []
+    rejected = {"collision": 0, "laser": 0, "unreachable": 0}
+    for counts, k in st.poses:
+        twin.set_counts(np.asarray(counts, np.int64))
+        lr = read_stable(twin.read, LaserSettings())
+        if not lr.ok:
+            rejected["laser"] += 1
+            continue
+        qe.append(twin.current_counts)
+        d.append(lr.value_mm * 1e-3)
+        plate.append(int(k))
+    return np.array(qe), np.array(d), np.array(plate, int), rejected
+
+
+def rehearse_samples(scene, truth, st: MCSettings, seed: int):
+    """The full sampling run, tick by tick (``planecal rehearse`` without the CLI)."""
+    from planecal.links.base import AlwaysEnabled
+    from planecal.samples import read_samples
+    from planecal.sampling.run import Driver, RunSettings, SamplingRun
+    from planecal.twin import Twin, TwinOptions
+
+    twin = Twin(scene, truth=truth, seed=seed,
+                options=TwinOptions(laser_noise_mm=st.laser_noise_mm,
+                                    repeatability_mm=st.repeatability_mm))
+    rs = RunSettings(scene=str(scene.path), samples=st.samples, seed=seed,
+                     clearance_m=st.clearance_m)
+    rs.pose.cone_deg, rs.pose.distance_mm = scene.cone_deg, tuple(scene.distance_mm)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "run.tsv")
+        drv = Driver(twin, AlwaysEnabled(), scene.robot)
+        stats = SamplingRun(drv, twin, scene, rs, out, _world(st.scene, st.clearance_m)).run()
+        if stats.status != "complete":
+            raise RuntimeError(f"rehearsal with seed {seed}: {stats.status} ({stats.stop_reason})")
+        s = read_samples(out)
+    return s.qe, s.d_mm * 1e-3, s.plate, dict(stats.rejected)
+
+
+def synthetic_noisy_samples(scene, truth, st: MCSettings, seed: int):
+    """Analytic model with the twin's noise model (module docstring)."""
+    from planecal.cell import plane_distance, sensor_in_base
+    from planecal.encoder import counts_to_joints
+    from planecal.synthetic import synthetic_samples
+
+    rng = np.random.default_rng(seed)
+    robot = scene.robot
+    qe, _, plate = synthetic_samples(scene, truth, st.samples, rng)
+    q = counts_to_joints(robot, qe)
+    s = joint_sigma(robot, st)
+    if s > 0:
+        q = q + rng.normal(0.0, s, q.shape)
+    if st.quantization:
+        x = rng.uniform(-0.5, 0.5, q.shape) / robot.gains
+        q = q + x @ robot.coupling.T
+    o_b, z_b = sensor_in_base(robot, q, truth)
+    d = plane_distance(truth.planes[plate], o_b, z_b)
+    d = d + rng.normal(0.0, st.laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN), len(d))
+    return qe, d, plate, {"collision": 0, "laser": 0, "unreachable": 0}
+
+
+# ----- one run --------------------------------------------------------------------------------
+
+def run_one(job) -> dict:
+    """One Monte Carlo run: job = (settings, k). Pure function of (settings, k)."""
+    from planecal.fit import FitOptions, calibrate, uncertainty
+    from planecal.scene import nominal_params
+
+    st, k = job
+    scene = _scene(st.scene)
+    robot = scene.robot
+    seed = st.seed + k
+    truth = truth_for(st, k)
+    if st.poses is not None:
+        qe, d, plate, rejected = pose_list_samples(scene, truth, st, seed)
+    elif st.mode == "twin":
+        qe, d, plate, rejected = twin_samples(scene, truth, st, seed)
+    elif st.mode == "rehearse":
+        qe, d, plate, rejected = rehearse_samples(scene, truth, st, seed)
+    else:
+        qe, d, plate, rejected = synthetic_noisy_samples(scene, truth, st, seed)
+    names = parameter_names(len(scene.plates))
+    free = free_mask(names, st.free)
+    fit = calibrate(robot, qe, d, nominal_params(scene), plate, FitOptions(free=free))
+    # noise model and bounds at the truth, on this run's samples
+    _, J = predict_with_jacobian(robot, qe, truth, plate)
+    s = joint_sigma(robot, st)
+    v = noise_variance(J[:, :6], s, st.laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN))
+    if st.quantization:
+        Jx = J[:, :6] @ robot.coupling  # dd/dx (actuator angles)
+        v = v + np.sum(Jx ** 2 / (12.0 * robot.gains ** 2), axis=1)
+    cov = covariances(J[:, free], v)
+    # identifiability with every parameter free, at the truth
+    all_free = np.ones(len(names), bool)
+    ident_all, _, _, _ = uncertainty(J, np.sqrt(v), all_free, names)
+    err = fit.params.to_vector()[free] - truth.to_vector()[free]
+    return {
+        "k": k, "seed": seed, "samples": int(len(d)), "rejected": rejected,
+        "err": err, "reported_cov": fit.cov, "reported_std": fit.std[free],
+        "white_var": np.diag(cov["white"]), "sandwich_var": np.diag(cov["sandwich"]),
+        "crb_var": np.diag(cov["crb"]), "sandwich_cov": cov["sandwich"],
+        "crb_cov": cov["crb"],
+        "sigma_model_mm": float(np.sqrt(np.mean(v)) * 1e3),
+        "sigma_fit_mm": float(fit.sigma_m * 1e3), "rms_mm": fit.rms_mm(),
+        "converged": bool(fit.converged), "iterations": int(fit.iterations),
+        "not_identifiable": fit.identifiability["not_identifiable"],
+        "not_identifiable_all_free": ident_all["not_identifiable"],
+        "truth": truth.to_vector()[free],
+    }
+
+
+def run_many(st: MCSettings, jobs: int = 1, quiet: bool = False, label: str | None = None):
+    st.check()
+    prog = Progress(label or f"montecarlo {st.scene} N={st.samples}", st.runs, quiet=quiet)
+    return parallel_map(run_one, [(st, k) for k in range(st.runs)], jobs, prog)
+
+
+# ----- analysis ---------------------------------------------------------------------------------
+
+def _chi2(errs, covs, idx):
+    from scipy import stats
+    T = []
+    for e, C in zip(errs, covs):
+        Ci = C[np.ix_(idx, idx)]
+        if not np.all(np.isfinite(Ci)):
+            continue
+        ei = e[idx]
+        T.append(float(ei @ np.linalg.solve(Ci, ei)))
+    T = np.array(T)
+    kdim = len(idx)
+    R = len(T)
+    if R < 2 or kdim == 0:
+        return None
+    se = np.sqrt(2 * kdim / R)
+    ks = stats.kstest(T, "chi2", args=(kdim,))
+    q95 = stats.chi2.ppf(0.95, kdim)
+    ok = bool(abs(T.mean() - kdim) < 3 * se and ks.pvalue > 0.01)
+    return {"dof": kdim, "runs": R, "mean": float(T.mean()), "expected": kdim,
+            "standard_error": float(se), "ks_pvalue": float(ks.pvalue),
+            "share_below_chi2_95": float(np.mean(T < q95)), "passes": ok}
+
+
+def analyze(runs: list[dict], st: MCSettings) -> dict:
+    scene = _scene(st.scene)
+    names = parameter_names(len(scene.plates))
+    free = free_mask(names, st.free)
+    fnames = [n for n, f in zip(names, free) if f]
+    R = len(runs)
+    E = np.array([r["err"] for r in runs])
+    bias = E.mean(0)
+    emp = E.std(0, ddof=1)
+
+    def rms(key):
+        return np.sqrt(np.mean([r[key] for r in runs], axis=0))
+    white, sand, crb = rms("white_var"), rms("sandwich_var"), rms("crb_var")
+    rep = np.sqrt(np.nanmean([np.asarray(r["reported_std"]) ** 2 for r in runs], axis=0))
+    rel_se = 1.0 / np.sqrt(2 * (R - 1))  # relative standard error of a std from R runs
+    params = {}
+    for i, n in enumerate(fnames):
+        params[n] = {
+            "bias": float(bias[i]), "empirical_std": float(emp[i]),
+            "crb_white_std": float(white[i]), "sandwich_std": float(sand[i]),
+            "crb_std": float(crb[i]), "reported_std": float(rep[i]),
+            "ratio_emp_to_crb_white": float(emp[i] / white[i]),
+            "ratio_emp_to_sandwich": float(emp[i] / sand[i]),
+            "ratio_emp_to_crb": float(emp[i] / crb[i]),
+            "ratio_emp_to_reported": float(emp[i] / rep[i]),
+            "bias_over_crb": float(abs(bias[i]) / crb[i]),
+            "bias_t": float(bias[i] / (emp[i] / np.sqrt(R))),
+        }
+    off = [i for i, n in enumerate(fnames) if n.startswith("delta")
+           and all(n not in r["not_identifiable"] for r in runs)]
+    errs = [r["err"] for r in runs]
+    chi_rep = _chi2(errs, [r["reported_cov"] for r in runs], off)
+    chi_sand = _chi2(errs, [r["sandwich_cov"] for r in runs], off)
+    chi_all = _chi2(errs, [r["reported_cov"] for r in runs],
+                    [i for i, n in enumerate(fnames)
+                     if all(n not in r["not_identifiable"] for r in runs)])
+    offs = [fnames[i] for i in off]
+    within = {n: abs(params[n]["ratio_emp_to_crb"] - 1) <= TARGET_RATIO for n in offs}
+    within_white = {n: abs(params[n]["ratio_emp_to_crb_white"] - 1) <= TARGET_RATIO for n in offs}
+    honest = {n: abs(params[n]["ratio_emp_to_reported"] - 1) <= TARGET_RATIO for n in offs}
+    small_bias = {n: params[n]["bias_over_crb"] < TARGET_BIAS for n in offs}
+    rej = {k: int(sum(r["rejected"].get(k, 0) for r in runs)) for k in ("collision", "laser", "unreachable")}
+    return {
+        "settings": _settings_dict(st), "runs": R, "free": fnames, "params": params,
+        "offsets": offs,
+        "relative_standard_error_of_std": rel_se,
+        "chi2_offsets_reported": chi_rep, "chi2_offsets_sandwich": chi_sand,
+        "chi2_all_reported": chi_all,
+        "verdict": {
+            "efficient_within_15pct_of_crb": within,
+            "within_15pct_of_white_crb": within_white,
+            "reported_std_within_15pct": honest,
+            "bias_under_fifth_of_crb": small_bias,
+            "chi2_passes": None if chi_rep is None else chi_rep["passes"],
+        },
+        "sigma_model_mm": float(np.mean([r["sigma_model_mm"] for r in runs])),
+        "sigma_fit_mm": float(np.mean([r["sigma_fit_mm"] for r in runs])),
+        "not_converged": int(sum(not r["converged"] for r in runs)),
+        "rejected_total": rej,
+        "not_identifiable_all_free": sorted({n for r in runs for n in r["not_identifiable_all_free"]},
+                                            key=names.index),
+        "samples_per_run": float(np.mean([r["samples"] for r in runs])),
+    }
+
+
+def _settings_dict(st: MCSettings) -> dict:
+    d = asdict(st)
+    d["poses"] = None if st.poses is None else len(st.poses)
+    return d
+
+
+def slope_study(st: MCSettings, sample_counts: list[int], jobs: int = 1, quiet=False) -> dict:
+    """Empirical and CR spread of the offsets vs the number of samples, and the log-log
+    slope (N^-1/2 expected) fitted over ``sample_counts``."""
+    rows = []
+    for n in sample_counts:
+        s = replace(st, samples=n)
+        res = analyze(run_many(s, jobs, quiet, label=f"slope N={n}"), s)
+        rows.append({"samples": n, **{p: {"empirical_std": res["params"][p]["empirical_std"],
+                                          "crb_std": res["params"][p]["crb_std"]}
+                                      for p in res["offsets"]}})
+    offs = [k for k in rows[0] if k != "samples"]
+    logn = np.log([r["samples"] for r in rows])
+    slopes = {}
+    for p in offs:
+        ye = np.log([r[p]["empirical_std"] for r in rows])
+        yc = np.log([r[p]["crb_std"] for r in rows])
+        slopes[p] = {"empirical": float(np.polyfit(logn, ye, 1)[0]),
+                     "crb": float(np.polyfit(logn, yc, 1)[0])}
+    return {"sample_counts": list(sample_counts), "runs_per_point": st.runs, "rows": rows,
+            "slopes": slopes}
+
+
+def format_montecarlo(res: dict) -> str:
+    from planecal.studies.common import display_scale
+    st = res["settings"]
+    out = [f"Monte Carlo: scene {st['scene']}, mode {st['mode']}, {res['runs']} runs of "
+           f"{res['samples_per_run']:.0f} samples; truth "
+           + ("drawn per run" if st["vary_truth"] else f"fixed (seed {st['truth_seed']})")
+           + f"; noise: laser {st['laser_noise_mm']} mm per reading, repeatability "
+           + ("robot's" if st["repeatability_mm"] is None else f"{st['repeatability_mm']} mm")
+           + (", encoder quantisation" if st["quantization"] else ""),
+           f"noise model rms per sample {res['sigma_model_mm'] * 1e3:.2f} um, fit sigma "
+           f"{res['sigma_fit_mm'] * 1e3:.2f} um; a std from {res['runs']} runs is known to "
+           f"+-{res['relative_standard_error_of_std']:.0%} (1 s.e.)", ""]
+    rows = []
+    for n, p in res["params"].items():
+        k, unit = display_scale(n)
+        rows.append([n, unit, f"{p['bias'] * k:+.3g}", f"{p['empirical_std'] * k:.4g}",
+                     f"{p['crb_std'] * k:.4g}", f"{p['crb_white_std'] * k:.4g}",
+                     f"{p['sandwich_std'] * k:.4g}", f"{p['reported_std'] * k:.4g}",
+                     f"{p['ratio_emp_to_crb']:.3f}", f"{p['ratio_emp_to_crb_white']:.3f}",
+                     f"{p['ratio_emp_to_sandwich']:.3f}", f"{p['ratio_emp_to_reported']:.3f}",
+                     f"{p['bias_over_crb']:.3f}"])
+    out.append(table(["param", "unit", "bias", "emp_std", "CRB", "CRB_white", "sandwich",
+                      "reported", "emp/CRB", "emp/white", "emp/sandw", "emp/rep", "|bias|/CRB"],
+                     rows))
+    out.append("")
+    for key, what in (("chi2_offsets_reported", "offsets, fit's reported covariance"),
+                      ("chi2_offsets_sandwich", "offsets, sandwich covariance"),
+                      ("chi2_all_reported", "all free parameters, reported covariance")):
+        c = res[key]
+        if c:
+            out.append(f"chi-square ({what}): mean {c['mean']:.2f} for {c['dof']} dof "
+                       f"(+-{c['standard_error']:.2f}), KS p {c['ks_pvalue']:.3f}, "
+                       f"{c['share_below_chi2_95']:.0%} below the 95 % quantile -> "
+                       + ("PASS" if c["passes"] else "FAIL"))
+    v = res["verdict"]
+    out.append("")
+    out.append("offsets within 15 % of the Cramer-Rao bound: "
+               + ", ".join(f"{n} {'yes' if ok else 'NO'}" for n, ok in v["efficient_within_15pct_of_crb"].items()))
+    out.append("offsets within 15 % of the white-noise bound: "
+               + ", ".join(f"{n} {'yes' if ok else 'NO'}" for n, ok in v["within_15pct_of_white_crb"].items()))
+    out.append("reported std within 15 % of the spread: "
+               + ", ".join(f"{n} {'yes' if ok else 'NO'}" for n, ok in v["reported_std_within_15pct"].items()))
+    out.append("bias under a fifth of the bound: "
+               + ", ".join(f"{n} {'yes' if ok else 'NO'}" for n, ok in v["bias_under_fifth_of_crb"].items()))
+    if res["not_identifiable_all_free"]:
+        out.append("with every parameter free, not identifiable: "
+                   + ", ".join(res["not_identifiable_all_free"]))
+    r = res["rejected_total"]
+    out.append(f"rejected poses over all runs: collision {r['collision']}, laser {r['laser']}, "
+               f"unreachable {r['unreachable']}; fits not converged: {res['not_converged']}")
+    return "\n".join(out)
+
+
+def format_slope(sl: dict) -> str:
+    from planecal.studies.common import display_scale
+    offs = list(sl["slopes"])
+    rows = []
+    for r in sl["rows"]:
+        row = [str(r["samples"])]
+        for p in offs:
+            k, _ = display_scale(p)
+            row.append(f"{r[p]['empirical_std'] * k:.3g} / {r[p]['crb_std'] * k:.3g}")
+        rows.append(row)
+    rows.append(["slope"] + [f"{sl['slopes'][p]['empirical']:+.3f} / {sl['slopes'][p]['crb']:+.3f}"
+                             for p in offs])
+    return (f"spread vs samples ({sl['runs_per_point']} runs per point), empirical / CRB [urad]; "
+            f"expected slope -0.5\n" + table(["samples"] + offs, rows))
