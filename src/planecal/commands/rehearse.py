@@ -99,6 +99,6 @@ def run(args) -> int:
     if args.truth:
         summary["truth"] = str(args.truth)
     if args.rrd:
-        summary["rrd"] = str(args.rrd)
+        summary["rrd"] = str(getattr(observer, "path", args.rrd))
     print_summary(summary)
     return code

@@ -127,6 +127,8 @@ def run(args) -> int:
         if observer is not None and hasattr(observer, "close"):
             observer.close()
     summary["laser_read_errors"] = laser.total
+    if args.rrd:
+        summary["rrd"] = str(getattr(observer, "path", args.rrd))
     summary["link"] = {k: int(v) for k, v in vars(link.counters).items()}
     print_summary(summary)
     return code

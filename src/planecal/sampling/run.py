@@ -733,6 +733,9 @@ class SamplingRun:
             if bg:
                 bg.close()
             writer.close()
+            # the file is the record: a Ctrl-C between writing a line and counting it
+            # must not leave the sidecar one short
+            st.samples = count_samples(self.out)
             self._account()
             self._save()
             if own_lock:
