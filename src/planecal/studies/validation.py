@@ -4,7 +4,8 @@ and the gauge-block test of seed 9.3, each with the nominal and the calibrated m
 ISO 9283 (position part). A cube with edges parallel to the base axes is placed over the
 calibrated region: centred on the mean flange position of the calibration samples, edge
 ``cube_edge`` (default: 80 % of the samples' smallest flange-position range between the
-10th and 90th percentiles, at most 0.25 m). Its diagonal plane through corners
+10th and 90th percentiles, at most 0.25 m, shrunk by 0.75 until P1..P5 are reachable
+and collision-free). Its diagonal plane through corners
 (-,-,-), (+,+,-), (+,+,+), (-,-,+) holds P1 (the centre) and P2..P5, on the diagonals
 at a tenth of the diagonal from the corners. The commanded orientation is the flange's at
 the scene's calibration position. For each model (nominal: zero offsets; calibrated:
@@ -275,8 +276,15 @@ def validate(scene, truth: CellParams, calibrated: CellParams, sample_counts: np
     center, edge = cube_from_flanges(flanges, st.cube_edge_m)
     q_cal = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     R = fk(robot, q_cal)[:3, :3]
-    iso = iso9283(twin, scene, {"nominal": np.zeros(6), "calibrated": calibrated.joint_offsets},
-                  center, edge, R, st, checker)
+    models = {"nominal": np.zeros(6), "calibrated": calibrated.joint_offsets}
+    for attempt in range(6):  # a cube of our own choosing shrinks until all poses are clear
+        try:
+            iso = iso9283(twin, scene, models, center, edge, R, st, checker)
+            break
+        except InputError:
+            if st.cube_edge_m is not None or attempt == 5:
+                raise
+            edge *= 0.75
     nominal = nominal_params(scene)
     mixed = calibrated.copy()
     mixed.joint_offsets = nominal.joint_offsets.copy()

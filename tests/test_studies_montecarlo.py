@@ -1,0 +1,66 @@
+"""Monte Carlo study: the twin mode reproduces a rehearsal sample for sample; on small
+instances the spread agrees with the Cramer-Rao bound and the chi-square check holds."""
+import numpy as np
+import pytest
+
+from planecal.cli import main
+from planecal.studies.common import covariances
+from planecal.studies.montecarlo import (MCSettings, _scene, analyze, rehearse_samples,
+                                         run_many, truth_for, twin_samples)
+
+
+def test_covariance_forms_agree_for_white_noise_and_order_otherwise():
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(200, 5)) * [1, 10, 0.1, 3, 1]
+    c = covariances(J, np.full(200, 4e-10))
+    np.testing.assert_allclose(c["white"], c["sandwich"], rtol=1e-9, atol=1e-30)
+    np.testing.assert_allclose(c["white"], c["crb"], rtol=1e-9, atol=1e-30)
+    v = rng.uniform(0.2, 3.0, 200) * 1e-10
+    c = covariances(J, v)
+    # the Cramer-Rao bound is below the sandwich (unweighted fit) in the PSD order
+    assert np.linalg.eigvalsh(c["sandwich"] - c["crb"]).min() > -1e-12 * np.abs(c["sandwich"]).max()
+
+
+def test_twin_mode_reproduces_the_rehearsal_sample_for_sample():
+    st = MCSettings(samples=4)
+    scene = _scene(st.scene)
+    truth = truth_for(st, 0)
+    qe_r, d_r, p_r, _ = rehearse_samples(scene, truth, st, 11)
+    qe_t, d_t, p_t, _ = twin_samples(scene, truth, st, 11)
+    np.testing.assert_array_equal(qe_r, qe_t)
+    np.testing.assert_array_equal(p_r, p_t)
+    # the sample file keeps 6 decimals of a mm
+    np.testing.assert_allclose(d_r, d_t, atol=1e-9, rtol=0)
+
+
+def test_synthetic_monte_carlo_meets_the_bound():
+    st = MCSettings(mode="synthetic", samples=60, runs=24, seed=5)
+    res = analyze(run_many(st, jobs=2, quiet=True), st)
+    for n in ("delta3", "delta4", "delta5"):
+        p = res["params"][n]
+        # 24 runs: a std is known to +-15 %; allow 3 standard errors
+        assert 0.55 < p["ratio_emp_to_crb"] < 1.5, (n, p)
+        assert p["bias_over_crb"] < 0.7, (n, p)
+        # mild heteroscedasticity: the white-noise bound is within 10 % of the CR bound
+        assert abs(p["crb_white_std"] / p["crb_std"] - 1) < 0.1
+    c = res["chi2_offsets_reported"]
+    assert c["dof"] == 4 and abs(c["mean"] - 4) < 3 * c["standard_error"] + 0.5
+    assert res["not_identifiable_all_free"][:2] == ["delta1", "delta6"]
+
+
+def test_twin_monte_carlo_small(capsys, tmp_path):
+    out = tmp_path / "M.json"
+    assert main(["montecarlo", "--runs", "3", "--samples", "40", "--jobs", "2",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "emp/CRB" in text and "chi-square" in text
+    import json
+    res = json.loads(out.read_text())
+    assert res["runs"] == 3 and res["samples_per_run"] == 40
+    for n in ("delta2", "delta3", "delta4", "delta5"):
+        p = res["params"][n]
+        # the error of every run is within reach of the bound (4 sigma over 3 runs)
+        assert abs(p["bias"]) < 4 * p["crb_std"]
+        assert 0.7 < p["reported_std"] / p["crb_std"] < 1.4
+    assert main(["montecarlo", "--runs", "1"]) == 2
+    assert main(["montecarlo", "--mode", "twin", "--quantization"]) == 2
