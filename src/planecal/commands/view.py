@@ -1,0 +1,75 @@
+"""`planecal view FILE [--web] [--summary]`: open a Rerun recording (.rrd).
+
+Opens the Rerun viewer (the ``rerun`` executable that comes with rerun-sdk) on FILE and
+waits until it is closed. Where no viewer can run -- no ``rerun`` executable, or no
+display (Linux without $DISPLAY / $WAYLAND_DISPLAY) -- it prints one line saying how to
+open the file instead and exits 1. ``--web`` serves the recording to a browser instead
+(``rerun --serve-web FILE``; works without a display). ``--summary`` prints the entity
+tree (entity, rows, static, components) read with rerun's own reader, no viewer.
+Exit 2 when FILE is missing or not a recording.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from planecal.errors import InputError
+
+
+def add_arguments(p) -> None:
+    p.add_argument("file", metavar="FILE", help="Rerun recording (.rrd), e.g. from --rrd")
+    p.add_argument("--web", action="store_true",
+                   help="serve it to a web browser (rerun --serve-web) instead of a window")
+    p.add_argument("--summary", action="store_true",
+                   help="print the entity tree and row counts; open no viewer")
+
+
+def find_viewer() -> str | None:
+    """The ``rerun`` executable: next to this Python (a venv's bin/), else on PATH."""
+    here = Path(sys.executable).parent / ("rerun.exe" if os.name == "nt" else "rerun")
+    if here.is_file() and os.access(here, os.X_OK):
+        return str(here)
+    return shutil.which("rerun")
+
+
+def has_display() -> bool:
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def run(args) -> int:
+    from planecal.rerun_log.common import is_recording
+
+    path = Path(args.file)
+    if not path.is_file():
+        raise InputError(f"{path}: no such recording")
+    if not is_recording(path):
+        raise InputError(f"{path}: not a Rerun recording (.rrd)")
+    if args.summary:
+        from planecal.rerun_log.common import summarize
+        try:
+            rows = summarize(path)
+        except Exception as e:  # the reader's own errors (truncated file, ...)
+            raise InputError(f"{path}: cannot read the recording ({e})") from None
+        for entity, n, static, comps in rows:
+            print(f"{entity}\t{n}\t{'static' if static else 'temporal'}\t{', '.join(comps)}")
+        return 0
+    exe = find_viewer()
+    if exe is None:
+        print(f"planecal view: no Rerun viewer here; install it (pip install rerun-sdk) and "
+              f"run: rerun {path}")
+        return 1
+    if not args.web and not has_display():
+        print(f"planecal view: no display here; run `rerun {path}` where there is one, or "
+              f"`planecal view --web {path}` to serve it to a browser")
+        return 1
+    cmd = [exe, str(path)] + (["--serve-web", "--bind", "127.0.0.1"] if args.web else [])
+    try:
+        return subprocess.call(cmd)
+    except OSError as e:
+        print(f"planecal view: cannot start {exe} ({e.strerror}); run: rerun {path}")
+        return 1

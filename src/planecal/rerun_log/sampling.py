@@ -1,0 +1,382 @@
+"""The sampling-run observer: one logger for twin rehearsals and real runs.
+
+Per tick the loop hands over (tick, delta, reference, current, laser); the observer only
+keeps a reference to them in a list (about 0.2 us). Every ``chunk_ticks`` ticks and at
+``close()`` the buffered ticks are converted in bulk: kinematics vectorised over the
+ticks, and every entity sent with one ``rr.send_columns`` call. Motion (robot frames,
+beam, hit) is logged every ``every`` ticks plus the first tick and each sample's tick;
+the series (step counts, joint angles) every ``series_every`` ticks; every laser
+reading is logged. Samples and rejections are logged as they happen.
+
+Kinematics: the twin's hidden truth (offsets, sensor pose, planes) when a twin is given
+(``kinematics="truth"``), else the scene's nominal values -- the only ones a real run has.
+The colour (model error) of a sample always uses ``params`` (default: the scene's
+nominal values), so a rehearsal and a real run are coloured alike. Joint angles come from
+the counts through the nominal encoder model (``counts_to_joints``). The twin's random
+joint errors (repeatability, compliance, backlash) are not in the logged kinematics.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from planecal.cell import CellParams, beam_direction, predict, sensor_in_base
+from planecal.encoder import counts_to_joints
+from planecal.errors import InputError
+from planecal.robot import fk_frames
+from planecal.rerun_log.common import (BEAM_NONE_RGBA, BEAM_RGBA, HIT_RGBA, REJECT_RGBA, _rr,
+                                       close_recording, diverging_colors, log_cell,
+                                       log_robot_meshes, open_recording, recording_path)
+from planecal.sampling.run import REJECT_KINDS, NullObserver
+
+DEFAULT_EVERY = 5
+DEFAULT_CHUNK_TICKS = 4096
+N_JOINTS = 6
+SAMPLE_RADIUS_M = 0.003
+HIT_RADIUS_M = 0.004
+BEAM_RADIUS_M = 0.0015
+REJECT_LENGTH_M = 0.08  # length of the arrow marking a rejected pose (along the beam)
+
+TICK_ENTITIES = ([f"/robot/link_{i}" for i in range(1, N_JOINTS + 1)]
+                 + ["/robot/tool", "/laser/beam", "/laser/hit"])
+SERIES_ENTITIES = ([f"/series/steps/q{j}" for j in range(1, N_JOINTS + 1)]
+                   + [f"/series/joint_deg/q{j}" for j in range(1, N_JOINTS + 1)]
+                   + ["/series/laser_mm", "/series/model_error_mm"])
+EVENT_ENTITIES = ["/samples/points"] + [f"/rejected/{k}" for k in REJECT_KINDS] + ["/events"]
+
+
+def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) of rotation matrices (..., 3, 3), vectorised
+    (magnitudes from the diagonal, signs from the off-diagonal differences; exact to
+    ~1e-8 rad, plenty for display)."""
+    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
+    w = 0.5 * np.sqrt(np.maximum(0.0, 1.0 + m00 + m11 + m22))
+    x = 0.5 * np.sqrt(np.maximum(0.0, 1.0 + m00 - m11 - m22))
+    y = 0.5 * np.sqrt(np.maximum(0.0, 1.0 - m00 + m11 - m22))
+    z = 0.5 * np.sqrt(np.maximum(0.0, 1.0 - m00 - m11 + m22))
+    x = np.copysign(x, R[..., 2, 1] - R[..., 1, 2])
+    y = np.copysign(y, R[..., 0, 2] - R[..., 2, 0])
+    z = np.copysign(z, R[..., 1, 0] - R[..., 0, 1])
+    q = np.stack([x, y, z, w], -1)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def reject_kind(reason: str) -> str:
+    """'collision', 'laser' or 'unreachable' from a run's rejection reason text."""
+    head = reason.split(":", 1)[0].strip().split(" ", 1)[0].lower()
+    return head if head in REJECT_KINDS else "unreachable"
+
+
+def _env_int(name: str, default: int) -> int:
+    v = os.environ.get(name)
+    if v is None or not v.strip():
+        return default
+    try:
+        return int(v)
+    except ValueError:
+        raise InputError(f"{name}: must be an integer, got {v!r}") from None
+
+
+def sampling_blueprint():
+    """3D view of the cell, robot, laser, samples and rejections; time series of step
+    counts, joint angles, laser readings and model errors; the event log."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(name="cell", origin="/",
+                                  contents=["/cell/**", "/robot/**", "/laser/**",
+                                            "/samples/**", "/rejected/**"]),
+                rrb.TextLogView(name="events", origin="/events"),
+                row_shares=[4, 1]),
+            rrb.Vertical(
+                rrb.TimeSeriesView(name="step counts per tick", origin="/series/steps"),
+                rrb.TimeSeriesView(name="joint angles [deg]", origin="/series/joint_deg"),
+                rrb.TimeSeriesView(name="laser [mm]", origin="/series/laser_mm"),
+                rrb.TimeSeriesView(name="model error [mm]", origin="/series/model_error_mm"),
+                rrb.TextDocumentView(name="run", origin="/run"),
+            ),
+            column_shares=[3, 2]),
+        rrb.TimePanel(timeline="tick"),
+        collapse_panels=False)
+
+
+class SamplingObserver(NullObserver):
+    """An ``Observer`` (``planecal.sampling.run``) writing a Rerun recording.
+
+    ``rec``: an open RecordingStream (``open_recording``); ``close()`` finishes it.
+    ``twin``: the twin, for its hidden truth (kinematics) and start pose; None for a real
+    run. ``params``: parameters that colour the samples by model error (default nominal).
+    ``every``: motion downsampling (ticks); ``series_every``: series downsampling;
+    ``chunk_ticks``: ticks buffered before a bulk send. The arrays handed to ``on_tick``
+    are kept by reference until the next bulk send (the links return fresh arrays)."""
+
+    wants_ticks = True
+
+    def __init__(self, rec, scene, *, twin=None, params: CellParams | None = None,
+                 kinematics: str = "auto", every: int = DEFAULT_EVERY,
+                 series_every: int = DEFAULT_EVERY,
+                 chunk_ticks: int = DEFAULT_CHUNK_TICKS, path=None, source: str | None = None):
+        from planecal.scene import nominal_params
+
+        for name, v in (("every", every), ("series_every", series_every),
+                        ("chunk_ticks", chunk_ticks)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise InputError(f"rerun logging: {name} must be a positive integer, got {v!r}")
+        if kinematics == "auto":
+            kinematics = "truth" if twin is not None else "nominal"
+        if kinematics not in ("truth", "nominal"):
+            raise InputError(f"rerun logging: kinematics must be 'truth', 'nominal' or 'auto', "
+                             f"got {kinematics!r}")
+        if kinematics == "truth" and twin is None:
+            raise InputError("rerun logging: kinematics 'truth' needs the twin")
+        self.rec = rec
+        self.rr = _rr()
+        self.scene = scene
+        self.robot = scene.robot
+        self.path = path
+        self.source = source or ("twin" if twin is not None else "real")
+        self.kinematics = kinematics
+        nominal = nominal_params(scene)
+        self.kin = twin.truth if kinematics == "truth" else nominal
+        self.model = params.copy() if params is not None else nominal
+        self.params_given = params is not None
+        self.every = int(every)
+        self.series_every = int(series_every)
+        self.chunk_ticks = int(chunk_ticks)
+        self.tick_s = float(self.robot.tick_s)
+        self.tick_ns = int(round(self.tick_s * 1e9))  # robot_time in whole nanoseconds
+        self._buf: list = []
+        self._force: set[int] = set()
+        self._prev_delta = np.zeros(N_JOINTS, np.int64)
+        self._first = True
+        self._last_tick = 0
+        self._zf = beam_direction(self.kin.phi_y, self.kin.phi_z)
+        self._beam_none_m = float(scene.laser_range_mm[1]) * 1e-3
+        self._samples_p: list[np.ndarray] = []
+        self._samples_e: list[float] = []
+        self._samples_plate: list[int] = []
+        self._samples_index: list[int] = []
+        self._rejected = {k: ([], []) for k in REJECT_KINDS}
+        self.rejections = {k: 0 for k in REJECT_KINDS}
+        self.ticks_seen = 0
+        self.ticks_logged = 0
+        self._closed = False
+        self._static(twin)
+
+    # ----- set-up -----
+    def _static(self, twin) -> None:
+        rr, rec = self.rr, self.rec
+        log_cell(rec, self.scene, self.kin.planes if self.kinematics == "truth" else None)
+        log_robot_meshes(rec, self.scene, self.kin)
+        self._info()
+        # every dynamic entity exists from tick 0, so all runs have the same entity tree
+        self._time(0)
+        rec.log("/laser/beam", rr.Arrows3D(vectors=np.zeros((0, 3))))
+        rec.log("/laser/hit", rr.Points3D(np.zeros((0, 3))))
+        rec.log("/samples/points", rr.Points3D(np.zeros((0, 3))))
+        for k in REJECT_KINDS:
+            rec.log(f"/rejected/{k}", rr.Arrows3D(vectors=np.zeros((0, 3))))
+        rec.log("/events", rr.TextLog(f"recording a {self.source} run on scene "
+                                      f"{self.scene.name} ({self.kinematics} kinematics)",
+                                      level="INFO"))
+        if twin is not None:  # the pose before the first tick
+            self._log_motion(np.array([0]), np.asarray(twin.current_counts, np.int64)[None],
+                             np.array([np.nan]))
+
+    def _info(self, final: str = "") -> None:
+        k = self.kin
+        txt = (f"# {self.source} run, scene `{self.scene.name}`\n\n"
+               f"* kinematics: **{self.kinematics}** "
+               + ("(the twin's hidden truth: offsets, sensor pose, planes)"
+                  if self.kinematics == "truth" else "(the scene's nominal values)") + "\n"
+               f"* joint offsets [mrad]: {np.array2string(k.joint_offsets * 1e3, precision=4)}\n"
+               f"* sample colour: model error = predicted - measured distance with "
+               f"{'the given' if self.params_given else 'the nominal'} parameters, "
+               f"blue < 0 < red\n"
+               f"* motion logged every {self.every} ticks (+ first tick and sample ticks); "
+               f"series every {self.series_every} tick(s); tick = {self.tick_s * 1e3:g} ms\n"
+               + final)
+        self.rec.log("/run/info", self.rr.TextDocument(txt, media_type="text/markdown"),
+                     static=True)
+
+    def _time(self, tick: int) -> None:
+        self.rec.set_time("tick", sequence=int(tick))
+        self.rec.set_time("robot_time", duration=np.timedelta64(int(tick) * self.tick_ns, "ns"))
+
+    # ----- Observer -----
+    def on_tick(self, tick, delta, reference, current, laser_mm):
+        buf = self._buf
+        if len(buf) >= self.chunk_ticks:
+            self._flush()
+            buf = self._buf
+        buf.append((tick, delta, current, laser_mm))
+        self._last_tick = tick
+
+    def on_sample(self, index, qe, d_mm, plate):
+        rr, rec = self.rr, self.rec
+        qe = np.asarray(qe, np.int64).reshape(1, N_JOINTS)
+        plate = int(plate or 0)
+        d_m = float(d_mm) * 1e-3
+        q = counts_to_joints(self.robot, qe)
+        o_b, z_b = sensor_in_base(self.robot, q, self.kin)
+        p = (o_b + d_m * z_b)[0]
+        pl = min(plate, self.model.n_planes - 1)
+        err_mm = float((predict(self.robot, qe, self.model, np.array([pl]))[0] - d_m) * 1e3)
+        self._samples_p.append(p)
+        self._samples_e.append(err_mm)
+        self._samples_plate.append(plate)
+        self._samples_index.append(int(index))
+        self._force.add(self._last_tick)
+        self._time(self._last_tick)
+        self._log_samples()
+        rec.log("/series/model_error_mm", rr.Scalars(err_mm))
+        rec.log("/events", rr.TextLog(f"sample {index}: {d_mm:.4f} mm on plate {plate + 1}, "
+                                      f"model error {err_mm:+.4f} mm", level="INFO"))
+
+    def _log_samples(self) -> None:
+        rr = self.rr
+        e = np.array(self._samples_e)
+        self.rec.log("/samples/points",
+                     rr.Points3D(np.array(self._samples_p), colors=diverging_colors(e),
+                                 radii=SAMPLE_RADIUS_M),
+                     rr.AnyValues(error_mm=e, sample=np.array(self._samples_index),
+                                  plate=np.array(self._samples_plate)))
+
+    def on_reject(self, q_target, reason):
+        rr, rec = self.rr, self.rec
+        kind = reject_kind(reason)
+        self.rejections[kind] += 1
+        self._time(self._last_tick)
+        if q_target is not None:
+            o_b, z_b = sensor_in_base(self.robot, np.asarray(q_target, float)[None], self.kin)
+            origins, vectors = self._rejected[kind]
+            origins.append(o_b[0])
+            vectors.append(z_b[0] * REJECT_LENGTH_M)
+            rec.log(f"/rejected/{kind}",
+                    rr.Arrows3D(origins=np.array(origins), vectors=np.array(vectors),
+                                colors=REJECT_RGBA[kind], radii=BEAM_RADIUS_M))
+        rec.log("/events", rr.TextLog(f"rejected ({kind}): {reason}", level="WARN"))
+
+    def on_path(self, kind, q_start, q_goal, rows):
+        if kind != "sample":
+            self._time(self._last_tick)
+            self.rec.log("/events", self.rr.TextLog(f"move ({kind}): {len(rows)} ticks",
+                                                    level="INFO"))
+
+    # ----- bulk sends -----
+    def _flush(self) -> None:
+        buf = self._buf
+        if not buf:
+            return
+        self._buf = []
+        n = len(buf)
+        t = np.fromiter((r[0] for r in buf), np.int64, n)
+        delta = np.array([r[1] for r in buf], np.int64).reshape(n, N_JOINTS)
+        cur = np.array([r[2] for r in buf], np.int64).reshape(n, N_JOINTS)
+        laser = np.fromiter((np.nan if r[3] is None else r[3] for r in buf), float, n)
+        self.ticks_seen += n
+        steps = np.diff(delta, axis=0, prepend=self._prev_delta[None])
+        self._prev_delta = delta[-1].copy()
+        self._log_series(t, steps, cur, laser)
+        m = (t % self.every) == 0
+        if self._first:
+            m[0] = True
+            self._first = False
+        if self._force:
+            m |= np.isin(t, np.fromiter(self._force, np.int64))
+            last = int(t[-1])
+            self._force = {k for k in self._force if k > last}
+        self._log_motion(t[m], cur[m], laser[m])
+
+    def _indexes(self, t):
+        rr = self.rr
+        return [rr.TimeColumn("tick", sequence=t),
+                rr.TimeColumn("robot_time", duration=(t * self.tick_ns).astype("timedelta64[ns]"))]
+
+    def _log_series(self, t, steps, cur, laser) -> None:
+        rr, rec = self.rr, self.rec
+        s = (t % self.series_every) == 0 if self.series_every > 1 else slice(None)
+        ts = t[s]
+        if len(ts):
+            idx = self._indexes(ts)
+            qdeg = np.rad2deg(counts_to_joints(self.robot, cur[s]))
+            st = steps[s]
+            for j in range(N_JOINTS):
+                rec.send_columns(f"/series/steps/q{j + 1}", indexes=idx,
+                                 columns=rr.Scalars.columns(scalars=st[:, j].astype(float)))
+                rec.send_columns(f"/series/joint_deg/q{j + 1}", indexes=idx,
+                                 columns=rr.Scalars.columns(scalars=qdeg[:, j]))
+        ok = np.isfinite(laser)
+        if ok.any():
+            rec.send_columns("/series/laser_mm", indexes=self._indexes(t[ok]),
+                             columns=rr.Scalars.columns(scalars=laser[ok]))
+
+    def _log_motion(self, t, cur, laser) -> None:
+        if not len(t):
+            return
+        rr, rec = self.rr, self.rec
+        self.ticks_logged += len(t)
+        q = counts_to_joints(self.robot, cur)
+        F = fk_frames(self.robot, q, self.kin.joint_offsets)
+        idx = self._indexes(t)
+        # quaternions (x, y, z, w): rerun converts them 80x faster than 3x3 matrices
+        quat = matrix_to_quaternion(F[:, 1:, :3, :3])
+        for b in range(1, N_JOINTS + 1):
+            rec.send_columns(f"/robot/link_{b}", indexes=idx,
+                             columns=rr.Transform3D.columns(translation=F[:, b, :3, 3],
+                                                            quaternion=quat[:, b - 1]))
+        F6 = F[:, N_JOINTS]
+        rec.send_columns("/robot/tool", indexes=idx,
+                         columns=rr.Transform3D.columns(translation=F6[:, :3, 3],
+                                                        quaternion=quat[:, N_JOINTS - 1]))
+        R = F6[:, :3, :3]
+        o_b = R @ self.kin.sensor_origin + F6[:, :3, 3]
+        z_b = R @ self._zf
+        has = np.isfinite(laser)
+        d = np.where(has, laser * 1e-3, self._beam_none_m)
+        colors = np.where(has[:, None], np.array(BEAM_RGBA), np.array(BEAM_NONE_RGBA))
+        rec.send_columns("/laser/beam", indexes=idx,
+                         columns=rr.Arrows3D.columns(origins=o_b, vectors=z_b * d[:, None],
+                                                     colors=colors.astype(np.uint8),
+                                                     radii=np.full(len(t), BEAM_RADIUS_M)))
+        hits = (o_b + d[:, None] * z_b)[has]
+        rec.send_columns("/laser/hit", indexes=idx,
+                         columns=rr.Points3D.columns(positions=hits.reshape(-1, 3))
+                         .partition(has.astype(np.int64)))
+
+    # ----- end -----
+    def close(self) -> None:
+        """Send what is buffered, note the totals in /run/info, finish the file."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._flush()
+            e = np.array(self._samples_e)
+            rms = f"{np.sqrt(np.mean(e ** 2)):.4f} mm" if e.size else "-"
+            self._info(f"* samples: **{len(e)}**, model error RMS {rms}\n"
+                       f"* rejected: {', '.join(f'{k} {v}' for k, v in self.rejections.items())}\n"
+                       f"* ticks: {self.ticks_seen} (motion logged at {self.ticks_logged})\n")
+        finally:
+            close_recording(self.rec)
+
+
+def sampling_observer(path, scene, twin=None, *, command: str | None = None, **options):
+    """The observer that ``planecal rehearse`` / ``sample`` ``--rrd`` use
+    (``planecal.sampling.session.rerun_observer``). ``path`` goes through
+    ``recording_path`` (a directory or "auto" gives a generated name); the observer's
+    ``.path`` is the file written. ``options``: see ``SamplingObserver``; ``every`` and
+    ``series_every`` default to $PLANECAL_RERUN_EVERY / $PLANECAL_RERUN_SERIES_EVERY."""
+    command = command or ("rehearse" if twin is not None else "sample")
+    p = recording_path(path, command, scene.name)
+    options.setdefault("every", _env_int("PLANECAL_RERUN_EVERY", DEFAULT_EVERY))
+    options.setdefault("series_every", _env_int("PLANECAL_RERUN_SERIES_EVERY", DEFAULT_EVERY))
+    rec = open_recording(p, sampling_blueprint(), name=f"{command} {scene.name}")
+    try:
+        return SamplingObserver(rec, scene, twin=twin, path=p, **options)
+    except BaseException:
+        close_recording(rec)
+        raise

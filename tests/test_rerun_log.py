@@ -1,0 +1,355 @@
+"""Rerun recordings (planecal.rerun_log, planecal view), read back with rerun's own reader:
+the entity tree, samples and hit points of a short twin rehearsal, the same run replayed
+as real-cell data, the optimizer's histograms, file naming, and the view command. Headless:
+no viewer is ever spawned, and rerun's config/data dirs point into a temporary HOME."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+rr = pytest.importorskip("rerun")
+twin_mod = pytest.importorskip("planecal.twin")
+collision = pytest.importorskip("planecal.collision")
+
+from rerun.chunk import RrdReader  # noqa: E402
+
+from planecal import cli  # noqa: E402
+from planecal.cell import predict  # noqa: E402
+from planecal.errors import InputError  # noqa: E402
+from planecal.fit import calibrate  # noqa: E402
+from planecal.links.base import AlwaysEnabled  # noqa: E402
+from planecal.rerun_log import (HIST_BINS, SamplingObserver, log_fit_to_file,  # noqa: E402
+                                open_recording, recording_path, reject_kind, sampling_observer)
+from planecal.samples import read_samples  # noqa: E402
+from planecal.sampling import Driver, RunSettings, SamplingRun  # noqa: E402
+from planecal.scene import load_scene, nominal_params  # noqa: E402
+
+N_SAMPLES = 20
+EVERY = 5
+
+
+@pytest.fixture(scope="module", autouse=True)
+def rerun_home(tmp_path_factory):
+    """Keep rerun (and anything it might start) off the real ~/.config and ~/.local."""
+    home = tmp_path_factory.mktemp("home")
+    keys = ("HOME", "XDG_CONFIG_HOME", "XDG_DATA_HOME", "XDG_CACHE_HOME")
+    old = {k: os.environ.get(k) for k in keys}
+    os.environ.update(HOME=str(home), XDG_CONFIG_HOME=str(home / ".config"),
+                      XDG_DATA_HOME=str(home / ".local/share"),
+                      XDG_CACHE_HOME=str(home / ".cache"))
+    yield home
+    for k, v in old.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
+
+
+# ----- reading recordings back -----
+
+def read_rrd(path) -> dict:
+    """entity -> {"static": bool, "rows": [dict column -> value]} sorted by tick."""
+    out: dict = {}
+    for ch in RrdReader(str(path)).store().stream():
+        rb = ch.to_record_batch()
+        cols = {}
+        for n in rb.schema.names:
+            if n == "rerun.controls.RowId":
+                continue
+            c = rb.column(n)
+            if pa.types.is_duration(c.type):  # robot_time: integer nanoseconds
+                c = c.cast(pa.int64())
+            cols[n] = c.to_pylist()
+        ent = out.setdefault(ch.entity_path, {"static": ch.is_static, "rows": []})
+        for i in range(ch.num_rows):
+            ent["rows"].append({n: v[i] for n, v in cols.items()})
+    for ent in out.values():
+        ent["rows"].sort(key=lambda r: r.get("tick") or r.get("iteration") or 0)
+    return out
+
+
+def last(data, entity, column):
+    rows = [r for r in data[entity]["rows"] if r.get(column) is not None]
+    return rows[-1][column]
+
+
+def tensor(cell) -> np.ndarray:
+    """A logged 1-D tensor (BarChart values / abscissa) as an array."""
+    t = cell[0]
+    return np.asarray(t["buffer"]).reshape(t["shape"])
+
+
+def user_entities(data) -> set[str]:
+    return {e for e in data if not e.startswith("/__")}
+
+
+# ----- a short noise-free rehearsal, every observer call recorded -----
+
+class Tee:
+    """Forwards to an observer and records every call (copies), to replay them later."""
+    wants_ticks = True
+
+    def __init__(self, target):
+        self.target = target
+        self.calls = []
+
+    def on_tick(self, tick, delta, reference, current, laser_mm):
+        self.calls.append(("on_tick", (tick, delta.copy(), reference.copy(), current.copy(),
+                                       laser_mm)))
+        self.target.on_tick(tick, delta, reference, current, laser_mm)
+
+    def on_sample(self, index, qe, d_mm, plate):
+        self.calls.append(("on_sample", (index, qe.copy(), d_mm, plate)))
+        self.target.on_sample(index, qe, d_mm, plate)
+
+    def on_reject(self, q_target, reason):
+        self.calls.append(("on_reject", (None if q_target is None else q_target.copy(), reason)))
+        self.target.on_reject(q_target, reason)
+
+    def on_path(self, kind, q_start, q_goal, rows):
+        self.calls.append(("on_path", (kind, q_start, q_goal, rows)))
+        self.target.on_path(kind, q_start, q_goal, rows)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("thesis_final")
+
+
+@pytest.fixture(scope="module")
+def rehearsal(scene, tmp_path_factory):
+    d = tmp_path_factory.mktemp("rehearsal")
+    twin = twin_mod.Twin(scene, seed=3, options=twin_mod.TwinOptions.exact())
+    world = collision.CollisionWorld(scene, clearance_m=0.01)
+    obs = sampling_observer(d / "twin.rrd", scene, twin=twin, every=EVERY, series_every=EVERY,
+                            chunk_ticks=1000)  # several bulk sends in a short run
+    tee = Tee(obs)
+    drv = Driver(twin, AlwaysEnabled(), scene.robot, tee)
+    settings = RunSettings(scene="thesis_final", samples=N_SAMPLES, seed=3)
+    stats = SamplingRun(drv, twin, scene, settings, d / "RUN.tsv", world, background=True).run()
+    obs.close()
+    assert stats.status == "complete"
+    return {"path": obs.path, "calls": tee.calls, "stats": stats, "twin": twin,
+            "out": d / "RUN.tsv", "dir": d, "data": read_rrd(obs.path), "ticks": drv.ticks}
+
+
+@pytest.fixture(scope="module")
+def replayed(scene, rehearsal):
+    """The rehearsal's counts and readings fed through the same logger as a real run."""
+    obs = sampling_observer(rehearsal["dir"] / "real.rrd", scene, twin=None, every=EVERY,
+                            series_every=EVERY)
+    for name, args in rehearsal["calls"]:
+        getattr(obs, name)(*args)
+    obs.close()
+    return {"path": obs.path, "data": read_rrd(obs.path), "obs": obs}
+
+
+EXPECTED = (["/cell/plates/plate", "/cell/stands/plate_stand", "/cell/floor", "/robot/tool",
+             "/robot/tool/laser_head", "/robot/tool/flange_adapter", "/laser/beam", "/laser/hit",
+             "/samples/points", "/rejected/collision", "/rejected/laser", "/rejected/unreachable",
+             "/series/laser_mm", "/series/model_error_mm", "/events", "/run/info"]
+            + [f"/robot/link_{i}" for i in range(7)]
+            + [f"/series/steps/q{j}" for j in range(1, 7)]
+            + [f"/series/joint_deg/q{j}" for j in range(1, 7)])
+
+
+def test_rehearsal_recording_has_the_documented_entity_tree(rehearsal):
+    data = rehearsal["data"]
+    missing = [e for e in EXPECTED if e not in data]
+    assert not missing, missing
+    reader = RrdReader(str(rehearsal["path"]))
+    assert len(reader.blueprints()) == 1  # the default blueprint is in the file
+    link = data["/robot/link_3"]["rows"]
+    assert {"tick", "robot_time", "Transform3D:translation",
+            "Transform3D:quaternion"} <= set(link[0])
+    # the meshes are static, the motion is not
+    assert data["/robot/link_3/elbow"]["static"] and not data["/robot/link_3"]["static"]
+
+
+def test_samples_logged_equal_the_samples_in_the_run(scene, rehearsal):
+    data = rehearsal["data"]
+    s = read_samples(rehearsal["out"])
+    assert len(s) == rehearsal["stats"].samples == N_SAMPLES
+    pts = np.array(last(data, "/samples/points", "Points3D:positions"))
+    assert pts.shape == (N_SAMPLES, 3)
+    assert len(data["/series/model_error_mm"]["rows"]) == N_SAMPLES
+    # colour value: the model error with the nominal parameters [mm]
+    err = np.array(last(data, "/samples/points", "error_mm")).ravel()
+    expect = (predict(scene.robot, s.qe, nominal_params(scene)) - s.d_mm * 1e-3) * 1e3
+    np.testing.assert_allclose(err, expect, atol=1e-9)
+
+
+def test_hit_points_lie_on_the_true_plate(rehearsal):
+    data = rehearsal["data"]
+    n_t = rehearsal["twin"].truth.planes[0]
+    pts = np.array(last(data, "/samples/points", "Points3D:positions"))
+    dist = np.abs(pts @ n_t - 1.0) / np.linalg.norm(n_t)
+    print(f"sample points: max distance to the true plane {dist.max():.2e} m")
+    assert dist.max() < 1e-6, dist.max()  # float32 positions at ~1.5 m: ~1e-7
+    hits = np.array([p for r in data["/laser/hit"]["rows"]
+                     for p in (r["Points3D:positions"] or [])])
+    assert len(hits) > N_SAMPLES  # every sample tick plus the readings on logged ticks
+    dist = np.abs(hits @ n_t - 1.0) / np.linalg.norm(n_t)
+    assert dist.max() < 1e-6, dist.max()
+
+
+def test_motion_is_downsampled_and_series_hold_the_steps(rehearsal):
+    data = rehearsal["data"]
+    ticks = np.array([r["tick"] for r in data["/robot/link_1"]["rows"]])
+    sample_ticks = {r["tick"] for r in data["/series/model_error_mm"]["rows"]}
+    assert sample_ticks <= set(ticks.tolist())  # the robot's pose at every sample
+    odd = [t for t in ticks if t % EVERY and t not in sample_ticks and t > 1]
+    assert not odd
+    assert len(ticks) <= rehearsal["ticks"] // EVERY + N_SAMPLES + 2
+    steps = np.array([r["Scalars:scalars"] for j in range(1, 7)
+                      for r in data[f"/series/steps/q{j}"]["rows"] if r["Scalars:scalars"]])
+    assert 0 < np.abs(steps).max() <= 51
+    laser = [r for r in data["/series/laser_mm"]["rows"] if r["Scalars:scalars"]]
+    assert all(65 <= r["Scalars:scalars"][0] <= 95 for r in laser)
+    rt = data["/robot/link_1"]["rows"][-1]
+    assert rt["robot_time"] == rt["tick"] * 10_000_000  # ns: 10 ms ticks
+
+
+def test_real_replay_has_the_same_entity_tree(rehearsal, replayed):
+    twin_tree = user_entities(rehearsal["data"])
+    real_tree = user_entities(replayed["data"])
+    assert twin_tree == real_tree
+    pts = np.array(last(replayed["data"], "/samples/points", "Points3D:positions"))
+    assert pts.shape == (N_SAMPLES, 3)
+    assert replayed["obs"].kinematics == "nominal"
+    # nominal kinematics: the same samples miss the true plate by millimetres
+    n_t = rehearsal["twin"].truth.planes[0]
+    assert np.max(np.abs(pts @ n_t - 1.0) / np.linalg.norm(n_t)) > 1e-4
+    info = last(replayed["data"], "/run/info", "TextDocument:text")[0]
+    assert "real run" in info and "nominal" in info
+
+
+def test_fit_recording_histograms_match_the_optimizer(scene, rehearsal, tmp_path):
+    s = read_samples(rehearsal["out"])
+    res = calibrate(scene.robot, s.qe, s.d_mm * 1e-3, nominal_params(scene))
+    path = log_fit_to_file(tmp_path, res, s, scene)
+    assert path.parent == tmp_path and path.name.startswith("calibrate-thesis_final-")
+    data = read_rrd(path)
+    for entity, values in (("/fit/hist/error_before", res.initial_residuals_m * 1e3),
+                           ("/fit/hist/error_after", res.residuals_m * 1e3),
+                           ("/fit/hist/distance", s.d_mm)):
+        counts, edges = np.histogram(values, bins=HIST_BINS)
+        row = data[entity]["rows"][-1]
+        np.testing.assert_array_equal(tensor(row["BarChart:values"]), counts)
+        np.testing.assert_allclose(np.ravel(row["bin_edges_mm"]), edges)
+        np.testing.assert_allclose(tensor(row["BarChart:abscissa"]),
+                                   0.5 * (edges[1:] + edges[:-1]))
+        assert data[entity]["static"]
+    rms = data["/fit/rms_mm"]["rows"]
+    assert [r["iteration"] for r in rms] == [h["iteration"] for h in res.history]
+    np.testing.assert_allclose([r["Scalars:scalars"][0] for r in rms],
+                               [h["rms_m"] * 1e3 for h in res.history])
+    mx = [r["Scalars:scalars"][0] for r in data["/fit/max_mm"]["rows"]]
+    np.testing.assert_allclose(mx, [h["max_m"] * 1e3 for h in res.history])
+    table = data["/fit/parameters"]["rows"][-1]["TextDocument:text"][0]
+    for name in res.names:
+        assert f"| {name} |" in table
+    assert "fixed" in table  # delta1, delta6
+    assert "Identifiability" in data["/fit/identifiability"]["rows"][-1]["TextDocument:text"][0]
+    assert len(last(data, "/samples/points", "Points3D:positions")) == len(s)
+
+
+def test_cli_rehearse_and_calibrate_write_recordings_into_a_directory(tmp_path, capsys):
+    rec_dir = tmp_path / "rec"
+    rec_dir.mkdir()
+    out = tmp_path / "run.tsv"
+    code = cli.main(["rehearse", "--out", str(out), "--samples", "15", "--exact", "--seed", "4",
+                     "--foreground", "--rrd", str(rec_dir)])
+    assert code == 0
+    files = list(rec_dir.glob("rehearse-thesis_final-*.rrd"))
+    assert len(files) == 1
+    data = read_rrd(files[0])
+    assert len(last(data, "/samples/points", "Points3D:positions")) == 15
+    capsys.readouterr()
+    assert cli.main(["calibrate", str(out), "--rrd", str(rec_dir)]) == 0
+    printed = capsys.readouterr().out
+    fits = list(rec_dir.glob("calibrate-thesis_final-*.rrd"))
+    assert len(fits) == 1 and f"recording written to {fits[0]}" in printed
+
+
+# ----- files -----
+
+def test_recording_path_names_and_errors(tmp_path, monkeypatch):
+    from datetime import datetime
+    monkeypatch.chdir(tmp_path)
+    now = datetime(2026, 1, 2, 3, 4, 5)
+    p = recording_path(None, "rehearse", "thesis_final", now)
+    assert p == Path("recordings/rehearse-thesis_final-20260102-030405.rrd")
+    assert Path("recordings").is_dir()
+    p.write_bytes(b"")
+    assert recording_path("auto", "rehearse", "thesis_final", now).name.endswith("030405-2.rrd")
+    assert recording_path(str(tmp_path), "sample", "s", now).parent == tmp_path
+    assert recording_path("new/", "calibrate", "s", now).parent == Path("new")
+    assert recording_path("x", "calibrate", "s", now) == Path("x.rrd")
+    Path("a").mkdir()
+    assert recording_path("a/b.rrd", "c", "s", now) == Path("a/b.rrd")
+    with pytest.raises(InputError, match="does not exist"):
+        recording_path("nowhere/run.rrd", "rehearse", "s", now)
+
+
+def test_observer_options_are_checked(scene, tmp_path):
+    rec = open_recording(tmp_path / "x.rrd")
+    try:
+        with pytest.raises(InputError, match="every"):
+            SamplingObserver(rec, scene, every=0)
+        with pytest.raises(InputError, match="needs the twin"):
+            SamplingObserver(rec, scene, kinematics="truth")
+    finally:
+        rec.disconnect()
+    assert reject_kind("collision (path): laser_head - plate") == "collision"
+    assert reject_kind("laser: gave up: 400 out-of-range reads in a row") == "laser"
+    assert reject_kind("unreachable: no IK solution within limits") == "unreachable"
+
+
+# ----- planecal view (never spawns a viewer) -----
+
+def test_view_missing_or_bad_file_exits_2(tmp_path, capsys):
+    assert cli.main(["view", str(tmp_path / "none.rrd")]) == 2
+    assert "no such recording" in capsys.readouterr().err
+    bad = tmp_path / "bad.rrd"
+    bad.write_text("hello")
+    assert cli.main(["view", str(bad)]) == 2
+
+
+def test_view_without_display_prints_how(rehearsal, monkeypatch, capsys):
+    import subprocess
+
+    from planecal.commands import view
+
+    def no_spawn(*a, **k):
+        raise AssertionError("a viewer was spawned")
+
+    monkeypatch.setattr(subprocess, "call", no_spawn)
+    monkeypatch.setattr(view, "find_viewer", lambda: "/opt/rerun")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(view.sys, "platform", "linux")
+    assert cli.main(["view", str(rehearsal["path"])]) == 1
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1 and "no display" in out[0] and "--web" in out[0]
+    monkeypatch.setattr(view, "find_viewer", lambda: None)
+    assert cli.main(["view", str(rehearsal["path"])]) == 1
+    assert "pip install rerun-sdk" in capsys.readouterr().out
+    # with a display the viewer would be started on the file (faked here)
+    calls = []
+    monkeypatch.setattr(view, "find_viewer", lambda: "/opt/rerun")
+    monkeypatch.setenv("DISPLAY", ":0")
+    monkeypatch.setattr(subprocess, "call", lambda cmd: calls.append(cmd) or 0)
+    assert cli.main(["view", str(rehearsal["path"])]) == 0
+    assert calls == [["/opt/rerun", str(rehearsal["path"])]]
+
+
+def test_view_summary_lists_the_entity_tree(rehearsal, capsys):
+    assert cli.main(["view", "--summary", str(rehearsal["path"])]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    entities = {ln.split("\t")[0] for ln in lines}
+    assert set(EXPECTED) <= entities
