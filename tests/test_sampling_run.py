@@ -249,6 +249,33 @@ def test_background_planning_gives_the_same_run(scene, tmp_path, two_plates):
     assert results[0] == results[1]
 
 
+def test_a_given_planner_supplies_the_targets(scene, tmp_path):
+    """A pose list instead of random poses: the run visits exactly those counts."""
+    from planecal.sampling.run import Plan
+
+    targets = [joints_to_counts(scene.robot, scene.calibration_q + dq)
+               for dq in np.deg2rad([[0, 0, 0, 0, 2, 0], [1, -1, 1, 0, 0, 3], [0, 1, 0, 2, -2, 0]])]
+
+    class ListPlanner:
+        def index_matters(self):
+            return False
+
+        def plan(self, q_start, index, rng_state, budget):
+            from planecal.encoder import counts_to_joints
+            out = Plan(index, q_start, [], rng_state)
+            out.qe_goal = targets[index]
+            out.q = counts_to_joints(scene.robot, out.qe_goal)
+            out.pose = type("P", (), {"plate": 0})()
+            return out
+
+    out = tmp_path / "RUN.tsv"
+    cell = FakeCell(scene)
+    stats = SamplingRun(Driver(cell, AlwaysEnabled(), scene.robot), cell, scene, settings(3), out,
+                        NullChecker(), planner=ListPlanner()).run()
+    assert stats.status == "complete"
+    assert np.array_equal(read_samples(out).qe, np.array(targets))
+
+
 def test_following_monitor_drops_enable_when_the_robot_stops_following(scene, tmp_path):
     class Brakes(FakeCell):
         """The dead-man switch is released after tick ``at``: the robot stands still."""

@@ -541,13 +541,19 @@ class SamplingRun:
     process while the robot moves (same results, less wall time on a multi-core machine);
     with ``hold_while_planning`` the hold delta keeps being sent, one per tick, whenever the
     loop waits for a plan (the real cell: the RT link is never left without a message;
-    the twin's robot time then includes that wait)."""
+    the twin's robot time then includes that wait).
+
+    ``planner``: where the targets come from; default ``Planner`` (random poses, seed 7.1.2).
+    Any object with ``plan(q_start, index, rng_state, budget) -> Plan`` and
+    ``index_matters() -> bool`` will do, e.g. a planned pose list (``studies.planning``);
+    one that keeps state between calls must run with ``background=False``."""
 
     def __init__(self, driver: Driver, laser, scene: Scene, settings: RunSettings, out,
                  checker, *, resume: bool = False, background: bool = False,
                  hold_while_planning: bool = False,
                  progress: Callable[[RunStats], None] | None = None,
-                 extra: dict | None = None, lock: RunLock | None = None):
+                 extra: dict | None = None, lock: RunLock | None = None,
+                 planner=None):
         if checker is None:
             raise ValueError("a collision checker is required")
         if settings.samples < 1:
@@ -563,7 +569,7 @@ class SamplingRun:
         self.extra = dict(extra or {})
         self.lock = lock  # the caller's, held for its session; else taken in run()
         self.observer = driver.observer
-        self.planner = Planner(scene, settings, checker)
+        self.planner = planner if planner is not None else Planner(scene, settings, checker)
         import multiprocessing as mp
         can_fork = "fork" in mp.get_all_start_methods()
         if hold_while_planning and not can_fork:
