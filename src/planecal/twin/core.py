@@ -33,6 +33,7 @@ from planecal.cell import CellParams
 from planecal.encoder import counts_in_range, joints_to_counts
 from planecal.errors import InputError
 from planecal.scene import Scene, load_scene
+from planecal.twin.beam import BeamCaster
 from planecal.twin.laser import LaserModel, RayCaster
 from planecal.twin.mjcf import (FLANGE_SITE, LASER_SITE, TOOL_BODY, plate_geom_names,
                                  scene_spec)
@@ -104,7 +105,15 @@ class Twin:
     cross-checks, Rerun): ``model``, ``data`` (MjModel/MjData, last kinematics: call
     ``hit()`` or ``read()`` first), ``spec``, ``laser_site``, ``flange_site``,
     ``tool_body``. ``truth`` / ``true_params``: the hidden truth, never for calibration.
+
+    ``batch_rays`` (class default True): ``run`` casts the beams of all its moving ticks
+    in one MuJoCo call (``beam.BeamCaster``: kinematics and ``mj_ray`` per tick in C);
+    False, or a model the caster doesn't cover: one ``mj_kinematics`` + ``mj_ray`` per
+    moving tick through the bindings (the reference; same counts, readings equal to
+    ~1e-12 mm, see tests/test_twin.py).
     """
+
+    batch_rays: bool = True
 
     def __init__(self, scene: Scene | str | Path = "thesis_final", truth=None, seed: int = 0,
                  options: TwinOptions | None = None, start_counts=None):
@@ -122,13 +131,14 @@ class Twin:
             cal_qpos = self.scene.calibration_q + self._truth.joint_offsets
         self.spec = scene_spec(self.scene, self._truth, calibration_qpos=cal_qpos)
         self.model = self.spec.compile()
-        self.data = mujoco.MjData(self.model)
+        self._data = mujoco.MjData(self.model)
         self.laser_site = self.model.site(LASER_SITE).id
         self.flange_site = self.model.site(FLANGE_SITE).id
         self.tool_body = self.model.body(TOOL_BODY).id
         self._plate_of_geom = {self.model.geom(name).id: i
                                for i, name in enumerate(plate_geom_names(self.scene))}
-        self._ray = RayCaster(self.model, self.data, self.laser_site, self.tool_body)
+        self._ray = RayCaster(self.model, self._data, self.laser_site, self.tool_body)
+        self._beam: BeamCaster | None | bool = None  # Twin.run's batch path, made on first use
         opt = self.options
         noise_seed = opt.noise_seed if opt.noise_seed is not None else (seed * 7919 + 1)
         ss = np.random.SeedSequence(noise_seed)
@@ -164,7 +174,8 @@ class Twin:
         self._tripped = False
         self._dirty = True
         self._errors_active = self._errors.active
-        self._qpos = self.data.qpos  # views into MjData's buffers (stable)
+        self._qpos = self._data.qpos  # views into MjData's buffers (stable)
+        self._stale_q = None  # qpos the MjData should show after a batch run (lazy)
         self._dist: float | None = None
         self._geom = -1
         self._errors.on_settle()  # the robot starts at rest
@@ -253,43 +264,15 @@ class Twin:
             sigma = errors.sigma
             settle = at_rest & ~np.concatenate([[self._at_rest], at_rest[:-1]]) if sigma > 0 \
                 else np.zeros(n, bool)
-            Q = (cur - self._qe0_arr) @ self._M_T + self._delta_true_arr
-            if sigma > 0:
-                Q += errors.eps
-            dists = np.empty(n)  # true distance per tick, NaN: no hit
-            qpos, model, data = self._qpos, self.model, self.data
-            ray, pnt, zcol = mujoco.mj_ray, self._ray._pnt, self._ray._mat[2::3]
-            mask, exclude, geomid = self._ray.mask, self._ray.exclude_body, self._ray.geomid
-            kinematics = mujoco.mj_kinematics
-            dirty = self._dirty
-            dist = -1.0 if self._dist is None else self._dist
-            events = np.flatnonzero(changed | settle).tolist() + [n]
-            settle_l = settle.tolist()
-            i = 0
-            for e in events:  # ticks i..e-1: nothing changes; tick e: counts move or settle
-                if i < e:
-                    if dirty:
-                        qpos[:] = Q[i]
-                        kinematics(model, data)
-                        dist = ray(model, data, pnt, zcol, mask, 1, exclude, geomid)
-                        dirty = False
-                    dists[i:e] = dist if dist >= 0 else np.nan
-                if e == n:
-                    break
-                if settle_l[e]:
-                    old = errors.eps
-                    errors.on_settle()
-                    Q[e:] += errors.eps - old
-                qpos[:] = Q[e]
-                kinematics(model, data)
-                dist = ray(model, data, pnt, zcol, mask, 1, exclude, geomid)
-                dirty = False
-                dists[e] = dist if dist >= 0 else np.nan
-                i = e + 1
-            dist = None if dist < 0 else dist
-            self._geom = int(geomid[0]) if dist is not None else -1
+            beam = self._beam_caster() if self.batch_rays else None
+            if beam is not None:
+                dists = self._dists_batch(beam, cur, changed, settle)
+            else:
+                Q = (cur - self._qe0_arr) @ self._M_T + self._delta_true_arr
+                if sigma > 0:
+                    Q += errors.eps
+                dists = self._dists_loop(Q, changed, settle)
             readings = self._laser.readings(dists)
-            self._dirty, self._dist = dirty, dist
             self._at_rest = bool(at_rest[-1])
             self._last_delta = D[-1].tolist()
             self._commanded = cmd[-1].tolist()
@@ -301,6 +284,103 @@ class Twin:
             raise EncoderJumpError(f"twin: delta jumped by more than {self._trip} counts "
                                    f"at row {trip_at}")
         return self._reference_arr.copy(), cur, readings
+
+    def _beam_caster(self) -> BeamCaster | None:
+        if self._beam is None:
+            self._beam = BeamCaster.build(self.model, self.laser_site, self._ray.mask,
+                                          self.tool_body, self._beam_agrees) or False
+        return self._beam or None
+
+    def _beam_agrees(self, beam: BeamCaster) -> bool:
+        """The caster's beams = mj_kinematics + mj_ray (1e-9 m, same geom) at the current
+        state and a few states around it."""
+        data = mujoco.MjData(self.model)
+        ray = RayCaster(self.model, data, self.laser_site, self.tool_body)
+        rng = np.random.default_rng(0)
+        q0 = np.array(self._qpos)
+        Q = np.vstack([q0, q0 + rng.normal(0.0, 0.3, (7, len(q0)))])
+        dist, geom = beam.cast(Q)
+        for q, d, g in zip(Q, dist, geom):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(self.model, data)
+            want, want_g = ray.cast()
+            if (want is None) != (d < 0) or (want is not None and (
+                    abs(want - d) > 1e-9 or want_g != g)):
+                return False
+        return True
+
+    def _dists_batch(self, beam, cur, changed, settle) -> np.ndarray:
+        """True distance per tick (NaN: no hit), the batch way: the beams of every tick
+        whose state changed (counts moved, a settle, or stale kinematics at tick 0) in
+        one MuJoCo call (``BeamCaster``); the other ticks repeat the last value. Draws the
+        settle perturbations in tick order, like the loop."""
+        errors = self._errors
+        recompute = changed | settle
+        if self._dirty:
+            recompute[0] = True
+        idx = np.flatnonzero(recompute)
+        prev = np.nan if self._dist is None else self._dist
+        if not idx.size:
+            return np.full(len(cur), prev)
+        Q = (cur[idx] - self._qe0_arr) @ self._M_T + self._delta_true_arr
+        if errors.sigma > 0:
+            at = np.flatnonzero(settle)
+            if at.size:
+                eps = [errors.eps]
+                for _ in range(at.size):
+                    errors.on_settle()
+                    eps.append(errors.eps)
+                Q += np.array(eps)[np.searchsorted(at, idx, side="right")]
+            else:
+                Q += errors.eps
+        dist, geom = beam.cast(Q)
+        last = float(dist[-1])
+        self._dist, self._geom = (None, -1) if last < 0 else (last, int(geom[-1]))
+        self._dirty = False
+        self._stale_q = Q[-1]  # MjData follows lazily (``data``, ``qpos``, poses)
+        dist[dist < 0] = np.nan
+        return np.append(dist, prev)[np.cumsum(recompute) - 1]
+
+    def _dists_loop(self, Q, changed, settle) -> np.ndarray:
+        """True distance per tick (NaN: no hit), one MuJoCo kinematics + mj_ray per tick
+        whose state changed (the reference for ``_dists_batch``)."""
+        errors = self._errors
+        n = len(Q)
+        dists = np.empty(n)
+        self._sync_data()
+        qpos, model, data = self._qpos, self.model, self._data
+        ray, pnt, zcol = mujoco.mj_ray, self._ray._pnt, self._ray._mat[2::3]
+        mask, exclude, geomid = self._ray.mask, self._ray.exclude_body, self._ray.geomid
+        kinematics = mujoco.mj_kinematics
+        dirty = self._dirty
+        dist = -1.0 if self._dist is None else self._dist
+        events = np.flatnonzero(changed | settle).tolist() + [n]
+        settle_l = settle.tolist()
+        i = 0
+        for e in events:  # ticks i..e-1: nothing changes; tick e: counts move or settle
+            if i < e:
+                if dirty:
+                    qpos[:] = Q[i]
+                    kinematics(model, data)
+                    dist = ray(model, data, pnt, zcol, mask, 1, exclude, geomid)
+                    dirty = False
+                dists[i:e] = dist if dist >= 0 else np.nan
+            if e == n:
+                break
+            if settle_l[e]:
+                old = errors.eps
+                errors.on_settle()
+                Q[e:] += errors.eps - old
+            qpos[:] = Q[e]
+            kinematics(model, data)
+            dist = ray(model, data, pnt, zcol, mask, 1, exclude, geomid)
+            dirty = False
+            dists[e] = dist if dist >= 0 else np.nan
+            i = e + 1
+        dist = None if dist < 0 else dist
+        self._geom = int(geomid[0]) if dist is not None else -1
+        self._dirty, self._dist = dirty, dist
+        return dists
 
     def _run_loop(self, D):
         cur = np.empty_like(D)
@@ -341,9 +421,23 @@ class Twin:
             self._qpos[:] = [a + b + c for a, b, c in zip(q, self._delta_true, extra)]
         else:
             self._qpos[:] = [a + b for a, b in zip(q, self._delta_true)]
-        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_kinematics(self.model, self._data)
+        self._stale_q = None
         self._dist, self._geom = self._ray.cast()
         self._dirty = False
+
+    def _sync_data(self) -> None:
+        """Bring MjData to the last state a batch run computed (qpos + kinematics)."""
+        if self._stale_q is not None:
+            self._qpos[:] = self._stale_q
+            mujoco.mj_kinematics(self.model, self._data)
+            self._stale_q = None
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """MjData at the last computed state (call ``hit()`` or ``read()`` first)."""
+        self._sync_data()
+        return self._data
 
     def set_counts(self, counts) -> None:
         """Put the robot at ``counts`` at once, at rest (tests, benchmarks, fast sampling;
@@ -413,10 +507,8 @@ class Twin:
     def _site_pose(self, sid: int) -> np.ndarray:
         if self._dirty:
             self._update()
-        T = np.eye(4)
-        T[:3, :3] = self.data.site_xmat[sid].reshape(3, 3)
-        T[:3, 3] = self.data.site_xpos[sid]
-        return T
+        d = self.data
+        return _pose(d.site_xmat[sid], d.site_xpos[sid])
 
     def to_xml(self) -> str:
         """The twin's scene (truth poses) as MJCF text for a viewer."""
@@ -425,6 +517,13 @@ class Twin:
 
 
 _INT64 = np.dtype(np.int64)
+
+
+def _pose(xmat, xpos) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = np.reshape(xmat, (3, 3))
+    T[:3, 3] = xpos
+    return T
 
 
 def _as_count_rows(v) -> np.ndarray:

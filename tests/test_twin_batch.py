@@ -1,0 +1,132 @@
+"""Twin.run's batch path (``beam.BeamCaster``: all moving ticks' beams in one MuJoCo call)
+equals the per-tick MuJoCo path (one mj_kinematics + mj_ray per moving tick)."""
+import os
+
+os.environ.setdefault("MUJOCO_GL", "disable")
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from planecal.twin import Twin, TwinOptions  # noqa: E402
+from planecal.twin.beam import BeamCaster  # noqa: E402
+
+SCENES = ["thesis_final", "appendix_d", "three_plates"]
+pytest.importorskip("mujoco.batch")
+
+
+def ramp(start, target, step=50):
+    rows, d = [], start.copy()
+    while not np.array_equal(d, target):
+        d = d + np.clip(target - d, -step, step)
+        rows.append(d)
+    return np.array(rows, np.int64).reshape(-1, 6)
+
+
+def no_hit_counts(twin):
+    """Counts near home where the beam hits nothing (points into empty space)."""
+    probe = Twin(twin.scene, truth=twin.truth, options=TwinOptions.exact())
+    home, gains = twin.robot.home_counts, twin.robot.gains
+    for j5 in (0.0, 1.2, -1.2, 2.4, -2.4):
+        for j4 in (0.0, 1.5, -1.5):
+            c = home + np.rint(gains * [0, 0, 0, j4, j5, 0]).astype(np.int64)
+            probe.set_counts(c)
+            if probe.hit().geom == -1:
+                return c
+    raise AssertionError("no pose without a hit")
+
+
+def segments(twin, rng, n_poses):
+    """A sampler's segments: ramps to random poses around the start and holds, then a
+    ramp out to a pose where the beam hits nothing, and back."""
+    base = twin.current_counts - twin.reference_counts
+    segs, d = [], base
+    for _ in range(n_poses):
+        target = base + rng.integers(-2500, 2500, 6)
+        segs += [ramp(d, target), np.repeat(target[None], 30, axis=0)]
+        d = target
+    away = no_hit_counts(twin) - twin.reference_counts
+    segs += [ramp(d, away, 60), np.repeat(away[None], 20, axis=0), ramp(away, base, 60)]
+    return segs
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_batch_path_equals_per_tick_mujoco(name):
+    a, b = Twin(name, seed=5), Twin(name, seed=5)  # default options: lag, noise, repeatability
+    b.batch_rays = False
+    segs = segments(a, np.random.default_rng(7), 25)
+    moving = hits = misses = 0
+    geoms = set()
+    for seg in segs:
+        ra, ca, ma = a.run(seg)
+        rb, cb, mb = b.run(seg)
+        assert np.array_equal(ra, rb) and np.array_equal(ca, cb)
+        assert np.array_equal(np.isnan(ma), np.isnan(mb))
+        if not np.all(np.isnan(ma)):
+            assert np.nanmax(np.abs(ma - mb)) < 1e-9
+        moving += int(np.any(np.diff(np.vstack([ca[:1], ca]), axis=0) != 0, axis=1).sum())
+        ha, hb = a.hit(), b.hit()
+        assert ha.geom == hb.geom and ha.plate == hb.plate
+        assert (ha.distance_m is None) == (hb.distance_m is None)
+        if ha.distance_m is not None:
+            assert abs(ha.distance_m - hb.distance_m) < 1e-12
+            hits += 1
+        else:
+            misses += 1
+        geoms.add(ha.geom)
+        # MjData follows the batch path lazily: same joints and poses as the loop's
+        assert np.abs(a.qpos - b.qpos).max() < 1e-15
+        assert np.abs(a.sensor_pose() - b.sensor_pose()).max() < 1e-12
+    assert isinstance(a._beam, BeamCaster) and b._beam is None
+    assert moving > 2000 and hits > 10 and misses >= 1 and -1 in geoms
+    assert a.ticks == b.ticks and a.read() == pytest.approx(b.read(), abs=1e-9)
+
+
+def test_batch_path_exact_twin_out_of_window():
+    # noise and repeatability off: the batch readings are MuJoCo's distances; a ramp
+    # along the beam leaves the 65-95 mm window on both sides
+    a = Twin("thesis_final", seed=2, options=TwinOptions.exact(servo="lag"))
+    b = Twin("thesis_final", seed=2, options=TwinOptions.exact(servo="lag"))
+    b.batch_rays = False
+    base = a.current_counts - a.reference_counts
+    step = np.array([0, 6, -9, 0, 3, 0], np.int64)
+    D = base + np.cumsum(np.vstack([np.tile(step, (300, 1)), np.tile(-step, (600, 1))]), axis=0)
+    _, ca, ma = a.run(D)
+    _, cb, mb = b.run(D)
+    assert np.array_equal(ca, cb) and np.array_equal(np.isnan(ma), np.isnan(mb))
+    assert np.isnan(ma).sum() > 50 and (~np.isnan(ma)).sum() > 50
+    assert np.nanmax(np.abs(ma - mb)) < 1e-9
+
+
+def test_beam_caster_sees_only_the_static_cell():
+    # the twin's ray sees only world-body geoms (the tool is excluded): the mask keeps
+    # no robot link geom, so the caster (which has no robot) casts against the same set
+    for name in SCENES:
+        twin = Twin(name, seed=1)
+        m, mask = twin.model, twin._ray.mask
+        seen = [g for g in range(m.ngeom) if mask[m.geom_group[g]]]
+        assert seen and all(m.geom_bodyid[g] in (0, twin.tool_body) for g in seen)
+        beam = BeamCaster(m, twin.laser_site, mask, twin.tool_body)
+        assert beam.geoms == [g for g in seen if m.geom_bodyid[g] == 0]
+        assert beam.model.ngeom == len(beam.geoms) and beam.model.nq == m.nq
+        # robot geoms moved anywhere: the twin's mj_ray doesn't change
+        d = mujoco.MjData(m)
+        d.qpos[:] = twin.qpos
+        mujoco.mj_kinematics(m, d)
+        ray = twin._ray.__class__(m, d, twin.laser_site, twin.tool_body)
+        want = ray.cast()
+        robot = m.geom_bodyid != 0
+        d.geom_xpos[robot] = ray._pnt + 0.05 * ray._mat.reshape(3, 3)[:, 2]
+        assert ray.cast() == want
+
+
+def test_batch_path_falls_back_without_caster(monkeypatch):
+    monkeypatch.setattr(BeamCaster, "build", classmethod(lambda cls, *a: None))
+    a, b = Twin("thesis_final", seed=3), Twin("thesis_final", seed=3)
+    b.batch_rays = False
+    D = segments(a, np.random.default_rng(1), 2)
+    for seg in D:
+        _, ca, ma = a.run(seg)
+        _, cb, mb = b.run(seg)
+        assert np.array_equal(ca, cb) and np.array_equal(ma, mb, equal_nan=True)
+    assert a._beam is False
