@@ -24,6 +24,8 @@ def add_arguments(p):
     p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
     p.add_argument("--max-iter", type=int, default=30)
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--rrd", default=None, metavar="FILE",
+                   help="also write the plots as a Rerun recording (planecal view FILE)")
     p.add_argument("--out", help="write the result (JSON) here")
 
 
@@ -55,4 +57,7 @@ def run(args) -> int:
     if args.out:
         save_json(args.out, res)
         print(f"result written to {args.out}")
+    if args.rrd:
+        from planecal.studies.report import log_bootstrap
+        print(f"plots written to {log_bootstrap(args.rrd, res)}")
     return 0

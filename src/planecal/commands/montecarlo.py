@@ -23,6 +23,8 @@ def add_arguments(p):
     p.add_argument("--runs", type=int, default=50, help="Monte Carlo runs (default 50)")
     p.add_argument("--samples", type=int, default=150, help="samples per run (default 150)")
     p.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
+    p.add_argument("--rrd", default=None, metavar="FILE",
+                   help="also write the plots as a Rerun recording (planecal view FILE)")
     p.add_argument("--out", help="write the summary (JSON) here")
     p.add_argument("--mode", choices=MODES, default="twin",
                    help="twin: the sampling run's planner + twin at rest (default); rehearse: "
@@ -76,4 +78,7 @@ def run(args) -> int:
     if args.out:
         save_json(args.out, res)
         print(f"result written to {args.out}")
+    if args.rrd:
+        from planecal.studies.report import log_montecarlo
+        print(f"plots written to {log_montecarlo(args.rrd, res)}")
     return 0

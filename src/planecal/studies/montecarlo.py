@@ -310,6 +310,7 @@ def _chi2(errs, covs, idx):
         T.append(float(ei @ np.linalg.solve(Ci, ei)))
     T = np.array(T)
     kdim = len(idx)
+    values = T.tolist()
     R = len(T)
     if R < 2 or kdim == 0:
         return None
@@ -319,7 +320,7 @@ def _chi2(errs, covs, idx):
     ok = bool(abs(T.mean() - kdim) < 3 * se and ks.pvalue > 0.01)
     return {"dof": kdim, "runs": R, "mean": float(T.mean()), "expected": kdim,
             "standard_error": float(se), "ks_pvalue": float(ks.pvalue),
-            "share_below_chi2_95": float(np.mean(T < q95)), "passes": ok}
+            "share_below_chi2_95": float(np.mean(T < q95)), "passes": ok, "values": values}
 
 
 def analyze(runs: list[dict], st: MCSettings) -> dict:
@@ -384,6 +385,8 @@ def analyze(runs: list[dict], st: MCSettings) -> dict:
         "not_identifiable_all_free": sorted({n for r in runs for n in r["not_identifiable_all_free"]},
                                             key=names.index),
         "samples_per_run": float(np.mean([r["samples"] for r in runs])),
+        "run_errors": E.tolist(),
+        "run_crb_std": np.sqrt([r["crb_var"] for r in runs]).tolist(),
     }
 
 

@@ -22,10 +22,10 @@ sampling run's own distribution). ``order_poses`` sorts the planned poses into a
 the calibration position (nearest in the largest count difference, straight joint paths
 collision-checked; a pose whose path is blocked is tried later).
 
-The sampling run cannot read a pose list without a change to ``planecal.sampling.run``
-(owned elsewhere); ``ListPlanner`` below is a drop-in ``Planner`` for ``SamplingRun``
-(assigned to ``run.planner`` after construction, foreground planning only) and
-``rehearse_planned`` uses it. See docs/STUDIES.md for the change proposed upstream.
+The sampling run takes the list through ``SamplingRun(..., planner=ListPlanner(...))``
+(foreground planning only: the list planner keeps state); ``rehearse_planned`` does that
+on the twin. A ``--poses POSES.json`` flag for ``planecal rehearse`` / ``sample`` is
+left to the owners of those commands.
 """
 from __future__ import annotations
 
@@ -261,6 +261,5 @@ def rehearse_planned(scene, counts, plates, out, twin, checker, seed: int = 0):
 
     rs = RunSettings(scene=str(scene.path), samples=len(counts), seed=seed)
     drv = Driver(twin, AlwaysEnabled(), scene.robot)
-    run = SamplingRun(drv, twin, scene, rs, out, checker, background=False)
-    run.planner = ListPlanner(scene, counts, plates, checker)
-    return run.run()
+    return SamplingRun(drv, twin, scene, rs, out, checker, background=False,
+                       planner=ListPlanner(scene, counts, plates, checker)).run()
