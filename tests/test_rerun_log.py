@@ -132,7 +132,7 @@ def rehearsal(scene, tmp_path_factory):
     settings = RunSettings(scene="thesis_final", samples=N_SAMPLES, seed=3)
     stats = SamplingRun(drv, twin, scene, settings, d / "RUN.tsv", world, background=True).run()
     obs.close()
-    assert stats.status == "complete"
+    assert stats.status == "complete" and obs.error is None
     return {"path": obs.path, "calls": tee.calls, "stats": stats, "twin": twin,
             "out": d / "RUN.tsv", "dir": d, "data": read_rrd(obs.path), "ticks": drv.ticks}
 
@@ -145,6 +145,7 @@ def replayed(scene, rehearsal):
     for name, args in rehearsal["calls"]:
         getattr(obs, name)(*args)
     obs.close()
+    assert obs.error is None
     return {"path": obs.path, "data": read_rrd(obs.path), "obs": obs}
 
 
@@ -191,7 +192,7 @@ def test_hit_points_lie_on_the_true_plate(rehearsal):
     print(f"sample points: max distance to the true plane {dist.max():.2e} m")
     assert dist.max() < 1e-6, dist.max()  # float32 positions at ~1.5 m: ~1e-7
     hits = np.array([p for r in data["/laser/hit"]["rows"]
-                     for p in (r["Points3D:positions"] or [])])
+                     for p in (r.get("Points3D:positions") or [])])
     assert len(hits) > N_SAMPLES  # every sample tick plus the readings on logged ticks
     dist = np.abs(hits @ n_t - 1.0) / np.linalg.norm(n_t)
     assert dist.max() < 1e-6, dist.max()
@@ -201,6 +202,7 @@ def test_motion_is_downsampled_and_series_hold_the_steps(rehearsal):
     data = rehearsal["data"]
     ticks = np.array([r["tick"] for r in data["/robot/link_1"]["rows"]])
     sample_ticks = {r["tick"] for r in data["/series/model_error_mm"]["rows"]}
+    assert len(sample_ticks) == N_SAMPLES and min(sample_ticks) > 0
     assert sample_ticks <= set(ticks.tolist())  # the robot's pose at every sample
     odd = [t for t in ticks if t % EVERY and t not in sample_ticks and t > 1]
     assert not odd
@@ -318,6 +320,9 @@ def test_view_missing_or_bad_file_exits_2(tmp_path, capsys):
     bad = tmp_path / "bad.rrd"
     bad.write_text("hello")
     assert cli.main(["view", str(bad)]) == 2
+    (tmp_path / "empty").mkdir()
+    assert cli.main(["view", str(tmp_path / "empty")]) == 2  # no recordings in it
+    assert "no .rrd recording" in capsys.readouterr().err
 
 
 def test_view_without_display_prints_how(rehearsal, monkeypatch, capsys):
@@ -346,6 +351,8 @@ def test_view_without_display_prints_how(rehearsal, monkeypatch, capsys):
     monkeypatch.setattr(subprocess, "call", lambda cmd: calls.append(cmd) or 0)
     assert cli.main(["view", str(rehearsal["path"])]) == 0
     assert calls == [["/opt/rerun", str(rehearsal["path"])]]
+    assert cli.main(["view", "--web", str(rehearsal["path"])]) == 0
+    assert calls[-1] == ["/opt/rerun", str(rehearsal["path"]), "--serve-web", "--bind", "127.0.0.1"]
 
 
 def test_view_summary_lists_the_entity_tree(rehearsal, capsys):
@@ -353,3 +360,34 @@ def test_view_summary_lists_the_entity_tree(rehearsal, capsys):
     lines = capsys.readouterr().out.splitlines()
     entities = {ln.split("\t")[0] for ln in lines}
     assert set(EXPECTED) <= entities
+
+
+def test_cell_entities_follow_the_scene(tmp_path):
+    """Every plate, stand and obstacle of the scene is in the tree (real-run observer)."""
+    for name, expect in (("three_plates", ["/cell/plates/plate_a", "/cell/plates/plate_b",
+                                           "/cell/plates/plate_c"]),
+                         ("obstacle_test", ["/cell/plates/plate", "/cell/obstacles/fin"])):
+        sc = load_scene(name)
+        obs = sampling_observer(tmp_path / f"{name}.rrd", sc)
+        obs.close()
+        data = read_rrd(obs.path)
+        assert set(expect) <= set(data), name
+        assert "/cell/floor" in data and "/robot/tool/laser_head" in data
+
+
+def test_a_logging_error_is_reported_and_does_not_stop_the_run(scene, tmp_path, capsys):
+    obs = sampling_observer(tmp_path / "e.rrd", scene, chunk_ticks=10)
+
+    def broken(*a):
+        raise ValueError("boom")
+
+    obs._log_motion = broken
+    base = scene.robot.home_counts
+    for k in range(1, 35):  # three bulk sends fail in the sender thread
+        obs.on_tick(k, np.zeros(6, np.int64), base, base, None)
+    obs.on_sample(0, base, 80.0, 0)  # logged directly, still works
+    obs.close()
+    assert isinstance(obs.error, ValueError)
+    assert "rerun logging: ValueError: boom" in capsys.readouterr().err
+    data = read_rrd(obs.path)
+    assert len(last(data, "/samples/points", "Points3D:positions")) == 1

@@ -1,5 +1,7 @@
 """`planecal view FILE [--web] [--summary]`: open a Rerun recording (.rrd).
 
+FILE may be a directory (e.g. ``recordings/``): its newest ``.rrd`` is opened.
+
 Opens the Rerun viewer (the ``rerun`` executable that comes with rerun-sdk) on FILE and
 waits until it is closed. Where no viewer can run -- no ``rerun`` executable, or no
 display (Linux without $DISPLAY / $WAYLAND_DISPLAY) -- it prints one line saying how to
@@ -20,7 +22,8 @@ from planecal.errors import InputError
 
 
 def add_arguments(p) -> None:
-    p.add_argument("file", metavar="FILE", help="Rerun recording (.rrd), e.g. from --rrd")
+    p.add_argument("file", metavar="FILE",
+                   help="Rerun recording (.rrd), e.g. from --rrd; a directory: its newest .rrd")
     p.add_argument("--web", action="store_true",
                    help="serve it to a web browser (rerun --serve-web) instead of a window")
     p.add_argument("--summary", action="store_true",
@@ -45,6 +48,11 @@ def run(args) -> int:
     from planecal.rerun_log.common import is_recording
 
     path = Path(args.file)
+    if path.is_dir():  # e.g. recordings/: the newest recording in it
+        found = sorted(path.glob("*.rrd"), key=lambda p: p.stat().st_mtime)
+        if not found:
+            raise InputError(f"{path}: no .rrd recording in this directory")
+        path = found[-1]
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
     if not is_recording(path):

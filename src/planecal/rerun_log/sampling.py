@@ -1,9 +1,12 @@
 """The sampling-run observer: one logger for twin rehearsals and real runs.
 
 Per tick the loop hands over (tick, delta, reference, current, laser); the observer only
-keeps a reference to them in a list (about 0.2 us). Every ``chunk_ticks`` ticks and at
-``close()`` the buffered ticks are converted in bulk: kinematics vectorised over the
-ticks, and every entity sent with one ``rr.send_columns`` call. Motion (robot frames,
+keeps a reference to them in a list (well under 1 us). Every ``chunk_ticks`` ticks (4096
+on the twin, 1000 = 10 s on the real cell) and at ``close()`` the buffered ticks go to a
+sender thread that converts them in bulk -- kinematics vectorised over the ticks, every
+entity sent with one ``rr.send_columns`` call -- so the tick loop never waits for a bulk
+send (at most for the GIL). An error there is reported by ``close()`` on stderr (and kept
+in ``.error``); it never stops the run. Motion (robot frames,
 beam, hit) is logged every ``every`` ticks plus the first tick and each sample's tick;
 the series (step counts, joint angles) every ``series_every`` ticks; every laser
 reading is logged. Samples and rejections are logged as they happen.
@@ -18,6 +21,9 @@ joint errors (repeatability, compliance, backlash) are not in the logged kinemat
 from __future__ import annotations
 
 import os
+import queue
+import sys
+import threading
 
 import numpy as np
 
@@ -31,7 +37,8 @@ from planecal.rerun_log.common import (BEAM_NONE_RGBA, BEAM_RGBA, HIT_RGBA, REJE
 from planecal.sampling.run import REJECT_KINDS, NullObserver
 
 DEFAULT_EVERY = 5
-DEFAULT_CHUNK_TICKS = 4096
+DEFAULT_CHUNK_TICKS = 4096  # twin: ~0.1 s of wall time
+REAL_CHUNK_TICKS = 1000  # real cell: 10 s; the recording is never far behind
 N_JOINTS = 6
 SAMPLE_RADIUS_M = 0.003
 HIT_RADIUS_M = 0.004
@@ -118,9 +125,12 @@ class SamplingObserver(NullObserver):
     def __init__(self, rec, scene, *, twin=None, params: CellParams | None = None,
                  kinematics: str = "auto", every: int = DEFAULT_EVERY,
                  series_every: int = DEFAULT_EVERY,
-                 chunk_ticks: int = DEFAULT_CHUNK_TICKS, path=None, source: str | None = None):
+                 chunk_ticks: int | None = None, background: bool = True, path=None,
+                 source: str | None = None):
         from planecal.scene import nominal_params
 
+        if chunk_ticks is None:
+            chunk_ticks = DEFAULT_CHUNK_TICKS if twin is not None else REAL_CHUNK_TICKS
         for name, v in (("every", every), ("series_every", series_every),
                         ("chunk_ticks", chunk_ticks)):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
@@ -164,7 +174,14 @@ class SamplingObserver(NullObserver):
         self.ticks_seen = 0
         self.ticks_logged = 0
         self._closed = False
+        self.error: Exception | None = None
         self._static(twin)
+        self._queue = self._worker = None
+        if background:
+            self._queue = queue.Queue(maxsize=4)
+            self._worker = threading.Thread(target=self._work, name="planecal-rerun",
+                                            daemon=True)
+            self._worker.start()
 
     # ----- set-up -----
     def _static(self, twin) -> None:
@@ -176,6 +193,8 @@ class SamplingObserver(NullObserver):
         self._time(0)
         rec.log("/laser/beam", rr.Arrows3D(vectors=np.zeros((0, 3))))
         rec.log("/laser/hit", rr.Points3D(np.zeros((0, 3))))
+        rec.log("/laser/hit", rr.Points3D.from_fields(colors=[HIT_RGBA], radii=[HIT_RADIUS_M]),
+                static=True)  # style only; the positions are temporal
         rec.log("/samples/points", rr.Points3D(np.zeros((0, 3))))
         for k in REJECT_KINDS:
             rec.log(f"/rejected/{k}", rr.Arrows3D(vectors=np.zeros((0, 3))))
@@ -210,7 +229,7 @@ class SamplingObserver(NullObserver):
     def on_tick(self, tick, delta, reference, current, laser_mm):
         buf = self._buf
         if len(buf) >= self.chunk_ticks:
-            self._flush()
+            self._submit()
             buf = self._buf
         buf.append((tick, delta, current, laser_mm))
         self._last_tick = tick
@@ -267,11 +286,32 @@ class SamplingObserver(NullObserver):
                                                     level="INFO"))
 
     # ----- bulk sends -----
-    def _flush(self) -> None:
+    def _submit(self) -> None:
+        """Hand the buffered ticks to the sender thread (or send them here)."""
         buf = self._buf
         if not buf:
             return
         self._buf = []
+        force = np.fromiter(self._force, np.int64, len(self._force))
+        self._force = {k for k in self._force if k > buf[-1][0]}
+        first, self._first = self._first, False
+        if self._queue is None:
+            self._flush(buf, force, first)
+        else:
+            self._queue.put((buf, force, first))  # blocks if the sender is far behind
+
+    def _work(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            if self.error is None:
+                try:
+                    self._flush(*item)
+                except Exception as e:  # reported by close(); the run goes on
+                    self.error = e
+
+    def _flush(self, buf, force, first) -> None:
         n = len(buf)
         t = np.fromiter((r[0] for r in buf), np.int64, n)
         delta = np.array([r[1] for r in buf], np.int64).reshape(n, N_JOINTS)
@@ -282,13 +322,9 @@ class SamplingObserver(NullObserver):
         self._prev_delta = delta[-1].copy()
         self._log_series(t, steps, cur, laser)
         m = (t % self.every) == 0
-        if self._first:
-            m[0] = True
-            self._first = False
-        if self._force:
-            m |= np.isin(t, np.fromiter(self._force, np.int64))
-            last = int(t[-1])
-            self._force = {k for k in self._force if k > last}
+        m[0] |= first
+        if len(force):
+            m |= np.isin(t, force)
         self._log_motion(t[m], cur[m], laser[m])
 
     def _indexes(self, t):
@@ -354,7 +390,13 @@ class SamplingObserver(NullObserver):
             return
         self._closed = True
         try:
-            self._flush()
+            self._submit()
+            if self._worker is not None:
+                self._queue.put(None)
+                self._worker.join()
+            if self.error is not None:
+                print(f"rerun logging: {type(self.error).__name__}: {self.error} "
+                      f"(the recording {self.path or ''} lacks some motion)", file=sys.stderr)
             e = np.array(self._samples_e)
             rms = f"{np.sqrt(np.mean(e ** 2)):.4f} mm" if e.size else "-"
             self._info(f"* samples: **{len(e)}**, model error RMS {rms}\n"
