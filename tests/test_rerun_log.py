@@ -391,3 +391,38 @@ def test_a_logging_error_is_reported_and_does_not_stop_the_run(scene, tmp_path, 
     assert "rerun logging: ValueError: boom" in capsys.readouterr().err
     data = read_rrd(obs.path)
     assert len(last(data, "/samples/points", "Points3D:positions")) == 1
+
+
+def test_logged_tool_frame_is_the_kinematics_at_that_tick(scene, rehearsal):
+    """/robot/tool at a sample's tick = frame 6 of the twin's truth kinematics for the
+    counts of that tick (translation + quaternion, float32)."""
+    from scipy.spatial.transform import Rotation
+
+    from planecal.encoder import counts_to_joints
+    from planecal.robot import fk_frames
+
+    data = rehearsal["data"]
+    tick = max(r["tick"] for r in data["/series/model_error_mm"]["rows"])
+    cur = next(a[3] for name, a in rehearsal["calls"] if name == "on_tick" and a[0] == tick)
+    F = fk_frames(scene.robot, counts_to_joints(scene.robot, cur),
+                  rehearsal["twin"].truth.joint_offsets)[6]
+    row = next(r for r in data["/robot/tool"]["rows"] if r["tick"] == tick)
+    np.testing.assert_allclose(np.ravel(row["Transform3D:translation"]), F[:3, 3], atol=1e-6)
+    R = Rotation.from_quat(np.ravel(row["Transform3D:quaternion"])).as_matrix()
+    np.testing.assert_allclose(R, F[:3, :3], atol=1e-6)
+
+
+def test_matrix_to_quaternion_handles_half_turns():
+    from scipy.spatial.transform import Rotation
+
+    from planecal.rerun_log.sampling import matrix_to_quaternion
+
+    rng = np.random.default_rng(0)
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    rots = [Rotation.random(200, random_state=1), Rotation.from_rotvec(axes * np.pi),
+            Rotation.from_euler("x", [[180], [90], [0]], degrees=True)]
+    for rot in rots:
+        M = rot.as_matrix()
+        q = matrix_to_quaternion(M)
+        np.testing.assert_allclose(Rotation.from_quat(q).as_matrix(), M, atol=1e-12)

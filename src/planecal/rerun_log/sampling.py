@@ -55,18 +55,26 @@ EVENT_ENTITIES = ["/samples/points"] + [f"/rejected/{k}" for k in REJECT_KINDS] 
 
 def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
     """Unit quaternions (x, y, z, w) of rotation matrices (..., 3, 3), vectorised
-    (magnitudes from the diagonal, signs from the off-diagonal differences; exact to
-    ~1e-8 rad, plenty for display)."""
-    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
-    w = 0.5 * np.sqrt(np.maximum(0.0, 1.0 + m00 + m11 + m22))
-    x = 0.5 * np.sqrt(np.maximum(0.0, 1.0 + m00 - m11 - m22))
-    y = 0.5 * np.sqrt(np.maximum(0.0, 1.0 - m00 + m11 - m22))
-    z = 0.5 * np.sqrt(np.maximum(0.0, 1.0 - m00 - m11 + m22))
-    x = np.copysign(x, R[..., 2, 1] - R[..., 1, 2])
-    y = np.copysign(y, R[..., 0, 2] - R[..., 2, 0])
-    z = np.copysign(z, R[..., 1, 0] - R[..., 0, 1])
-    q = np.stack([x, y, z, w], -1)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    (Shepperd: from the largest of |w|, |x|, |y|, |z|, so 180-degree turns are exact)."""
+    m = R.reshape(-1, 3, 3)
+    m00, m11, m22 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
+    d21, d02, d10 = m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]
+    s01, s02, s12 = m[:, 0, 1] + m[:, 1, 0], m[:, 0, 2] + m[:, 2, 0], m[:, 1, 2] + m[:, 2, 1]
+    cand = np.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22,
+                     1 - m00 + m11 - m22, 1 - m00 - m11 + m22], -1)
+    k = np.argmax(cand, -1)
+    big = 0.5 * np.sqrt(np.maximum(cand[np.arange(len(m)), k], 1e-300))
+    f = 0.25 / big
+    q = np.empty((len(m), 4))
+    for case, (x, y, z, w) in enumerate((
+            (d21 * f, d02 * f, d10 * f, big),   # w largest
+            (big, s01 * f, s02 * f, d21 * f),   # x largest
+            (s01 * f, big, s12 * f, d02 * f),   # y largest
+            (s02 * f, s12 * f, big, d10 * f))):  # z largest
+        sel = k == case
+        q[sel] = np.stack([x, y, z, w], -1)[sel]
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return q.reshape(R.shape[:-2] + (4,))
 
 
 def reject_kind(reason: str) -> str:
@@ -169,7 +177,7 @@ class SamplingObserver(NullObserver):
         self._samples_e: list[float] = []
         self._samples_plate: list[int] = []
         self._samples_index: list[int] = []
-        self._rejected = {k: ([], []) for k in REJECT_KINDS}
+        self._rejected = {k: ([], [], []) for k in REJECT_KINDS}  # origins, vectors, reasons
         self.rejections = {k: 0 for k in REJECT_KINDS}
         self.ticks_seen = 0
         self.ticks_logged = 0
@@ -260,7 +268,9 @@ class SamplingObserver(NullObserver):
         e = np.array(self._samples_e)
         self.rec.log("/samples/points",
                      rr.Points3D(np.array(self._samples_p), colors=diverging_colors(e),
-                                 radii=SAMPLE_RADIUS_M),
+                                 radii=SAMPLE_RADIUS_M, show_labels=False,
+                                 labels=[f"sample {i}: {v:+.4f} mm" for i, v in
+                                         zip(self._samples_index, self._samples_e)]),
                      rr.AnyValues(error_mm=e, sample=np.array(self._samples_index),
                                   plate=np.array(self._samples_plate)))
 
@@ -271,12 +281,14 @@ class SamplingObserver(NullObserver):
         self._time(self._last_tick)
         if q_target is not None:
             o_b, z_b = sensor_in_base(self.robot, np.asarray(q_target, float)[None], self.kin)
-            origins, vectors = self._rejected[kind]
+            origins, vectors, reasons = self._rejected[kind]
             origins.append(o_b[0])
             vectors.append(z_b[0] * REJECT_LENGTH_M)
-            rec.log(f"/rejected/{kind}",
+            reasons.append(reason)
+            rec.log(f"/rejected/{kind}",  # the reason shows on hover (labels hidden)
                     rr.Arrows3D(origins=np.array(origins), vectors=np.array(vectors),
-                                colors=REJECT_RGBA[kind], radii=BEAM_RADIUS_M))
+                                colors=REJECT_RGBA[kind], radii=BEAM_RADIUS_M,
+                                labels=reasons, show_labels=False))
         rec.log("/events", rr.TextLog(f"rejected ({kind}): {reason}", level="WARN"))
 
     def on_path(self, kind, q_start, q_goal, rows):
