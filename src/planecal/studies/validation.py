@@ -228,6 +228,7 @@ def gauge_block(twin, scene, truth, models: dict, st: ValidationSettings, checke
     sig_l = st.laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN)
     lengths = {name: [] for name in models}
     worst_incidence = 0.0
+    first = None
     for _ in range(st.gauge_repeats):
         meas = []
         for fi, c in plan:
@@ -241,6 +242,7 @@ def gauge_block(twin, scene, truth, models: dict, st: ValidationSettings, checke
             if not (scene.laser_range_mm[0] <= d * 1e3 <= scene.laser_range_mm[1]):
                 raise InputError(f"gauge block: reading {d * 1e3:.1f} mm out of the laser range")
             meas.append((fi, c, d))
+        first = first or meas
         for name, params in models.items():
             pts = {0: [], 1: []}
             for fi, c, d in meas:
@@ -248,7 +250,7 @@ def gauge_block(twin, scene, truth, models: dict, st: ValidationSettings, checke
                 pts[fi].append(ob[0] + d * zb[0])
             lengths[name].append(gauge_length(np.array(pts[0]), np.array(pts[1])))
     out = {"length_m": st.block_length_m, "repeats": st.gauge_repeats,
-           "max_incidence_deg": worst_incidence, "models": {}}
+           "max_incidence_deg": worst_incidence, "models": {}, "measurements": first}
     for name, ls in lengths.items():
         e = np.array(ls) - st.block_length_m
         out["models"][name] = {"error_mm": float(e.mean() * 1e3),
@@ -257,10 +259,57 @@ def gauge_block(twin, scene, truth, models: dict, st: ValidationSettings, checke
     return out
 
 
+def length_from(robot, meas, params: CellParams) -> float:
+    pts = {0: [], 1: []}
+    for fi, c, d in meas:
+        ob, zb = sensor_in_base(robot, counts_to_joints(robot, c)[None], params)
+        pts[fi].append(ob[0] + d * zb[0])
+    return gauge_length(np.array(pts[0]), np.array(pts[1]))
+
+
+def predicted_spread(robot, meas, calibrated: CellParams, free, cov, points, R, tcp,
+                     q_ref) -> dict:
+    """What the fit's own covariance predicts (1 sigma) for the gauge-length error and for
+    the TCP position error at the ISO poses (offsets' covariance through the flange
+    Jacobian), by linear propagation."""
+    from planecal.robot import jacobian
+    x0 = calibrated.to_vector()
+    idx = np.flatnonzero(free)
+    ok = np.all(np.isfinite(cov), axis=1)
+    g = np.zeros(len(idx))
+    L0 = length_from(robot, meas, calibrated)
+    for k, i in enumerate(idx):
+        if not ok[k]:
+            continue
+        h = 1e-7 * max(1.0, abs(x0[i]))
+        x = x0.copy()
+        x[i] += h
+        g[k] = (length_from(robot, meas, CellParams.from_vector(x)) - L0) / h
+    C = np.where(np.isfinite(cov), cov, 0.0)
+    sig_len = float(np.sqrt(max(g @ C @ g, 0.0)))
+    # offsets block of the covariance (free offsets only)
+    off = [k for k, i in enumerate(idx) if i < 6 and ok[k]]
+    Co = C[np.ix_(off, off)]
+    cols = [int(idx[k]) for k in off]
+    sig_pos = []
+    for p in points:
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = p - R @ tcp
+        q = ik_nearest(robot, T, q_ref, delta=calibrated.joint_offsets)
+        Jg = jacobian(robot, q, calibrated.joint_offsets)
+        r = R @ tcp
+        Jv = Jg[:3] - np.cross(r, Jg[3:].T).T  # TCP velocity: v + w x r
+        Jo = Jv[:, cols]
+        sig_pos.append(float(np.sqrt(np.trace(Jo @ Co @ Jo.T))))
+    return {"gauge_length_std_mm": sig_len * 1e3, "tcp_position_rms_mm": np.array(sig_pos) * 1e3}
+
+
 # ----- whole validation ---------------------------------------------------------------------------
 
 def validate(scene, truth: CellParams, calibrated: CellParams, sample_counts: np.ndarray,
-             st: ValidationSettings | None = None, checker=None) -> dict:
+             st: ValidationSettings | None = None, checker=None, fit_free=None,
+             fit_cov=None) -> dict:
     """ISO 9283 AP/RP and the gauge block, nominal vs calibrated, on a twin with ``truth``.
     ``sample_counts``: the calibration samples (they place the ISO cube)."""
     from planecal.scene import nominal_params
@@ -290,6 +339,12 @@ def validate(scene, truth: CellParams, calibrated: CellParams, sample_counts: np
     mixed.joint_offsets = nominal.joint_offsets.copy()
     gb = gauge_block(twin, scene, truth, {"nominal": nominal, "calibrated": calibrated,
                                           "calibrated_sensor_nominal_offsets": mixed}, st, checker)
+    pred = None
+    if fit_cov is not None:
+        pred = predicted_spread(robot, gb["measurements"], calibrated, np.asarray(fit_free, bool),
+                                np.asarray(fit_cov), iso["points_m"], R,
+                                np.asarray(st.tcp_m, float), q_cal)
+    gb.pop("measurements")
     ap_b, ap_a = iso["models"]["nominal"]["ap_mm"], iso["models"]["calibrated"]["ap_mm"]
     rp = np.maximum(iso["models"]["nominal"]["rp_mm"], iso["models"]["calibrated"]["rp_mm"])
     d_err = calibrated.joint_offsets - truth.joint_offsets
@@ -306,6 +361,7 @@ def validate(scene, truth: CellParams, calibrated: CellParams, sample_counts: np
         "gauge_error_before_mm": gb["models"]["nominal"]["error_mm"],
         "gauge_error_after_mm": gb["models"]["calibrated"]["error_mm"],
         "gauge_error_offsets_only_mm": gb["models"]["calibrated_sensor_nominal_offsets"]["error_mm"],
+        "predicted_from_fit": pred,
         "iso": iso, "gauge": gb, "residual_offset_error": left,
         "settings": {k: getattr(st, k) for k in st.__dataclass_fields__},
     }
@@ -333,6 +389,13 @@ def format_validation(v: dict) -> str:
                f"repeats (largest incidence {g['max_incidence_deg']:.0f} deg)")
     out.append(table(["model", "length error mm", "std mm", "max |error| mm"], rows))
     r = v["residual_offset_error"]
+    pr = v.get("predicted_from_fit")
+    if pr:
+        out.append("")
+        out.append(f"the fit's covariance predicts (1 sigma): gauge length "
+                   f"{pr['gauge_length_std_mm']:.4f} mm (sensor pose and offsets); TCP position "
+                   f"error from the offsets at P1..P5 "
+                   + " ".join(f"{x:.4f}" for x in pr["tcp_position_rms_mm"]) + " mm (rms)")
     out.append("")
     out.append("offset error left after calibration [urad]: "
                + " ".join(f"{e * 1e6:+.1f}" for e in r["offset_error_rad"]))
