@@ -111,6 +111,29 @@ def is_recording(path) -> bool:
         return False
 
 
+def eye_controls(scene, kind: str = "cell"):
+    """A starting camera for the 3D view: ``"cell"`` looks at the robot and the first
+    plate from the side; ``"plate"`` looks at the first plate's measured face."""
+    import rerun.blueprint as rrb
+
+    if scene is None or not scene.plates:
+        return None
+    from planecal.cell import point_normal_from_n_tilde
+
+    plate = scene.plates[0]
+    c = plate.center()
+    if kind == "plate":
+        _, nhat = point_normal_from_n_tilde(plate.n_tilde)
+        pos = c + plate.face * nhat * 1.2 + np.array([0.0, 0.0, 0.4])
+        return rrb.EyeControls3D(position=pos, look_target=c, eye_up=[0, 0, 1])
+    target = 0.5 * (c + np.array([0.0, 0.0, 0.8]))
+    d = np.array([c[0], c[1], 0.0])
+    d = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-6 else np.array([1.0, 0, 0])
+    side = np.array([-d[1], d[0], 0.0])
+    pos = target + 2.8 * side - 0.8 * d + np.array([0.0, 0.0, 1.4])
+    return rrb.EyeControls3D(position=pos, look_target=target, eye_up=[0, 0, 1])
+
+
 # ----- colours -----
 
 def diverging_colors(values: np.ndarray, scale: float | None = None) -> np.ndarray:

@@ -8,8 +8,8 @@ import numpy as np
 
 from planecal.cell import parameter_units, sensor_in_base
 from planecal.encoder import counts_to_joints
-from planecal.rerun_log.common import (_rr, close_recording, diverging_colors, log_cell,
-                                       open_recording, recording_path)
+from planecal.rerun_log.common import (_rr, close_recording, diverging_colors, eye_controls,
+                                       log_cell, open_recording, recording_path)
 
 HIST_BINS = 20  # equal-width bins from the smallest to the largest value (numpy.histogram)
 HIST_ENTITIES = {"error_before": "/fit/hist/error_before", "error_after": "/fit/hist/error_after",
@@ -25,13 +25,14 @@ def histogram(values_mm: np.ndarray, bins: int = HIST_BINS):
     return np.histogram(v, bins=bins)
 
 
-def fit_blueprint():
+def fit_blueprint(scene=None):
     import rerun.blueprint as rrb
 
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
                 rrb.Spatial3DView(name="samples (final model error)", origin="/",
+                                  eye_controls=eye_controls(scene, "plate"),
                                   contents=["/cell/**", "/samples/**"]),
                 rrb.TimeSeriesView(name="model error per iteration [mm]", origin="/fit",
                                    contents=["/fit/rms_mm", "/fit/max_mm"]),
@@ -150,7 +151,7 @@ def log_fit_to_file(arg, res, samples, scene):
     """Write the fit's recording; ``arg`` as for ``recording_path`` (command "calibrate").
     Returns the path written."""
     path = recording_path(arg, "calibrate", scene.name)
-    rec = open_recording(path, fit_blueprint(), name=f"calibrate {scene.name}")
+    rec = open_recording(path, fit_blueprint(scene), name=f"calibrate {scene.name}")
     try:
         log_fit(rec, res, samples, scene)
     finally:

@@ -32,8 +32,9 @@ from planecal.encoder import counts_to_joints
 from planecal.errors import InputError
 from planecal.robot import fk_frames
 from planecal.rerun_log.common import (BEAM_NONE_RGBA, BEAM_RGBA, HIT_RGBA, REJECT_RGBA, _rr,
-                                       close_recording, diverging_colors, log_cell,
-                                       log_robot_meshes, open_recording, recording_path)
+                                       close_recording, diverging_colors, eye_controls,
+                                       log_cell, log_robot_meshes, open_recording,
+                                       recording_path)
 from planecal.sampling.run import REJECT_KINDS, NullObserver
 
 DEFAULT_EVERY = 5
@@ -93,7 +94,7 @@ def _env_int(name: str, default: int) -> int:
         raise InputError(f"{name}: must be an integer, got {v!r}") from None
 
 
-def sampling_blueprint():
+def sampling_blueprint(scene=None):
     """3D view of the cell, robot, laser, samples and rejections; time series of step
     counts, joint angles, laser readings and model errors; the event log."""
     import rerun.blueprint as rrb
@@ -101,7 +102,7 @@ def sampling_blueprint():
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(name="cell", origin="/",
+                rrb.Spatial3DView(name="cell", origin="/", eye_controls=eye_controls(scene),
                                   contents=["/cell/**", "/robot/**", "/laser/**",
                                             "/samples/**", "/rejected/**"]),
                 rrb.TextLogView(name="events", origin="/events"),
@@ -428,7 +429,7 @@ def sampling_observer(path, scene, twin=None, *, command: str | None = None, **o
     p = recording_path(path, command, scene.name)
     options.setdefault("every", _env_int("PLANECAL_RERUN_EVERY", DEFAULT_EVERY))
     options.setdefault("series_every", _env_int("PLANECAL_RERUN_SERIES_EVERY", DEFAULT_EVERY))
-    rec = open_recording(p, sampling_blueprint(), name=f"{command} {scene.name}")
+    rec = open_recording(p, sampling_blueprint(scene), name=f"{command} {scene.name}")
     try:
         return SamplingObserver(rec, scene, twin=twin, path=p, **options)
     except BaseException:
