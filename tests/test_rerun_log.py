@@ -278,6 +278,29 @@ def test_cli_rehearse_and_calibrate_write_recordings_into_a_directory(tmp_path, 
     assert len(fits) == 1 and f"recording written to {fits[0]}" in printed
 
 
+
+def test_sample_command_over_the_emulators_records_the_same_tree(rehearsal, tmp_path, capsys):
+    """`planecal sample --rrd` (the real-cell command, FD11 UDP + laser pty emulated by a
+    twin) writes a recording with the rehearsal's entity tree, nominal kinematics."""
+    import json
+
+    from planecal.links.emulators import Emulators
+
+    twin = twin_mod.Twin("thesis_final", seed=2)
+    rrd = tmp_path / "real.rrd"
+    with Emulators(twin, rt_port=0, reply_port=None) as emu:
+        code = cli.main(["sample", "--rt", "127.0.0.1", "--rt-port", str(emu.fd11.rt_port),
+                         "--local-port", "0", "--rt-tick-s", "0", "--laser", emu.laser.port,
+                         "--samples", "3", "--seed", "2", "--out", str(tmp_path / "RUN.tsv"),
+                         "--rrd", str(rrd)])
+    assert code == 0
+    assert json.loads(capsys.readouterr().out)["rrd"] == str(rrd)
+    data = read_rrd(rrd)
+    assert user_entities(data) == user_entities(rehearsal["data"])
+    assert len(last(data, "/samples/points", "Points3D:positions")) == 3
+    assert "real run" in last(data, "/run/info", "TextDocument:text")[0]
+
+
 # ----- files -----
 
 def test_recording_path_names_and_errors(tmp_path, monkeypatch):

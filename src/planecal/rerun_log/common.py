@@ -14,7 +14,7 @@ from planecal.errors import InputError
 APP_ID = "planecal"
 DEFAULT_DIR = "recordings"  # relative to the working directory (see recordings/README.md)
 AUTO_NAMES = ("", "auto", "-")  # --rrd values that mean "a generated name in recordings/"
-RRD_MAGIC = b"RRF2"
+RRD_MAGIC = b"RRF"  # "RRF2" in rerun 0.41; older files start "RRF0"/"RRF1"
 
 # colours (RGBA)
 PLATE_RGBA = (150, 170, 200, 255)
@@ -106,7 +106,7 @@ def close_recording(rec) -> None:
 def is_recording(path) -> bool:
     try:
         with open(path, "rb") as f:
-            return f.read(4) == RRD_MAGIC
+            return f.read(len(RRD_MAGIC)) == RRD_MAGIC
     except OSError:
         return False
 
