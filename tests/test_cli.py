@@ -93,3 +93,16 @@ def test_console_script_runs_without_traceback(tmp_path):
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stderr.strip().endswith("bad.tsv:1: expected 7 tab-separated columns (q1..q6, Dm), found 3")
+
+
+def test_demo_end_to_end(tmp_path, capsys):
+    """The README's main job, shortened: rehearse on the twin, calibrate, compare."""
+    assert main(["demo", "--samples", "40", "--seed", "3", "--dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "3 reported standard deviations of the truth" in out
+    r = json.loads((tmp_path / "result.json").read_text())
+    t = json.loads((tmp_path / "truth.json").read_text())
+    err = np.abs(np.array(r["joint_offsets_rad"]) - t["joint_offsets_rad"])[1:5]
+    std = np.array(r["std"]["joint_offsets_rad"][1:5], float)
+    assert np.all(err < 4 * std) and np.all(std < 2e-4)
+    assert r["residual_rms_mm"] < 0.03 < r["residual_rms_initial_mm"]

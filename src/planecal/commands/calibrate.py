@@ -32,7 +32,9 @@ def add_arguments(p):
                    help="gn: Gauss-Newton with SVD pseudo-inverse (seed); lm: Levenberg-Marquardt")
     p.add_argument("--no-scale", action="store_true", help="no column scaling of the Jacobian")
     p.add_argument("--free", help="comma-separated parameter names to fit (default: all but delta1, delta6)")
-    p.add_argument("--rrd", help="write a Rerun recording of the fit (file name or directory)")
+    p.add_argument("--rrd", nargs="?", const="auto", default=None,
+                   help="write a Rerun recording of the fit (file name, directory, or nothing "
+                        "for recordings/calibrate-<scene>-<time>.rrd)")
 
 
 def free_mask(spec: str | None, n_planes: int) -> np.ndarray:

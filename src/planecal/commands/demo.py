@@ -23,7 +23,9 @@ def add_arguments(p):
     p.add_argument("--samples", type=int, default=150, help="samples to take (default %(default)s)")
     p.add_argument("--seed", type=int, default=1, help="seed of poses and twin truth (default %(default)s)")
     p.add_argument("--dir", default="runs/demo", help="output directory (default %(default)s)")
-    p.add_argument("--rrd", default=None, help="also write a Rerun recording of the run")
+    p.add_argument("--rrd", nargs="?", const="auto", default=None,
+                   help="also write Rerun recordings of the run and of the fit (a directory, "
+                        "a file name, or nothing for recordings/)")
 
 
 def run(args) -> int:
@@ -60,6 +62,9 @@ def run(args) -> int:
         raise InputError(str(e)) from None
     print(format_report(res, samples.n_zero))
     save_json(out / "result.json", result_dict(res))
+    if args.rrd:
+        from planecal.rerun_log import log_fit_to_file
+        print(f"fit recording written to {log_fit_to_file(args.rrd, res, samples, scene)}")
     truth = load_params(truth_file)
     print("\n== identified joint offsets against the twin's hidden truth")
     print(f"{'joint':<7} {'truth_mrad':>11} {'nominal_err':>12} {'identified':>11} "
