@@ -107,7 +107,9 @@ class BeamCaster:
             self.geoms.append(g)
         self.model = spec.compile()
         # beam joint k (tree order: the deepest twin joint first) turns by -qpos[order[k]]
-        self._order = np.array([int(model.jnt_qposadr[j]) for j in joints], np.intp)
+        order = [int(model.jnt_qposadr[j]) for j in joints]
+        self._order = slice(None, None, -1) if order == list(range(model.nq))[::-1] \
+            else np.array(order, np.intp)
         self._geom_map = np.array(self.geoms + [-1], np.int32)  # index -1 -> -1
         self._cap = 0
         self._grow(capacity)
@@ -126,7 +128,10 @@ class BeamCaster:
         self._raw = getattr(getattr(self._batch, "_b", None), "ray", None)
         self._cap = cap
 
-    def cast(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def cast(self, Q: np.ndarray, last_geom_only: bool = False):
+        """(distance (K,) [m], -1: no hit; geom ids (K,) of the twin model, -1: none) for
+        the twin's qpos rows ``Q`` (K, nq); with ``last_geom_only`` the geom id of the
+        last row only (an int)."""
         k = len(Q)
         if k > self._cap:
             self._grow(k)
@@ -143,6 +148,8 @@ class BeamCaster:
         else:
             dist, geomid = self._batch.ray(self._pnt[:k], self._vec[:k], self.mask, True,
                                            -1, ids=self._ids[:k])
+        if last_geom_only:
+            return dist[:, 0].copy(), int(self._geom_map[geomid[-1, 0]])
         return dist[:, 0].copy(), self._geom_map[geomid[:, 0]]
 
     @classmethod

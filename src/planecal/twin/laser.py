@@ -25,37 +25,57 @@ class LaserModel:
         self.noise_mm = float(noise_mm)
         self.quantum_mm = quantum_mm
         self.rng = rng if rng is not None else np.random.default_rng()
-        self._noise: list[float] = []
+        # the current block of draws, used from the end: numpy for batches, a list
+        # (made on first use) for single readings; ``_left`` values not used yet
+        self._block = np.zeros(0)
+        self._list: list[float] | None = None
+        self._left = 0
+
+    def _refill(self) -> None:
+        self._block = self.rng.normal(0.0, self.noise_mm, NOISE_BLOCK)
+        self._list = None
+        self._left = NOISE_BLOCK
 
     def _next_noise(self) -> float:
-        if not self._noise:
-            self._noise = (self.rng.normal(0.0, self.noise_mm, NOISE_BLOCK)).tolist()
-        return self._noise.pop()
+        if not self._left:
+            self._refill()
+        if self._list is None:
+            self._list = self._block.tolist()
+        self._left -= 1
+        return self._list[self._left]
 
     def _take_noise(self, n: int) -> np.ndarray:
         """The next ``n`` noise values in the order ``n`` calls of ``reading`` use them."""
+        if n <= 0:
+            return np.zeros(0)
+        if n <= self._left:  # one block: its values from the end
+            hi = self._left
+            self._left = lo = hi - n
+            return self._block[hi - 1:lo - 1 if lo else None:-1].copy()
         out = np.empty(n)
         i = 0
         while i < n:
-            if not self._noise:
-                self._noise = (self.rng.normal(0.0, self.noise_mm, NOISE_BLOCK)).tolist()
-            k = min(n - i, len(self._noise))
-            out[i:i + k] = self._noise[:-k - 1:-1]  # pop() order
-            del self._noise[-k:]
+            if not self._left:
+                self._refill()
+            k = min(n - i, self._left)
+            out[i:i + k] = self._take_noise(k)
             i += k
         return out
 
     def readings(self, distance_m: np.ndarray) -> np.ndarray:
         """Readings [mm] for true distances [m] (NaN: no hit), NaN where ``reading``
         gives None. Same values and noise stream as one ``reading`` call per element."""
-        d = np.asarray(distance_m, float)
-        hit = ~np.isnan(d)
-        mm = d * 1000.0
+        mm = np.multiply(distance_m, 1000.0)
         if self.noise_mm > 0.0:
-            mm[hit] += self._take_noise(int(hit.sum()))
+            hit = mm == mm  # not NaN
+            k = int(np.count_nonzero(hit))
+            if k == len(mm):
+                mm += self._take_noise(k)
+            elif k:
+                mm[hit] += self._take_noise(k)
         if self.quantum_mm:
             mm = np.round(mm / self.quantum_mm) * self.quantum_mm
-        mm[~((mm >= self.lo) & (mm <= self.hi))] = np.nan
+        mm[(mm < self.lo) | (mm > self.hi)] = np.nan  # NaN compares False: stays NaN
         return mm
 
     def reading(self, distance_m: float | None) -> float | None:

@@ -25,6 +25,32 @@ from scipy.signal import lfilter
 from planecal.robot import Robot, fk_frames, jacobian
 
 SERVO_MODES = ("ideal", "lag")
+
+
+def _first_order_filter():
+    """``f(b, a, x, zi) -> (y, zf)`` along axis 0: scipy's C filter under ``lfilter``
+    (~20 us less per call than lfilter's argument handling) when it answers exactly
+    like lfilter, else lfilter itself."""
+    def public(b, a, x, zi):
+        return lfilter(b, a, x, axis=0, zi=zi)
+    try:
+        from scipy.signal import _sigtools
+        raw = _sigtools._linear_filter
+
+        def fast(b, a, x, zi):
+            return raw(b, a, x, 0, zi)
+        rng = np.random.default_rng(0)
+        b, a = np.array([0.3]), np.array([1.0, -0.7])
+        x, zi = rng.normal(0, 100, (50, 6)), rng.normal(0, 10, (1, 6))
+        want, got = public(b, a, x, zi), fast(b, a, x, zi)
+        if all(np.array_equal(u, v) for u, v in zip(want, got)):
+            return fast
+    except Exception:  # noqa: BLE001 - a private function: any change means lfilter
+        pass
+    return public
+
+
+_filter = _first_order_filter()
 # (DH frame, point in that frame [m], mass [kg]): an MC70-sized arm (~570 kg in all)
 LUMPED_MASSES = [
     (2, (-0.45, 0.0, 0.0), 110.0),  # upper arm
@@ -58,6 +84,7 @@ class Servo:
         self.y = [float(c) for c in self.current]
         self.gain = 1.0 - float(np.exp(-tick_s / tau_s)) if mode == "lag" else 1.0
         self.keep = 1.0 - self.gain
+        self._b, self._a = np.array([self.gain]), np.array([1.0, -self.keep])  # lfilter's
 
     def set(self, counts) -> None:
         """Put the servo at rest on ``counts``."""
@@ -79,17 +106,20 @@ class Servo:
         self.current = new
         return True
 
-    def run(self, commanded: np.ndarray) -> np.ndarray:
-        """Counts (N, 6) int64 for commands (N, 6), one row per tick."""
+    def run(self, commanded: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Counts (N, 6) int64 for commands (N, 6), one row per tick (into ``out`` if
+        given)."""
+        if out is None:
+            out = np.empty(commanded.shape, np.int64)
         if self.ideal:
-            cur = commanded.copy()
+            out[...] = commanded
         else:
-            zi = self.keep * np.array(self.y)[None, :]
-            y = lfilter([self.gain], [1.0, -self.keep], commanded.astype(float), axis=0, zi=zi)[0]
+            zi = np.multiply(self.keep, self.y)[None, :]
+            y = _filter(self._b, self._a, commanded.astype(float), zi)[0]
             self.y = y[-1].tolist()
-            cur = np.rint(y).astype(np.int64)
-        self.current = cur[-1].tolist()
-        return cur
+            out[...] = np.rint(y, out=y)
+        self.current = out[-1].tolist()
+        return out
 
 
 def repeatability_sigma(robot: Robot, repeatability_m: float) -> float:
