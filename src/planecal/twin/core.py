@@ -18,8 +18,10 @@ truth's sensor pose and planes. With noise and joint errors off, ``read()`` equa
 Kinematics and the ray are recomputed lazily, only when the counts (or joint errors)
 changed since the last reading: a robot at rest costs a laser-noise draw per reading.
 ``Twin.run(deltas)`` does many ticks (exchange + read each) in one call with the same
-results; see scripts/bench_twin.py for the throughput and what bounds it (one MuJoCo
-kinematics + one ray per moving tick).
+results: the counts -> joints, servo, trip and rest logic vectorised, and the beams of
+all its moving ticks cast in one MuJoCo call (``beam``: MuJoCo kinematics + ``mj_ray``
+per tick in C, ~0.8 us). See scripts/bench_twin.py for the throughput; what bounds it
+is ~40 numpy calls per ``run`` call (~100 us) plus ~0.8 us per moving tick.
 """
 from __future__ import annotations
 
@@ -98,9 +100,10 @@ class Twin:
     else its home counts. The reference counts of the FD11 link are these.
 
     RobotLink / Laser: ``exchange(delta)`` (one tick), ``read()``, ``close()``.
-    More ticks at once: ``run(deltas)``. Tests and tools: ``set_counts(counts)`` (jump
-    there, at rest), ``hit()`` (true distance, geom, plate), ``flange_pose()``,
-    ``sensor_pose()``, ``qpos``, ``to_xml()``. State: ``ticks``, ``robot_time_s``,
+    More ticks at once: ``run(deltas)`` (``prepare_run()`` builds its caster ahead).
+    Tests and tools: ``set_counts(counts)`` (jump there, at rest), ``hit()`` (true
+    distance, geom, plate), ``flange_pose()``, ``sensor_pose()``, ``qpos``, ``to_xml()``.
+    State: ``ticks``, ``robot_time_s``,
     ``current_counts``, ``reference_counts``, ``commanded_counts``. For others (collision
     cross-checks, Rerun): ``model``, ``data`` (MjModel/MjData, last kinematics: call
     ``hit()`` or ``read()`` first), ``spec``, ``laser_site``, ``flange_site``,
@@ -109,8 +112,8 @@ class Twin:
     ``batch_rays`` (class default True): ``run`` casts the beams of all its moving ticks
     in one MuJoCo call (``beam.BeamCaster``: kinematics and ``mj_ray`` per tick in C);
     False, or a model the caster doesn't cover: one ``mj_kinematics`` + ``mj_ray`` per
-    moving tick through the bindings (the reference; same counts, readings equal to
-    ~1e-12 mm, see tests/test_twin.py).
+    moving tick through the bindings (the reference; same counts and random streams,
+    readings equal to ~1e-12 mm: tests/test_twin_batch.py).
     """
 
     batch_rays: bool = True
@@ -293,6 +296,11 @@ class Twin:
             raise EncoderJumpError(f"twin: delta jumped by more than {self._trip} counts "
                                    f"at row {trip_at}")
         return self._reference_arr.copy(), cur, readings
+
+    def prepare_run(self) -> bool:
+        """Build ``run``'s batch caster now (~10 ms, else at the first ``run``); True if
+        ``run`` will use it."""
+        return self._beam_caster() is not None
 
     def _beam_caster(self) -> BeamCaster | None:
         if self._beam is None:
