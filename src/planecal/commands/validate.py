@@ -1,6 +1,6 @@
 """planecal validate [--scene S] [--out V.json] [--samples N] [--seed K] [--truth-seed T]
 [--offsets-all] [--cycles 30] [--cube-mm E] [--tcp-mm X,Y,Z] [--block-mm L]
-[--calibrated R.json --truth T.json --run RUN.tsv]
+[--poses POSES.json] [--calibrated R.json --truth T.json --run RUN.tsv]
 
 ISO 9283 pose accuracy AP and repeatability RP (P1..P5 in a cube over the calibrated
 region, 30 cycles) and the gauge-block test (seed 9.3) on the twin, with the nominal and
@@ -34,6 +34,8 @@ def add_arguments(p):
     p.add_argument("--tcp-mm", default="0,0,0", help="TCP in the flange frame, mm (default flange)")
     p.add_argument("--block-mm", type=float, default=100.0, help="gauge block length (default 100)")
     p.add_argument("--gauge-repeats", type=int, default=10)
+    p.add_argument("--poses", help="rehearse through this planned pose list (planecal plan) "
+                                   "instead of random poses")
     p.add_argument("--calibrated", help="calibration result to validate (with --truth and --run)")
     p.add_argument("--truth", help="the twin truth (parameter file) the calibration was made on")
     p.add_argument("--run", help="the calibration's sample file (places the ISO cube)")
@@ -79,9 +81,18 @@ def run(args) -> int:
             raise InputError(f"--samples must be at least 20, got {args.samples}")
         truth = draw_truth(scene, args.truth_seed, Tolerances(offsets_all=args.offsets_all))
         mc = MCSettings(scene=str(scene.path), samples=args.samples, seed=args.seed)
-        print(f"rehearsing {args.samples} samples on the twin ({scene.name}, seed {args.seed}, "
+        what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
+        print(f"rehearsing {what} on the twin ({scene.name}, seed {args.seed}, "
               f"truth seed {args.truth_seed})...", file=sys.stderr, flush=True)
-        qe, d, plate, rejected = twin_samples(scene, truth, mc, args.seed)
+        if args.poses:
+            from planecal.studies.montecarlo import pose_list_samples
+            from planecal.studies.planning import load_poses
+            pq, pp, _ = load_poses(args.poses)
+            mc = MCSettings(scene=str(scene.path), samples=len(pq), seed=args.seed,
+                            poses=tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp)))
+            qe, d, plate, rejected = pose_list_samples(scene, truth, mc, args.seed)
+        else:
+            qe, d, plate, rejected = twin_samples(scene, truth, mc, args.seed)
         fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate)
         calibrated = fit.params
         fit_free, fit_cov = fit.free, fit.cov
