@@ -88,7 +88,6 @@ class BeamCaster:
                 pose = _compose(pose, _inverse(*body_pose))
         if model.nq != len(joints) or model.njnt != len(joints):
             raise ValueError("beam: joints off the laser's path")
-        env = parent.add_body(pos=pose[0].tolist(), quat=pose[1].tolist())
         seen = [g for g in range(model.ngeom)
                 if self.mask[min(len(self.mask) - 1, max(0, int(model.geom_group[g])))]]
         self.geoms = []
@@ -100,10 +99,12 @@ class BeamCaster:
                 raise ValueError("beam: a seen geom on a moving body")
             if int(model.geom_type[g]) not in _PRIMITIVES or model.geom_matid[g] >= 0:
                 raise ValueError("beam: only primitive geoms without materials")
-            env.add_geom(type=mujoco.mjtGeom(int(model.geom_type[g])),
-                         size=model.geom_size[g].tolist(), pos=model.geom_pos[g].tolist(),
-                         quat=model.geom_quat[g].tolist(), group=int(model.geom_group[g]),
-                         rgba=model.geom_rgba[g].tolist(), contype=0, conaffinity=0)
+            # on the innermost joint's body: the remaining fixed part, then the geom's pose
+            gpos, gquat = _compose(pose, (model.geom_pos[g], model.geom_quat[g]))
+            parent.add_geom(type=mujoco.mjtGeom(int(model.geom_type[g])),
+                            size=model.geom_size[g].tolist(), pos=gpos.tolist(),
+                            quat=gquat.tolist(), group=int(model.geom_group[g]),
+                            rgba=model.geom_rgba[g].tolist(), contype=0, conaffinity=0)
             self.geoms.append(g)
         self.model = spec.compile()
         # beam joint k (tree order: the deepest twin joint first) turns by -qpos[order[k]]
@@ -131,7 +132,7 @@ class BeamCaster:
     def cast(self, Q: np.ndarray, last_geom_only: bool = False):
         """(distance (K,) [m], -1: no hit; geom ids (K,) of the twin model, -1: none) for
         the twin's qpos rows ``Q`` (K, nq); with ``last_geom_only`` the geom id of the
-        last row only (an int)."""
+        last row only (an int) and the distances as a view of the caster's buffer."""
         k = len(Q)
         if k > self._cap:
             self._grow(k)
@@ -148,8 +149,8 @@ class BeamCaster:
         else:
             dist, geomid = self._batch.ray(self._pnt[:k], self._vec[:k], self.mask, True,
                                            -1, ids=self._ids[:k])
-        if last_geom_only:
-            return dist[:, 0].copy(), int(self._geom_map[geomid[-1, 0]])
+        if last_geom_only:  # distances: a view of the buffer, valid until the next cast
+            return dist[:, 0], int(self._geom_map[geomid[-1, 0]])
         return dist[:, 0].copy(), self._geom_map[geomid[:, 0]]
 
     @classmethod

@@ -270,10 +270,10 @@ class Twin:
             at_rest = (Pv[1:] == Cv[1:]) & (Cv[1:] == Cv[:-1])
             settle = None  # ticks at which the robot comes to rest (new perturbation)
             if errors.sigma > 0:
-                was = np.empty(n + 1, bool)
-                was[0] = self._at_rest
-                was[1:] = at_rest
-                settle = at_rest & ~was[:-1]
+                settle = at_rest.copy()
+                settle[1:] &= ~at_rest[:-1]
+                if self._at_rest:
+                    settle[0] = False
             beam = self._beam_caster() if self.batch_rays else None
             if beam is not None:
                 dists = self._dists_batch(beam, cur, changed, settle)
@@ -327,7 +327,7 @@ class Twin:
         return True
 
     def _dists_batch(self, beam, cur, changed, settle) -> np.ndarray:
-        """True distance per tick (NaN: no hit), the batch way: the beams of every tick
+        """True distance per tick (NaN or -1: no hit), the batch way: the beams of every tick
         whose state changed (counts moved, a settle, or stale kinematics at tick 0) in
         one MuJoCo call (``BeamCaster``); the other ticks repeat the last value. Draws the
         settle perturbations in tick order, like the loop."""
@@ -340,7 +340,8 @@ class Twin:
         prev = np.nan if self._dist is None else self._dist
         if not k:
             return np.full(n, prev)
-        Q = np.subtract(cur if k == n else cur[idx], self._qe0_arr, dtype=float).dot(self._M_T)
+        head = idx[-1] == k - 1  # the usual: ticks 0..k-1 move, then holds
+        Q = np.subtract(cur[:k] if head else cur[idx], self._qe0_arr, dtype=float).dot(self._M_T)
         Q += self._delta_true_arr
         if errors.sigma > 0:
             at = settle.nonzero()[0]
@@ -357,10 +358,11 @@ class Twin:
         self._dist, self._geom = (None, -1) if last < 0 else (last, geom)
         self._dirty = False
         self._stale_q = Q[-1]  # MjData follows lazily (``data``, ``qpos``, poses)
-        dist[dist < 0] = np.nan
+        # dist: the caster's buffer (valid until its next cast), -1 for no hit, which
+        # LaserModel.readings takes like NaN
         if k == n:
             return dist
-        if idx[-1] == k - 1:  # the usual: moves, then holds
+        if head:
             out = np.empty(n)
             out[:k] = dist
             out[k:] = dist[-1]

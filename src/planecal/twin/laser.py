@@ -63,11 +63,12 @@ class LaserModel:
         return out
 
     def readings(self, distance_m: np.ndarray) -> np.ndarray:
-        """Readings [mm] for true distances [m] (NaN: no hit), NaN where ``reading``
-        gives None. Same values and noise stream as one ``reading`` call per element."""
+        """Readings [mm] for true distances [m] (NaN or < 0, as mj_ray's -1: no hit),
+        NaN where ``reading`` gives None. Same values and noise stream as one
+        ``reading`` call per element."""
         mm = np.multiply(distance_m, 1000.0)
         if self.noise_mm > 0.0:
-            hit = mm == mm  # not NaN
+            hit = mm >= 0.0  # False for NaN and misses
             k = int(np.count_nonzero(hit))
             if k == len(mm):
                 mm += self._take_noise(k)
@@ -75,7 +76,10 @@ class LaserModel:
                 mm[hit] += self._take_noise(k)
         if self.quantum_mm:
             mm = np.round(mm / self.quantum_mm) * self.quantum_mm
-        mm[(mm < self.lo) | (mm > self.hi)] = np.nan  # NaN compares False: stays NaN
+        if self.lo >= 0.0:  # misses (< 0) are below the window; NaN compares False
+            mm[(mm < self.lo) | (mm > self.hi)] = np.nan
+        else:
+            mm[~(np.asarray(distance_m) >= 0.0) | (mm < self.lo) | (mm > self.hi)] = np.nan
         return mm
 
     def reading(self, distance_m: float | None) -> float | None:
