@@ -82,11 +82,14 @@ def test_batch_path_equals_per_tick_mujoco(name):
     assert a.ticks == b.ticks and a.read() == pytest.approx(b.read(), abs=1e-9)
 
 
-def test_batch_path_exact_twin_out_of_window():
-    # noise and repeatability off: the batch readings are MuJoCo's distances; a ramp
-    # along the beam leaves the 65-95 mm window on both sides
-    a = Twin("thesis_final", seed=2, options=TwinOptions.exact(servo="lag"))
-    b = Twin("thesis_final", seed=2, options=TwinOptions.exact(servo="lag"))
+@pytest.mark.parametrize("opts", [dict(servo="lag"), dict(servo="ideal"),
+                                  dict(servo="ideal", laser_noise_mm=0.002,
+                                       laser_quantum_mm=0.001, check_steps=False)])
+def test_batch_path_exact_twin_out_of_window(opts):
+    # noise and repeatability off (or noise with quantisation): a ramp along the beam
+    # leaves the 65-95 mm window on both sides
+    a = Twin("thesis_final", seed=2, options=TwinOptions.exact(**opts))
+    b = Twin("thesis_final", seed=2, options=TwinOptions.exact(**opts))
     b.batch_rays = False
     base = a.current_counts - a.reference_counts
     step = np.array([0, 6, -9, 0, 3, 0], np.int64)

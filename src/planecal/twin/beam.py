@@ -12,12 +12,14 @@ chain inverted,
 (``P_b`` the twin model's body/site poses, ``R_j`` its hinges), so the beam is the fixed
 ray ``(0, 0, 0) + x (0, 0, 1)`` in every simulation and one ``Batch.ray`` call gives the
 beams of all K ticks (state ``qpos = -q``, joints in reverse): kinematics and ray cast by
-MuJoCo, ~0.5 us per tick against ~3-4 us for ``mj_kinematics`` + ``mj_ray`` per tick
-through the Python bindings. Only the geoms the twin's ray sees are in it (the static
-cell: world-body geoms in the mask's groups; the robot's and tool's geoms are masked or
-excluded), with their geom ids mapped back. Distances agree with the per-tick path to
-~1e-15 m (the intersection is computed in the site frame instead of the world frame);
-tests/test_twin.py checks the readings to 1e-9 mm on all scenes.
+MuJoCo, ~0.6-0.8 us per tick plus ~6 us per call, against ~3-4 us per tick for
+``mj_kinematics`` + ``mj_ray`` through the Python bindings. Only the geoms the twin's ray
+sees are in it (the static cell: world-body geoms in the mask's groups; the robot's
+link geoms are in no group the mask keeps, the tool's are excluded), with their geom ids
+mapped back. Distances agree with the per-tick path to ~1e-15 m (the intersection is
+computed in the site frame instead of the world frame); tests/test_twin_batch.py checks
+the readings to 1e-9 mm on all scenes. The caster is built from the twin's model at the
+first ``run`` (``Twin.prepare_run``): later edits of ``twin.model`` are not seen.
 
 ``BeamCaster.build`` returns None when the model is outside what this covers (no
 ``mujoco.batch``, i.e. MuJoCo < 4; joints that aren't hinges at the body origin on the
