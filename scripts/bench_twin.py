@@ -14,10 +14,10 @@ Each through the per-tick API (``exchange`` + ``read``, what the sampling loop c
 and through the batch API (``Twin.run``), timed in wall seconds and in this process's
 CPU seconds (on a shared machine the two differ). ``Twin.run`` twice, side by side:
 ``batch-mj`` with ``Twin.batch_rays = False`` (one ``mj_kinematics`` + ``mj_ray`` per
-moving tick through the Python bindings, the path before the batch caster) and
-``batch`` (the default: all moving ticks of a call in one MuJoCo call, ``twin.beam``).
-Twins are built before the clock starts, the batch caster included
-(``Twin.prepare_run``, ~10 ms once per twin, printed). ``--repeat N`` runs every
+moving tick through the Python bindings, the reference path; the rest of ``run`` is
+shared) and ``batch`` (the default: all moving ticks of a call in one MuJoCo call,
+``twin.beam``). Twins are built before the clock starts, the batch caster included
+(``Twin.prepare_run``, a few ms once per twin, printed). ``--repeat N`` runs every
 measurement N times, alternating, and keeps the best (default 1). The last line,
 ``twin_realtime_factor: X``, is the sampling workload through ``Twin.run`` (``batch``),
 wall clock.

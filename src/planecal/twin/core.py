@@ -21,7 +21,7 @@ changed since the last reading: a robot at rest costs a laser-noise draw per rea
 results: the counts -> joints, servo, trip and rest logic vectorised, and the beams of
 all its moving ticks cast in one MuJoCo call (``beam``: MuJoCo kinematics + ``mj_ray``
 per tick in C, ~0.8 us). See scripts/bench_twin.py for the throughput; what bounds it
-is ~40 numpy calls per ``run`` call (~100 us) plus ~0.8 us per moving tick.
+is ~50 numpy calls per ``run`` call (~100-130 us) plus ~0.8 us per moving tick.
 """
 from __future__ import annotations
 
