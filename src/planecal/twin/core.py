@@ -346,7 +346,8 @@ class Twin:
         if errors.sigma > 0:
             at = settle.nonzero()[0]
             if at.size:  # each perturbation from its settle tick on (few per run)
-                cuts = [0, *np.searchsorted(idx, at).tolist(), k]
+                pos = at if head else np.searchsorted(idx, at)  # settle ticks recompute
+                cuts = [0, *pos.tolist(), k]
                 for i in range(len(cuts) - 1):
                     if i:
                         errors.on_settle()
