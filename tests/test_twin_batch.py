@@ -168,3 +168,18 @@ def test_batch_runs_of_any_size_mixed_with_single_ticks():
             b.set_counts(c)
     assert a.ticks == b.ticks == len(D) and isinstance(a._beam, BeamCaster)
     assert a.hit().geom == b.hit().geom
+
+
+def test_beam_caster_long_runs_in_chunks(monkeypatch):
+    import planecal.twin.beam as beam_mod
+    twin = Twin("thesis_final", seed=1)
+    beam = BeamCaster(twin.model, twin.laser_site, twin._ray.mask, twin.tool_body)
+    rng = np.random.default_rng(2)
+    Q = np.array(twin.qpos) + rng.normal(0, 0.02, (50, 6))
+    want = beam.cast(Q)
+    monkeypatch.setattr(beam_mod, "MAX_CHUNK", 16)
+    got = beam.cast(Q)
+    assert np.array_equal(want[0], got[0]) and np.array_equal(want[1], got[1])
+    d, g = beam.cast(Q, last_geom_only=True)
+    assert np.array_equal(d, want[0]) and g == want[1][-1]
+    assert (want[0] > 0).any()

@@ -36,6 +36,9 @@ _PRIMITIVES = {int(mujoco.mjtGeom.mjGEOM_PLANE), int(mujoco.mjtGeom.mjGEOM_SPHER
                int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_BOX)}
 
 
+MAX_CHUNK = 4096  # simulations per Batch.ray call (buffers grow up to this)
+
+
 def _inverse(pos, quat):
     p, q = np.zeros(3), np.zeros(4)
     mujoco.mju_negPose(p, q, np.asarray(pos, float), np.asarray(quat, float))
@@ -118,7 +121,7 @@ class BeamCaster:
         self._grow(capacity)
 
     def _grow(self, k: int) -> None:
-        cap = max(k, 2 * self._cap)
+        cap = min(max(k, 2 * self._cap), MAX_CHUNK)
         self._batch = self._Batch(self.model, cap, 1)
         self._qpos = self._batch.bind("qpos")
         self._ids = np.arange(cap, dtype=np.int32)
@@ -136,6 +139,11 @@ class BeamCaster:
         the twin's qpos rows ``Q`` (K, nq); with ``last_geom_only`` the geom id of the
         last row only (an int) and the distances as a view of the caster's buffer."""
         k = len(Q)
+        if k > MAX_CHUNK:  # bounded buffers: a long run in chunks
+            parts = [self.cast(Q[i:i + MAX_CHUNK]) for i in range(0, k, MAX_CHUNK)]
+            dist = np.concatenate([p[0] for p in parts])
+            geom = np.concatenate([p[1] for p in parts])
+            return (dist, int(geom[-1])) if last_geom_only else (dist, geom)
         if k > self._cap:
             self._grow(k)
         # reversed joints, negated angles (exact): R_j(-q_j)
@@ -147,7 +155,8 @@ class BeamCaster:
             fail = self._raw(self._ids[:k], self._pnt[:k], self._vec[:k], self.mask, True,
                              self._exclude[:k], dist, geomid, None)
             if fail:
-                raise RuntimeError(f"twin: beam ray failed: {self._batch.error(0)}")
+                bad = int(np.flatnonzero(self._batch.status[:k])[0])
+                raise RuntimeError(f"twin: beam ray failed ({bad}): {self._batch.error(bad)}")
         else:
             dist, geomid = self._batch.ray(self._pnt[:k], self._vec[:k], self.mask, True,
                                            -1, ids=self._ids[:k])
