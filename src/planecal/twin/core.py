@@ -298,7 +298,7 @@ class Twin:
         return self._reference_arr.copy(), cur, readings
 
     def prepare_run(self) -> bool:
-        """Build ``run``'s batch caster now (~10 ms, else at the first ``run``); True if
+        """Build ``run``'s batch caster now (a few ms, else at the first ``run``); True if
         ``run`` will use it."""
         return self._beam_caster() is not None
 
