@@ -4,9 +4,11 @@ terminal report saved as OUT/<name>.txt and its JSON as OUT/<name>.json.
 
     python scripts/study_figures.py [--out study_out] [--jobs N] [--only NAME[,NAME]]
 
-Names: montecarlo, slope, three_plates, synthetic_quant, plan, validate,
-validate_offsets_all, bootstrap, replay. Takes roughly an hour of CPU (the Monte Carlo
-runs dominate: ~40 ms of collision-checked planning per sample).
+Names: montecarlo, montecarlo_seed5000, three_plates, slope, synthetic, synthetic_white,
+synthetic_quant, plan, validate, validate_offsets_all, bootstrap, replay. The validation
+over seeds 0-8 in docs/STUDIES.md is ``planecal validate --seed K`` (and ``--poses
+OUT/plan.json``) per seed. Takes 20-60 min on 2 cores (the twin Monte Carlo runs dominate:
+~20 ms of collision-checked planning per sample).
 """
 from __future__ import annotations
 
@@ -26,13 +28,20 @@ def studies(out: str, jobs: str) -> dict:
     pool = os.path.join(out, "pool.tsv")
     return {
         "montecarlo": ["montecarlo", "--runs", "200", "--samples", "150", *j, *o("montecarlo")],
-        "three_plates": ["montecarlo", "--scene", "three_plates", "--runs", "100",
+        "montecarlo_seed5000": ["montecarlo", "--runs", "100", "--samples", "150", "--seed",
+                                "5000", *j, *o("montecarlo_seed5000")],
+        "three_plates": ["montecarlo", "--scene", "three_plates", "--runs", "80",
                          "--samples", "150", *j, *o("three_plates")],
-        "slope": ["montecarlo", "--runs", "60", "--samples", "50", "--slope", "50,100,200",
-                  "--slope-runs", "60", *j, *o("slope")],
+        "slope": ["montecarlo", "--runs", "30", "--samples", "50", "--slope", "50,100,200",
+                  "--slope-runs", "30", *j, *o("slope")],
+        "synthetic": ["montecarlo", "--mode", "synthetic", "--runs", "200", "--samples", "150",
+                      *j, *o("synthetic")],
+        "synthetic_white": ["montecarlo", "--mode", "synthetic", "--runs", "200", "--samples",
+                            "150", "--repeatability-mm", "0", "--laser-noise-mm", "0.132", *j,
+                            *o("synthetic_white")],
         "synthetic_quant": ["montecarlo", "--mode", "synthetic", "--quantization", "--runs", "100",
                             "--samples", "150", *j, *o("synthetic_quant")],
-        "plan": ["plan", "--samples", "150", "--candidates", "1500", "--measure", "100", *j,
+        "plan": ["plan", "--samples", "150", "--candidates", "1500", "--measure", "40", *j,
                  *o("plan")],
         "validate": ["validate", *o("validate")],
         "validate_offsets_all": ["validate", "--offsets-all", "--tcp-mm", "0,100,150",
