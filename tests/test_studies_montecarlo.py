@@ -64,3 +64,21 @@ def test_twin_monte_carlo_small(capsys, tmp_path):
         assert 0.7 < p["reported_std"] / p["crb_std"] < 1.4
     assert main(["montecarlo", "--runs", "1"]) == 2
     assert main(["montecarlo", "--mode", "twin", "--quantization"]) == 2
+
+
+def test_three_planes_do_not_free_delta1_delta6():
+    st = MCSettings(scene="three_plates", mode="synthetic", samples=60, runs=2, seed=3)
+    runs = run_many(st, jobs=1, quiet=True)
+    res = analyze(runs, st)
+    bad = res["not_identifiable_all_free"]
+    assert "delta1" in bad and "delta6" in bad
+    # everything fitted by default is identifiable, one n~ per plate
+    assert len(res["free"]) == 4 + 5 + 9 and not any(r["not_identifiable"] for r in runs)
+
+
+def test_plots_go_to_a_rerun_recording(tmp_path, capsys):
+    from planecal.rerun_log import is_recording
+    rrd = tmp_path / "m.rrd"
+    assert main(["montecarlo", "--mode", "synthetic", "--runs", "3", "--samples", "30",
+                 "--jobs", "1", "--slope", "30,40", "--slope-runs", "2", "--rrd", str(rrd)]) == 0
+    assert is_recording(rrd)
