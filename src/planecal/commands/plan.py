@@ -40,6 +40,10 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     if args.measure and args.measure < 2:
         raise InputError(f"--measure needs at least 2 runs, got {args.measure}")
+    if args.samples < 13:
+        raise InputError(f"--samples must be at least 13, got {args.samples}")
+    if args.candidates < args.samples:
+        raise InputError(f"--candidates ({args.candidates}) must be at least --samples ({args.samples})")
     jobs = check_jobs(args.jobs)
     free = None if not args.free else tuple(s.strip() for s in args.free.split(",") if s.strip())
     print(f"drawing {args.candidates} candidate poses and choosing {args.samples}...",
@@ -68,7 +72,7 @@ def run(args) -> int:
           f"in {res['exchange_passes']} passes")
     print(table(heads, rows))
     if args.measure:
-        print(f"measured: {args.measure} twin runs each (std of the estimates about the truth)")
+        print(f"measured: {args.measure} twin runs each (std of the estimates over the runs)")
     save_json(args.out, res)
     print(f"pose list written to {args.out}")
     return 0
