@@ -3,10 +3,10 @@
 
 D-optimal sample poses: N of M collision-free candidates (the sampling run's pose
 distribution) maximising det(J^T J) at the nominal parameters (greedy + Fedorov exchange),
-ordered into a collision-checked tour. Prints the offsets' predicted std (twin noise
-model) for the planned set and for a random set of the same size; with --measure R also
-the measured spread on the twin over R runs each (planned poses replayed with fresh
-noise vs fresh random rehearsals, same truth). POSES.json holds the counts and plates
+ordered into a collision-checked tour. Prints the predicted std (twin noise model) for the
+planned set and for the poses the sampling run itself would visit with the same seed
+("random"); with --measure R also the measured spread on the twin over R runs each
+(planned poses replayed with fresh noise vs fresh random rehearsals, same truth). POSES.json holds the counts and plates
 (format planecal-poses/1); planecal.studies.planning.rehearse_planned runs them through
 the sampling loop.
 """
@@ -79,8 +79,6 @@ def run(args) -> int:
 
 
 def measure(scene, res: dict, runs: int, jobs: int) -> dict:
-    import numpy as np
-
     from planecal.studies.montecarlo import MCSettings, analyze, run_many
     free = tuple(res["free"])
     base = MCSettings(scene=str(scene.path), samples=res["samples"], runs=runs, free=free)
@@ -94,5 +92,4 @@ def measure(scene, res: dict, runs: int, jobs: int) -> dict:
         out[name + "_crb"] = {n: a["params"][n]["crb_std"] for n in a["params"]}
         out[name + "_bias"] = {n: a["params"][n]["bias"] for n in a["params"]}
         out[name + "_samples_per_run"] = a["samples_per_run"]
-    _ = np
     return out

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.cell import CellParams, beam_direction, sensor_in_base, sensor_rotation
+from planecal.cell import CellParams, sensor_in_base, sensor_rotation
 from planecal.encoder import counts_to_joints, joints_to_counts
 from planecal.errors import InputError
 from planecal.robot import fk, ik_nearest
