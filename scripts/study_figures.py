@@ -4,7 +4,7 @@ terminal report saved as OUT/<name>.txt and its JSON as OUT/<name>.json.
 
     python scripts/study_figures.py [--out study_out] [--jobs N] [--only NAME[,NAME]]
 
-Names: montecarlo, montecarlo_seed5000, three_plates, slope, synthetic, synthetic_white,
+Names: montecarlo, montecarlo_seed1000, montecarlo_seed5000, three_plates, slope, synthetic, synthetic_white,
 synthetic_quant, plan, validate, validate_offsets_all, bootstrap, replay. The validation
 over seeds 0-8 in docs/STUDIES.md is ``planecal validate --seed K`` (and ``--poses
 OUT/plan.json``) per seed. Takes 20-60 min on 2 cores (the twin Monte Carlo runs dominate:
@@ -27,7 +27,10 @@ def studies(out: str, jobs: str) -> dict:
     o = lambda n: ["--out", os.path.join(out, n + ".json")]  # noqa: E731
     pool = os.path.join(out, "pool.tsv")
     return {
-        "montecarlo": ["montecarlo", "--runs", "200", "--samples", "150", *j, *o("montecarlo")],
+        "montecarlo": ["montecarlo", "--runs", "600", "--samples", "150", "--seed", "10000", *j,
+                       "--rrd", os.path.join(out, "montecarlo.rrd"), *o("montecarlo")],
+        "montecarlo_seed1000": ["montecarlo", "--runs", "200", "--samples", "150", *j,
+                                *o("montecarlo_seed1000")],
         "montecarlo_seed5000": ["montecarlo", "--runs", "100", "--samples", "150", "--seed",
                                 "5000", *j, *o("montecarlo_seed5000")],
         "three_plates": ["montecarlo", "--scene", "three_plates", "--runs", "80",
