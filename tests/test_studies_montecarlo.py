@@ -1,7 +1,6 @@
 """Monte Carlo study: the twin mode reproduces a rehearsal sample for sample; on small
 instances the spread agrees with the Cramer-Rao bound and the chi-square check holds."""
 import numpy as np
-import pytest
 
 from planecal.cli import main
 from planecal.studies.common import covariances

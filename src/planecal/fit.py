@@ -35,6 +35,25 @@ def default_free(n_planes: int) -> np.ndarray:
     return free
 
 
+def free_from_names(spec, n_planes: int) -> np.ndarray:
+    """Free-parameter mask from names (a comma-separated string or a list; "all" frees
+    everything); None gives ``default_free``."""
+    from planecal.errors import InputError
+    if not spec:
+        return default_free(n_planes)
+    names = parameter_names(n_planes)
+    wanted = [w.strip() for w in (spec.split(",") if isinstance(spec, str) else spec)]
+    mask = np.zeros(len(names), bool)
+    for name in filter(None, wanted):
+        if name == "all":
+            mask[:] = True
+        elif name in names:
+            mask[names.index(name)] = True
+        else:
+            raise InputError(f"--free: unknown parameter {name!r}; known: {', '.join(names)}")
+    return mask
+
+
 @dataclass
 class FitOptions:
     max_iter: int = 30

@@ -30,11 +30,9 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.commands.calibrate import free_mask
+    from planecal.commands.calibrate import free_mask, load_problem
     from planecal.fit import FitOptions
-    from planecal.params import load_params, save_json
-    from planecal.samples import read_many
-    from planecal.scene import load_scene, nominal_params
+    from planecal.params import save_json
     from planecal.studies.bootstrap import BootstrapSettings, bootstrap, format_bootstrap
     from planecal.studies.common import check_jobs, parse_int_list
 
@@ -43,12 +41,7 @@ def run(args) -> int:
         raise InputError(f"--seed must be >= 0, got {args.seed}")
     if args.max_iter < 1:
         raise InputError("--max-iter must be at least 1")
-    samples = read_many(args.samples)
-    scene = load_scene(args.scene)
-    initial = load_params(args.initial) if args.initial else nominal_params(scene)
-    if samples.plate.max() >= initial.n_planes:
-        raise InputError(f"samples refer to plate {samples.plate.max() + 1} but the initial "
-                         f"parameters hold {initial.n_planes} plane(s)")
+    samples, scene, initial = load_problem(args)
     opts = FitOptions(max_iter=args.max_iter, free=free_mask(args.free, initial.n_planes))
     res = bootstrap(scene.robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate,
                     BootstrapSettings(tuple(sizes), args.repeats, args.seed), opts,

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.cell import parameter_names, parameter_units
+from planecal.cell import parameter_units
 from planecal.errors import InputError
-from planecal.fit import FitOptions, FitResult, calibrate, default_free
+from planecal.fit import FitOptions, FitResult, calibrate, free_from_names
 from planecal.params import load_params, params_to_dict, save_json
 from planecal.samples import read_many
 from planecal.scene import DEFAULT_SCENE, load_scene, nominal_params
@@ -38,18 +38,7 @@ def add_arguments(p):
 
 
 def free_mask(spec: str | None, n_planes: int) -> np.ndarray:
-    if not spec:
-        return default_free(n_planes)
-    names = parameter_names(n_planes)
-    mask = np.zeros(len(names), bool)
-    for name in (s.strip() for s in spec.split(",") if s.strip()):
-        if name == "all":
-            mask[:] = True
-        elif name in names:
-            mask[names.index(name)] = True
-        else:
-            raise InputError(f"--free: unknown parameter {name!r}; known: {', '.join(names)}")
-    return mask
+    return free_from_names(spec, n_planes)
 
 
 def result_dict(res: FitResult) -> dict:
@@ -119,13 +108,19 @@ def format_report(res: FitResult, n_zero: int = 0) -> str:
     return "\n".join(lines)
 
 
-def run(args) -> int:
+def load_problem(args):
+    """(samples, scene, initial parameters) from SAMPLES..., --scene and --initial."""
     samples = read_many(args.samples)
     scene = load_scene(args.scene)
     initial = load_params(args.initial) if args.initial else nominal_params(scene)
     if samples.plate.max() >= initial.n_planes:
         raise InputError(f"samples refer to plate {samples.plate.max() + 1} but the initial "
                          f"parameters hold {initial.n_planes} plane(s)")
+    return samples, scene, initial
+
+
+def run(args) -> int:
+    samples, scene, initial = load_problem(args)
     if args.max_iter < 1:
         raise InputError("--max-iter must be at least 1")
     opts = FitOptions(max_iter=args.max_iter, improvement_limit=args.improvement_limit,

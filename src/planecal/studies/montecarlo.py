@@ -103,19 +103,8 @@ def _world(name, clearance):
 
 
 def free_mask(names: list[str], free) -> np.ndarray:
-    from planecal.fit import default_free
-    n_planes = (len(names) - 11) // 3
-    if free is None:
-        return default_free(n_planes)
-    mask = np.zeros(len(names), bool)
-    for f in free:
-        if f == "all":
-            mask[:] = True
-        elif f in names:
-            mask[names.index(f)] = True
-        else:
-            raise InputError(f"--free: unknown parameter {f!r}; known: {', '.join(names)}")
-    return mask
+    from planecal.fit import free_from_names
+    return free_from_names(free, (len(names) - 11) // 3)
 
 
 def truth_for(st: MCSettings, k: int):
@@ -132,11 +121,9 @@ def joint_sigma(robot, st: MCSettings) -> float:
 
 # ----- sampling -----------------------------------------------------------------------------
 
-def twin_samples(scene, truth, st: MCSettings, seed: int):
-    """The ``twin`` mode (module docstring): (qe, d_m, plate, rejected dict)."""
-    from planecal.encoder import counts_to_joints
-    from planecal.sampling.laserread import LaserSettings, read_stable
-    from planecal.sampling.run import Planner, RunSettings
+def _twin_and_settings(scene, truth, st: MCSettings, seed: int):
+    """The run's twin (its noise options from the settings) and its sampling settings."""
+    from planecal.sampling.run import RunSettings
     from planecal.twin import Twin, TwinOptions
 
     twin = Twin(scene, truth=truth, seed=seed,
@@ -145,6 +132,16 @@ def twin_samples(scene, truth, st: MCSettings, seed: int):
     rs = RunSettings(scene=str(scene.path), samples=st.samples, seed=seed,
                      clearance_m=st.clearance_m)
     rs.pose.cone_deg, rs.pose.distance_mm = scene.cone_deg, tuple(scene.distance_mm)
+    return twin, rs
+
+
+def twin_samples(scene, truth, st: MCSettings, seed: int):
+    """The ``twin`` mode (module docstring): (qe, d_m, plate, rejected dict)."""
+    from planecal.encoder import counts_to_joints
+    from planecal.sampling.laserread import LaserSettings, read_stable
+    from planecal.sampling.run import Planner
+
+    twin, rs = _twin_and_settings(scene, truth, st, seed)
     planner = Planner(scene, rs, _world(st.scene, st.clearance_m))
     rng_state = np.random.default_rng(seed).bit_generator.state
     q0 = counts_to_joints(scene.robot, twin.current_counts)
@@ -200,15 +197,9 @@ def rehearse_samples(scene, truth, st: MCSettings, seed: int):
     """The full sampling run, tick by tick (``planecal rehearse`` without the CLI)."""
     from planecal.links.base import AlwaysEnabled
     from planecal.samples import read_samples
-    from planecal.sampling.run import Driver, RunSettings, SamplingRun
-    from planecal.twin import Twin, TwinOptions
+    from planecal.sampling.run import Driver, SamplingRun
 
-    twin = Twin(scene, truth=truth, seed=seed,
-                options=TwinOptions(laser_noise_mm=st.laser_noise_mm,
-                                    repeatability_mm=st.repeatability_mm))
-    rs = RunSettings(scene=str(scene.path), samples=st.samples, seed=seed,
-                     clearance_m=st.clearance_m)
-    rs.pose.cone_deg, rs.pose.distance_mm = scene.cone_deg, tuple(scene.distance_mm)
+    twin, rs = _twin_and_settings(scene, truth, st, seed)
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "run.tsv")
         drv = Driver(twin, AlwaysEnabled(), scene.robot)
