@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -75,11 +76,17 @@ def load_params(path: str | Path) -> CellParams:
     return params_from_dict(load_json(path), str(path))
 
 
-def save_json(path: str | Path, data: dict) -> None:
+def save_json(path: str | Path, data: dict, fsync: bool = False) -> None:
+    """Write JSON to a temp file and rename it over ``path``: a reader (or a resumed run)
+    sees the old or the new file, never a torn one."""
     path = Path(path)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=_jsonable) + "\n")
-    tmp.replace(path)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(json.dumps(data, indent=2, default=_jsonable) + "\n")
+        if fsync:
+            f.flush()
+            os.fsync(f.fileno())
+    os.replace(tmp, path)
 
 
 def save_params(path: str | Path, p: CellParams) -> None:

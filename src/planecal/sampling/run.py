@@ -65,6 +65,7 @@ import numpy as np
 
 from planecal.encoder import counts_to_joints, joints_to_counts
 from planecal.errors import InputError
+from planecal.params import save_json
 from planecal.robot import within_limits
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
@@ -299,19 +300,6 @@ class RunSettings:
 def sidecar_path(out: str | Path) -> Path:
     out = Path(out)
     return out.with_name(out.name + ".json")
-
-
-def write_json_atomic(path: Path, data: dict, fsync: bool = False) -> None:
-    """Write to a temp file and rename it over ``path``: a reader (or a resumed run) sees
-    the old or the new sidecar, never a torn one. The sample file is fsynced per line;
-    the sidecar needs no fsync, since resume recounts the samples from the file."""
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(json.dumps(data, indent=2) + "\n")
-        if fsync:
-            f.flush()
-            os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 class RunLock:
@@ -622,7 +610,8 @@ class SamplingRun:
         return side
 
     def _save(self) -> None:
-        write_json_atomic(sidecar_path(self.out), self.sidecar())
+        # no fsync: resume recounts the samples from the (fsynced) sample file
+        save_json(sidecar_path(self.out), self.sidecar())
 
     def _account(self) -> None:
         st, drv = self.stats, self.driver
