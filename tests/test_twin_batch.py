@@ -8,7 +8,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from planecal.twin import Twin, TwinOptions  # noqa: E402
+from planecal.twin import EncoderJumpError, Twin, TwinOptions  # noqa: E402
 from planecal.twin.beam import BeamCaster  # noqa: E402
 
 SCENES = ["thesis_final", "appendix_d", "three_plates"]
@@ -183,3 +183,75 @@ def test_beam_caster_long_runs_in_chunks(monkeypatch):
     d, g = beam.cast(Q, last_geom_only=True)
     assert np.array_equal(d, want[0]) and g == want[1][-1]
     assert (want[0] > 0).any()
+
+
+@pytest.mark.parametrize("name,opts", [
+    ("thesis_final", {}), ("three_plates", {}), ("appendix_d", {}),
+    ("thesis_final", dict(servo="ideal")), ("three_plates", dict(laser_noise_mm=0.0)),
+    ("thesis_final", dict(laser_quantum_mm=0.001)), ("three_plates", dict(repeatability_mm=0.0)),
+    ("thesis_final", dict(laser_noise_mm=0.05, servo="ideal", repeatability_mm=0.3))])
+def test_run_fast_path_equals_reference_bit_for_bit(name, opts):
+    # Twin.run's batch path (``_run_batch``: fewer numpy calls, laser window shortcuts,
+    # perturbations drawn in blocks) against ``_run_ref`` (the general path with the same
+    # caster) over random segments of random sizes: ramps, holds, single ticks, misses,
+    # set_counts, exchange/read in between, and a trip at the end; identical results
+    a = Twin(name, seed=6, options=TwinOptions(**opts))
+    b = Twin(name, seed=6, options=TwinOptions(**opts))
+    b.run = b._run_ref
+    rng = np.random.default_rng(len(name) + len(opts))
+    D = np.vstack(segments(a, rng, 8))
+    D = np.vstack([D, np.repeat(D[-1:], 40, axis=0)])  # a long hold at the end
+    i = calls = 0
+    while i < len(D):
+        size = int(rng.choice([1, 2, 3, int(rng.integers(4, 60)), int(rng.integers(60, 200))]))
+        rows = D[i:i + size]
+        i += len(rows)
+        calls += 1
+        if calls % 11 == 0:  # one tick through exchange/read on both
+            for d in rows[:1]:
+                assert np.array_equal(a.exchange(d)[1], b.exchange(d)[1])
+                assert a.read() == b.read()
+            rows = rows[1:]
+        ra, ca, ma = a.run(rows)
+        rb, cb, mb = b.run(rows)
+        assert np.array_equal(ra, rb) and np.array_equal(ca, cb) and ca.dtype == cb.dtype
+        assert ma.dtype == mb.dtype and np.array_equal(ma, mb, equal_nan=True)
+        assert a._at_rest == b._at_rest and a._dist == b._dist and a._geom == b._geom
+        assert np.array_equal(a._errors.eps, b._errors.eps)
+        if calls % 17 == 0:  # jump onto the command, at rest (both)
+            c = a.commanded_counts
+            a.set_counts(c)
+            b.set_counts(c)
+    assert a.ticks == b.ticks == len(D) and isinstance(a._beam, BeamCaster)
+    assert np.array_equal(a.qpos, b.qpos) and a.hit() == b.hit()
+    jump = np.repeat(D[-1:], 6, axis=0)
+    jump[4:] += 100
+    with pytest.raises(EncoderJumpError) as ea:
+        a.run(jump)
+    with pytest.raises(EncoderJumpError) as eb:
+        b.run(jump)
+    assert str(ea.value) == str(eb.value) and a.ticks == b.ticks
+    assert a.read() == b.read()
+
+
+def test_run_fast_path_window_cases():
+    # the laser's shortcuts (all readings in the window, all out, per reading) on a
+    # ramp that walks the beam through the window and back, split into calls of all sizes
+    for noise in (0.001, 0.0, 3.0):
+        opts = TwinOptions(laser_noise_mm=noise)
+        a, b = Twin("thesis_final", seed=2, options=opts), Twin("thesis_final", seed=2, options=opts)
+        b.run = b._run_ref
+        base = a.current_counts - a.reference_counts
+        step = np.array([0, 6, -9, 0, 3, 0], np.int64)
+        D = base + np.cumsum(np.vstack([np.tile(step, (300, 1)), np.zeros((50, 6), np.int64),
+                                        np.tile(-step, (600, 1))]), axis=0)
+        rng = np.random.default_rng(3)
+        i, seen = 0, set()
+        while i < len(D):
+            rows = D[i:i + int(rng.integers(1, 80))]
+            i += len(rows)
+            _, ca, ma = a.run(rows)
+            _, cb, mb = b.run(rows)
+            assert np.array_equal(ca, cb) and np.array_equal(ma, mb, equal_nan=True)
+            seen.add((bool(np.isnan(ma).all()), bool(np.isnan(ma).any())))
+        assert seen >= {(True, True), (False, False), (False, True)}

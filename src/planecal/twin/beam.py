@@ -133,6 +133,7 @@ class BeamCaster:
         self._geomid = np.zeros((cap, 1), np.int32)
         self._raw = getattr(getattr(self._batch, "_b", None), "ray", None)
         self._cap = cap
+        self._kviews = {}  # k -> the buffers' first k rows (``cast_last``)
 
     def cast(self, Q: np.ndarray, last_geom_only: bool = False):
         """(distance (K,) [m], -1: no hit; geom ids (K,) of the twin model, -1: none) for
@@ -163,6 +164,24 @@ class BeamCaster:
         if last_geom_only:  # distances: a view of the buffer, valid until the next cast
             return dist[:, 0], int(self._geom_map[geomid[-1, 0]])
         return dist[:, 0].copy(), self._geom_map[geomid[:, 0]]
+
+    def cast_last(self, Q: np.ndarray):
+        """``cast(Q, last_geom_only=True)`` with the buffers' views cached per row count
+        (``Twin.run``'s per-call path; ~1-2 us less)."""
+        k, raw = len(Q), self._raw
+        v = self._kviews.get(k)
+        if v is None or raw is None:
+            if raw is None or k > self._cap:
+                return self.cast(Q, last_geom_only=True)
+            v = self._kviews[k] = (self._qpos[:k], self._ids[:k], self._pnt[:k],
+                                   self._vec[:k], self._exclude[:k], self._dist[:k],
+                                   self._geomid[:k], self._dist[:k, 0])
+        qpos, ids, pnt, vec, exclude, dist, geomid, out = v
+        np.negative(Q[:, self._order], out=qpos)
+        if raw(ids, pnt, vec, self.mask, True, exclude, dist, geomid, None):
+            bad = int(np.flatnonzero(self._batch.status[:k])[0])
+            raise RuntimeError(f"twin: beam ray failed ({bad}): {self._batch.error(bad)}")
+        return out, int(self._geom_map[geomid[k - 1, 0]])
 
     @classmethod
     def build(cls, model, site_id, mask, exclude_body, check):

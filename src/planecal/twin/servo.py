@@ -59,6 +59,7 @@ LUMPED_MASSES = [
     (5, (0.0, 0.0, 0.05), 20.0),  # wrist and tool
 ]
 GRAVITY = np.array([0.0, 0.0, -9.81])
+EPS_BLOCK = 64  # joint perturbations drawn at once (``JointErrors.on_settle``)
 
 
 class Servo:
@@ -85,11 +86,15 @@ class Servo:
         self.gain = 1.0 - float(np.exp(-tick_s / tau_s)) if mode == "lag" else 1.0
         self.keep = 1.0 - self.gain
         self._b, self._a = np.array([self.gain]), np.array([1.0, -self.keep])  # lfilter's
+        # the filter state keep * y as a (1, 6) array, None when ``y`` changed elsewhere:
+        # ``run`` keeps lfilter's final state (= keep * y[-1], bit for bit) for the next run
+        self._zi = None
 
     def set(self, counts) -> None:
         """Put the servo at rest on ``counts``."""
         self.current = [int(c) for c in counts]
         self.y = [float(c) for c in self.current]
+        self._zi = None
 
     def step(self, commanded: list) -> bool:
         """Advance one tick towards ``commanded`` (list of ints); True when the counts changed."""
@@ -100,6 +105,7 @@ class Servo:
             return True
         g, k = self.gain, self.keep
         self.y = y = [g * u + k * v for u, v in zip(commanded, self.y)]
+        self._zi = None
         new = [round(v) for v in y]  # Python round: half to even, like np.rint
         if new == self.current:
             return False
@@ -114,8 +120,10 @@ class Servo:
         if self.ideal:
             out[...] = commanded
         else:
-            zi = np.multiply(self.keep, self.y)[None, :]
-            y = _filter(self._b, self._a, commanded.astype(float), zi)[0]
+            zi = self._zi
+            if zi is None:
+                zi = np.multiply(self.keep, self.y)[None, :]
+            y, self._zi = _filter(self._b, self._a, commanded.astype(float), zi)
             self.y = y[-1].tolist()
             out[...] = np.rint(y, out=y)
         self.current = out[-1].tolist()
@@ -153,6 +161,8 @@ class JointErrors:
         self.backlash = None if backlash_rad is None else np.asarray(backlash_rad, float).reshape(6)
         self.eps = np.zeros(robot.n_joints)
         self.direction = np.zeros(robot.n_joints)
+        self._eps_block = np.zeros((0, robot.n_joints))  # perturbations drawn ahead
+        self._next = 0
 
     @property
     def active(self) -> bool:
@@ -165,7 +175,16 @@ class JointErrors:
 
     def on_settle(self) -> None:
         if self.sigma > 0:
-            self.eps = self.rng.normal(0.0, self.sigma, self.robot.n_joints)
+            # the draws come in blocks of EPS_BLOCK perturbations: the same values, in the
+            # same order, as one rng.normal(0, sigma, n_joints) call per settle (numpy's
+            # Generator draws element by element), ~5 us less per settle
+            i = self._next
+            if i == len(self._eps_block):
+                self._eps_block = self.rng.normal(0.0, self.sigma,
+                                                  (EPS_BLOCK, self.robot.n_joints))
+                i = 0
+            self.eps = self._eps_block[i]
+            self._next = i + 1
 
     def extra(self, q: np.ndarray, delta: np.ndarray) -> np.ndarray:
         out = self.eps.copy()
