@@ -119,28 +119,27 @@ def predict_with_jacobian(robot: Robot, qe: np.ndarray, params: CellParams,
     N = len(qe)
     pidx = np.zeros(N, int) if plane_index is None else np.asarray(plane_index, int)
     q = counts_to_joints(robot, qe)
-    xs, ys, zs, ps = chain(robot, q, params.joint_offsets)
+    xs, ys, zs, ps = chain(robot, q, params.joint_offsets)  # component first: (3, N)
     x6, y6, z6, p6 = xs[-1], ys[-1], zs[-1], ps[-1]
     o, zf = params.sensor_origin, beam_direction(params.phi_y, params.phi_z)
     o_b = x6 * o[0] + y6 * o[1] + z6 * o[2] + p6
     z_b = x6 * zf[0] + y6 * zf[1] + z6 * zf[2]
-    n = params.planes[pidx]
-    s = np.sum(n * z_b, -1)
-    d = (1.0 - np.sum(n * o_b, -1)) / s
-    p_m = o_b + d[:, None] * z_b
+    n = np.ascontiguousarray(params.planes[pidx].T)  # (3, N)
+    s = np.einsum("kn,kn->n", n, z_b)
+    d = (1.0 - np.einsum("kn,kn->n", n, o_b)) / s
+    p_m = o_b + d * z_b
     J = np.zeros((N, N_SHARED + 3 * params.n_planes))
     # joint offsets: rotation about z_{i-1} through o_{i-1}:
     # n~ . (z x (p_m - o)) = (p_m - o) . (n~ x z)
     for i in range(6):
         z, w = zs[i], p_m - ps[i]
-        J[:, i] = -(w[:, 0] * (n[:, 1] * z[..., 2] - n[:, 2] * z[..., 1])
-                    + w[:, 1] * (n[:, 2] * z[..., 0] - n[:, 0] * z[..., 2])
-                    + w[:, 2] * (n[:, 0] * z[..., 1] - n[:, 1] * z[..., 0])) / s
-    nf = np.stack([np.sum(n * x6, -1), np.sum(n * y6, -1), np.sum(n * z6, -1)], -1)  # R^T n~
+        J[:, i] = -(w[0] * (n[1] * z[2] - n[2] * z[1]) + w[1] * (n[2] * z[0] - n[0] * z[2])
+                    + w[2] * (n[0] * z[1] - n[1] * z[0])) / s
+    nf = np.stack([np.einsum("kn,kn->n", n, v) for v in (x6, y6, z6)], -1)  # R^T n~, (N, 3)
     J[:, 6:9] = -nf / s[:, None]
     J[:, 9:11] = -(d / s)[:, None] * (nf @ beam_direction_derivative(params.phi_y, params.phi_z))
     cols = N_SHARED + 3 * pidx[:, None] + np.arange(3)
-    J[np.arange(N)[:, None], cols] = -p_m / s[:, None]
+    J[np.arange(N)[:, None], cols] = -(p_m / s).T
     return d, J
 
 
