@@ -21,7 +21,8 @@ changed since the last reading: a robot at rest costs a laser-noise draw per rea
 results: the counts -> joints, servo, trip and rest logic vectorised, and the beams of
 all its moving ticks cast in one MuJoCo call (``beam``: MuJoCo kinematics + ``mj_ray``
 per tick in C, ~0.8 us). See scripts/bench_twin.py for the throughput; what bounds it
-is ~50 numpy calls per ``run`` call (~100-130 us) plus ~0.8 us per moving tick.
+is ~35-40 numpy calls per ``run`` call (~2 us each in the benchmark, twice what they take
+in a tight loop) plus MuJoCo's ~5 us per call and ~0.8 us per moving tick.
 """
 from __future__ import annotations
 
@@ -180,6 +181,8 @@ class Twin:
         self._errors_active = self._errors.active
         # run's batch path: no compliance, no backlash (else exchange + read per tick)
         self._plain = self._errors.stiffness is None and self._errors.backlash is None
+        self._ws_C = np.empty((256, 6), np.int64)  # its commands workspace
+        self._ws_Cv = self._ws_C.view(_ROW).ravel()
         self._qpos = self._data.qpos  # views into MjData's buffers (stable)
         self._stale_q = None  # qpos the MjData should show after a batch run (lazy)
         self._dist: float | None = None
@@ -262,10 +265,13 @@ class Twin:
 
     def _run_batch(self, D, beam):
         """``run`` with the batch caster (no compliance, no backlash, trip checks on):
-        ``_run_ref``'s arithmetic with about half its numpy calls per call, the same
-        results bit for bit (tests/test_twin_batch.py)."""
+        ``_run_ref``'s arithmetic in ~35-40 numpy calls per call instead of ~50, the
+        same results bit for bit (tests/test_twin_batch.py)."""
         n = len(D)
-        C = np.empty((n + 1, 6), np.int64)  # the commands, the last one in front
+        if n >= len(self._ws_C):  # the commands workspace (and its rows as 48-byte voids)
+            self._ws_C = np.empty((max(n + 1, 2 * len(self._ws_C)), 6), np.int64)
+            self._ws_Cv = self._ws_C.view(_ROW).ravel()
+        C = self._ws_C[:n + 1]  # the commands, the last one in front
         C[0] = self._commanded
         cmd = C[1:]
         np.add(self._reference_arr, D, out=cmd)
@@ -283,13 +289,14 @@ class Twin:
                                        f"counts at row 0")
             C = C[:n + 1]
             cmd = C[1:]
+        Cv = self._ws_Cv[:n + 1]
         hold = top == 0  # every command = the last one
         servo, errors = self._servo, self._errors
         P = np.empty((n + 1, 6), np.int64)  # the counts, the last ones in front
         P[0] = servo.current
         cur = servo.run(cmd, out=P[1:])
         # rows compared whole (48-byte void views)
-        Cv, Pv = C.view(_ROW).ravel(), P.view(_ROW).ravel()
+        Pv = P.view(_ROW).ravel()
         recompute = Pv[1:] != Pv[:-1]  # the counts changed (+ settles, + stale state)
         rest = Pv[1:] == (Cv[:1] if hold else Cv[1:])  # on the command ...
         sigma = errors.sigma > 0

@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 NOISE_BLOCK = 4096
+_INSIDE = np.array([np.nan, 1.0, np.nan])  # below, in, above the window
 
 
 class LaserModel:
@@ -31,6 +32,7 @@ class LaserModel:
         self._list: list[float] | None = None
         self._left = 0
         self._bound = None
+        self._edges = None
 
     def _refill(self) -> None:
         self._block = self.rng.normal(0.0, self.noise_mm, NOISE_BLOCK)
@@ -123,7 +125,11 @@ class LaserModel:
             self._left -= n
 
     def window(self, mm: np.ndarray) -> np.ndarray:
-        mm[(mm < self.lo) | (mm > self.hi)] = np.nan
+        """NaN outside [lo, hi] for readings that all hit (no NaN): ``mm`` times 1 or NaN
+        by where it sorts among (lo, the float after hi): 3 numpy calls, not 4."""
+        if self._edges is None:
+            self._edges = np.array([self.lo, np.nextafter(self.hi, np.inf)])
+        mm *= _INSIDE.take(self._edges.searchsorted(mm, "right"))
         return mm
 
     def reading(self, distance_m: float | None) -> float | None:
