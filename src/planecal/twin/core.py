@@ -293,39 +293,66 @@ class Twin:
         hold = top == 0  # every command = the last one
         servo, errors = self._servo, self._errors
         P = np.empty((n + 1, 6), np.int64)  # the counts, the last ones in front
-        P[0] = servo.current
+        before = servo.current  # tick -1's counts
+        P[0] = before
         cur = servo.run(cmd, out=P[1:])
         # rows compared whole (48-byte void views)
         Pv = P.view(_ROW).ravel()
         recompute = Pv[1:] != Pv[:-1]  # the counts changed (+ settles, + stale state)
-        rest = Pv[1:] == (Cv[:1] if hold else Cv[1:])  # on the command ...
         sigma = errors.sigma > 0
         at = None  # ticks at which the robot comes to rest (a new perturbation)
-        if hold or rest.any():
-            if not hold:
-                rest &= Cv[1:] == Cv[:-1]  # ... and the command holds: at rest
-            if sigma:
-                at = [p + 1 for p in (rest[1:] > rest[:-1]).nonzero()[0].tolist()]
-                if rest[0] and not self._at_rest:
-                    at.insert(0, 0)
-                if len(at) > 4:
-                    recompute[at] = True
-                else:
-                    for p in at:
-                        recompute[p] = True
-            at_rest = bool(rest[n - 1])
+        rows = None  # cur[idx], when taken already
+        if hold:
+            # every command is the last one, c: at rest = counts on c, which changes only
+            # at the ticks where the counts do (and tick 0), so look there only
+            idx = recompute.nonzero()[0]
+            il = idx.tolist()
+            rows = cur[idx]
+            c, state, at = self._commanded, self._at_rest, []
+            if not il or il[0]:
+                r = before == c
+                if r and not state:
+                    at.append(0)
+                state = r
+            for j, row in zip(il, rows.tolist()):
+                r = row == c
+                if r and not state:
+                    at.append(j)
+                state = r
+            at_rest = state
+            if not sigma:
+                at = None
+            if (self._dirty or (at and not at[0])) and (not il or il[0]):
+                recompute[0] = True  # tick 0 too: stale state, or it settles unmoved
+                idx = recompute.nonzero()[0]
+                il = idx.tolist()
+                rows = None
         else:
-            at_rest = False
-        if self._dirty:
-            recompute[0] = True
-        idx = recompute.nonzero()[0]
+            rest = Pv[1:] == Cv[1:]  # on the command ...
+            if rest.any():
+                rest &= Cv[1:] == Cv[:-1]  # ... and the command holds: at rest
+                if sigma:
+                    at = [p + 1 for p in (rest[1:] > rest[:-1]).nonzero()[0].tolist()]
+                    if rest[0] and not self._at_rest:
+                        at.insert(0, 0)
+                    if len(at) > 4:
+                        recompute[at] = True
+                    else:
+                        for p in at:
+                            recompute[p] = True
+                at_rest = bool(rest[n - 1])
+            else:
+                at_rest = False
+            if self._dirty:
+                recompute[0] = True
+            idx = recompute.nonzero()[0]
+            il = idx.tolist()
         k = len(idx)
         prev = self._dist
         if k:
-            il = idx.tolist()
             head = il[-1] == k - 1  # the usual: ticks 0..k-1 move, then holds
-            Q = np.subtract(cur[:k] if head else cur[idx], self._qe0_arr,
-                            dtype=float).dot(self._M_T)
+            X = cur[:k] if head else (cur[idx] if rows is None else rows)
+            Q = np.subtract(X, self._qe0_arr, dtype=float).dot(self._M_T)
             Q += self._delta_true_arr
             if sigma:
                 if at:  # each perturbation from its settle tick on
