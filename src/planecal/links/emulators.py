@@ -75,8 +75,35 @@ class FD11EmulatorCounters:
     ignored_tripped: int = 0
 
 
-class FD11Emulator:
+class _Served:
+    """A server loop (``_serve``) in a daemon thread: start/stop and a context manager;
+    ``_close`` releases the endpoint after the thread has stopped."""
+
+    _thread_name = "emulator"
+
+    def start(self):
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._serve, name=self._thread_name, daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self._close()
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+class FD11Emulator(_Served):
     """FD11 RT server on UDP backed by ``backend`` (any RobotLink)."""
+
+    _thread_name = "fd11-emulator"
 
     def __init__(self, backend, host: str = "127.0.0.1", rt_port: int = 5555,
                  reply_port: int | None = 5556, *, faults: FD11Faults | None = None,
@@ -178,23 +205,8 @@ class FD11Emulator:
                 except OSError:
                     pass
 
-    def start(self) -> "FD11Emulator":
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._serve, name="fd11-emulator", daemon=True)
-            self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
+    def _close(self) -> None:
         self._sock.close()
-
-    def __enter__(self) -> "FD11Emulator":
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
 
 @dataclasses.dataclass
@@ -215,8 +227,10 @@ class LaserEmulatorCounters:
     backend_errors: int = 0
 
 
-class LaserEmulator:
+class LaserEmulator(_Served):
     """ZS-LD80 on a pty backed by ``backend`` (any Laser); `port` is the device to open."""
+
+    _thread_name = "laser-emulator"
 
     def __init__(self, backend, *, faults: LaserFaults | None = None, command: bytes = b"M",
                  terminator: bytes = b"\r", field_width: int = FIELD_WIDTH, lock=None):
@@ -287,27 +301,12 @@ class LaserEmulator:
                 except OSError:
                     return
 
-    def start(self) -> "LaserEmulator":
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._serve, name="laser-emulator", daemon=True)
-            self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
+    def _close(self) -> None:
         for fd in (self._master, self._slave):
             try:
                 os.close(fd)
             except OSError:
                 pass
-
-    def __enter__(self) -> "LaserEmulator":
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
 
 class Emulators:

@@ -91,6 +91,15 @@ class Hit:
     plate: int | None  # index into scene.plates, None if not a plate
 
 
+def _add_settled_errors(Q: np.ndarray, cuts: list, errors) -> None:
+    """Add each repeatability perturbation to the rows from its settle tick on: rows
+    cuts[i]..cuts[i+1] get the perturbation drawn at the i-th settle (none drawn for i=0)."""
+    for i in range(len(cuts) - 1):
+        if i:
+            errors.on_settle()
+        Q[cuts[i]:cuts[i + 1]] += errors.eps
+
+
 class Twin:
     """In-process robot link (``RobotLink``) and laser (``Laser``) over a MuJoCo model.
 
@@ -356,11 +365,8 @@ class Twin:
             Q += self._delta_true_arr
             if sigma:
                 if at:  # each perturbation from its settle tick on
-                    cuts = [0, *(at if head else [bisect_left(il, p) for p in at]), k]
-                    for i in range(len(cuts) - 1):
-                        if i:
-                            errors.on_settle()
-                        Q[cuts[i]:cuts[i + 1]] += errors.eps
+                    pos = at if head else [bisect_left(il, p) for p in at]
+                    _add_settled_errors(Q, [0, *pos, k], errors)
                 else:
                     Q += errors.eps
             dist, geom = beam.cast_last(Q)
@@ -520,11 +526,7 @@ class Twin:
             at = settle.nonzero()[0]
             if at.size:  # each perturbation from its settle tick on (few per run)
                 pos = at if head else np.searchsorted(idx, at)  # settle ticks recompute
-                cuts = [0, *pos.tolist(), k]
-                for i in range(len(cuts) - 1):
-                    if i:
-                        errors.on_settle()
-                    Q[cuts[i]:cuts[i + 1]] += errors.eps
+                _add_settled_errors(Q, [0, *pos.tolist(), k], errors)
             else:
                 Q += errors.eps
         dist, geom = beam.cast(Q, last_geom_only=True)
