@@ -58,6 +58,9 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="record the run for Rerun (needs planecal.rerun_log)")
+    p.add_argument("--poses", default=None, metavar="POSES.json",
+                   help="visit this planned pose list (planecal plan) instead of random poses; "
+                        "--samples defaults to its length")
     p.add_argument("--foreground", action="store_true",
                    help="plan poses in this process only (default: plan the next pose in a "
                         "forked process while the robot moves)")
@@ -123,6 +126,8 @@ def prepare(args, default_samples: int = 150):
             print(f"note: --resume takes the scene and settings from {sidecar_path(out)}; "
                   f"ignoring {' '.join(given)}", file=sys.stderr)
         st = RunSettings.from_sidecar(side, str(sidecar_path(out)))
+        if side.get("poses") and getattr(args, "poses", None) is None:
+            args.poses = side["poses"]
         if args.samples is not None:
             if args.samples < 1:
                 raise InputError(f"--samples must be at least 1, got {args.samples}")
@@ -207,6 +212,40 @@ class Progress:
             print(f"run {st.status}: {st.stop_reason}", file=self.stream, flush=True)
 
 
+def pose_list_planner(args, scene, settings: RunSettings, checker):
+    """With --poses: a planner serving the planned list (poses already in the sample file
+    of a resumed run are skipped); the run's target becomes the list's length unless
+    --samples asks for fewer. None without --poses."""
+    path = getattr(args, "poses", None)
+    if not path:
+        return None
+    import numpy as np
+
+    from planecal.samples import read_samples
+    from planecal.studies.planning import ListPlanner, load_poses
+
+    counts, plates, _ = load_poses(path)
+    if len(counts) == 0:
+        raise InputError(f"{path}: the pose list is empty")
+    if plates.min() < 0 or plates.max() >= len(scene.plates):
+        raise InputError(f"{path}: plate numbers must be 0..{len(scene.plates) - 1} for scene "
+                         f"{scene.name}")
+    n = len(counts)
+    if args.resume and Path(args.out).exists() and Path(args.out).stat().st_size > 0:
+        try:
+            done = read_samples(args.out).qe
+        except InputError:  # no sample yet
+            done = np.zeros((0, 6), np.int64)
+        keep = ~np.any(np.all(counts[:, None, :] == done[None, :, :], axis=2), axis=1) \
+            if len(done) else np.ones(n, bool)
+        counts, plates = counts[keep], plates[keep]
+    if args.samples is None:
+        settings.samples = n
+    elif settings.samples > n:
+        raise InputError(f"--samples {settings.samples} is more than the {n} poses in {path}")
+    return ListPlanner(scene, counts, plates, checker)
+
+
 def run_session(args, scene, settings: RunSettings, link, laser, enable, checker, *,
                 observer=None, extra=None, hold_while_planning=False) -> tuple[int, dict]:
     """Start move, the sampling run, end move. Returns (exit code, summary): 0 when the run
@@ -233,9 +272,13 @@ def _session(args, scene, settings, link, laser, enable, checker, observer, extr
         raise InputError(f"--start {args.start}: {e}") from None
     except EnableDropped:
         raise InputError(f"--start {args.start}: enable dropped on the way; nothing sampled") from None
+    planner = pose_list_planner(args, scene, settings, checker)
+    if planner is not None:  # a resumed run finds its pose list in the sidecar
+        extra = {**(extra or {}), "poses": str(Path(args.poses).resolve())}
     run = SamplingRun(drv, laser, scene, settings, args.out, checker, resume=args.resume,
-                      background=not args.foreground, hold_while_planning=hold_while_planning,
-                      progress=progress, extra=extra, lock=lock)
+                      background=not args.foreground and planner is None,
+                      hold_while_planning=hold_while_planning,
+                      progress=progress, extra=extra, lock=lock, planner=planner)
     t0 = time.perf_counter()
     ticks0 = drv.ticks
     try:

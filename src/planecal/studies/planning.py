@@ -27,8 +27,8 @@ collision-checked; a pose whose path is blocked is tried later).
 
 The sampling run takes the list through ``SamplingRun(..., planner=ListPlanner(...))``
 (foreground planning only: the list planner keeps state); ``rehearse_planned`` does that
-on the twin. A ``--poses POSES.json`` flag for ``planecal rehearse`` / ``sample`` is
-left to the owners of those commands.
+on the twin; ``planecal rehearse --poses POSES.json`` (and ``sample``) does it from the
+command line.
 """
 from __future__ import annotations
 
