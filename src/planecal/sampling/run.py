@@ -52,7 +52,6 @@ random generator, and goes on until ``samples_target`` -- from wherever the robo
 """
 from __future__ import annotations
 
-import json
 import os
 import time
 from collections import deque
@@ -65,7 +64,7 @@ import numpy as np
 
 from planecal.encoder import counts_to_joints, joints_to_counts
 from planecal.errors import InputError
-from planecal.params import save_json
+from planecal.params import load_json, save_json
 from planecal.robot import within_limits
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
@@ -328,12 +327,9 @@ class RunLock:
 
 def load_sidecar(out: str | Path) -> dict:
     p = sidecar_path(out)
-    try:
-        side = json.loads(p.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{p}: no run sidecar to resume from") from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"{p}:{e.lineno}: invalid JSON: {e.msg}") from None
+    if not p.exists():
+        raise InputError(f"{p}: no run sidecar to resume from")
+    side = load_json(p)
     if not isinstance(side, dict) or side.get("format") != SIDECAR_FORMAT:
         raise InputError(f"{p}: not a planecal run sidecar (format {SIDECAR_FORMAT})")
     return side
