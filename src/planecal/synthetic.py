@@ -35,5 +35,5 @@ def synthetic_samples(scene: Scene, truth: CellParams, n: int, rng: np.random.Ge
         plate.append(k)
     qe = np.array(qe)
     plate = np.array(plate)
-    d = predict(scene.robot, qe, truth, plate) + rng.normal(0.0, noise_m, n) * (noise_m > 0)
+    d = predict(scene.robot, qe, truth, plate) + rng.normal(0.0, noise_m, n)
     return qe, d, plate

@@ -30,8 +30,8 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.commands.calibrate import free_mask, load_problem
-    from planecal.fit import FitOptions
+    from planecal.commands.calibrate import load_problem
+    from planecal.fit import FitOptions, free_from_names
     from planecal.params import save_json
     from planecal.studies.bootstrap import BootstrapSettings, bootstrap, format_bootstrap
     from planecal.studies.common import check_jobs, parse_int_list
@@ -42,7 +42,7 @@ def run(args) -> int:
     if args.max_iter < 1:
         raise InputError("--max-iter must be at least 1")
     samples, scene, initial = load_problem(args)
-    opts = FitOptions(max_iter=args.max_iter, free=free_mask(args.free, initial.n_planes))
+    opts = FitOptions(max_iter=args.max_iter, free=free_from_names(args.free, initial.n_planes))
     res = bootstrap(scene.robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate,
                     BootstrapSettings(tuple(sizes), args.repeats, args.seed), opts,
                     jobs=check_jobs(args.jobs))

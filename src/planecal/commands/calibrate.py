@@ -37,10 +37,6 @@ def add_arguments(p):
                         "for recordings/calibrate-<scene>-<time>.rrd)")
 
 
-def free_mask(spec: str | None, n_planes: int) -> np.ndarray:
-    return free_from_names(spec, n_planes)
-
-
 def result_dict(res: FitResult) -> dict:
     out = params_to_dict(res.params)
     std = res.std
@@ -125,7 +121,7 @@ def run(args) -> int:
         raise InputError("--max-iter must be at least 1")
     opts = FitOptions(max_iter=args.max_iter, improvement_limit=args.improvement_limit,
                       outlier_sigma=args.outlier_sigma, method=args.method,
-                      scale=not args.no_scale, free=free_mask(args.free, initial.n_planes))
+                      scale=not args.no_scale, free=free_from_names(args.free, initial.n_planes))
     try:
         res = calibrate(scene.robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate, opts)
     except ValueError as e:
