@@ -430,6 +430,13 @@ def test_twin_over_udp_and_pty_matches_in_process_twin():
     assert remote.ticks == local.ticks == len(path)
 
 
+def _default_sigint():
+    """In the child: SIGINT back to its default, so Python raises KeyboardInterrupt on it
+    even when the test runner was started in the background (SIGINT ignored, inherited)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_planecal_emulate_serves_the_twin():
     pytest.importorskip("mujoco")
     twin_mod = pytest.importorskip("planecal.twin")
@@ -443,7 +450,8 @@ def test_planecal_emulate_serves_the_twin():
     env = dict(os.environ, MUJOCO_GL="disable")
     proc = subprocess.Popen([sys.executable, "-m", "planecal.cli", "emulate", "--seed", "3",
                              "--rt-port", "0", "--reply-port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=_default_sigint)
     guard = threading.Timer(60, proc.kill)  # never hang the suite
     guard.start()
     try:

@@ -108,7 +108,8 @@ def test_ctrl_c_stops_cleanly(tmp_path):
     out = tmp_path / "RUN.tsv"
     p = subprocess.Popen([sys.executable, "-m", "planecal.cli", "rehearse", "--samples", "5000",
                           "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True, start_new_session=True)
+                         text=True, start_new_session=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
