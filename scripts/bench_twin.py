@@ -13,10 +13,11 @@ repeatability):
 Each through the per-tick API (``exchange`` + ``read``, what the sampling loop calls)
 and through the batch API (``Twin.run``), timed in wall seconds and in this process's
 CPU seconds (on a shared machine the two differ). ``Twin.run`` twice, side by side:
-``batch-mj`` with ``Twin.batch_rays = False`` (one ``mj_kinematics`` + ``mj_ray`` per
-moving tick through the Python bindings, the reference path; the rest of ``run`` is
-shared) and ``batch`` (the default: all moving ticks of a call in one MuJoCo call,
-``twin.beam``). Twins are built before the clock starts, the batch caster included
+``batch-mj`` with ``Twin.batch_rays = False`` (``Twin._run_ref``: the tick logic in numpy,
+one ``mj_kinematics`` + ``mj_ray`` per moving tick through the Python bindings; the
+reference) and ``batch`` (the default: the tick loop compiled with numba, ``twin.ticks``,
+and all moving ticks of a call cast in one MuJoCo call, ``twin.beam``). Twins are built
+and the loop compiled before the clock starts, the batch caster included
 (``Twin.prepare_run``, a few ms once per twin, printed). ``--repeat N`` runs every
 measurement N times, alternating, and keeps the best (default 1). The last line,
 ``twin_realtime_factor: X``, is the sampling workload through ``Twin.run`` (``batch``),

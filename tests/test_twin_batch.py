@@ -255,3 +255,25 @@ def test_run_fast_path_window_cases():
             assert np.array_equal(ca, cb) and np.array_equal(ma, mb, equal_nan=True)
             seen.add((bool(np.isnan(ma).all()), bool(np.isnan(ma).any())))
         assert seen >= {(True, True), (False, False), (False, True)}
+
+
+def test_run_refills_random_blocks_mid_call():
+    # one call of 9,000 ticks with 150 settles: the perturbation block (64 draws) and the
+    # laser-noise block (4,096) both run out inside the call; the compiled loop stops,
+    # the twin draws the next block and the loop goes on, with the reference's numbers
+    a = Twin("thesis_final", seed=4, options=TwinOptions(servo="ideal"))
+    b = Twin("thesis_final", seed=4, options=TwinOptions(servo="ideal"))
+    b.run = b._run_ref
+    base = a.current_counts - a.reference_counts
+    step = np.array([0, 0, 0, 0, 20, 0], np.int64)
+    D = np.vstack([np.repeat((base + (i % 2) * step)[None], 60, axis=0) for i in range(1, 151)])
+    settles, draw = [], b._errors.on_settle
+    b._errors.on_settle = lambda: (settles.append(1), draw())
+    _, ca, ma = a.run(D)
+    _, cb, mb = b.run(D)
+    assert np.array_equal(ca, cb) and np.array_equal(ma, mb, equal_nan=True)
+    assert np.array_equal(a._errors.eps, b._errors.eps) and a._errors._next == b._errors._next
+    assert a._laser._left == b._laser._left
+    assert (~np.isnan(ma)).sum() > 4096  # the noise block refilled at least once
+    assert len(settles) == 150  # > 2 blocks of perturbations
+    assert a._S is not None  # the compiled loop ran (numba is a dependency)

@@ -18,15 +18,15 @@ truth's sensor pose and planes. With noise and joint errors off, ``read()`` equa
 Kinematics and the ray are recomputed lazily, only when the counts (or joint errors)
 changed since the last reading: a robot at rest costs a laser-noise draw per reading.
 ``Twin.run(deltas)`` does many ticks (exchange + read each) in one call with the same
-results: the counts -> joints, servo, trip and rest logic vectorised, and the beams of
-all its moving ticks cast in one MuJoCo call (``beam``: MuJoCo kinematics + ``mj_ray``
-per tick in C, ~0.8 us). See scripts/bench_twin.py for the throughput; what bounds it
-is ~35-40 numpy calls per ``run`` call (~2 us each in the benchmark, twice what they take
-in a tight loop) plus MuJoCo's ~5 us per call and ~0.8 us per moving tick.
+results, bit for bit: the tick loop compiled (``ticks``, numba: FD11 trip check, servo,
+rest and repeatability logic, counts -> joints, laser model) and the beams of all its
+moving ticks cast in one MuJoCo call (``beam``: MuJoCo kinematics + ``mj_ray`` per tick
+in C, ~1 us with a hit). ``_run_ref`` is the same in numpy and the bindings (the
+reference the tests hold ``run`` to, and the path with compliance or backlash on).
+scripts/bench_twin.py measures the throughput.
 """
 from __future__ import annotations
 
-from bisect import bisect_left
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -120,11 +120,12 @@ class Twin:
     ``hit()`` or ``read()`` first), ``spec``, ``laser_site``, ``flange_site``,
     ``tool_body``. ``truth`` / ``true_params``: the hidden truth, never for calibration.
 
-    ``batch_rays`` (class default True): ``run`` casts the beams of all its moving ticks
-    in one MuJoCo call (``beam.BeamCaster``: kinematics and ``mj_ray`` per tick in C);
-    False, or a model the caster doesn't cover: one ``mj_kinematics`` + ``mj_ray`` per
-    moving tick through the bindings (the reference; same counts and random streams,
-    readings equal to ~1e-12 mm: tests/test_twin_batch.py).
+    ``batch_rays`` (class default True): ``run`` runs its ticks in the compiled loop
+    (``ticks``) and casts the beams of all its moving ticks in one MuJoCo call
+    (``beam.BeamCaster``: kinematics and ``mj_ray`` per tick in C); False, or a model the
+    caster doesn't cover, or compliance / backlash on: ``_run_ref`` with one
+    ``mj_kinematics`` + ``mj_ray`` per moving tick through the bindings (same counts and
+    random streams, readings equal to ~1e-12 mm: tests/test_twin_batch.py).
     """
 
     batch_rays: bool = True
@@ -173,7 +174,6 @@ class Twin:
                         for j in range(6)]
         self._qe0 = [int(v) for v in robot.qe0]
         self._qe0_arr = robot.qe0.astype(np.int64)
-        self._M_T = M.T.copy()
         self._delta_true_arr = self._truth.joint_offsets.copy()
         self._delta_true = [float(v) for v in self._truth.joint_offsets]
         self._reference = [int(v) for v in start]
@@ -190,8 +190,10 @@ class Twin:
         self._errors_active = self._errors.active
         # run's batch path: no compliance, no backlash (else exchange + read per tick)
         self._plain = self._errors.stiffness is None and self._errors.backlash is None
-        self._ws_C = np.empty((256, 6), np.int64)  # its commands workspace
-        self._ws_Cv = self._ws_C.view(_ROW).ravel()
+        self._S = self._F = None  # its state arrays (``ticks``), made at the first run
+        self._stop = np.zeros(2, np.int64)
+        self._ws_Q = np.empty((256, 6))  # its workspaces: joint rows, row per tick
+        self._ws_row = np.empty(256, np.int64)
         self._qpos = self._data.qpos  # views into MjData's buffers (stable)
         self._stale_q = None  # qpos the MjData should show after a batch run (lazy)
         self._dist: float | None = None
@@ -254,7 +256,8 @@ class Twin:
         """Many ticks at once: for each row of ``deltas`` (N, 6) one ``exchange`` then one
         ``read``. Returns (reference int64[6], current counts int64[N, 6], readings
         float[N] in mm with NaN where read() gives None). Same results and random
-        streams as the loop; faster (vectorised counts -> joints, no per-tick checks).
+        streams as the loop, bit for bit; ~20x faster (a compiled tick loop, the beams of
+        all moving ticks in one MuJoCo call).
         An encoder jump runs the ticks before it, then raises EncoderJumpError."""
         if self._tripped:
             raise EncoderJumpError("twin: the robot braked after an encoder jump; make a new Twin")
@@ -263,7 +266,7 @@ class Twin:
             D = deltas
         else:
             D = _as_count_rows(deltas)
-        if not (self.batch_rays and self._check and self._plain):
+        if not (self.batch_rays and self._plain) or _ticks() is None:
             return self._run_ref(D)
         beam = self._beam
         if beam is None:
@@ -273,149 +276,88 @@ class Twin:
         return self._run_batch(D, beam)
 
     def _run_batch(self, D, beam):
-        """``run`` with the batch caster (no compliance, no backlash, trip checks on):
-        ``_run_ref``'s arithmetic in ~35-40 numpy calls per call instead of ~50, the
-        same results bit for bit (tests/test_twin_batch.py)."""
+        """``run`` with the compiled tick loop (``ticks``) and the batch caster (no
+        compliance, no backlash, trip checks on): the same results as ``_run_ref`` bit
+        for bit (tests/test_twin_batch.py)."""
+        ticks = _ticks()
+        if self._S is None:
+            self._S, self._F = self._tick_state(ticks)
         n = len(D)
-        if n >= len(self._ws_C):  # the commands workspace (and its rows as 48-byte voids)
-            self._ws_C = np.empty((max(n + 1, 2 * len(self._ws_C)), 6), np.int64)
-            self._ws_Cv = self._ws_C.view(_ROW).ravel()
-        C = self._ws_C[:n + 1]  # the commands, the last one in front
-        C[0] = self._commanded
-        cmd = C[1:]
-        np.add(self._reference_arr, D, out=cmd)
-        if not n:
-            return self._reference_arr.copy(), np.zeros((0, 6), np.int64), np.zeros(0)
-        steps = np.subtract(cmd, C[:-1])
-        np.abs(steps, out=steps)
-        top = _MAX(steps, None)
-        trip_at = None
-        if top > self._trip:
-            trip_at = n = int(np.flatnonzero(_MAX(steps, 1) > self._trip)[0])
-            if not n:
-                self._tripped = True
-                raise EncoderJumpError(f"twin: delta jumped by more than {self._trip} "
-                                       f"counts at row 0")
-            C = C[:n + 1]
-            cmd = C[1:]
-        Cv = self._ws_Cv[:n + 1]
-        hold = top == 0  # every command = the last one
-        servo, errors = self._servo, self._errors
-        P = np.empty((n + 1, 6), np.int64)  # the counts, the last ones in front
-        before = servo.current  # tick -1's counts
-        P[0] = before
-        cur = servo.run(cmd, out=P[1:])
-        # rows compared whole (48-byte void views)
-        Pv = P.view(_ROW).ravel()
-        recompute = Pv[1:] != Pv[:-1]  # the counts changed (+ settles, + stale state)
-        sigma = errors.sigma > 0
-        at = None  # ticks at which the robot comes to rest (a new perturbation)
-        rows = None  # cur[idx], when taken already
-        if hold:
-            # every command is the last one, c: at rest = counts on c, which changes only
-            # at the ticks where the counts do (and tick 0), so look there only
-            idx = recompute.nonzero()[0]
-            il = idx.tolist()
-            rows = cur[idx]
-            c, state, at = self._commanded, self._at_rest, []
-            if not il or il[0]:
-                r = before == c
-                if r and not state:
-                    at.append(0)
-                state = r
-            for j, row in zip(il, rows.tolist()):
-                r = row == c
-                if r and not state:
-                    at.append(j)
-                state = r
-            at_rest = state
-            if not sigma:
-                at = None
-            if (self._dirty or (at and not at[0])) and (not il or il[0]):
-                recompute[0] = True  # tick 0 too: stale state, or it settles unmoved
-                idx = recompute.nonzero()[0]
-                il = idx.tolist()
-                rows = None
-        else:
-            rest = Pv[1:] == Cv[1:]  # on the command ...
-            if rest.any():
-                rest &= Cv[1:] == Cv[:-1]  # ... and the command holds: at rest
-                if sigma:
-                    at = [p + 1 for p in (rest[1:] > rest[:-1]).nonzero()[0].tolist()]
-                    if rest[0] and not self._at_rest:
-                        at.insert(0, 0)
-                    if len(at) > 4:
-                        recompute[at] = True
-                    else:
-                        for p in at:
-                            recompute[p] = True
-                at_rest = bool(rest[n - 1])
-            else:
-                at_rest = False
-            if self._dirty:
-                recompute[0] = True
-            idx = recompute.nonzero()[0]
-            il = idx.tolist()
-        k = len(idx)
-        prev = self._dist
+        S, F, stop = self._S, self._F, self._stop
+        servo, errors, laser = self._servo, self._errors, self._laser
+        S[0:6] = servo.current
+        S[6:12] = self._commanded
+        S[ticks.AT_REST] = self._at_rest
+        S[ticks.DIRTY] = self._dirty
+        e0 = S[ticks.EPS_NEXT] = errors._next
+        if not servo.ideal:
+            F[0:6] = servo.y
+        F[ticks.EPS:ticks.EPS + 6] = errors.eps
+        if len(self._ws_Q) < n:
+            self._ws_Q = np.empty((max(n, 2 * len(self._ws_Q)), 6))
+            self._ws_row = np.empty(len(self._ws_Q), np.int64)
+        Q, row_of = self._ws_Q, self._ws_row[:n]
+        cur = np.empty((n, 6), np.int64)
+        i = k = 0
+        drew = False
+        while True:
+            k = ticks.advance(D, i, S, F, errors._eps_block, cur, row_of, Q, k, stop)
+            if stop[0] != ticks.NEED_EPS:
+                break
+            errors.draw_block()  # drawn before the settle that needs it: same values
+            S[ticks.EPS_NEXT] = e0 = 0
+            i, drew = int(stop[1]), True
+        m = int(stop[1])  # the ticks run (all but a tripping one and after)
+        servo.current = S[0:6].tolist()
+        if not servo.ideal:
+            servo.y = F[0:6].tolist()
+            servo._zi = None
+        self._commanded = S[6:12].tolist()
+        self._at_rest = bool(S[ticks.AT_REST])
+        if drew or S[ticks.EPS_NEXT] != e0:
+            errors._next = int(S[ticks.EPS_NEXT])
+            errors.eps = F[ticks.EPS:ticks.EPS + 6].copy()
+        prev = -1.0 if self._dist is None else self._dist
         if k:
-            head = il[-1] == k - 1  # the usual: ticks 0..k-1 move, then holds
-            X = cur[:k] if head else (cur[idx] if rows is None else rows)
-            Q = np.subtract(X, self._qe0_arr, dtype=float).dot(self._M_T)
-            Q += self._delta_true_arr
-            if sigma:
-                if at:  # each perturbation from its settle tick on
-                    pos = at if head else [bisect_left(il, p) for p in at]
-                    _add_settled_errors(Q, [0, *pos, k], errors)
-                else:
-                    Q += errors.eps
-            dist, geom = beam.cast_last(Q)
-            dl = dist.tolist()
-            last = dl[-1]
+            dist, geom = beam.cast_last(Q[:k])
+            last = float(dist[k - 1])
             self._dist, self._geom = (None, -1) if last < 0 else (last, geom)
             self._dirty = False
-            self._stale_q = Q[-1]  # MjData follows lazily (``data``, ``qpos``, poses)
-            lo_d, hi_d = min(dl), max(dl)
-            if il[0]:  # ticks before the first recomputed one read the last value
-                lo_d = None if prev is None else min(lo_d, prev)
-                hi_d = max(hi_d, prev or 0.0)
+            self._stale_q = Q[k - 1].copy()  # MjData follows lazily (``data``, poses)
         else:
-            lo_d = hi_d = prev
-        laser = self._laser
-        case = 0 if lo_d is None or lo_d < 0.0 else laser.fast_case(n, lo_d * 1000.0,
-                                                                      hi_d * 1000.0)
-        if case == 2:  # every reading out of the window
-            laser.skip_noise(n)
-            readings = np.full(n, np.nan)
-        else:
-            # the true readings [mm], each tick the last recomputed value
-            if not k:
-                mm = np.full(n, np.nan if prev is None else prev * 1000.0)
-            elif k == n:
-                mm = np.multiply(dist, 1000.0)
-            elif head:
-                mm = np.empty(n)
-                np.multiply(dist, 1000.0, out=mm[:k])
-                mm[k:] = mm[k - 1]
-            else:
-                ext = np.empty(k + 1)
-                ext[0] = np.nan if prev is None else prev * 1000.0
-                np.multiply(dist, 1000.0, out=ext[1:])
-                mm = ext.repeat([il[0], *[b - a for a, b in zip(il, il[1:])], n - il[-1]])
-            if case:
-                laser.add_noise(mm)
-                readings = mm if case == 1 else laser.window(mm)
-            else:
-                readings = laser.readings_mm(mm)
-        self._at_rest = at_rest
-        self._last_delta = D[n - 1].tolist()
-        self._commanded = C[n].tolist()
-        self._ticks += n
-        if trip_at is not None:
+            dist = _NO_DIST
+        readings = np.empty(m)
+        noise = laser.noise_mm > 0.0
+        i = 0
+        while True:
+            laser._left = ticks.laser(row_of[:m], dist, prev, i, laser._block, laser._left,
+                                      noise, laser.quantum_mm or 0.0, laser.lo, laser.hi,
+                                      readings, stop)
+            if stop[0] != ticks.NEED_EPS:
+                break
+            laser._refill()
+            i = int(stop[1])
+        self._ticks += m
+        if m:
+            self._last_delta = D[m - 1].tolist()
+        if m < n:
             self._tripped = True
             raise EncoderJumpError(f"twin: delta jumped by more than {self._trip} counts "
-                                   f"at row {trip_at}")
+                                   f"at row {m}")
         return self._reference_arr.copy(), cur, readings
+
+    def _tick_state(self, ticks):
+        """The constant part of ``ticks``' state arrays (the rest is set per ``run``)."""
+        S, F = np.zeros(ticks.NS, np.int64), np.zeros(ticks.NF)
+        S[ticks.REF:ticks.REF + 6] = self._reference
+        S[ticks.QE0:ticks.QE0 + 6] = self._qe0
+        S[ticks.TRIP] = self._trip if self._check else -1
+        S[ticks.IDEAL] = self._servo.ideal
+        S[ticks.SIGMA] = self._errors.sigma > 0
+        F[ticks.GAIN], F[ticks.KEEP] = self._servo.gain, self._servo.keep
+        F[ticks.DELTA:ticks.DELTA + 6] = self._delta_true
+        F[ticks.M:ticks.M + 36] = (self.robot.coupling / self.robot.gains[None, :]).ravel()
+        return S, F
 
     def _run_ref(self, D) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``run``'s reference (the general path, and the only one without the batch
@@ -459,7 +401,7 @@ class Twin:
             else:
                 if settle is None:
                     settle = np.zeros(n, bool)
-                Q = (cur - self._qe0_arr) @ self._M_T + self._delta_true_arr
+                Q = self._joint_rows(cur)
                 if errors.sigma > 0:
                     Q += errors.eps
                 dists = self._dists_loop(Q, changed, settle)
@@ -520,8 +462,7 @@ class Twin:
         if not k:
             return np.full(n, prev)
         head = idx[-1] == k - 1  # the usual: ticks 0..k-1 move, then holds
-        Q = np.subtract(cur[:k] if head else cur[idx], self._qe0_arr, dtype=float).dot(self._M_T)
-        Q += self._delta_true_arr
+        Q = self._joint_rows(cur[:k] if head else cur[idx])
         if errors.sigma > 0:
             at = settle.nonzero()[0]
             if at.size:  # each perturbation from its settle tick on (few per run)
@@ -618,6 +559,17 @@ class Twin:
                 acc += m * x[k]
             q.append(acc)
         return q
+
+    def _joint_rows(self, counts: np.ndarray) -> np.ndarray:
+        """``_joint_angles`` + the true offsets for rows of counts (K, 6), the same
+        arithmetic in the same order (a BLAS product would differ in the last bits)."""
+        x = np.subtract(counts, self._qe0_arr, dtype=float)
+        Q = np.zeros(x.shape)
+        for j, row in enumerate(self._M_rows):
+            for k, m in row:
+                Q[:, j] += m * x[:, k]
+        Q += self._delta_true_arr
+        return Q
 
     def _update(self) -> None:
         q = self._joint_angles()
@@ -722,7 +674,21 @@ class Twin:
 
 
 _INT64 = np.dtype(np.int64)
-_MAX = np.maximum.reduce
+_NO_DIST = np.zeros(0)
+_TICKS = []
+
+
+def _ticks():
+    """The compiled tick loop (``twin.ticks``), imported at the first ``run`` (numba
+    takes ~0.25 s to import); None if numba can't be imported (``run`` then takes the
+    reference path)."""
+    if not _TICKS:
+        try:
+            from planecal.twin import ticks
+        except ImportError:
+            ticks = None
+        _TICKS.append(ticks)
+    return _TICKS[0]
 _ROW = np.dtype("V48")  # one row of 6 int64 counts, compared as bytes
 
 

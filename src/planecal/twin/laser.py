@@ -16,7 +16,6 @@ import mujoco
 import numpy as np
 
 NOISE_BLOCK = 4096
-_INSIDE = np.array([np.nan, 1.0, np.nan])  # below, in, above the window
 
 
 class LaserModel:
@@ -31,14 +30,11 @@ class LaserModel:
         self._block = np.zeros(0)
         self._list: list[float] | None = None
         self._left = 0
-        self._bound = None
-        self._edges = None
 
     def _refill(self) -> None:
         self._block = self.rng.normal(0.0, self.noise_mm, NOISE_BLOCK)
         self._list = None
         self._left = NOISE_BLOCK
-        self._bound = None  # max |draw| of the block + margin, made when needed
 
     def _next_noise(self) -> float:
         if not self._left:
@@ -91,45 +87,6 @@ class LaserModel:
             mm[(mm < self.lo) | (mm > self.hi)] = np.nan
         else:
             mm[~valid | (mm < self.lo) | (mm > self.hi)] = np.nan
-        return mm
-
-    # ``Twin.run``'s fast path, for n ticks that all hit, true readings in [lo_mm, hi_mm]:
-    # ``fast_case`` says what ``readings_mm`` would do (0: call it; 1: every reading in
-    # the window; 2: every reading outside it; 3: per reading), then ``add_noise`` or
-    # ``skip_noise`` (1, 2, 3) and ``window`` (3): the same values and noise stream.
-    def fast_case(self, n: int, lo_mm: float, hi_mm: float) -> int:
-        if self.quantum_mm:
-            return 0
-        b = 0.0
-        if self.noise_mm > 0.0:
-            if n > self._left:
-                return 0
-            b = self._bound
-            if b is None:  # the margin covers the rounding of mm + noise (~1e-14 mm)
-                b = self._bound = float(np.abs(self._block).max()) + 1e-9
-        if lo_mm - self.lo >= b and self.hi - hi_mm >= b:
-            return 1
-        if lo_mm - self.hi >= b or self.lo - hi_mm >= b:
-            return 2 if b else 3  # (no noise: the window decides exactly)
-        return 3
-
-    def add_noise(self, mm: np.ndarray) -> None:
-        """The next len(mm) draws added in place (the block holds them: ``fast_case``)."""
-        if self.noise_mm > 0.0:
-            left = self._left
-            self._left = lo = left - len(mm)
-            np.add(mm, self._block[left - 1:lo - 1 if lo else None:-1], out=mm)
-
-    def skip_noise(self, n: int) -> None:
-        if self.noise_mm > 0.0:
-            self._left -= n
-
-    def window(self, mm: np.ndarray) -> np.ndarray:
-        """NaN outside [lo, hi] for readings that all hit (no NaN): ``mm`` times 1 or NaN
-        by where it sorts among (lo, the float after hi): 3 numpy calls, not 4."""
-        if self._edges is None:
-            self._edges = np.array([self.lo, np.nextafter(self.hi, np.inf)])
-        mm *= _INSIDE.take(self._edges.searchsorted(mm, "right"))
         return mm
 
     def reading(self, distance_m: float | None) -> float | None:

@@ -182,16 +182,18 @@ class JointErrors:
 
     def on_settle(self) -> None:
         if self.sigma > 0:
-            # the draws come in blocks of EPS_BLOCK perturbations: the same values, in the
-            # same order, as one rng.normal(0, sigma, n_joints) call per settle (numpy's
-            # Generator draws element by element), ~5 us less per settle
-            i = self._next
-            if i == len(self._eps_block):
-                self._eps_block = self.rng.normal(0.0, self.sigma,
-                                                  (EPS_BLOCK, self.robot.n_joints))
-                i = 0
-            self.eps = self._eps_block[i]
-            self._next = i + 1
+            if self._next == len(self._eps_block):
+                self.draw_block()
+            self.eps = self._eps_block[self._next]
+            self._next += 1
+
+    def draw_block(self) -> None:
+        """Draw the next EPS_BLOCK perturbations: the same values, in the same order, as
+        one rng.normal(0, sigma, n_joints) call per settle (numpy's Generator draws
+        element by element), ~5 us less per settle. Drawing a block early (before the
+        settle that needs it, as ``Twin.run`` does) changes no value."""
+        self._eps_block = self.rng.normal(0.0, self.sigma, (EPS_BLOCK, self.robot.n_joints))
+        self._next = 0
 
     def extra(self, q: np.ndarray, delta: np.ndarray) -> np.ndarray:
         out = self.eps.copy()
