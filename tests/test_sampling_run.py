@@ -396,3 +396,49 @@ def test_multi_plate_run_records_the_plate(scene, tmp_path):
     assert list(s.plate) == [0, 1, 0, 1, 0, 1] == [x[3] for x in obs.samples]
     assert load_sidecar(out)["plates"] == 2
     assert sidecar_path(out).name == "RUN.tsv.json"
+
+
+@pytest.mark.skipif(not __import__("os").path.exists("/proc/self/status"),
+                    reason="reads process states from /proc")
+def test_background_planner_ends_when_the_run_is_killed(tmp_path):
+    # the forked planner must not outlive its run: SIGKILL the run (no cleanup runs) and
+    # the planner sees the pipe close and exits, instead of waiting for requests forever
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "run.py"
+    script.write_text(
+        "import sys, time\n"
+        "from planecal.sampling.run import BackgroundPlanner\n"
+        "class P:\n"
+        "    def plan(self, *req): time.sleep(0.5); return req\n"
+        "    def index_matters(self): return False\n"
+        "bp = BackgroundPlanner(P())\n"
+        "bp.submit(1, 2, 3)\n"
+        "print(bp._proc.pid, flush=True)\n"
+        "time.sleep(60)\n")
+    run = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    try:
+        child = int(run.stdout.readline())
+        os.kill(run.pid, signal.SIGKILL)
+        run.wait(timeout=10)
+
+        def alive(pid):
+            try:
+                with open(f"/proc/{pid}/status") as f:
+                    return "\nState:\tZ" not in f.read()  # a zombie has exited
+            except FileNotFoundError:
+                return False
+        deadline = time.monotonic() + 20
+        while alive(child) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        gone = not alive(child)
+        if not gone:
+            os.kill(child, signal.SIGKILL)
+        assert gone, "the planner outlived its run"
+    finally:
+        if run.poll() is None:
+            run.kill()

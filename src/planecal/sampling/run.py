@@ -435,9 +435,12 @@ class Planner:
         return self.poses.n_plates > 1 and self.poses.settings.plate_choice == "round_robin"
 
 
-def _planner_worker(conn, planner: Planner) -> None:
+def _planner_worker(conn, parent_end, planner: Planner) -> None:
     import signal
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle, not ours
+    # the fork gave us a copy of the run's end of the pipe too: close it, so that the
+    # run's death (even SIGKILL) closes the pipe and ends this process (EOF, broken pipe)
+    parent_end.close()
     while True:
         try:
             req = conn.recv()
@@ -449,7 +452,10 @@ def _planner_worker(conn, planner: Planner) -> None:
             plan = planner.plan(*req)
         except Exception as e:  # report it in the run's process
             plan = RuntimeError(f"planner: {type(e).__name__}: {e}")
-        conn.send(plan)
+        try:
+            conn.send(plan)
+        except OSError:  # the run is gone
+            break
 
 
 class BackgroundPlanner:
@@ -468,7 +474,8 @@ class BackgroundPlanner:
         ctx = mp.get_context("fork")  # the planner (with its FCL model) is inherited, not pickled
         self.planner = planner
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_planner_worker, args=(child, planner), daemon=True)
+        self._proc = ctx.Process(target=_planner_worker, args=(child, self._conn, planner),
+                                 daemon=True)
         self._proc.start()
         child.close()
         self._pending = None
