@@ -277,3 +277,21 @@ def test_run_refills_random_blocks_mid_call():
     assert (~np.isnan(ma)).sum() > 4096  # the noise block refilled at least once
     assert len(settles) == 150  # > 2 blocks of perturbations
     assert a._S is not None  # the compiled loop ran (numba is a dependency)
+
+
+def test_run_without_the_compiled_loop_warns_and_takes_the_reference(monkeypatch):
+    import sys
+
+    import planecal.twin.core as core
+    monkeypatch.setattr(core, "_TICKS", [])
+    import planecal.twin
+    monkeypatch.setitem(sys.modules, "planecal.twin.ticks", None)  # as if numba were missing
+    monkeypatch.delattr(planecal.twin, "ticks", raising=False)
+    a, b = Twin("thesis_final", seed=3), Twin("thesis_final", seed=3)
+    b.run = b._run_ref
+    D = np.vstack(segments(a, np.random.default_rng(2), 2))
+    with pytest.warns(RuntimeWarning, match="compiled tick loop is not available"):
+        _, ca, ma = a.run(D)
+    _, cb, mb = b.run(D)
+    assert np.array_equal(ca, cb) and np.array_equal(ma, mb, equal_nan=True)
+    assert a._S is None

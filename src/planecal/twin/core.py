@@ -680,12 +680,16 @@ _TICKS = []
 
 def _ticks():
     """The compiled tick loop (``twin.ticks``), imported at the first ``run`` (numba
-    takes ~0.25 s to import); None if numba can't be imported (``run`` then takes the
-    reference path)."""
+    takes ~0.25 s to import); None, with a warning, if it can't be set up (numba missing,
+    no writable cache directory): ``run`` then takes the reference path, same numbers."""
     if not _TICKS:
         try:
             from planecal.twin import ticks
-        except ImportError:
+        except (ImportError, RuntimeError, OSError) as e:
+            import warnings
+            warnings.warn(f"twin: the compiled tick loop is not available ({e}); "
+                          "Twin.run takes the slower reference path", RuntimeWarning,
+                          stacklevel=3)
             ticks = None
         _TICKS.append(ticks)
     return _TICKS[0]
