@@ -8,6 +8,14 @@ absolute correction falls below ``improvement_limit`` (the seed's end condition,
 
 Uncertainty (at the solution, on the samples used):
   sigma^2 = |r|^2 / (m - p),  cov = sigma^2 (J^T J)^-1   (on the identifiable subspace)
+That assumes white distance noise. A robot's is not: its repeatability, projected on the
+beam, gives sample i a variance v_i = s^2 |dd/dq_i|^2 + s_d^2 that depends on the pose
+(docs/STUDIES.md measures the effect: on three plates the reported std is ~20 % off).
+``FitOptions(joint_sigma_rad=s)`` fits by weighted least squares instead, rows weighted
+by 1/sqrt(v_i) with v_i re-evaluated at each iterate (``noise_variance``), and reports
+  f = |W r|^2 / (m - p) (the variance factor, ~1 when s is right),  cov = f (J^T W^2 J)^-1
+which is the Cramer-Rao bound of the noise model, scaled by what the residuals show (the
+singular values, condition number and observability indices are then those of W J).
 Identifiability is judged on the column-scaled Jacobian (unit-norm columns, so units do not
 matter): a scaled singular value below ``unidentifiable_ratio`` x the largest is a direction
 the data cannot see; the parameters that make up that direction are named, and their
@@ -71,6 +79,11 @@ class FitOptions:
     practical_std_rad: float = 0.01
     practical_std_m: float = 0.01
     practical_std_plane: float = 0.1  # 1/m, n~ components (|n~| ~ 1/distance to the plane)
+    # weighted fit (module docstring): joint-angle std of the robot's repeatability [rad]
+    # (``robot.repeatability_sigma``; None: unweighted) and the std of a sample's distance
+    # from the sensor itself [m]
+    joint_sigma_rad: float | None = None
+    distance_sigma_m: float = 1e-6
 
 
 @dataclass
@@ -99,6 +112,21 @@ class FitResult:
     def rms_mm(self, initial: bool = False) -> float:
         r = self.initial_residuals_m if initial else self.residuals_m
         return float(np.sqrt(np.mean(r[self.used] ** 2)) * 1e3)
+
+
+def noise_variance(J_delta: np.ndarray, joint_sigma: float, distance_sigma_m: float) -> np.ndarray:
+    """Per-sample distance noise variance [m^2]: J_delta (N, 6) the Jacobian columns of the
+    six joint offsets (= dd/dq), joint_sigma the joint-angle std of the robot's
+    repeatability [rad], distance_sigma_m the std of a sample from the sensor [m]."""
+    return joint_sigma ** 2 * np.sum(J_delta ** 2, axis=1) + distance_sigma_m ** 2
+
+
+def _weights(J: np.ndarray, opt: "FitOptions") -> np.ndarray | None:
+    """Row weights 1/sqrt(v_i) from the full Jacobian J (its first six columns are the
+    offsets'), or None for an unweighted fit."""
+    if opt.joint_sigma_rad is None:
+        return None
+    return 1.0 / np.sqrt(noise_variance(J[:, :6], opt.joint_sigma_rad, opt.distance_sigma_m))
 
 
 def _solve_step(A: np.ndarray, r: np.ndarray, rcond: float) -> np.ndarray:
@@ -144,29 +172,39 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
     iterations = 0
     converged = False
 
-    def evaluate(xv, mask):
-        d, J = predict_with_jacobian(robot, qe[mask], CellParams.from_vector(xv), pidx[mask])
-        return d - d_m[mask], J[:, free]
+    if opt.joint_sigma_rad is not None and not (np.isfinite(opt.joint_sigma_rad)
+                                                 and opt.joint_sigma_rad >= 0
+                                                 and opt.distance_sigma_m > 0):
+        raise ValueError("weighted fit: joint_sigma_rad must be >= 0 and distance_sigma_m > 0")
 
-    r, Jf = evaluate(x, used)
+    def evaluate(xv, mask):
+        """Residuals, free Jacobian columns and row weights (None: unweighted) at xv."""
+        d, J = predict_with_jacobian(robot, qe[mask], CellParams.from_vector(xv), pidx[mask])
+        return d - d_m[mask], J[:, free], _weights(J, opt)
+
+    r, Jf, w = evaluate(x, used)
     initial_r = r.copy()
     history.append({"iteration": 0, "rms_m": float(np.sqrt(np.mean(r ** 2))),
                     "max_m": float(np.max(np.abs(r))), "samples": int(used.sum())})
     for it in range(1, opt.max_iter + 1):
-        S = _scales(Jf, opt.scale)
-        A = Jf * S
+        # weighted: rows scaled by w (held for this iteration, re-evaluated at the next)
+        Jw, rw = (Jf, r) if w is None else (Jf * w[:, None], r * w)
+        S = _scales(Jw, opt.scale)
+        A = Jw * S
         if opt.method == "gn":
-            dx = S * _solve_step(A, r, opt.rcond)
+            dx = S * _solve_step(A, rw, opt.rcond)
         elif opt.method == "lm":
-            cost = r @ r
+            cost = rw @ rw
             H = A.T @ A
-            g = A.T @ r
+            g = A.T @ rw
             for _ in range(30):
                 step = np.linalg.lstsq(H + lam * np.diag(np.maximum(np.diag(H), 1e-30)), -g,
                                        rcond=None)[0]
                 xt = x.copy()
                 xt[free] += S * step
-                rt, _ = evaluate(xt, used)
+                rt = evaluate(xt, used)[0]
+                if w is not None:
+                    rt = rt * w
                 if rt @ rt <= cost:
                     lam = max(lam / 10, 1e-12)
                     break
@@ -186,16 +224,16 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
                             "mean_abs_correction": float(np.mean(np.abs(dx)))})
             converged = True
             break
-        r, Jf = evaluate(x, used)
+        r, Jf, w = evaluate(x, used)
         if opt.outlier_sigma is not None:
-            e = r
+            e = r if w is None else r * w  # weighted: standardised residuals
             dev = np.abs(e - e.mean())
             bad = dev > opt.outlier_sigma * e.std()
             if bad.any() and used.sum() - bad.sum() > p + 1:
                 idx = np.flatnonzero(used)[bad]
                 outliers.extend(int(i) for i in idx)
                 used[idx] = False
-                r, Jf = evaluate(x, used)
+                r, Jf, w = evaluate(x, used)
         history.append({"iteration": it, "rms_m": float(np.sqrt(np.mean(r ** 2))),
                         "max_m": float(np.max(np.abs(r))), "samples": int(used.sum()),
                         "mean_abs_correction": float(np.mean(np.abs(dx)))})
@@ -205,7 +243,7 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
     params = CellParams.from_vector(x)
     # residuals over all samples (outliers included), for reporting
     final_r = r if used.all() else predict(robot, qe, params, pidx) - d_m
-    ident, std_free, cov, sigma = uncertainty(Jf, r, free, names, opt)
+    ident, std_free, cov, sigma = uncertainty(Jf, r, free, names, opt, weights=w)
     std = np.full(len(x), np.nan)
     std[free] = std_free
     notes = []
@@ -243,10 +281,15 @@ def _practical_limit(name: str, opt: FitOptions) -> float:
 
 
 def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str],
-                opt: FitOptions | None = None):
-    """Covariance, standard deviations and the identifiability report at a solution."""
+                opt: FitOptions | None = None, weights: np.ndarray | None = None):
+    """Covariance, standard deviations and the identifiability report at a solution;
+    ``weights`` (row weights 1/sqrt(v_i)): of the weighted fit (module docstring). Returns
+    (report, std, cov, sigma_m = sqrt(|r|^2 / (m - p)) of the unweighted residuals)."""
     opt = opt or FitOptions()
     m, p = Jf.shape
+    sigma_m = float(np.sqrt(float(r @ r) / max(m - p, 1)))
+    if weights is not None:
+        Jf, r = Jf * weights[:, None], r * weights
     free_names = [n for n, f in zip(names, free) if f]
     norms = np.linalg.norm(Jf, axis=0)
     no_effect = [free_names[j] for j in np.flatnonzero(norms <= 1e-10 * norms.max())]
@@ -312,9 +355,12 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str
             "O3": float(s[-1]),
             "O4": float(s[-1] ** 2 / s[0]),
         },
-        "sigma_mm": float(np.sqrt(sigma2) * 1e3),
+        "sigma_mm": sigma_m * 1e3,
         "samples": int(m),
         "rank": int(keep.sum()),
         "identifiable_min_scaled_ratio": float(sk[-1] / s[0]) if len(sk) else 0.0,
     }
-    return ident, std, cov, float(np.sqrt(sigma2))
+    if weights is not None:
+        ident["weighted"] = True
+        ident["variance_factor"] = sigma2
+    return ident, std, cov, sigma_m

@@ -151,6 +151,16 @@ def jacobian(robot: Robot, q: np.ndarray, delta: np.ndarray | None = None) -> np
     return np.concatenate([np.swapaxes(Jv, -1, -2), np.swapaxes(z, -1, -2)], axis=-2)
 
 
+def repeatability_sigma(robot: Robot, repeatability_m: float | None = None) -> float:
+    """Joint-angle std [rad] that gives a flange 3-sigma spread of ``repeatability_m``
+    (default: the robot's, robot.json ``repeatability_mm``): each joint perturbed
+    independently by N(0, s^2), s = (r / 3) / ||J_v(q = 0)||_F. For the MC70 (+-0.07 mm)
+    s ~ 1.1e-5 rad. The twin's repeatability and the weighted fit's noise model."""
+    r = robot.repeatability_m if repeatability_m is None else repeatability_m
+    Jv = jacobian(robot, np.zeros(robot.n_joints))[:3]
+    return float(r / 3.0 / np.linalg.norm(Jv))
+
+
 def within_limits(robot: Robot, q: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     q = np.asarray(q, float)
     return np.all((q >= robot.limits[:, 0] - tol) & (q <= robot.limits[:, 1] + tol), axis=-1)

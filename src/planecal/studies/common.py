@@ -5,14 +5,15 @@ terminal tables, the per-sample noise model of the twin and the covariance formu
 Noise model of one sample (SI): the twin's distance error is
   e_i = sum_j (dd/dq_j)_i eps_j + laser_i
 with eps ~ N(0, s^2 I) the repeatability perturbation of the six joints drawn each time the
-robot comes to rest (``twin.servo.repeatability_sigma``: a 3-sigma flange spread of the
+robot comes to rest (``robot.repeatability_sigma``: a 3-sigma flange spread of the
 robot's repeatability, 0.07 mm for the MC70, s ~ 1.1e-5 rad) and laser_i the laser noise of
 the sample value, the mean of a 100-reading buffer (std noise / 10). dd/dq_j equals the
 Jacobian column of delta_j. So e_i is Gaussian, independent between samples, zero mean, but
 its variance v_i = s^2 |J_delta,i|^2 + sigma_L^2 depends on the pose (heteroscedastic): the
 white-noise bound sigma^2 (J^T J)^-1 is then not the covariance of the (unweighted) least
 squares estimate; that is the sandwich (J^T J)^-1 J^T V J (J^T J)^-1, and the Cramer-Rao
-bound for this noise is (J^T V^-1 J)^-1 (weighted least squares would reach it).
+bound for this noise is (J^T V^-1 J)^-1, which the weighted fit reaches
+(``FitOptions(joint_sigma_rad=s)``; ``fit.noise_variance`` is v_i).
 """
 from __future__ import annotations
 
@@ -129,13 +130,6 @@ def display_scale(name: str) -> tuple[float, str]:
     if name.startswith("phi"):
         return 1e6, "urad"
     return 1e3, "1e-3/m"
-
-
-def noise_variance(J_delta: np.ndarray, joint_sigma: float, laser_sigma_m: float) -> np.ndarray:
-    """Per-sample distance noise variance [m^2] (module docstring): J_delta (N, 6) the
-    Jacobian columns of the six joint offsets (= dd/dq), joint_sigma the repeatability
-    joint std [rad], laser_sigma_m the std of one sample value [m]."""
-    return joint_sigma ** 2 * np.sum(J_delta ** 2, axis=1) + laser_sigma_m ** 2
 
 
 def covariances(Jf: np.ndarray, v: np.ndarray) -> dict:

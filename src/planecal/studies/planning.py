@@ -37,7 +37,8 @@ import numpy as np
 from planecal.cell import parameter_names, predict_with_jacobian
 from planecal.encoder import counts_in_range, joints_to_counts, counts_to_joints
 from planecal.errors import InputError
-from planecal.studies.common import BUFFER_LEN, covariances, noise_variance
+from planecal.fit import noise_variance
+from planecal.studies.common import BUFFER_LEN, covariances
 
 POSES_FORMAT = "planecal-poses/1"
 

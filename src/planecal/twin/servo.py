@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import lfilter
 
-from planecal.robot import Robot, fk_frames, jacobian
+from planecal.robot import Robot, fk_frames, repeatability_sigma
 
 SERVO_MODES = ("ideal", "lag")
 
@@ -135,12 +135,6 @@ class Servo:
             out[...] = np.rint(y, out=y)
         self.current = out[-1].tolist()
         return out
-
-
-def repeatability_sigma(robot: Robot, repeatability_m: float) -> float:
-    """Joint-angle std [rad] that gives a flange 3-sigma spread of ``repeatability_m``."""
-    Jv = jacobian(robot, np.zeros(robot.n_joints))[:3]
-    return float(repeatability_m / 3.0 / np.linalg.norm(Jv))
 
 
 def gravity_torque(robot: Robot, theta_q: np.ndarray, delta: np.ndarray) -> np.ndarray:
