@@ -54,6 +54,23 @@ def test_calibrate_writes_result_json(run_file, tmp_path, capsys):
     assert np.all(np.abs(err[1:5]) < 4 * std)
 
 
+def test_calibrate_weighted_reports_its_variance_factor(run_file, tmp_path, capsys):
+    # white 2 um noise, as the run file has, against the repeatability model (~10 um,
+    # pose dependent): the weighted fit lands within 4 std of the truth and says the
+    # model's noise level is ~50x the residuals' in variance
+    path, truth = run_file
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "--weighted", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "weighted by the repeatability noise model: variance factor" in text
+    r = json.loads(out.read_text())
+    ident = r["identifiability"]
+    assert ident["weighted"] is True and 0.005 < ident["variance_factor"] < 0.2
+    err = np.array(r["joint_offsets_rad"]) - truth.joint_offsets
+    std = np.array(r["std"]["joint_offsets_rad"][1:5], float)
+    assert np.all(np.abs(err[1:5]) < 4 * std)
+
+
 def test_calibrate_with_initial_file_and_free_list(run_file, tmp_path, capsys):
     path, _ = run_file
     p = tmp_path / "init.json"
@@ -69,6 +86,9 @@ def test_calibrate_with_initial_file_and_free_list(run_file, tmp_path, capsys):
     (["calibrate", SEED], "5 samples cannot determine 12 free parameters"),
     (["predict", SEED, "--params", "missing.json"], "missing.json: file not found"),
     (["calibrate", SEED, "--free", "delta9"], "unknown parameter 'delta9'"),
+    (["calibrate", SEED, "--repeatability-mm", "0.05"], "--repeatability-mm needs --weighted"),
+    (["calibrate", SEED, "--weighted", "--repeatability-mm", "0"], "--repeatability-mm must be > 0"),
+    (["calibrate", SEED, "--weighted", "--distance-sigma-um", "nan"], "--distance-sigma-um must be > 0"),
 ])
 def test_errors_are_one_line_exit_2(argv, message, capsys):
     assert main(argv) == 2

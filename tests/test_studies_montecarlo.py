@@ -4,8 +4,8 @@ import numpy as np
 
 from planecal.cli import main
 from planecal.studies.common import covariances
-from planecal.studies.montecarlo import (MCSettings, _scene, analyze, rehearse_samples,
-                                         run_many, truth_for, twin_samples)
+from planecal.studies.montecarlo import (MCSettings, _scene, analyze, format_montecarlo,
+                                         rehearse_samples, run_many, truth_for, twin_samples)
 
 
 def test_covariance_forms_agree_for_white_noise_and_order_otherwise():
@@ -63,6 +63,25 @@ def test_twin_monte_carlo_small(capsys, tmp_path):
         assert 0.7 < p["reported_std"] / p["crb_std"] < 1.4
     assert main(["montecarlo", "--runs", "1"]) == 2
     assert main(["montecarlo", "--mode", "twin", "--quantization"]) == 2
+
+
+def test_weighted_monte_carlo_reports_the_weighted_fit():
+    # same runs, fit unweighted and weighted: the header says which. The weighted fit
+    # reports the Cramer-Rao bound of the noise model times one variance factor per run
+    # (~1 +- 11 % in std at 60 samples), so the same ratio for every offset; the
+    # unweighted fit reports the white-noise form, off by different ratios
+    base = dict(scene="three_plates", mode="synthetic", samples=60, runs=2, seed=3)
+    res = {w: analyze(run_many(MCSettings(weighted=w, **base), jobs=1, quiet=True),
+                      MCSettings(weighted=w, **base)) for w in (False, True)}
+    offsets = ("delta2", "delta3", "delta4", "delta5")
+    ratio = {w: np.array([res[w]["params"][n]["reported_std"] / res[w]["params"][n]["crb_std"]
+                          for n in offsets]) for w in res}
+    assert np.ptp(ratio[True]) < 0.03 and abs(ratio[True].mean() - 1) < 0.25
+    assert np.ptp(ratio[False]) > 0.1
+    for n in offsets:
+        assert res[True]["params"][n]["crb_std"] == res[False]["params"][n]["crb_std"]
+    assert "fit weighted by the noise model" in format_montecarlo(res[True])
+    assert "fit unweighted" in format_montecarlo(res[False])
 
 
 def test_three_planes_do_not_free_delta1_delta6():

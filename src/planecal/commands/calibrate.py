@@ -1,5 +1,6 @@
 """planecal calibrate SAMPLES... [--initial P.json] [--out R.json] [--max-iter N]
-[--improvement-limit X] [--outlier-sigma K] [--method gn|lm] [--free NAMES] [--rrd FILE]
+[--improvement-limit X] [--outlier-sigma K] [--method gn|lm] [--free NAMES]
+[--weighted [--repeatability-mm R] [--distance-sigma-um S]] [--rrd FILE]
 
 Several sample files may be given; a file's samples are on the plate named in its 8th
 column, or on plate 1. Without --initial the default scene's nominal values (the thesis
@@ -32,6 +33,16 @@ def add_arguments(p):
                    help="gn: Gauss-Newton with SVD pseudo-inverse (seed); lm: Levenberg-Marquardt")
     p.add_argument("--no-scale", action="store_true", help="no column scaling of the Jacobian")
     p.add_argument("--free", help="comma-separated parameter names to fit (default: all but delta1, delta6)")
+    p.add_argument("--weighted", action="store_true",
+                   help="weighted least squares with the robot's repeatability as the noise "
+                        "model (each sample's variance from its pose): honest std on several "
+                        "plates; see planecal.fit")
+    p.add_argument("--repeatability-mm", type=float, default=None,
+                   help="with --weighted: the robot's repeatability, +- mm at the flange "
+                        "(default: robot.json's)")
+    p.add_argument("--distance-sigma-um", type=float, default=1.0,
+                   help="with --weighted: std of a sample's distance from the sensor itself "
+                        "(default %(default)g um)")
     p.add_argument("--rrd", nargs="?", const="auto", default=None,
                    help="write a Rerun recording of the fit (file name, directory, or nothing "
                         "for recordings/calibrate-<scene>-<time>.rrd)")
@@ -81,6 +92,10 @@ def format_report(res: FitResult, n_zero: int = 0) -> str:
                  f"   max after {np.max(np.abs(res.residuals_m[res.used])) * 1e3:.4f} mm")
     lines.append(f"iterations {res.iterations}" + ("" if res.converged else " (not converged)"))
     lines.append("outliers " + (", ".join(str(i) for i in res.outliers) if res.outliers else "none"))
+    if ident.get("weighted"):
+        lines.append(f"weighted by the repeatability noise model: variance factor "
+                     f"{ident['variance_factor']:.3g} (1: the model's noise level fits the "
+                     f"residuals; the std include it)")
     lines.append(f"sigma {ident['sigma_mm']:.4g} mm   scaled condition number "
                  f"{ident['condition_number_scaled']:.4g}   O1 {ident['observability']['O1']:.3g}"
                  f"  O2 {ident['observability']['O2']:.3g}")
@@ -115,13 +130,34 @@ def load_problem(args):
     return samples, scene, initial
 
 
+def weighting(args, robot) -> dict:
+    """FitOptions fields of --weighted (empty without it)."""
+    if not args.weighted:
+        if args.repeatability_mm is not None:
+            raise InputError("--repeatability-mm needs --weighted")
+        return {}
+    from planecal.robot import repeatability_sigma
+    rep = args.repeatability_mm
+    if rep is not None and not (np.isfinite(rep) and rep > 0):
+        raise InputError(f"--repeatability-mm must be > 0, got {rep:g}")
+    if not (np.isfinite(args.distance_sigma_um) and args.distance_sigma_um > 0):
+        raise InputError(f"--distance-sigma-um must be > 0, got {args.distance_sigma_um:g}")
+    r_m = robot.repeatability_m if rep is None else rep * 1e-3
+    if not r_m > 0:
+        raise InputError("--weighted: the robot description has no repeatability_mm; "
+                         "give --repeatability-mm")
+    return {"joint_sigma_rad": repeatability_sigma(robot, r_m),
+            "distance_sigma_m": args.distance_sigma_um * 1e-6}
+
+
 def run(args) -> int:
     samples, scene, initial = load_problem(args)
     if args.max_iter < 1:
         raise InputError("--max-iter must be at least 1")
     opts = FitOptions(max_iter=args.max_iter, improvement_limit=args.improvement_limit,
                       outlier_sigma=args.outlier_sigma, method=args.method,
-                      scale=not args.no_scale, free=free_from_names(args.free, initial.n_planes))
+                      scale=not args.no_scale, free=free_from_names(args.free, initial.n_planes),
+                      **weighting(args, scene.robot))
     try:
         res = calibrate(scene.robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate, opts)
     except ValueError as e:

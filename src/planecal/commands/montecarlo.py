@@ -1,12 +1,13 @@
 """planecal montecarlo [--scene S] [--runs R] [--samples N] [--jobs J] [--out M.json]
 [--mode twin|rehearse|synthetic] [--seed K] [--truth-seed T] [--vary-truth]
 [--offsets-all] [--laser-noise-mm X] [--repeatability-mm X] [--quantization]
-[--free NAMES] [--slope 50,100,200] [--slope-runs R]
+[--free NAMES] [--weighted] [--slope 50,100,200] [--slope-runs R]
 
 Repeated rehearsals on the twin with fresh poses and noise, each calibrated from the
 scene's nominal values: per parameter the bias, the empirical std, the Cramer-Rao bound
 (white-noise form sigma^2 (J^T J)^-1 and the heteroscedastic form (J^T V^-1 J)^-1), the
-sandwich covariance of the unweighted fit and the std the fit reports; the chi-square
+sandwich covariance of the unweighted fit and the std the fit reports (unweighted, or
+with --weighted the weighted fit of planecal.fit, which should reach the CRB); the chi-square
 consistency of the reported covariance; with --slope the spread vs the number of samples
 and its log-log slope. Runs go to --jobs worker processes (default: all cores).
 See planecal.studies.montecarlo for the modes and the noise model.
@@ -40,6 +41,8 @@ def add_arguments(p):
     p.add_argument("--quantization", action="store_true",
                    help="synthetic mode: add +-0.5 count encoder quantisation noise")
     p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
+    p.add_argument("--weighted", action="store_true",
+                   help="fit by weighted least squares with the noise model (planecal.fit)")
     p.add_argument("--slope", help="also measure the spread at these sample counts (e.g. 50,100,200)")
     p.add_argument("--slope-runs", type=int, default=None, help="runs per slope point (default --runs)")
 
@@ -59,7 +62,7 @@ def run(args) -> int:
                     mode=args.mode, truth_seed=args.truth_seed, vary_truth=args.vary_truth,
                     offsets_all=args.offsets_all, laser_noise_mm=args.laser_noise_mm,
                     repeatability_mm=args.repeatability_mm, quantization=args.quantization,
-                    free=free)
+                    free=free, weighted=args.weighted)
     st.check()
     jobs = check_jobs(args.jobs)
     slope_counts = parse_int_list(args.slope, "--slope", 20) if args.slope else None

@@ -43,7 +43,8 @@ import numpy as np
 
 from planecal.cell import parameter_names, predict_with_jacobian
 from planecal.errors import InputError
-from planecal.studies.common import (BUFFER_LEN, Progress, covariances, noise_variance,
+from planecal.fit import noise_variance
+from planecal.studies.common import (BUFFER_LEN, Progress, covariances,
                                      parallel_map, table)
 
 MODES = ("twin", "rehearse", "synthetic")
@@ -69,6 +70,7 @@ class MCSettings:
     free: tuple | None = None  # parameter names; None: all but delta1, delta6
     clearance_m: float = 0.01
     poses: tuple | None = None  # fixed encoder counts (planning study): replayed in order
+    weighted: bool = False  # fit by weighted least squares with the noise model (fit.py)
 
     def check(self) -> None:
         if self.mode not in MODES:
@@ -114,7 +116,7 @@ def truth_for(st: MCSettings, k: int):
 
 
 def joint_sigma(robot, st: MCSettings) -> float:
-    from planecal.twin.servo import repeatability_sigma
+    from planecal.robot import repeatability_sigma
     rep = robot.repeatability_m if st.repeatability_mm is None else st.repeatability_mm * 1e-3
     return repeatability_sigma(robot, rep) if rep > 0 else 0.0
 
@@ -257,11 +259,15 @@ def run_one(job) -> dict:
         return {"k": k, "seed": seed, "failed": str(e)}
     names = parameter_names(len(scene.plates))
     free = free_mask(names, st.free)
-    fit = calibrate(robot, qe, d, nominal_params(scene), plate, FitOptions(free=free))
+    s = joint_sigma(robot, st)
+    sample_sigma = st.laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN)
+    weights = {"joint_sigma_rad": s, "distance_sigma_m": max(sample_sigma, 1e-9)} \
+        if st.weighted else {}
+    fit = calibrate(robot, qe, d, nominal_params(scene), plate,
+                    FitOptions(free=free, **weights))
     # noise model and bounds at the truth, on this run's samples
     _, J = predict_with_jacobian(robot, qe, truth, plate)
-    s = joint_sigma(robot, st)
-    v = noise_variance(J[:, :6], s, st.laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN))
+    v = noise_variance(J[:, :6], s, sample_sigma)
     if st.quantization:
         Jx = J[:, :6] @ robot.coupling  # dd/dx (actuator angles)
         v = v + np.sum(Jx ** 2 / (12.0 * robot.gains ** 2), axis=1)
@@ -429,7 +435,9 @@ def format_montecarlo(res: dict) -> str:
            + ("drawn per run" if st["vary_truth"] else f"fixed (seed {st['truth_seed']})")
            + f"; noise: laser {st['laser_noise_mm']} mm per reading, repeatability "
            + ("robot's" if st["repeatability_mm"] is None else f"{st['repeatability_mm']} mm")
-           + (", encoder quantisation" if st["quantization"] else ""),
+           + (", encoder quantisation" if st["quantization"] else "")
+           + ("; fit weighted by the noise model" if st.get("weighted") else
+              "; fit unweighted"),
            f"noise model rms per sample {res['sigma_model_mm'] * 1e3:.2f} um, fit sigma "
            f"{res['sigma_fit_mm'] * 1e3:.2f} um; a std from {res['runs']} runs is known to "
            f"+-{res['relative_standard_error_of_std']:.0%} (1 s.e.)", ""]
