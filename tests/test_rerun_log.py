@@ -256,8 +256,17 @@ def test_fit_recording_histograms_match_the_optimizer(scene, rehearsal, tmp_path
     for name in res.names:
         assert f"| {name} |" in table
     assert "fixed" in table  # delta1, delta6
-    assert "Identifiability" in data["/fit/identifiability"]["rows"][-1]["TextDocument:text"][0]
+    ident_text = data["/fit/identifiability"]["rows"][-1]["TextDocument:text"][0]
+    assert "Identifiability" in ident_text and "variance factor" not in ident_text
     assert len(last(data, "/samples/points", "Points3D:positions")) == len(s)
+    # a weighted fit says so, with its variance factor
+    from planecal.fit import FitOptions
+    from planecal.rerun_log.fit import identifiability_markdown
+    from planecal.robot import repeatability_sigma
+    wres = calibrate(scene.robot, s.qe, s.d_mm * 1e-3, nominal_params(scene),
+                     options=FitOptions(joint_sigma_rad=repeatability_sigma(scene.robot)))
+    f = wres.identifiability["variance_factor"]
+    assert f"variance factor {f:.3g}" in identifiability_markdown(wres)
 
 
 def test_cli_rehearse_and_calibrate_write_recordings_into_a_directory(tmp_path, capsys):

@@ -90,6 +90,9 @@ def identifiability_markdown(res) -> str:
         lines.append(f"* sigma {ident['sigma_mm']:.4g} mm, scaled condition number "
                      f"{ident.get('condition_number_scaled', float('nan')):.4g}, "
                      + ", ".join(f"{k} {v:.3g}" for k, v in obs.items()))
+    if ident.get("weighted"):
+        lines.append(f"* weighted by the repeatability noise model, variance factor "
+                     f"{ident['variance_factor']:.3g}")
     warnings = []
     for d in ident.get("unidentifiable_directions", []):
         mix = " ".join(f"{v:+.3f}*{k}" for k, v in d.items())
