@@ -282,6 +282,8 @@ class Twin:
         ticks = _ticks()
         if self._S is None:
             self._S, self._F = self._tick_state(ticks)
+        if not D.flags.c_contiguous:  # one compiled version (C order), not one per layout
+            D = np.ascontiguousarray(D)
         n = len(D)
         S, F, stop = self._S, self._F, self._stop
         servo, errors, laser = self._servo, self._errors, self._laser
