@@ -218,6 +218,8 @@ def test_run_fast_path_equals_reference_bit_for_bit(name, opts):
         assert ma.dtype == mb.dtype and np.array_equal(ma, mb, equal_nan=True)
         assert a._at_rest == b._at_rest and a._dist == b._dist and a._geom == b._geom
         assert np.array_equal(a._errors.eps, b._errors.eps)
+        assert a._errors._next == b._errors._next and a._laser._left == b._laser._left
+        assert a._errors.rng.bit_generator.state == b._errors.rng.bit_generator.state
         if calls % 17 == 0:  # jump onto the command, at rest (both)
             c = a.commanded_counts
             a.set_counts(c)
@@ -295,3 +297,32 @@ def test_run_without_the_compiled_loop_warns_and_takes_the_reference(monkeypatch
     _, cb, mb = b.run(D)
     assert np.array_equal(ca, cb) and np.array_equal(ma, mb, equal_nan=True)
     assert a._S is None
+
+
+def test_run_draws_the_next_perturbation_block_only_at_a_settle():
+    # the perturbation block used up, then a call that only moves: no settle, so no new
+    # block drawn (the per-tick path draws at the settle that needs it), the generator
+    # untouched; the next settle draws it in both
+    opts = TwinOptions(servo="ideal")
+    a, b = Twin("thesis_final", seed=1, options=opts), Twin("thesis_final", seed=1, options=opts)
+    for t in (a, b):
+        while t._errors._next < len(t._errors._eps_block):
+            t.set_counts(t.current_counts)
+    base = a.current_counts - a.reference_counts
+    D = base + np.cumsum(np.tile([0, 5, 0, 0, 0, 0], (10, 1)), axis=0)
+    state = a._errors.rng.bit_generator.state
+    a.run(D)
+    for d in D:
+        b.exchange(d)
+        b.read()
+    assert a._errors.rng.bit_generator.state == state == b._errors.rng.bit_generator.state
+    assert a._errors._next == b._errors._next == len(a._errors._eps_block)
+    hold = np.repeat(D[-1:], 3, axis=0)  # comes to rest: the settle draws a block
+    _, _, ma = a.run(hold)
+    mb = []
+    for d in hold:
+        b.exchange(d)
+        mb.append(b.read())
+    assert a._errors._next == b._errors._next == 1
+    assert np.array_equal(a._errors.eps, b._errors.eps)
+    assert np.abs(ma - np.array(mb, float)).max() < 1e-9

@@ -17,12 +17,15 @@ truth's sensor pose and planes. With noise and joint errors off, ``read()`` equa
 
 Kinematics and the ray are recomputed lazily, only when the counts (or joint errors)
 changed since the last reading: a robot at rest costs a laser-noise draw per reading.
-``Twin.run(deltas)`` does many ticks (exchange + read each) in one call with the same
-results, bit for bit: the tick loop compiled (``ticks``, numba: FD11 trip check, servo,
-rest and repeatability logic, counts -> joints, laser model) and the beams of all its
-moving ticks cast in one MuJoCo call (``beam``: MuJoCo kinematics + ``mj_ray`` per tick
-in C, ~1 us with a hit). ``_run_ref`` is the same in numpy and the bindings (the
-reference the tests hold ``run`` to, and the path with compliance or backlash on).
+``Twin.run(deltas)`` does many ticks (exchange + read each) in one call: the tick loop
+compiled (``ticks``, numba: FD11 trip check, servo, rest and repeatability logic, counts
+-> joints, laser model) and the beams of all its moving ticks cast in one MuJoCo call
+(``beam``: MuJoCo kinematics + ``mj_ray`` per tick in C, ~1 us with a hit, intersecting
+in the laser's frame). Against the per-tick loop: the same counts, joint states and
+random streams bit for bit, readings to ~1e-12 mm (the caster's frame). ``_run_ref`` is
+the same in numpy and the bindings; with the same caster it gives ``run``'s readings bit
+for bit (the reference the tests hold ``run`` to, and the path with compliance or
+backlash on).
 scripts/bench_twin.py measures the throughput.
 """
 from __future__ import annotations
@@ -123,7 +126,8 @@ class Twin:
     ``batch_rays`` (class default True): ``run`` runs its ticks in the compiled loop
     (``ticks``) and casts the beams of all its moving ticks in one MuJoCo call
     (``beam.BeamCaster``: kinematics and ``mj_ray`` per tick in C); False, or a model the
-    caster doesn't cover, or compliance / backlash on: ``_run_ref`` with one
+    caster doesn't cover, or compliance / backlash on, or numba unavailable (a warning):
+    ``_run_ref`` with one
     ``mj_kinematics`` + ``mj_ray`` per moving tick through the bindings (same counts and
     random streams, readings equal to ~1e-12 mm: tests/test_twin_batch.py).
     """
@@ -255,9 +259,9 @@ class Twin:
     def run(self, deltas) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Many ticks at once: for each row of ``deltas`` (N, 6) one ``exchange`` then one
         ``read``. Returns (reference int64[6], current counts int64[N, 6], readings
-        float[N] in mm with NaN where read() gives None). Same results and random
-        streams as the loop, bit for bit; ~20x faster (a compiled tick loop, the beams of
-        all moving ticks in one MuJoCo call).
+        float[N] in mm with NaN where read() gives None). Same counts and random streams
+        as the loop, bit for bit, readings to ~1e-12 mm; ~20x faster (a compiled tick
+        loop, the beams of all moving ticks in one MuJoCo call).
         An encoder jump runs the ticks before it, then raises EncoderJumpError."""
         if self._tripped:
             raise EncoderJumpError("twin: the robot braked after an encoder jump; make a new Twin")
@@ -277,13 +281,13 @@ class Twin:
 
     def _run_batch(self, D, beam):
         """``run`` with the compiled tick loop (``ticks``) and the batch caster (no
-        compliance, no backlash, trip checks on): the same results as ``_run_ref`` bit
-        for bit (tests/test_twin_batch.py)."""
+        compliance, no backlash; trip checks on or off): the same results and state as
+        ``_run_ref`` with the caster, bit for bit (tests/test_twin_batch.py)."""
         ticks = _ticks()
         if self._S is None:
             self._S, self._F = self._tick_state(ticks)
-        if not D.flags.c_contiguous:  # one compiled version (C order), not one per layout
-            D = np.ascontiguousarray(D)
+        if not (D.flags.c_contiguous and D.flags.writeable):
+            D = np.require(D, requirements="CW")  # one compiled version, not one per layout
         n = len(D)
         S, F, stop = self._S, self._F, self._stop
         servo, errors, laser = self._servo, self._errors, self._laser
@@ -306,7 +310,7 @@ class Twin:
             k = ticks.advance(D, i, S, F, errors._eps_block, cur, row_of, Q, k, stop)
             if stop[0] != ticks.NEED_EPS:
                 break
-            errors.draw_block()  # drawn before the settle that needs it: same values
+            errors.draw_block()  # at the settle that needs it, as on_settle does
             S[ticks.EPS_NEXT] = e0 = 0
             i, drew = int(stop[1]), True
         m = int(stop[1])  # the ticks run (all but a tripping one and after)
@@ -329,11 +333,11 @@ class Twin:
         else:
             dist = _NO_DIST
         readings = np.empty(m)
-        noise = laser.noise_mm > 0.0
+        noise, quantum = laser.noise_mm > 0.0, float(laser.quantum_mm or 0.0)
         i = 0
         while True:
             laser._left = ticks.laser(row_of[:m], dist, prev, i, laser._block, laser._left,
-                                      noise, laser.quantum_mm or 0.0, laser.lo, laser.hi,
+                                      noise, quantum, laser.lo, laser.hi,
                                       readings, stop)
             if stop[0] != ticks.NEED_EPS:
                 break
@@ -362,8 +366,8 @@ class Twin:
         return S, F
 
     def _run_ref(self, D) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``run``'s reference (the general path, and the only one without the batch
-        caster or with compliance / backlash / no trip checks)."""
+        """``run``'s reference (the general path: the only one without the batch caster
+        or numba, or with compliance / backlash)."""
         if self._tripped:
             raise EncoderJumpError("twin: the robot braked after an encoder jump; make a new Twin")
         D = _as_count_rows(D)

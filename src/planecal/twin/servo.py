@@ -184,8 +184,8 @@ class JointErrors:
     def draw_block(self) -> None:
         """Draw the next EPS_BLOCK perturbations: the same values, in the same order, as
         one rng.normal(0, sigma, n_joints) call per settle (numpy's Generator draws
-        element by element), ~5 us less per settle. Drawing a block early (before the
-        settle that needs it, as ``Twin.run`` does) changes no value."""
+        element by element), ~5 us less per settle. ``Twin.run`` calls it at the settle
+        that needs it, as ``on_settle`` does."""
         self._eps_block = self.rng.normal(0.0, self.sigma, (EPS_BLOCK, self.robot.n_joints))
         self._next = 0
 

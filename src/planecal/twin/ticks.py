@@ -1,23 +1,28 @@
 """``Twin.run``'s tick loop, compiled (numba): the FD11 semantics, the servo, the rest
 logic and the laser model, tick by tick, with the same arithmetic in the same order as
-``Twin.exchange`` + ``Twin.read`` (so the same numbers, bit for bit); only the beams are
-cast outside, all of a call's in one MuJoCo call (``beam.BeamCaster``).
+``Twin.exchange`` + ``Twin.read``: the same counts, joint states and random streams, bit
+for bit. Only the beams are cast outside, all of a call's in one MuJoCo call
+(``beam.BeamCaster``, which intersects in the laser's frame: distances equal the per-tick
+``mj_ray``'s to ~1e-15 m, readings to ~1e-12 mm; ``Twin._run_ref`` with the same caster
+gives the same readings bit for bit).
 
 One ``run`` call is three steps:
 
 1. ``advance``: for each tick, command = reference + delta (stop at an encoder jump),
    the servo (ideal, or the first-order lag rounded to counts), at rest = the command
    holds and the counts are on it (coming to rest draws the next repeatability
-   perturbation), and whenever the counts moved or a perturbation was drawn, the joint
-   state ``qpos = q(counts) + delta_true + eps`` of that tick as a row of ``Q``;
-   ``row_of[i]`` is the row tick i reads (-1: the state before the call).
+   perturbation), and whenever the state changed (the counts moved, a perturbation was
+   drawn, or it was stale at entry) the joint state ``qpos = q(counts) + delta_true +
+   eps`` of that tick as a row of ``Q``; ``row_of[i]`` is the row tick i reads (-1: the
+   state before the call).
 2. the beams of the rows of ``Q`` (MuJoCo: kinematics + ``mj_ray`` per row);
 3. ``laser``: each tick's reading from its row's distance: + noise, quantum, window.
 
 Random streams: both steps use blocks drawn ahead by the twin (the repeatability
 perturbations, ``JointErrors``; the laser noise, ``LaserModel``), in the order the
-per-tick path uses them. When a block runs out, the step returns where it stopped; the
-caller draws the next block and calls again from there (state is kept in the arrays).
+per-tick path uses them. When a draw finds its block used up, the step returns before
+applying that tick; the caller draws the next block (as the per-tick path would, at the
+same moment) and calls again from that tick (state is kept in the arrays).
 
 The twin's state travels in two arrays, ``S`` (int64) and ``F`` (float64), laid out by the
 indices below; ``Twin._run_batch`` fills them from the twin before a call and reads them
@@ -58,9 +63,9 @@ DONE, NEED_EPS, TRIPPED = 0, 1, 2
 def advance(D, i0, S, F, eps_block, cur_out, row_of, Q, k0, stop):
     """Ticks ``i0..`` of ``D`` (n, 6) deltas. Writes the counts ``cur_out[i]``, the
     recomputed joint rows ``Q[k0..]`` and ``row_of[i]``; returns the number of rows of Q
-    now used. ``stop[0]``: DONE, NEED_EPS (the perturbation block is used up: draw the
-    next, call again from tick ``stop[1]``; drawing before the settle that needs it gives
-    the same values) or TRIPPED (tick ``stop[1]`` jumps: not run)."""
+    now used. ``stop[0]``: DONE, NEED_EPS (tick ``stop[1]`` comes to rest and the
+    perturbation block is used up: draw the next, call again from that tick; nothing of
+    it was applied) or TRIPPED (tick ``stop[1]`` jumps: not run)."""
     n = D.shape[0]
     k = k0
     trip = S[TRIP]
@@ -70,11 +75,10 @@ def advance(D, i0, S, F, eps_block, cur_out, row_of, Q, k0, stop):
     sigma = S[SIGMA] == 1
     nblock = eps_block.shape[0]
     cmd = np.empty(6, np.int64)
+    cnt = np.empty(6, np.int64)
+    y = np.empty(6)
     for i in range(i0, n):
-        if sigma and S[EPS_NEXT] >= nblock:  # (before the tick: it may settle)
-            stop[0] = NEED_EPS
-            stop[1] = i
-            return k
+        # the tick computed aside, applied once nothing can stop it
         holding = True
         for j in range(6):
             c = S[REF + j] + D[i, j]
@@ -91,17 +95,26 @@ def advance(D, i0, S, F, eps_block, cur_out, row_of, Q, k0, stop):
             if ideal:
                 c = cmd[j]
             else:
-                y = g * cmd[j] + keep * F[Y + j]
-                F[Y + j] = y
-                c = np.int64(np.rint(y))
+                y[j] = g * cmd[j] + keep * F[Y + j]
+                c = np.int64(np.rint(y[j]))
+            cnt[j] = c
             if c != S[CUR + j]:
                 moved = True
-                S[CUR + j] = c
             if c != cmd[j]:
                 on_cmd = False
-            S[CMD + j] = cmd[j]
         at_rest = holding and on_cmd
-        if at_rest and S[AT_REST] == 0 and sigma:  # comes to rest: a new perturbation
+        settle = at_rest and S[AT_REST] == 0 and sigma  # comes to rest: new perturbation
+        if settle and S[EPS_NEXT] >= nblock:
+            stop[0] = NEED_EPS
+            stop[1] = i
+            return k
+        for j in range(6):
+            if not ideal:
+                F[Y + j] = y[j]
+            S[CUR + j] = cnt[j]
+            S[CMD + j] = cmd[j]
+            cur_out[i, j] = cnt[j]
+        if settle:
             e = S[EPS_NEXT]
             for j in range(6):
                 F[EPS + j] = eps_block[e, j]
@@ -110,8 +123,6 @@ def advance(D, i0, S, F, eps_block, cur_out, row_of, Q, k0, stop):
         if moved:
             S[DIRTY] = 1
         S[AT_REST] = 1 if at_rest else 0
-        for j in range(6):
-            cur_out[i, j] = S[CUR + j]
         if S[DIRTY] == 1:
             _joint_row(S, F, sigma, Q, k)
             k += 1
