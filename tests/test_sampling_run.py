@@ -400,9 +400,11 @@ def test_multi_plate_run_records_the_plate(scene, tmp_path):
 
 @pytest.mark.skipif(not __import__("os").path.exists("/proc/self/status"),
                     reason="reads process states from /proc")
-def test_background_planner_ends_when_the_run_is_killed(tmp_path):
-    # the forked planner must not outlive its run: SIGKILL the run (no cleanup runs) and
-    # the planner sees the pipe close and exits, instead of waiting for requests forever
+@pytest.mark.parametrize("plan_s", [0.5, 0.0])
+def test_background_planner_ends_when_the_run_is_killed(tmp_path, plan_s):
+    # the forked planner must not outlive its run: SIGKILL the run (no cleanup runs)
+    # while it plans (0.5 s) or with its plan sent and unread (0 s): the planner sees the
+    # pipe close or reset and exits quietly, instead of waiting for requests forever
     import os
     import signal
     import subprocess
@@ -414,15 +416,17 @@ def test_background_planner_ends_when_the_run_is_killed(tmp_path):
         "import sys, time\n"
         "from planecal.sampling.run import BackgroundPlanner\n"
         "class P:\n"
-        "    def plan(self, *req): time.sleep(0.5); return req\n"
+        f"    def plan(self, *req): time.sleep({plan_s}); return req\n"
         "    def index_matters(self): return False\n"
         "bp = BackgroundPlanner(P())\n"
         "bp.submit(1, 2, 3)\n"
         "print(bp._proc.pid, flush=True)\n"
         "time.sleep(60)\n")
-    run = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    run = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
     try:
         child = int(run.stdout.readline())
+        time.sleep(0.2)  # (0 s: the plan is back in the pipe by now)
         os.kill(run.pid, signal.SIGKILL)
         run.wait(timeout=10)
 
@@ -439,6 +443,7 @@ def test_background_planner_ends_when_the_run_is_killed(tmp_path):
         if not gone:
             os.kill(child, signal.SIGKILL)
         assert gone, "the planner outlived its run"
+        assert "Traceback" not in run.stderr.read()  # the planner held it until it exited
     finally:
         if run.poll() is None:
             run.kill()

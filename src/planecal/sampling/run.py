@@ -444,7 +444,7 @@ def _planner_worker(conn, parent_end, planner: Planner) -> None:
     while True:
         try:
             req = conn.recv()
-        except EOFError:
+        except (EOFError, OSError):  # the run is gone (closed, or reset with a plan unread)
             break
         if req is None:
             break
