@@ -87,6 +87,7 @@ def test_calibrate_with_initial_file_and_free_list(run_file, tmp_path, capsys):
     (["predict", SEED, "--params", "missing.json"], "missing.json: file not found"),
     (["calibrate", SEED, "--free", "delta9"], "unknown parameter 'delta9'"),
     (["calibrate", SEED, "--repeatability-mm", "0.05"], "--repeatability-mm needs --weighted"),
+    (["calibrate", SEED, "--distance-sigma-um", "2"], "--distance-sigma-um needs --weighted"),
     (["calibrate", SEED, "--weighted", "--repeatability-mm", "0"], "--repeatability-mm must be > 0"),
     (["calibrate", SEED, "--weighted", "--distance-sigma-um", "nan"], "--distance-sigma-um must be > 0"),
 ])

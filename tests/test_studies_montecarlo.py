@@ -63,6 +63,11 @@ def test_twin_monte_carlo_small(capsys, tmp_path):
         assert 0.7 < p["reported_std"] / p["crb_std"] < 1.4
     assert main(["montecarlo", "--runs", "1"]) == 2
     assert main(["montecarlo", "--mode", "twin", "--quantization"]) == 2
+    assert main(["montecarlo", "--mode", "synthetic", "--quantization", "--weighted"]) == 2
+    assert main(["montecarlo", "--mode", "synthetic", "--repeatability-mm", "0",
+                 "--laser-noise-mm", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "no quantisation term" in err and "no noise to study" in err
 
 
 def test_weighted_monte_carlo_reports_the_weighted_fit():
@@ -81,6 +86,7 @@ def test_weighted_monte_carlo_reports_the_weighted_fit():
     for n in offsets:
         assert res[True]["params"][n]["crb_std"] == res[False]["params"][n]["crb_std"]
     assert "fit weighted by the noise model" in format_montecarlo(res[True])
+    assert res[True]["chi2_offsets_sandwich"] is None  # the unweighted estimator's: no check
     assert "fit unweighted" in format_montecarlo(res[False])
 
 

@@ -172,10 +172,11 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
     iterations = 0
     converged = False
 
-    if opt.joint_sigma_rad is not None and not (np.isfinite(opt.joint_sigma_rad)
-                                                 and opt.joint_sigma_rad >= 0
-                                                 and opt.distance_sigma_m > 0):
-        raise ValueError("weighted fit: joint_sigma_rad must be >= 0 and distance_sigma_m > 0")
+    if opt.joint_sigma_rad is not None and not (
+            np.isfinite(opt.joint_sigma_rad) and opt.joint_sigma_rad >= 0
+            and np.isfinite(opt.distance_sigma_m) and opt.distance_sigma_m > 0):
+        raise ValueError("weighted fit: joint_sigma_rad must be finite and >= 0, "
+                         "distance_sigma_m finite and > 0")
 
     def evaluate(xv, mask):
         """Residuals, free Jacobian columns and row weights (None: unweighted) at xv."""
@@ -259,7 +260,8 @@ def analyze(robot: Robot, qe: np.ndarray, params: CellParams, plane_index=None,
             options: FitOptions | None = None):
     """Identifiability and predicted standard deviations of a pose set *before* fitting:
     the Jacobian at ``params`` (e.g. the nominal values) and an assumed distance noise
-    ``sigma_m``. Returns (identifiability dict, std over the full parameter vector)."""
+    ``sigma_m`` (white: the weighted fit's options are not used here). Returns
+    (identifiability dict, std over the full parameter vector)."""
     opt = options or FitOptions()
     free = default_free(params.n_planes) if free is None else np.asarray(free, bool)
     _, J = predict_with_jacobian(robot, qe, params, plane_index)

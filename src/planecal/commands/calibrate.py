@@ -40,9 +40,9 @@ def add_arguments(p):
     p.add_argument("--repeatability-mm", type=float, default=None,
                    help="with --weighted: the robot's repeatability, +- mm at the flange "
                         "(default: robot.json's)")
-    p.add_argument("--distance-sigma-um", type=float, default=1.0,
+    p.add_argument("--distance-sigma-um", type=float, default=None,
                    help="with --weighted: std of a sample's distance from the sensor itself "
-                        "(default %(default)g um)")
+                        "(default 1 um)")
     p.add_argument("--rrd", nargs="?", const="auto", default=None,
                    help="write a Rerun recording of the fit (file name, directory, or nothing "
                         "for recordings/calibrate-<scene>-<time>.rrd)")
@@ -133,21 +133,24 @@ def load_problem(args):
 def weighting(args, robot) -> dict:
     """FitOptions fields of --weighted (empty without it)."""
     if not args.weighted:
-        if args.repeatability_mm is not None:
-            raise InputError("--repeatability-mm needs --weighted")
+        for flag, v in (("--repeatability-mm", args.repeatability_mm),
+                        ("--distance-sigma-um", args.distance_sigma_um)):
+            if v is not None:
+                raise InputError(f"{flag} needs --weighted")
         return {}
     from planecal.robot import repeatability_sigma
     rep = args.repeatability_mm
     if rep is not None and not (np.isfinite(rep) and rep > 0):
         raise InputError(f"--repeatability-mm must be > 0, got {rep:g}")
-    if not (np.isfinite(args.distance_sigma_um) and args.distance_sigma_um > 0):
-        raise InputError(f"--distance-sigma-um must be > 0, got {args.distance_sigma_um:g}")
+    sd_um = 1.0 if args.distance_sigma_um is None else args.distance_sigma_um
+    if not (np.isfinite(sd_um) and sd_um > 0):
+        raise InputError(f"--distance-sigma-um must be > 0, got {sd_um:g}")
     r_m = robot.repeatability_m if rep is None else rep * 1e-3
     if not r_m > 0:
         raise InputError("--weighted: the robot description has no repeatability_mm; "
                          "give --repeatability-mm")
     return {"joint_sigma_rad": repeatability_sigma(robot, r_m),
-            "distance_sigma_m": args.distance_sigma_um * 1e-6}
+            "distance_sigma_m": sd_um * 1e-6}
 
 
 def run(args) -> int:

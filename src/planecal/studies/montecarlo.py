@@ -83,6 +83,11 @@ class MCSettings:
             raise InputError("seeds must be >= 0")
         if self.laser_noise_mm < 0 or (self.repeatability_mm or 0) < 0:
             raise InputError("noise levels must be >= 0")
+        if self.laser_noise_mm == 0 and self.repeatability_mm == 0:
+            raise InputError("laser noise and repeatability are both 0: no noise to study")
+        if self.weighted and self.quantization:
+            raise InputError("--weighted with --quantization: the weighted fit's noise model "
+                             "(repeatability + sensor) has no quantisation term")
         if self.quantization and self.mode != "synthetic":
             raise InputError("encoder quantisation noise exists in the synthetic mode only "
                              "(the twin's joints sit exactly on their counts)")
@@ -363,7 +368,8 @@ def analyze(runs: list[dict], st: MCSettings) -> dict:
            and all(n not in r["not_identifiable"] for r in runs)]
     errs = [r["err"] for r in runs]
     chi_rep = _chi2(errs, [r["reported_cov"] for r in runs], off)
-    chi_sand = _chi2(errs, [r["sandwich_cov"] for r in runs], off)
+    # the sandwich is the unweighted estimator's covariance: no check of a weighted fit
+    chi_sand = None if st.weighted else _chi2(errs, [r["sandwich_cov"] for r in runs], off)
     chi_all = _chi2(errs, [r["reported_cov"] for r in runs],
                     [i for i, n in enumerate(fnames)
                      if all(n not in r["not_identifiable"] for r in runs)])
@@ -455,6 +461,9 @@ def format_montecarlo(res: dict) -> str:
                       "|bias|/CRB"], rows))
     out.append("emp/X: empirical std over the RMS of the runs' X; std(e/CRB): std of the errors "
                "each divided by its own run's bound (robust to designs of unequal strength)")
+    if st.get("weighted"):
+        out.append("sandwich: the unweighted fit's covariance, for comparison (the errors "
+                   "and 'reported' are the weighted fit's)")
     out.append("")
     for key, what in (("chi2_offsets_reported", "offsets, fit's reported covariance"),
                       ("chi2_offsets_sandwich", "offsets, sandwich covariance"),
