@@ -259,3 +259,24 @@ def test_weighted_fit_reports_honest_std_where_the_unweighted_does_not(three_pla
     assert abs(np.mean(vf) - 1) < 0.05
     assert ratio["u"][1] > 1.12  # delta3: the unweighted fit reports too small a std
     assert emp["w"][1] < emp["u"][1]  # and the weighted fit's delta3 is better
+
+
+def test_sigma_counts_only_the_identifiable_directions(robot, problem):
+    # everything free: two directions (delta1, delta6 with their partners) are not
+    # identifiable, the fit moves rank = p - 2 directions, and sigma^2 = |r|^2/(m - rank);
+    # analyze() with a known sigma predicts exactly sigma sqrt(diag((J^T J)^-1))
+    from planecal.cell import predict_with_jacobian
+    truth, qe, d = problem
+    dn = d + np.random.default_rng(4).normal(0, 2e-6, len(d))
+    everything = np.ones(len(INITIAL.to_vector()), bool)
+    res = calibrate(robot, qe, dn, INITIAL, options=FitOptions(free=everything))
+    rank = res.identifiability["rank"]
+    assert rank == everything.sum() - 2
+    r = res.residuals_m
+    assert res.sigma_m == pytest.approx(np.sqrt(r @ r / (len(r) - rank)), rel=1e-12)
+    ident, std = analyze(robot, qe, truth, sigma_m=2e-6)
+    _, J = predict_with_jacobian(robot, qe, truth)
+    Jf = J[:, default_free(1)]
+    want = 2e-6 * np.sqrt(np.diag(np.linalg.inv(Jf.T @ Jf)))
+    np.testing.assert_allclose(std[default_free(1)], want, rtol=1e-6)
+    assert ident["sigma_mm"] == pytest.approx(2e-3)

@@ -7,13 +7,14 @@ sense on the free columns. Iteration stops after ``max_iter`` corrections or whe
 absolute correction falls below ``improvement_limit`` (the seed's end condition, 7.2).
 
 Uncertainty (at the solution, on the samples used):
-  sigma^2 = |r|^2 / (m - p),  cov = sigma^2 (J^T J)^-1   (on the identifiable subspace)
+  sigma^2 = |r|^2 / (m - rank),  cov = sigma^2 (J^T J)^-1   (on the identifiable subspace;
+  rank = p unless some direction is not identifiable)
 That assumes white distance noise. A robot's is not: its repeatability, projected on the
 beam, gives sample i a variance v_i = s^2 |dd/dq_i|^2 + s_d^2 that depends on the pose
 (docs/STUDIES.md measures the effect: on three plates the reported std is ~20 % off).
 ``FitOptions(joint_sigma_rad=s)`` fits by weighted least squares instead, rows weighted
 by 1/sqrt(v_i) with v_i re-evaluated at each iterate (``noise_variance``), and reports
-  f = |W r|^2 / (m - p) (the variance factor, ~1 when s is right),  cov = f (J^T W^2 J)^-1
+  f = |W r|^2 / (m - rank) (the variance factor, ~1 when s is right),  cov = f (J^T W^2 J)^-1
 which is the Cramer-Rao bound of the noise model, scaled by what the residuals show (the
 singular values, condition number and observability indices are then those of W J).
 Identifiability is judged on the column-scaled Jacobian (unit-norm columns, so units do not
@@ -267,8 +268,8 @@ def analyze(robot: Robot, qe: np.ndarray, params: CellParams, plane_index=None,
     _, J = predict_with_jacobian(robot, qe, params, plane_index)
     Jf = J[:, free]
     m, p = Jf.shape
-    r = np.full(m, sigma_m * np.sqrt(max(m - p, 1) / m))  # |r|^2/(m-p) = sigma^2
-    ident, std_free, _, _ = uncertainty(Jf, r, free, parameter_names(params.n_planes), opt)
+    ident, std_free, _, _ = uncertainty(Jf, np.zeros(m), free, parameter_names(params.n_planes),
+                                        opt, known_sigma_m=sigma_m)
     std = np.full(len(free), np.nan)
     std[free] = std_free
     return ident, std
@@ -283,13 +284,16 @@ def _practical_limit(name: str, opt: FitOptions) -> float:
 
 
 def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str],
-                opt: FitOptions | None = None, weights: np.ndarray | None = None):
+                opt: FitOptions | None = None, weights: np.ndarray | None = None,
+                known_sigma_m: float | None = None):
     """Covariance, standard deviations and the identifiability report at a solution;
-    ``weights`` (row weights 1/sqrt(v_i)): of the weighted fit (module docstring). Returns
-    (report, std, cov, sigma_m = sqrt(|r|^2 / (m - p)) of the unweighted residuals)."""
+    ``weights`` (row weights 1/sqrt(v_i)): of the weighted fit (module docstring);
+    ``known_sigma_m``: a known white noise std instead of the residuals' estimate
+    (``analyze``). Returns (report, std, cov, sigma_m = sqrt(|r|^2 / (m - rank)) of the
+    unweighted residuals, or the known sigma)."""
     opt = opt or FitOptions()
     m, p = Jf.shape
-    sigma_m = float(np.sqrt(float(r @ r) / max(m - p, 1)))
+    rr = float(r @ r)  # the unweighted residuals' (sigma_m)
     if weights is not None:
         Jf, r = Jf * weights[:, None], r * weights
     free_names = [n for n, f in zip(names, free) if f]
@@ -304,8 +308,13 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str
     ratio = s / s[0]
     null = ratio < opt.unidentifiable_ratio
     weak = (~null) & (ratio < opt.weak_ratio)
-    sigma2 = float(r @ r) / max(m - p, 1)
     keep = ~null
+    dof = max(m - int(keep.sum()), 1)  # the fit moves only the identifiable directions
+    sigma2 = float(r @ r) / dof
+    sigma_m = float(np.sqrt(rr / dof))
+    if known_sigma_m is not None:
+        sigma2 = sigma_m = float(known_sigma_m)
+        sigma2 *= sigma2
     cov_scaled = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
     cov = sigma2 * cov_scaled * np.outer(S, S)
 
