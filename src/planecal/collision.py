@@ -577,28 +577,34 @@ class CollisionWorld:
             G[rows, cols] = self._step_sizes(Fg[rows], CU[rows, cols], cols, D[rows, cols] - c,
                                              adq, L[cols])
 
+        def certify(rows, cols, bounds=True):
+            """Grid points (rows, cols): lower bounds (``bounds``) and exact distances where
+            a bound is within the clearance (all of them without bounds), then the steps
+            they certify; the rejection if a distance is within the clearance."""
+            if bounds:
+                bound(rows, cols)
+                sel = D[rows, cols] <= c_meas
+                bad = exact(rows[sel], cols[sel])
+            else:
+                bad = exact(rows, cols)
+            if bad is None:
+                steps(rows, cols)
+            return bad
+
         # 1a. both ends of every pair (the target first: colliding targets are common);
         #     exact distances where the bound is within the clearance; pairs whose end
         #     bounds certify the whole path are done
-        rows, cols = np.repeat([K - 1, 0], P), np.tile(np.arange(P), 2)
-        bound(rows, cols)
-        sel = D[rows, cols] <= c_meas
-        bad = exact(rows[sel], cols[sel])
+        bad = certify(np.repeat([K - 1, 0], P), np.tile(np.arange(P), 2))
         if bad is not None:
             return bad
-        steps(rows, cols)
         R = np.flatnonzero(~(G[0] + G[K - 1] > 1.0))
         # 1b. the pairs still open on the interior grid points: bounds, exact distances
         #     where a bound is within the clearance (most rejected paths end here)
         unc = np.zeros((K - 1, P), bool)
         if len(R) and K > 2:
-            rows, cols = np.repeat(np.arange(1, K - 1), len(R)), np.tile(R, K - 2)
-            bound(rows, cols)
-            sel = D[rows, cols] <= c_meas
-            bad = exact(rows[sel], cols[sel])
+            bad = certify(np.repeat(np.arange(1, K - 1), len(R)), np.tile(R, K - 2))
             if bad is not None:
                 return bad
-            steps(rows, cols)
             h = np.diff(grid)[:, None]
             unc[:, R] = ~(G[:-1, R] + G[1:, R] > h)
             # exact distances at the ends of the grid intervals still open, test again
@@ -607,10 +613,9 @@ class CollisionWorld:
             ends[1:] |= unc
             rows, cols = np.nonzero(ends & ~X)
             if len(rows):
-                bad = exact(rows, cols)
+                bad = certify(rows, cols, bounds=False)
                 if bad is not None:
                     return bad
-                steps(rows, cols)
             unc[:, R] = ~(G[:-1, R] + G[1:, R] > h)
         elif len(R):
             unc[0, R] = True
