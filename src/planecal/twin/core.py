@@ -173,7 +173,7 @@ class Twin:
             raise InputError(f"twin: {e}") from None
         # q_j = sum_k M[j,k] (counts_k - qe0_k), M = C diag(1/g), qe0 nominal (the
         # controller's); kept as Python (k, M[j,k]) lists for the per-tick path
-        M = robot.coupling / robot.gains[None, :]
+        M = self._M = robot.coupling / robot.gains[None, :]
         self._M_rows = [[(k, float(M[j, k])) for k in range(6) if M[j, k] != 0.0]
                         for j in range(6)]
         self._qe0 = [int(v) for v in robot.qe0]
@@ -362,7 +362,7 @@ class Twin:
         S[ticks.SIGMA] = self._errors.sigma > 0
         F[ticks.GAIN], F[ticks.KEEP] = self._servo.gain, self._servo.keep
         F[ticks.DELTA:ticks.DELTA + 6] = self._delta_true
-        F[ticks.M:ticks.M + 36] = (self.robot.coupling / self.robot.gains[None, :]).ravel()
+        F[ticks.M:ticks.M + 36] = self._M.ravel()
         return S, F
 
     def _run_ref(self, D) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
