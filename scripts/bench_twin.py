@@ -1,27 +1,21 @@
 #!/usr/bin/env python
-"""Twin throughput: ticks (exchange + laser read) per wall second, as a multiple of real
-time (the FD11 runs 100 ticks/s). Trajectories are made before the clock starts, so only
-the twin is timed (counts -> joints, MuJoCo kinematics, ray, laser model).
+"""Twin throughput: ticks per wall second, as a multiple of real time (the FD11 runs 100
+ticks/s). Trajectories are made before the clock starts, so only the twin is timed (the
+tick: FD11 semantics, servo, rest, joint rows; the MuJoCo beams; the laser model).
 
 Workloads on the final cell with the default options (lag servo, laser noise,
 repeatability):
-* moving:   the delta changes every tick: every tick recomputes joints, kinematics, ray;
-* holding:  the robot at rest, one reading per tick (kinematics and ray are cached);
-* sampling: the thesis' sampling loop (7.1.3): ramp to a new pose at <= 50 counts/tick,
-            then hold for 105 ticks while 100 readings fill the buffer (the batch API
-            gets one ``run`` call per ramp and one per hold, as a sampler would).
-Each through the per-tick API (``exchange`` + ``read``, what the sampling loop calls)
-and through the batch API (``Twin.run``), timed in wall seconds and in this process's
-CPU seconds (on a shared machine the two differ). ``Twin.run`` twice, side by side:
-``batch-mj`` with ``Twin.batch_rays = False`` (``Twin._run_ref``: the tick logic in numpy,
-one ``mj_kinematics`` + ``mj_ray`` per moving tick through the Python bindings; the
-reference) and ``batch`` (the default: the tick loop compiled with numba, ``twin.ticks``,
-and all moving ticks of a call cast in one MuJoCo call, ``twin.beam``). Twins are built
-and the loop compiled before the clock starts, the batch caster included
-(``Twin.prepare_run``, a few ms once per twin, printed). ``--repeat N`` runs every
-measurement N times, alternating, and keeps the best (default 1). The last line,
-``twin_realtime_factor: X``, is the sampling workload through ``Twin.run`` (``batch``),
-wall clock.
+* moving:   the delta changes every tick, a reading every tick (every tick casts a beam);
+* holding:  the robot at rest, one reading per tick (one beam in all);
+* sampling: the sampling loop (seed 7.1.3) as ``planecal rehearse`` drives it: a ramp to
+            a new pose at <= 50 counts/tick without reading (one ``run(read=False)``),
+            then a hold of 105 ticks reading the laser (one ``run``).
+Side by side: ``run`` (the compiled tick, what the sampling loop calls), ``per-tick``
+(``exchange`` + ``read`` per tick: what the FD11 emulator calls) and ``reference`` (the
+same tick run by the interpreter, ``Twin(..., reference_ticks=True)``, on a tenth of the
+workload), in wall and in this process's CPU seconds. ``--repeat N`` keeps the best of N
+(alternating). The last line, ``twin_realtime_factor: X``, is the sampling workload
+through ``run``, wall clock.
 """
 from __future__ import annotations
 
@@ -59,74 +53,81 @@ def sampling_traj(base, n_samples, rng):
 
 
 def per_tick(twin, D):
-    rows = [d for seg in (D if isinstance(D, list) else [D]) for d in seg]
+    segments = D if isinstance(D, list) else [D]
     exchange, read = twin.exchange, twin.read
-    t0, c0 = time.perf_counter(), time.process_time()
-    for d in rows:
-        exchange(d)
-        read()
-    return len(rows) / (time.perf_counter() - t0), len(rows) / (time.process_time() - c0)
-
-
-def batch(twin, D, chunk=1000):
-    """One Twin.run per segment (a list of arrays) or per ``chunk`` ticks of one array."""
-    segments = D if isinstance(D, list) else [D[i:i + chunk] for i in range(0, len(D), chunk)]
-    n = sum(len(seg) for seg in segments)
+    n = sum(len(seg) for seg, _ in segments) if isinstance(D, list) else len(D)
     t0, c0 = time.perf_counter(), time.process_time()
     for seg in segments:
-        twin.run(seg)
+        rows, reading = seg if isinstance(D, list) else (seg, True)
+        for d in rows:
+            exchange(d)
+            if reading:
+                read()
     return n / (time.perf_counter() - t0), n / (time.process_time() - c0)
 
 
-BUILD_MS = []
+def batch(twin, D, chunk=1000):
+    """One Twin.run per (segment, read) of a list, or per ``chunk`` ticks of one array."""
+    segments = D if isinstance(D, list) else [(D[i:i + chunk], True)
+                                               for i in range(0, len(D), chunk)]
+    n = sum(len(seg) for seg, _ in segments)
+    t0, c0 = time.perf_counter(), time.process_time()
+    for seg, reading in segments:
+        twin.run(seg, read=reading)
+    return n / (time.perf_counter() - t0), n / (time.process_time() - c0)
 
 
-def fresh(batch_rays=True):
-    twin = Twin("thesis_final", seed=1)
-    twin.batch_rays = batch_rays
-    if batch_rays:
-        t0 = time.perf_counter()
-        assert twin.prepare_run(), "the batch caster does not cover this model"
-        BUILD_MS.append((time.perf_counter() - t0) * 1e3)
+def fresh(reference=False):
+    twin = Twin("thesis_final", seed=1, reference_ticks=reference)
     return twin, twin.current_counts - twin.reference_counts
 
 
-APIS = (("per-tick", per_tick, True), ("batch-mj", batch, False), ("batch", batch, True))
+APIS = (("run", batch, False, 1), ("per-tick", per_tick, False, 1),
+        ("reference", batch, True, 10))
+
+
+def shrink(work, k):
+    if k == 1:
+        return work
+    if isinstance(work, list):
+        return work[:max(2, len(work) // k)]
+    return work[:len(work) // k]
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=1, help="best of N (alternating)")
     args = ap.parse_args(argv)
-    for _, fn, mode in APIS:  # warm up
-        twin, base = fresh(mode)
-        fn(twin, moving_traj(base, 2000))
+    for _, fn, ref, _ in APIS:  # warm up (numba's compile or cache load)
+        twin, base = fresh(ref)
+        fn(twin, moving_traj(base, 200))
     workloads = {
         "moving": lambda base: moving_traj(base, 40_000),
         "holding": lambda base: np.repeat(base[None], 100_000, axis=0),
-        "sampling": lambda base: sampling_traj(base, 250, np.random.default_rng(1)),
+        "sampling": lambda base: [(seg, i % 2 == 1) for i, seg in
+                                  enumerate(sampling_traj(base, 250, np.random.default_rng(1)))],
     }
     results = {}
     for _ in range(max(1, args.repeat)):
         for work, make in workloads.items():
-            for api, fn, mode in APIS:
-                twin, base = fresh(mode)
-                wall, cpu = fn(twin, make(base))
+            for api, fn, ref, k in APIS:
+                twin, base = fresh(ref)
+                wall, cpu = fn(twin, shrink(make(base), k))
                 best = results.get((api, work), (0.0, 0.0))
                 results[api, work] = (max(best[0], wall), max(best[1], cpu))
-    print("api      workload   wall ticks/s (x real time)   cpu ticks/s (x real time)")
+    print("api        workload   wall ticks/s (x real time)   cpu ticks/s (x real time)")
     for work in workloads:
-        for api, _, _ in APIS:
+        for api, *_ in APIS:
             wall, cpu = results[api, work]
-            print(f"{api:8s} {work:8s} {wall:10.0f} ({wall / TICK_HZ:7.0f} x)      "
+            print(f"{api:10s} {work:8s} {wall:10.0f} ({wall / TICK_HZ:7.0f} x)      "
                   f"{cpu:10.0f} ({cpu / TICK_HZ:7.0f} x)")
     for work in workloads:
-        (w0, c0), (w1, c1) = results["batch-mj", work], results["batch", work]
-        print(f"batch / batch-mj, {work:8s}: wall {w1 / w0:4.1f}x, cpu {c1 / c0:4.1f}x")
-    print(f"batch caster build (outside the clock): {np.median(BUILD_MS):.1f} ms per twin")
+        for other in ("per-tick", "reference"):
+            (w0, c0), (w1, c1) = results[other, work], results["run", work]
+            print(f"run / {other:9s}, {work:8s}: wall {w1 / w0:6.1f}x, cpu {c1 / c0:6.1f}x")
     print(f"load average: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores "
           "(cpu = this process's CPU time; wall includes waiting for a core)")
-    print(f"twin_realtime_factor: {results['batch', 'sampling'][0] / TICK_HZ:.0f}")
+    print(f"twin_realtime_factor: {results['run', 'sampling'][0] / TICK_HZ:.0f}")
     return 0
 
 

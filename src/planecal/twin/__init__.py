@@ -6,10 +6,10 @@
     mm = twin.read()                                 # laser reading or None
     ref, counts, mm = twin.run(deltas)               # many ticks: (N, 6) deltas
 
-Modules: ``core`` (Twin), ``mjcf`` (MjSpec builders), ``truth`` (hidden truth),
-``servo`` (servo and joint errors), ``laser`` (ray + sensor model), ``beam`` (the beams
-of many ticks in one MuJoCo call, for ``run``), ``aim`` (IK helper that points the beam
-at a plate point), ``export`` (scene MJCF for a viewer).
+Modules: ``core`` (Twin), ``ticks`` (the tick, written once: compiled and interpreted),
+``errors`` (joint-side error sources), ``mjcf`` (MjSpec builders), ``truth`` (hidden
+truth), ``laser`` (sensor model settings, noise), ``beam`` (the beams of many joint
+states in one MuJoCo call), ``export`` (scene MJCF for a viewer).
 """
 from planecal.twin.core import EncoderJumpError, Hit, Twin, TwinOptions
 from planecal.twin.truth import Tolerances, draw_truth, load_truth

@@ -1,35 +1,31 @@
-"""The laser beam for many joint states in one MuJoCo call: the batch path of ``Twin.run``.
+"""The laser beam for many joint states in one MuJoCo call.
 
 ``mj_ray`` casts from a point along a direction in the world frame, so a batch of ticks
-needs the laser site's pose at each tick before it can cast; ``mujoco.batch.Batch.ray``
-runs ``mj_kinematics`` + ``mj_ray`` for many simulations in C, but with rays fixed in
-each simulation's world frame. The ``BeamCaster`` turns the problem around: a second
-MuJoCo model whose world is the laser site frame and whose cell hangs off the robot's
-chain inverted,
+would need the laser site's pose at each tick before it can cast;
+``mujoco.batch.Batch.ray`` runs ``mj_kinematics`` + ``mj_ray`` for many simulations in
+C, but with rays fixed in each simulation's world frame. The ``BeamCaster`` turns the
+problem around: a second MuJoCo model whose world is the laser site frame and whose cell
+hangs off the robot's chain inverted,
 
     T_site^-1 = P_site^-1 P_tool^-1 R_6(-q_6) P_link6^-1 ... R_1(-q_1) P_link1^-1 P_base^-1
 
 (``P_b`` the twin model's body/site poses, ``R_j`` its hinges), so the beam is the fixed
 ray ``(0, 0, 0) + x (0, 0, 1)`` in every simulation and one ``Batch.ray`` call gives the
 beams of all K ticks (state ``qpos = -q``, joints in reverse): kinematics and ray cast by
-MuJoCo, ~0.6-0.8 us per tick plus ~6 us per call, against ~3-4 us per tick for
-``mj_kinematics`` + ``mj_ray`` through the Python bindings. Only the geoms the twin's ray
-sees are in it (the static cell: world-body geoms in the mask's groups; the robot's
-link geoms are in no group the mask keeps, the tool's are excluded), with their geom ids
-mapped back. Distances agree with the per-tick path to ~1e-15 m (the intersection is
-computed in the site frame instead of the world frame); tests/test_twin_batch.py checks
-the readings to 1e-9 mm on all scenes. The caster is built from the twin's model at the
-first ``run`` (``Twin.prepare_run``): later edits of ``twin.model`` are not seen.
+MuJoCo, ~0.5 us per tick plus ~15 us per call. Only the geoms the twin's ray sees are in
+it (the static cell: world-body geoms in the mask's groups; the robot's link geoms are in
+no group the mask keeps, the tool's are excluded), with their geom ids mapped back.
+Distances agree with ``mj_ray`` in the world frame to ~1e-15 m (the intersection is
+computed in the site frame); tests/test_twin_batch.py holds them to it on all scenes.
 
-``BeamCaster.build`` returns None when the model is outside what this covers (no
-``mujoco.batch``, i.e. MuJoCo < 4; joints that aren't hinges at the body origin on the
-site's path; seen geoms that aren't primitives on the world body): ``Twin.run`` then
-casts tick by tick.
+The caster covers the twin's own models (hinges at body origins on the site's path,
+primitive geoms on the world body); ``BeamCaster`` raises ValueError for anything else.
 """
 from __future__ import annotations
 
 import mujoco
 import numpy as np
+from mujoco.batch import Batch
 
 _PRIMITIVES = {int(mujoco.mjtGeom.mjGEOM_PLANE), int(mujoco.mjtGeom.mjGEOM_SPHERE),
                int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID),
@@ -57,8 +53,6 @@ class BeamCaster:
 
     def __init__(self, model: mujoco.MjModel, site_id: int, mask: np.ndarray,
                  exclude_body: int, capacity: int = 256):
-        from mujoco.batch import Batch
-        self._Batch = Batch
         self.mask = np.ascontiguousarray(mask, np.uint8)
         # the site's body path up to the world: bodies (deepest first)
         path, b = [], int(model.site_bodyid[site_id])
@@ -122,83 +116,25 @@ class BeamCaster:
 
     def _grow(self, k: int) -> None:
         cap = min(max(k, 2 * self._cap), MAX_CHUNK)
-        self._batch = self._Batch(self.model, cap, 1)
+        self._batch = Batch(self.model, cap, 1)
         self._qpos = self._batch.bind("qpos")
         self._ids = np.arange(cap, dtype=np.int32)
-        self._pnt = np.zeros((cap, 1, 3))
-        self._vec = np.zeros((cap, 1, 3))
-        self._vec[..., 2] = 1.0
-        self._exclude = np.full((cap, 1), -1, np.int32)
-        self._dist = np.zeros((cap, 1))
-        self._geomid = np.zeros((cap, 1), np.int32)
-        self._raw = getattr(getattr(self._batch, "_b", None), "ray", None)
+        self._pnt = np.zeros(3)
+        self._vec = np.array([0.0, 0.0, 1.0])
         self._cap = cap
-        self._kviews = {}  # k -> the buffers' first k rows (``cast_last``)
 
-    def cast(self, Q: np.ndarray, last_geom_only: bool = False):
+    def cast(self, Q: np.ndarray):
         """(distance (K,) [m], -1: no hit; geom ids (K,) of the twin model, -1: none) for
-        the twin's qpos rows ``Q`` (K, nq); with ``last_geom_only`` the geom id of the
-        last row only (an int) and the distances as a view of the caster's buffer."""
+        the twin's qpos rows ``Q`` (K, nq)."""
         k = len(Q)
         if k > MAX_CHUNK:  # bounded buffers: a long run in chunks
             parts = [self.cast(Q[i:i + MAX_CHUNK]) for i in range(0, k, MAX_CHUNK)]
-            dist = np.concatenate([p[0] for p in parts])
-            geom = np.concatenate([p[1] for p in parts])
-            return (dist, int(geom[-1])) if last_geom_only else (dist, geom)
+            return (np.concatenate([p[0] for p in parts]),
+                    np.concatenate([p[1] for p in parts]))
         if k > self._cap:
             self._grow(k)
         # reversed joints, negated angles (exact): R_j(-q_j)
         np.negative(Q[:, self._order], out=self._qpos[:k])
-        dist, geomid = self._dist[:k], self._geomid[:k]
-        if self._raw is not None:
-            # the binding under Batch.ray, with preallocated buffers (skips ~30 us of
-            # argument broadcasting per call)
-            fail = self._raw(self._ids[:k], self._pnt[:k], self._vec[:k], self.mask, True,
-                             self._exclude[:k], dist, geomid, None)
-            if fail:
-                bad = int(np.flatnonzero(self._batch.status[:k])[0])
-                raise RuntimeError(f"twin: beam ray failed ({bad}): {self._batch.error(bad)}")
-        else:
-            dist, geomid = self._batch.ray(self._pnt[:k], self._vec[:k], self.mask, True,
-                                           -1, ids=self._ids[:k])
-        if last_geom_only:  # distances: a view of the buffer, valid until the next cast
-            return dist[:, 0], int(self._geom_map[geomid[-1, 0]])
-        return dist[:, 0].copy(), self._geom_map[geomid[:, 0]]
-
-    def cast_last(self, Q: np.ndarray):
-        """``cast(Q, last_geom_only=True)`` with the buffers' views cached per row count
-        (``Twin.run``'s per-call path; ~1-2 us less)."""
-        k, raw = len(Q), self._raw
-        v = self._kviews.get(k)
-        if v is None or raw is None:
-            if raw is None or k > self._cap:
-                return self.cast(Q, last_geom_only=True)
-            v = self._kviews[k] = (self._qpos[:k], self._ids[:k], self._pnt[:k],
-                                   self._vec[:k], self._exclude[:k], self._dist[:k],
-                                   self._geomid[:k], self._dist[:k, 0])
-        qpos, ids, pnt, vec, exclude, dist, geomid, out = v
-        np.negative(Q[:, self._order], out=qpos)
-        if raw(ids, pnt, vec, self.mask, True, exclude, dist, geomid, None):
-            bad = int(np.flatnonzero(self._batch.status[:k])[0])
-            raise RuntimeError(f"twin: beam ray failed ({bad}): {self._batch.error(bad)}")
-        return out, int(self._geom_map[geomid[k - 1, 0]])
-
-    @classmethod
-    def build(cls, model, site_id, mask, exclude_body, check):
-        """A BeamCaster, or None if the model isn't covered or ``check(caster)`` fails
-        (``check`` compares with the per-tick path at a few states)."""
-        try:
-            caster = cls(model, site_id, mask, exclude_body)
-        except (ImportError, ValueError):
-            return None
-        try:
-            ok = check(caster)
-        except (TypeError, ValueError, RuntimeError):
-            ok = False
-        if not ok and caster._raw is not None:  # retry through the public API
-            caster._raw = None
-            try:
-                ok = check(caster)
-            except (TypeError, ValueError, RuntimeError):
-                ok = False
-        return caster if ok else None
+        dist, geomid = self._batch.ray(self._pnt, self._vec, self.mask, True, -1,
+                                       ids=self._ids[:k])
+        return dist[:, 0], self._geom_map[geomid[:, 0]]
