@@ -90,17 +90,19 @@ def user_entities(data) -> set[str]:
 # ----- a short noise-free rehearsal, every observer call recorded -----
 
 class Tee:
-    """Forwards to an observer and records every call (copies), to replay them later."""
-    wants_ticks = True
+    """Forwards to an observer and records every call (copies), to replay them later;
+    blocks of ticks also tick by tick (``on_tick`` records, for lookups)."""
 
     def __init__(self, target):
         self.target = target
         self.calls = []
+        self.ticks = []
 
-    def on_tick(self, tick, delta, reference, current, laser_mm):
-        self.calls.append(("on_tick", (tick, delta.copy(), reference.copy(), current.copy(),
-                                       laser_mm)))
-        self.target.on_tick(tick, delta, reference, current, laser_mm)
+    def on_ticks(self, first_tick, deltas, reference, current, laser_mm):
+        self.calls.append(("on_ticks", (first_tick, deltas.copy(), reference.copy(),
+                                        current.copy(), laser_mm.copy())))
+        self.ticks += [(first_tick + i, current[i].copy()) for i in range(len(deltas))]
+        self.target.on_ticks(first_tick, deltas, reference, current, laser_mm)
 
     def on_sample(self, index, qe, d_mm, plate):
         self.calls.append(("on_sample", (index, qe.copy(), d_mm, plate)))
@@ -128,13 +130,14 @@ def rehearsal(scene, tmp_path_factory):
     obs = sampling_observer(d / "twin.rrd", scene, twin=twin, every=EVERY, series_every=EVERY,
                             chunk_ticks=1000)  # several bulk sends in a short run
     tee = Tee(obs)
-    drv = Driver(twin, AlwaysEnabled(), scene.robot, tee)
+    drv = Driver(twin, twin, AlwaysEnabled(), scene.robot, tee)
     settings = RunSettings(scene="thesis_final", samples=N_SAMPLES, seed=3)
-    stats = SamplingRun(drv, twin, scene, settings, d / "RUN.tsv", world, background=True).run()
+    stats = SamplingRun(drv, scene, settings, d / "RUN.tsv", world, background=True).run()
     obs.close()
     assert stats.status == "complete" and obs.error is None
-    return {"path": obs.path, "calls": tee.calls, "stats": stats, "twin": twin,
-            "out": d / "RUN.tsv", "dir": d, "data": read_rrd(obs.path), "ticks": drv.ticks}
+    return {"path": obs.path, "calls": tee.calls, "ticks": tee.ticks, "stats": stats,
+            "twin": twin,
+            "out": d / "RUN.tsv", "dir": d, "data": read_rrd(obs.path), "n_ticks": drv.ticks}
 
 
 @pytest.fixture(scope="module")
@@ -206,7 +209,7 @@ def test_motion_is_downsampled_and_series_hold_the_steps(rehearsal):
     assert sample_ticks <= set(ticks.tolist())  # the robot's pose at every sample
     odd = [t for t in ticks if t % EVERY and t not in sample_ticks and t > 1]
     assert not odd
-    assert len(ticks) <= rehearsal["ticks"] // EVERY + N_SAMPLES + 2
+    assert len(ticks) <= rehearsal["n_ticks"] // EVERY + N_SAMPLES + 2
     steps = np.array([r["Scalars:scalars"] for j in range(1, 7)
                       for r in data[f"/series/steps/q{j}"]["rows"] if r["Scalars:scalars"]])
     assert 0 < np.abs(steps).max() <= 51
@@ -416,7 +419,7 @@ def test_a_logging_error_is_reported_and_does_not_stop_the_run(scene, tmp_path, 
     obs._log_motion = broken
     base = scene.robot.home_counts
     for k in range(1, 35):  # three bulk sends fail in the sender thread
-        obs.on_tick(k, np.zeros(6, np.int64), base, base, None)
+        obs.on_ticks(k, np.zeros((1, 6), np.int64), base, base[None], np.full(1, np.nan))
     obs.on_sample(0, base, 80.0, 0)  # logged directly, still works
     obs.close()
     assert isinstance(obs.error, ValueError)
@@ -435,7 +438,7 @@ def test_logged_tool_frame_is_the_kinematics_at_that_tick(scene, rehearsal):
 
     data = rehearsal["data"]
     tick = max(r["tick"] for r in data["/series/model_error_mm"]["rows"])
-    cur = next(a[3] for name, a in rehearsal["calls"] if name == "on_tick" and a[0] == tick)
+    cur = next(c for t, c in rehearsal["ticks"] if t == tick)
     F = fk_frames(scene.robot, counts_to_joints(scene.robot, cur),
                   rehearsal["twin"].truth.joint_offsets)[6]
     row = next(r for r in data["/robot/tool"]["rows"] if r["tick"] == tick)

@@ -9,13 +9,18 @@ from planecal.sampling.laserread import LaserSettings, read_stable
 
 
 class Source:
+    """``take(n)``: the next n readings of ``values`` (None: out of range) as the loop
+    gets them, n ticks at a time; ``calls`` counts the readings taken (= ticks)."""
+
     def __init__(self, values):
         self.it = iter(values)
         self.calls = 0
+        self.blocks = []
 
-    def __call__(self):
-        self.calls += 1
-        return next(self.it)
+    def __call__(self, n):
+        self.calls += n
+        self.blocks.append(n)
+        return np.array([np.nan if v is None else v for v in itertools.islice(self.it, n)])
 
 
 def test_quiet_sensor_sample_after_exactly_100_reads_and_value_is_the_mean():
@@ -85,8 +90,33 @@ def test_stop_raised_by_the_tick_propagates():
     class Stop(Exception):
         pass
 
-    def read_once():
+    def take(n):
         raise Stop()
 
     with pytest.raises(Stop):
-        read_stable(read_once)
+        read_stable(take)
+
+
+def test_blocks_take_exactly_the_readings_of_one_at_a_time():
+    # the block sizes are lower bounds of what can be decided: over many sensors, the
+    # readings (ticks) taken and the sample equal a reader that takes one at a time
+    rng = np.random.default_rng(5)
+
+    def one_at_a_time(vals, st):
+        src = Source(vals)
+        return read_stable(lambda n: np.concatenate([src(1) for _ in range(n)]), st), src
+
+    for k in range(60):
+        st = LaserSettings(buffer_len=int(rng.integers(2, 40)),
+                           max_out_of_range=int(rng.integers(3, 60)), max_reads=600)
+        base = 80 + rng.normal(0, rng.choice([0.0005, 0.002, 0.004]), 2000)
+        settle = 0.05 * np.exp(-np.arange(2000) / rng.uniform(1, 30))
+        vals = [None if rng.uniform() < rng.choice([0.0, 0.1, 0.6]) else v
+                for v in base + settle]
+        b, src_b = one_at_a_time(vals, st)
+        src_a = Source(vals)
+        a = read_stable(src_a, st)
+        assert (a.value_mm, a.reason, a.reads, a.spread_mm, a.out_of_range) == \
+            (b.value_mm, b.reason, b.reads, b.spread_mm, b.out_of_range)
+        assert src_a.calls == src_b.calls == a.reads
+        assert len(src_a.blocks) <= len(src_b.blocks)

@@ -10,7 +10,8 @@ from test_sampling_fakes import Clear, DropAfter, FakeCell, NullChecker
 from planecal.encoder import joints_to_counts
 from planecal.links.base import AlwaysEnabled
 from planecal.samples import read_samples
-from planecal.sampling import (Driver, FollowingMonitor, NullObserver, PathBlocked,
+from planecal.sampling import (Driver, EnableDropped, FollowingMonitor, NullObserver,
+                               PathBlocked,
                                PoseSettings, RunSettings, SamplingRun, load_sidecar,
                                move_home, move_to_calibration, sidecar_path)
 from planecal.sampling.run import count_samples
@@ -36,9 +37,9 @@ class Recorder(NullObserver):
         self.lines_on_disk = []
         self.laser_ticks = 0
 
-    def on_tick(self, tick, delta, reference, current, laser_mm):
-        self.ticks = tick
-        self.laser_ticks += laser_mm is not None
+    def on_ticks(self, first_tick, deltas, reference, current, laser_mm):
+        self.ticks = first_tick + len(deltas) - 1
+        self.laser_ticks += int(np.isfinite(laser_mm).sum())
 
     def on_sample(self, index, qe, d_mm, plate):
         self.samples.append((index, qe.copy(), d_mm, plate))
@@ -55,9 +56,9 @@ class Recorder(NullObserver):
 def run(scene, out, n, cell=None, enable=None, checker=None, observer=None, resume=False,
         st=None):
     cell = cell or FakeCell(scene)
-    drv = Driver(cell, enable or AlwaysEnabled(), scene.robot, observer)
+    drv = Driver(cell, cell, enable or AlwaysEnabled(), scene.robot, observer)
     st = st or settings(n)
-    r = SamplingRun(drv, cell, scene, st, out, checker or NullChecker(), resume=resume)
+    r = SamplingRun(drv, scene, st, out, checker or NullChecker(), resume=resume)
     return r.run(), cell, drv
 
 
@@ -240,8 +241,8 @@ def test_background_planning_gives_the_same_run(scene, tmp_path, two_plates):
         out = tmp_path / f"RUN{bg}.tsv"
         cell = FakeCell(sc, window=(65.0, 82.0))  # some laser rejections
         obs = Recorder()
-        drv = Driver(cell, AlwaysEnabled(), sc.robot, obs)
-        stats = SamplingRun(drv, cell, sc, settings(8), out, Hashy(), background=bg).run()
+        drv = Driver(cell, cell, AlwaysEnabled(), sc.robot, obs)
+        stats = SamplingRun(drv, sc, settings(8), out, Hashy(), background=bg).run()
         assert stats.status == "complete"
         results.append((out.read_text(), stats.rejected, obs.rejects,
                         load_sidecar(out)["rng_state"], len(cell.sent)))
@@ -251,12 +252,14 @@ def test_background_planning_gives_the_same_run(scene, tmp_path, two_plates):
 
 def test_a_given_planner_supplies_the_targets(scene, tmp_path):
     """A pose list instead of random poses: the run visits exactly those counts."""
-    from planecal.sampling.run import Plan
+    from planecal.sampling.planner import Plan
 
     targets = [joints_to_counts(scene.robot, scene.calibration_q + dq)
                for dq in np.deg2rad([[0, 0, 0, 0, 2, 0], [1, -1, 1, 0, 0, 3], [0, 1, 0, 2, -2, 0]])]
 
     class ListPlanner:
+        pure = False
+
         def index_matters(self):
             return False
 
@@ -265,13 +268,12 @@ def test_a_given_planner_supplies_the_targets(scene, tmp_path):
             out = Plan(index, q_start, [], rng_state)
             out.qe_goal = targets[index]
             out.q = counts_to_joints(scene.robot, out.qe_goal)
-            out.pose = type("P", (), {"plate": 0})()
             return out
 
     out = tmp_path / "RUN.tsv"
     cell = FakeCell(scene)
-    stats = SamplingRun(Driver(cell, AlwaysEnabled(), scene.robot), cell, scene, settings(3), out,
-                        NullChecker(), planner=ListPlanner()).run()
+    stats = SamplingRun(Driver(cell, cell, AlwaysEnabled(), scene.robot), scene, settings(3),
+                        out, NullChecker(), planner=ListPlanner()).run()
     assert stats.status == "complete"
     assert np.array_equal(read_samples(out).qe, np.array(targets))
 
@@ -295,9 +297,9 @@ def test_following_monitor_drops_enable_when_the_robot_stops_following(scene, tm
     _, t0, n = paths[1]
     cell = Brakes(scene, at=t0 + 5)
     mon = FollowingMonitor(cell, tolerance_counts=600, ticks=5)
-    drv = Driver(mon, mon, scene.robot)
+    drv = Driver(mon, cell, mon, scene.robot)
     out = tmp_path / "RUN.tsv"
-    stats = SamplingRun(drv, cell, scene, settings(3), out, NullChecker()).run()
+    stats = SamplingRun(drv, scene, settings(3), out, NullChecker()).run()
     assert stats.status == "stopped" and "dead-man" in stats.stop_reason
     assert stats.samples == 1 and len(read_samples(out)) == 1
     # detected within tolerance/50 + ticks of the brakes; nothing sent after that
@@ -318,14 +320,14 @@ def test_following_monitor_tolerates_a_lagging_but_following_servo(scene, tmp_pa
 
     cell = Lagging(scene)
     mon = FollowingMonitor(cell)
-    stats = SamplingRun(Driver(mon, mon, scene.robot), cell, scene, settings(3),
+    stats = SamplingRun(Driver(mon, cell, mon, scene.robot), scene, settings(3),
                         tmp_path / "RUN.tsv", NullChecker()).run()
     assert stats.status == "complete" and mon.enabled()
 
 
 def test_driver_refuses_a_path_with_a_step_above_51(scene):
     cell = FakeCell(scene)
-    drv = Driver(cell, AlwaysEnabled(), scene.robot)
+    drv = Driver(cell, cell, AlwaysEnabled(), scene.robot)
     drv.start()
     rows = np.array([[10, 0, 0, 0, 0, 0], [62, 0, 0, 0, 0, 0]], np.int64)
     with pytest.raises(ValueError, match="step of 52 counts"):
@@ -335,28 +337,60 @@ def test_driver_refuses_a_path_with_a_step_above_51(scene):
     assert drv.max_step_counts == 10
 
 
-def test_observer_ticks_only_when_wanted(scene):
-    class Quiet(NullObserver):
-        def on_sample(self, *a):
-            pass
+def test_driver_hands_whole_moves_to_a_move_link_and_ticks_otherwise(scene):
+    # the twin takes a move in one call when the enable signal is known ahead; a link
+    # that cannot (or an enable signal that is not) gets it tick by tick: same counts
+    twin_mod = pytest.importorskip("planecal.twin")
 
-    class Explicit(NullObserver):
-        wants_ticks = False
+    class Counting(twin_mod.Twin):
+        calls = 0
 
-        def on_tick(self, *a):
-            raise AssertionError("not wanted")
+        def run(self, deltas, read=True):
+            self.calls += 1
+            return super().run(deltas, read)
 
-    cell = FakeCell(scene)
-    assert Driver(cell, AlwaysEnabled(), scene.robot, Quiet())._on_tick is None
-    assert Driver(cell, AlwaysEnabled(), scene.robot, Explicit())._on_tick is None
-    assert Driver(cell, AlwaysEnabled(), scene.robot, Recorder())._on_tick is not None
-    assert Driver(cell, AlwaysEnabled(), scene.robot)._on_tick is None
+    class Plain:  # enabled(), nothing known ahead
+        def enabled(self):
+            return True
+
+    rows = np.cumsum(np.tile([20, -10, 5, 0, 15, 0], (60, 1)), axis=0).astype(np.int64)
+    got = []
+    for enable in (AlwaysEnabled(), Plain()):
+        twin = Counting(scene, seed=1)
+        obs = Recorder()
+        drv = Driver(twin, twin, enable, scene.robot, obs)
+        drv.start()
+        drv.follow(rows)
+        got.append((twin.calls, drv.ticks, obs.ticks, drv.current.tolist(), twin.qpos.tolist()))
+    assert got[0][0] == 2 and got[1][0] == 61  # start + one move / start + 60 ticks
+    assert got[0][1:] == got[1][1:] and got[0][1] == 61
+
+
+def test_enable_known_ahead_stops_a_handed_over_move_at_the_same_tick(scene):
+    twin_mod = pytest.importorskip("planecal.twin")
+
+    class Reserving(DropAfter):  # the same signal, known ahead
+        def reserve(self, ticks):
+            m = max(0, min(ticks, self.n - self.calls))
+            self.calls += m
+            return m
+
+    rows = np.cumsum(np.tile([20, -10, 5, 0, 15, 0], (60, 1)), axis=0).astype(np.int64)
+    seen = []
+    for enable in (DropAfter(25), Reserving(25)):
+        twin = twin_mod.Twin(scene, seed=1)
+        drv = Driver(twin, twin, enable, scene.robot)
+        drv.start()
+        with pytest.raises(EnableDropped):
+            drv.follow(rows)
+        seen.append((twin.ticks, drv.ticks, drv.delta.tolist(), drv.max_step_counts))
+    assert seen[0] == seen[1] and seen[0][0] == 25
 
 
 def test_home_and_calibration_moves(scene, tmp_path):
     cell = FakeCell(scene)
     obs = Recorder()
-    drv = Driver(cell, AlwaysEnabled(), scene.robot, obs)
+    drv = Driver(cell, cell, AlwaysEnabled(), scene.robot, obs)
     n = move_home(drv, scene, NullChecker())
     assert np.array_equal(cell.cur, scene.home_counts)
     assert n == len(cell.sent) - 1

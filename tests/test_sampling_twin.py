@@ -28,10 +28,10 @@ def world(scene):
 
 def rehearse(scene, world, out, n, seed, enable=None, twin=None, resume=False):
     twin = twin or twin_mod.Twin(scene, seed=seed)
-    drv = Driver(twin, enable or AlwaysEnabled(), scene.robot)
+    drv = Driver(twin, twin, enable or AlwaysEnabled(), scene.robot)
     st = RunSettings.from_sidecar(load_sidecar(out)) if resume else \
         RunSettings(scene="thesis_final", samples=n, seed=seed)
-    stats = SamplingRun(drv, twin, scene, st, out, world, resume=resume, background=True).run()
+    stats = SamplingRun(drv, scene, st, out, world, resume=resume, background=True).run()
     return stats, twin
 
 

@@ -76,13 +76,17 @@ def test_weighted_monte_carlo_reports_the_weighted_fit():
     # (~1 +- 11 % in std at 60 samples), so the same ratio for every offset; the
     # unweighted fit reports the white-noise form, off by different ratios
     base = dict(scene="three_plates", mode="synthetic", samples=60, runs=2, seed=3)
-    res = {w: analyze(run_many(MCSettings(weighted=w, **base), jobs=1, quiet=True),
-                      MCSettings(weighted=w, **base)) for w in (False, True)}
+    runs = {w: run_many(MCSettings(weighted=w, **base), jobs=1, quiet=True) for w in (False, True)}
+    res = {w: analyze(runs[w], MCSettings(weighted=w, **base)) for w in (False, True)}
     offsets = ("delta2", "delta3", "delta4", "delta5")
-    ratio = {w: np.array([res[w]["params"][n]["reported_std"] / res[w]["params"][n]["crb_std"]
-                          for n in offsets]) for w in res}
-    assert np.ptp(ratio[True]) < 0.03 and abs(ratio[True].mean() - 1) < 0.25
-    assert np.ptp(ratio[False]) > 0.1
+    idx = [res[True]["free"].index(n) for n in offsets]
+    for w in (False, True):  # per run: reported std over the run's own bound, per offset
+        for r in runs[w]:
+            ratio = np.asarray(r["reported_std"])[idx] / np.sqrt(np.asarray(r["crb_var"])[idx])
+            if w:  # one variance factor per run (~1 +- 11 % in std at 60 samples)
+                assert np.ptp(ratio) < 0.03 and abs(ratio.mean() - 1) < 0.35, ratio
+            else:  # the white-noise form: off by different ratios
+                assert np.ptp(ratio) > 0.1, ratio
     for n in offsets:
         assert res[True]["params"][n]["crb_std"] == res[False]["params"][n]["crb_std"]
     assert "fit weighted by the noise model" in format_montecarlo(res[True])

@@ -1,5 +1,7 @@
-"""Synthetic sample sets made through the analytic model (no MuJoCo): the sampling poses of
-``sampling.poses`` with distances from the model at a given truth, plus Gaussian noise.
+"""Synthetic sample sets made through the analytic model (no MuJoCo): the sampling run's
+random poses (``sampling.planner.Planner``, without collision checks) collected by the
+collect core, each measured by the model at a given truth (the laser window applied),
+plus Gaussian noise.
 
 For benchmarks and studies that need many samples fast; the twin (``planecal.twin``) is
 the independent, physical stand-in and is what rehearsals use.
@@ -9,31 +11,41 @@ from __future__ import annotations
 import numpy as np
 
 from planecal.cell import CellParams, predict
-from planecal.encoder import joints_to_counts
-from planecal.sampling.poses import PoseGenerator, PoseSettings
+from planecal.sampling.collect import Acquired, Cursor, MemoryRecorder, Tally, collect
+from planecal.sampling.laserread import LaserResult
+from planecal.sampling.planner import NoCollisionChecks, Plan, Planner
+from planecal.sampling.poses import PoseSettings
 from planecal.scene import Scene
+
+
+class ModelAcquirer:
+    """The distance the analytic model gives at the target for the truth, None outside
+    the laser's window."""
+    idle = None
+
+    def __init__(self, scene: Scene, truth: CellParams):
+        self.robot, self.truth = scene.robot, truth
+        self.lo, self.hi = scene.laser_range_mm
+
+    def acquire(self, plan: Plan) -> Acquired:
+        mm = float(predict(self.robot, plan.qe_goal[None], self.truth,
+                           np.array([plan.plate]))[0]) * 1e3
+        if not self.lo < mm < self.hi:
+            return Acquired(plan.qe_goal, LaserResult(None, "out_of_range", 1, None, 1))
+        return Acquired(plan.qe_goal, LaserResult(mm, "stable", 1, 0.0, 0))
 
 
 def synthetic_samples(scene: Scene, truth: CellParams, n: int, rng: np.random.Generator,
                       noise_m: float = 0.0, settings: PoseSettings | None = None):
     """n samples (qe (n,6) int64, d (n,) m, plate (n,) int) on the scene's plates."""
-    gen = PoseGenerator(scene, settings)
-    q = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    qe, plate = [], []
-    lo, hi = (v * 1e-3 for v in scene.laser_range_mm)
-    while len(qe) < n:
-        k = gen.plate_for(len(qe), rng)
-        target = gen.joint_target(gen.draw(rng, k), q)
-        if target is None:
-            continue
-        counts = joints_to_counts(scene.robot, target)
-        d = predict(scene.robot, counts[None], truth, np.array([k]))[0]
-        if not lo < d < hi:
-            continue
-        q = target
-        qe.append(counts)
-        plate.append(k)
-    qe = np.array(qe)
-    plate = np.array(plate)
-    d = predict(scene.robot, qe, truth, plate) + rng.normal(0.0, noise_m, n)
-    return qe, d, plate
+    pose = settings or PoseSettings(cone_deg=scene.cone_deg, distance_mm=tuple(scene.distance_mm))
+    planner = Planner(scene, pose, NoCollisionChecks())
+    rec, tally = MemoryRecorder(), Tally()
+    q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
+    collect(planner, ModelAcquirer(scene, truth), rec, n,
+            Cursor(q0, np.random.default_rng(rng.integers(2 ** 63)).bit_generator.state),
+            tally, max_attempts=20 * n)
+    if tally.status != "complete":
+        raise RuntimeError(f"synthetic samples: {tally.reason}")
+    qe, d, plate = rec.arrays()
+    return qe, d + rng.normal(0.0, noise_m, n), plate

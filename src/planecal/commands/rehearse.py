@@ -27,7 +27,7 @@ from planecal.errors import InputError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from planecal.sampling.session import add_sampling_arguments
+    from planecal.commands.sampling_options import add_sampling_arguments
 
     add_sampling_arguments(p)
     p.add_argument("--truth", default=None, metavar="TRUTH.json",
@@ -61,9 +61,11 @@ def make_checker(scene, clearance_m: float):
 
 
 def run(args) -> int:
+    from planecal.commands.sampling_options import (pose_list_planner, prepare, rerun_observer,
+                                                    session_from_args)
     from planecal.links.base import AlwaysEnabled
     from planecal.params import save_params
-    from planecal.sampling.session import prepare, print_summary, rerun_observer, run_session
+    from planecal.sampling.session import print_summary, run_session
 
     scene, settings, side = prepare(args)
     if side is not None:
@@ -81,10 +83,11 @@ def run(args) -> int:
         except OSError as e:
             raise InputError(f"--truth {args.truth}: cannot write ({e.strerror})") from None
     observer = rerun_observer(args.rrd, scene, twin) if args.rrd else None
-    extra = {"twin": {"seed": twin_seed, "exact": exact}}
+    session = session_from_args(args, pose_list_planner(args, scene, settings, checker),
+                                observer, extra={"twin": {"seed": twin_seed, "exact": exact}})
     try:
-        code, summary = run_session(args, scene, settings, twin, twin, AlwaysEnabled(), checker,
-                                    observer=observer, extra=extra)
+        code, summary = run_session(session, scene, settings, twin, twin, AlwaysEnabled(),
+                                    checker)
     finally:
         if observer is not None and hasattr(observer, "close"):
             observer.close()
@@ -93,7 +96,7 @@ def run(args) -> int:
     robot_s = summary["session_robot_time_s"]
     summary["speedup"] = round(robot_s / wall, 1) if wall > 0 else None
     summary["twin_seed"] = twin_seed
-    if args.foreground and hasattr(checker, "summary"):
+    if args.foreground:
         summary["collision"] = checker.summary()
     summary["cpu_count"] = os.cpu_count()
     if args.truth:

@@ -33,7 +33,7 @@ from planecal.errors import InputError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from planecal.sampling.session import add_sampling_arguments
+    from planecal.commands.sampling_options import add_sampling_arguments
 
     p.add_argument("--rt", required=True, metavar="HOST", help="FD11 RT system address")
     p.add_argument("--rt-port", type=int, default=5555, help="FD11 UDP port (default 5555)")
@@ -88,7 +88,9 @@ def run(args) -> int:
     from planecal.links.zs_ld80 import ZSLD80, LaserError
     from planecal.sampling.enable import FollowingMonitor
     from planecal.sampling.run import count_samples, sidecar_path
-    from planecal.sampling.session import prepare, print_summary, rerun_observer, run_session
+    from planecal.commands.sampling_options import (pose_list_planner, prepare, rerun_observer,
+                                                    session_from_args)
+    from planecal.sampling.session import print_summary, run_session
 
     if args.lag_tolerance_counts <= 0 or args.lag_ticks <= 0:
         raise InputError("--lag-tolerance-counts and --lag-ticks must be positive")
@@ -111,10 +113,11 @@ def run(args) -> int:
         extra = {"real_cell": {"rt": args.rt, "rt_port": args.rt_port, "laser": args.laser,
                                "lag_tolerance_counts": args.lag_tolerance_counts,
                                "lag_ticks": args.lag_ticks}}
+        session = session_from_args(args, pose_list_planner(args, scene, settings, checker),
+                                    observer, extra, hold_while_planning=True)
         try:
-            code, summary = run_session(args, scene, settings, monitor, laser, monitor, checker,
-                                        observer=observer, extra=extra,
-                                        hold_while_planning=True)
+            code, summary = run_session(session, scene, settings, monitor, laser, monitor,
+                                        checker)
         except (LinkError, LaserError) as e:
             n = count_samples(Path(args.out)) if sidecar_path(args.out).exists() else 0
             where = (f"{n} samples so far are in {args.out}; continue with --resume" if n

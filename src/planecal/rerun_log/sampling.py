@@ -35,7 +35,8 @@ from planecal.rerun_log.common import (BEAM_NONE_RGBA, BEAM_RGBA, HIT_RGBA, REJE
                                        close_recording, diverging_colors, eye_controls,
                                        log_cell, log_robot_meshes, open_recording,
                                        recording_path)
-from planecal.sampling.run import REJECT_KINDS, NullObserver
+from planecal.sampling.collect import REJECT_KINDS
+from planecal.sampling.observer import NullObserver
 
 DEFAULT_EVERY = 5
 DEFAULT_CHUNK_TICKS = 4096  # twin: ~0.1 s of wall time
@@ -120,16 +121,14 @@ def sampling_blueprint(scene=None):
 
 
 class SamplingObserver(NullObserver):
-    """An ``Observer`` (``planecal.sampling.run``) writing a Rerun recording.
+    """An ``Observer`` (``planecal.sampling.observer``) writing a Rerun recording.
 
     ``rec``: an open RecordingStream (``open_recording``); ``close()`` finishes it.
     ``twin``: the twin, for its hidden truth (kinematics) and start pose; None for a real
     run. ``params``: parameters that colour the samples by model error (default nominal).
     ``every``: motion downsampling (ticks); ``series_every``: series downsampling;
-    ``chunk_ticks``: ticks buffered before a bulk send. The arrays handed to ``on_tick``
+    ``chunk_ticks``: ticks buffered before a bulk send. The arrays handed to ``on_ticks``
     are kept by reference until the next bulk send (the links return fresh arrays)."""
-
-    wants_ticks = True
 
     def __init__(self, rec, scene, *, twin=None, params: CellParams | None = None,
                  kinematics: str = "auto", every: int = DEFAULT_EVERY,
@@ -167,7 +166,8 @@ class SamplingObserver(NullObserver):
         self.chunk_ticks = int(chunk_ticks)
         self.tick_s = float(self.robot.tick_s)
         self.tick_ns = int(round(self.tick_s * 1e9))  # robot_time in whole nanoseconds
-        self._buf: list = []
+        self._buf: list = []  # blocks of ticks (first tick, deltas, counts, readings)
+        self._buffered = 0
         self._force: set[int] = set()
         self._prev_delta = np.zeros(N_JOINTS, np.int64)
         self._first = True
@@ -235,13 +235,15 @@ class SamplingObserver(NullObserver):
         self.rec.set_time("robot_time", duration=np.timedelta64(int(tick) * self.tick_ns, "ns"))
 
     # ----- Observer -----
-    def on_tick(self, tick, delta, reference, current, laser_mm):
-        buf = self._buf
-        if len(buf) >= self.chunk_ticks:
+    def on_ticks(self, first_tick, deltas, reference, current, laser_mm):
+        # the last block stays buffered until the next one: a sample's tick, marked by
+        # on_sample after its block, is still there to be logged with it
+        if self._buffered >= self.chunk_ticks:
             self._submit()
-            buf = self._buf
-        buf.append((tick, delta, current, laser_mm))
-        self._last_tick = tick
+        n = len(deltas)
+        self._buf.append((first_tick, deltas, current, laser_mm))
+        self._buffered += n
+        self._last_tick = first_tick + n - 1
 
     def on_sample(self, index, qe, d_mm, plate):
         rr, rec = self.rr, self.rec
@@ -304,9 +306,10 @@ class SamplingObserver(NullObserver):
         buf = self._buf
         if not buf:
             return
-        self._buf = []
+        self._buf, self._buffered = [], 0
+        last = buf[-1][0] + len(buf[-1][1]) - 1
         force = np.fromiter(self._force, np.int64, len(self._force))
-        self._force = {k for k in self._force if k > buf[-1][0]}
+        self._force = {k for k in self._force if k > last}
         first, self._first = self._first, False
         if self._queue is None:
             self._flush(buf, force, first)
@@ -325,12 +328,11 @@ class SamplingObserver(NullObserver):
                     self.error = e
 
     def _flush(self, buf, force, first) -> None:
-        n = len(buf)
-        t = np.fromiter((r[0] for r in buf), np.int64, n)
-        delta = np.array([r[1] for r in buf], np.int64).reshape(n, N_JOINTS)
-        cur = np.array([r[2] for r in buf], np.int64).reshape(n, N_JOINTS)
-        laser = np.fromiter((np.nan if r[3] is None else r[3] for r in buf), float, n)
-        self.ticks_seen += n
+        t = np.concatenate([np.arange(r[0], r[0] + len(r[1]), dtype=np.int64) for r in buf])
+        delta = np.concatenate([r[1] for r in buf]).astype(np.int64, copy=False)
+        cur = np.concatenate([r[2] for r in buf]).astype(np.int64, copy=False)
+        laser = np.concatenate([r[3] for r in buf]).astype(float, copy=False)
+        self.ticks_seen += len(t)
         steps = np.diff(delta, axis=0, prepend=self._prev_delta[None])
         self._prev_delta = delta[-1].copy()
         self._log_series(t, steps, cur, laser)

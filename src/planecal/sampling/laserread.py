@@ -1,7 +1,11 @@
 """Laser read (seed 7.1.3): wait for a stable distance, one reading per 10 ms tick.
 
 Every tick the loop sends the hold delta to the robot link (so the RT link keeps running)
-and reads the laser once. In-range readings go into a circular buffer of ``buffer_len``
+and reads the laser once. The readings are asked for in blocks (``take(n)``: n ticks, one
+reading each), each block as long as the fewest ticks before anything can be decided (the
+buffer cannot be full, or cannot lose its extremes, or the out-of-range count cannot
+reach its limit, before then), and the block is then read one reading after the other:
+the same ticks go out, and the same sample comes out, as reading tick by tick. In-range readings go into a circular buffer of ``buffer_len``
 (100) readings; out-of-range readings (the ZS-LD80's 0, ``None`` here) are not stored and
 do not clear the buffer.
 
@@ -53,34 +57,42 @@ class LaserResult:
         return f"gave up: not stable within {self.reads} reads (buffer spread {spread})"
 
 
-def read_stable(read_once: Callable[[], float | None],
+def read_stable(take: Callable[[int], np.ndarray],
                 settings: LaserSettings | None = None) -> LaserResult:
-    """Call ``read_once()`` (one tick and one laser reading; it may raise to stop the run)
-    until the reading is stable or the reader gives up; see the module docstring."""
+    """Read ``take(n)`` (n ticks holding still, one reading each: an array of n readings
+    in mm, NaN or 0 for none; it may raise to stop the run) until the reading is stable or
+    the reader gives up; see the module docstring."""
     s = settings or LaserSettings()
     n = s.buffer_len
     buf = np.empty(n)
-    filled = 0
-    head = 0
-    in_a_row = 0
-    out_total = 0
+    filled = head = in_a_row = out_total = reads = 0
     spread = None
-    for reads in range(1, s.max_reads + 1):
-        v = read_once()
-        if v is None or v == 0.0:
-            in_a_row += 1
-            out_total += 1
-            if in_a_row >= s.max_out_of_range:
-                return LaserResult(None, "out_of_range", reads, spread, out_total)
-            continue
-        in_a_row = 0
-        buf[head] = v
-        head = (head + 1) % n
+    while reads < s.max_reads:
         if filled < n:
-            filled += 1
-            if filled < n:
+            need = n - filled
+        else:  # full, not stable: the oldest readings that must leave before it can be
+            old = np.roll(buf, -head)  # oldest first
+            top = np.maximum.accumulate(old[::-1])[::-1]
+            low = np.minimum.accumulate(old[::-1])[::-1]
+            ok = np.flatnonzero(top[1:] - low[1:] < s.spread_mm)
+            need = int(ok[0]) + 1 if ok.size else n
+        need = min(need, s.max_out_of_range - in_a_row, s.max_reads - reads)
+        for v in take(need):
+            reads += 1
+            if not v == v or v == 0.0:  # NaN (none) or the sensor's 0
+                in_a_row += 1
+                out_total += 1
+                if in_a_row >= s.max_out_of_range:
+                    return LaserResult(None, "out_of_range", reads, spread, out_total)
                 continue
-        spread = float(buf.max() - buf.min())
-        if spread < s.spread_mm:
-            return LaserResult(float(buf.mean()), "stable", reads, spread, out_total)
+            in_a_row = 0
+            buf[head] = v
+            head = (head + 1) % n
+            if filled < n:
+                filled += 1
+                if filled < n:
+                    continue
+            spread = float(buf.max() - buf.min())
+            if spread < s.spread_mm:
+                return LaserResult(float(buf.mean()), "stable", reads, spread, out_total)
     return LaserResult(None, "not_stable", s.max_reads, spread, out_total)

@@ -19,9 +19,19 @@ flange->sensor transform (``cell.sensor_rotation(phi_y, phi_z)``, scene sensor o
 T_base_flange = T_base_sensor inv(T_flange_sensor). Only the beam of the nominal sensor
 frame matters to the distance model; the sensor's own x axis is arbitrary but fixed.
 
-The joint target is ``robot.ik_nearest`` to the current configuration within the joint
-limits, nearest in the largest number of encoder counts any joint must travel (weights =
-|gains|, i.e. the fewest 10 ms ticks), with the nominal (zero) joint offsets.
+The joint target is an IK solution within the joint limits, with the nominal (zero) joint
+offsets, chosen by ``ik_choice``:
+
+- ``wrist`` (default; seed 7.1.2: "try to achieve maximum joint change between the random
+  poses, in order to get good identifiability"): the wrist branch (the sign of q5, which
+  turns the wrist over) drawn at random, then the solution of that branch nearest to the
+  current configuration; the other branch when the drawn one has no solution. Without it
+  the nearest solution keeps the wrist in one branch for a whole run, and delta5, which the
+  wrist branch is the lever of, is determined 5-10x worse (docs/STUDIES.md).
+- ``nearest``: the solution nearest to the current configuration.
+
+Nearest means the fewest 10 ms ticks: the largest number of encoder counts any joint must
+travel (weights = |gains|).
 """
 from __future__ import annotations
 
@@ -32,10 +42,11 @@ import numpy as np
 from planecal.cell import sensor_rotation
 from planecal.encoder import joints_to_counts
 from planecal.errors import InputError
-from planecal.robot import ik_nearest
+from planecal.robot import ik_all
 from planecal.scene import Scene
 
 PLATE_CHOICES = ("round_robin", "random")
+IK_CHOICES = ("wrist", "nearest")
 
 
 @dataclass
@@ -46,6 +57,7 @@ class PoseSettings:
     margin_m: float = 0.025
     roll_deg: float = 180.0
     plate_choice: str = "round_robin"
+    ik_choice: str = "nearest"
 
     def check(self, scene: Scene) -> None:
         """Raise InputError for settings the scene cannot use."""
@@ -63,6 +75,9 @@ class PoseSettings:
             if not (lo_r <= lo <= hi <= hi_r):
                 raise InputError(f"distance range {lo}-{hi} mm is not within the laser range "
                                  f"{lo_r}-{hi_r} mm")
+        if self.ik_choice not in IK_CHOICES:
+            raise InputError(f"IK choice must be one of {', '.join(IK_CHOICES)}, "
+                             f"got {self.ik_choice!r}")
         if self.plate_choice not in PLATE_CHOICES:
             raise InputError(f"plate choice must be one of {', '.join(PLATE_CHOICES)}, "
                              f"got {self.plate_choice!r}")
@@ -138,10 +153,20 @@ class PoseGenerator:
         T[:3, 3] = point - d * beam
         return SensorPose(plate, point, beam, d, T, T @ self.T_sf, float(np.arccos(min(cos_t, 1.0))))
 
-    def joint_target(self, pose: SensorPose, q_near: np.ndarray):
-        """Joint angles (6,) reaching ``pose`` within the limits nearest to ``q_near``,
-        or None when unreachable."""
-        return ik_nearest(self.robot, pose.T_flange, q_near, weights=self.weights)
+    def joint_target(self, pose: SensorPose, q_near: np.ndarray,
+                     rng: np.random.Generator | None = None):
+        """Joint angles (6,) reaching ``pose`` within the limits (``ik_choice``, module
+        docstring; ``wrist`` draws the branch from ``rng``), or None when unreachable."""
+        Q = ik_all(self.robot, pose.T_flange)
+        if len(Q) == 0:
+            return None
+        if self.settings.ik_choice == "wrist":
+            up = rng.uniform() < 0.5
+            branch = (Q[:, 4] >= 0) == up
+            if branch.any():
+                Q = Q[branch]
+        cost = np.max(np.abs(Q - q_near) * self.weights, axis=1)
+        return Q[np.argmin(cost)]
 
     def counts_target(self, q: np.ndarray) -> np.ndarray:
         return joints_to_counts(self.robot, q)

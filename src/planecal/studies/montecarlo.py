@@ -136,83 +136,64 @@ def _twin_and_settings(scene, truth, st: MCSettings, seed: int):
     twin = Twin(scene, truth=truth, seed=seed,
                 options=TwinOptions(laser_noise_mm=st.laser_noise_mm,
                                     repeatability_mm=st.repeatability_mm))
-    rs = RunSettings(scene=str(scene.path), samples=st.samples, seed=seed,
-                     clearance_m=st.clearance_m)
-    rs.pose.cone_deg, rs.pose.distance_mm = scene.cone_deg, tuple(scene.distance_mm)
+    rs = RunSettings.for_scene(scene, samples=st.samples, seed=seed)
+    rs.clearance_m = st.clearance_m
     return twin, rs
+
+
+def _collect(scene, planner, twin, rs, seed: int):
+    """The collect core with the twin set at rest at each target (``RestAcquirer``):
+    (qe, d_m, plate, rejected dict); RuntimeError when the run gives up."""
+    from planecal.encoder import counts_to_joints
+    from planecal.sampling.collect import Cursor, MemoryRecorder, RestAcquirer, Tally, collect
+
+    rec, tally = MemoryRecorder(), Tally()
+    cursor = Cursor(counts_to_joints(scene.robot, twin.current_counts),
+                    np.random.default_rng(seed).bit_generator.state)
+    collect(planner, RestAcquirer(twin, rs.laser), rec, rs.samples, cursor, tally,
+            rs.max_attempts)
+    if tally.status != "complete":
+        raise RuntimeError(f"run with seed {seed}: {tally.reason}")
+    qe, d, plate = rec.arrays()
+    return qe, d, plate, dict(tally.rejected)
 
 
 def twin_samples(scene, truth, st: MCSettings, seed: int):
     """The ``twin`` mode (module docstring): (qe, d_m, plate, rejected dict)."""
-    from planecal.encoder import counts_to_joints
-    from planecal.sampling.laserread import LaserSettings, read_stable
-    from planecal.sampling.run import Planner
+    from planecal.sampling.planner import Planner
 
     twin, rs = _twin_and_settings(scene, truth, st, seed)
-    planner = Planner(scene, rs, _world(st.scene, st.clearance_m))
-    rng_state = np.random.default_rng(seed).bit_generator.state
-    q0 = counts_to_joints(scene.robot, twin.current_counts)
-    qe, d, plate = [], [], []
-    rejected = {"collision": 0, "laser": 0, "unreachable": 0}
-    in_a_row = 0
-    laser = LaserSettings()
-    while len(qe) < st.samples:
-        plan = planner.plan(q0, len(qe), rng_state, rs.max_attempts - in_a_row)
-        for kind, _, _ in plan.rejections:
-            rejected[kind] += 1
-        in_a_row += len(plan.rejections)
-        if plan.q is None:
-            raise RuntimeError(f"run with seed {seed}: {rs.max_attempts} poses rejected in a row")
-        rng_state = plan.rng_after
-        twin.set_counts(plan.qe_goal)
-        q0 = plan.q
-        lr = read_stable(twin.read, laser)
-        if not lr.ok:
-            rejected["laser"] += 1
-            in_a_row += 1
-            continue
-        qe.append(twin.current_counts)
-        d.append(lr.value_mm * 1e-3)
-        plate.append(plan.pose.plate)
-        in_a_row = 0
-    return np.array(qe), np.array(d), np.array(plate, int), rejected
+    return _collect(scene, Planner(scene, rs.pose, _world(st.scene, st.clearance_m)), twin,
+                    rs, seed)
 
 
 def pose_list_samples(scene, truth, st: MCSettings, seed: int):
-    """Fixed counts (a planned pose list) measured on the twin in order."""
-    from planecal.sampling.laserread import LaserSettings, read_stable
-    from planecal.twin import Twin, TwinOptions
+    """A planned pose list measured on the twin as ``rehearse --poses`` visits it (each
+    pose checked from the last; a blocked one later), set at rest at each pose."""
+    from planecal.sampling.planner import ListPlanner
 
-    twin = Twin(scene, truth=truth, seed=seed,
-                options=TwinOptions(laser_noise_mm=st.laser_noise_mm,
-                                    repeatability_mm=st.repeatability_mm))
-    qe, d, plate = [], [], []
-    rejected = {"collision": 0, "laser": 0, "unreachable": 0}
-    for counts, k in st.poses:
-        twin.set_counts(np.asarray(counts, np.int64))
-        lr = read_stable(twin.read, LaserSettings())
-        if not lr.ok:
-            rejected["laser"] += 1
-            continue
-        qe.append(twin.current_counts)
-        d.append(lr.value_mm * 1e-3)
-        plate.append(int(k))
-    return np.array(qe), np.array(d), np.array(plate, int), rejected
+    twin, rs = _twin_and_settings(scene, truth, st, seed)
+    counts = np.array([c for c, _ in st.poses], np.int64)
+    plates = np.array([k for _, k in st.poses], int)
+    rs.samples = len(counts)
+    planner = ListPlanner(scene, counts, plates, _world(st.scene, st.clearance_m))
+    return _collect(scene, planner, twin, rs, seed)
 
 
 def rehearse_samples(scene, truth, st: MCSettings, seed: int):
     """The full sampling run, tick by tick (``planecal rehearse`` without the CLI)."""
     from planecal.links.base import AlwaysEnabled
     from planecal.samples import read_samples
-    from planecal.sampling.run import Driver, SamplingRun
+    from planecal.sampling.driver import Driver
+    from planecal.sampling.run import SamplingRun
 
     twin, rs = _twin_and_settings(scene, truth, st, seed)
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "run.tsv")
-        drv = Driver(twin, AlwaysEnabled(), scene.robot)
-        stats = SamplingRun(drv, twin, scene, rs, out, _world(st.scene, st.clearance_m)).run()
+        drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
+        stats = SamplingRun(drv, scene, rs, out, _world(st.scene, st.clearance_m)).run()
         if stats.status != "complete":
-            raise RuntimeError(f"rehearsal with seed {seed}: {stats.status} ({stats.stop_reason})")
+            raise RuntimeError(f"rehearsal with seed {seed}: {stats.status} ({stats.reason})")
         s = read_samples(out)
     return s.qe, s.d_mm * 1e-3, s.plate, dict(stats.rejected)
 

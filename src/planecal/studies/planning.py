@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from planecal.cell import parameter_names, predict_with_jacobian
-from planecal.encoder import counts_in_range, joints_to_counts, counts_to_joints
+from planecal.encoder import counts_in_range, joints_to_counts
 from planecal.errors import InputError
 from planecal.fit import noise_variance
 from planecal.studies.common import BUFFER_LEN, covariances
@@ -75,23 +75,22 @@ def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = N
 
 
 def run_design(scene, n: int, seed: int, checker, clearance_m: float = 0.01):
-    """The poses the sampling run itself would visit (its ``Planner``: IK nearest to the
-    previous pose, target and path collision-checked) for ``seed``: (qe, plate)."""
-    from planecal.sampling.run import Planner, RunSettings
-    rs = RunSettings(scene=str(scene.path), samples=n, seed=seed, clearance_m=clearance_m)
-    rs.pose.cone_deg, rs.pose.distance_mm = scene.cone_deg, tuple(scene.distance_mm)
-    planner = Planner(scene, rs, checker)
-    state = np.random.default_rng(seed).bit_generator.state
+    """The poses the sampling run itself would visit (its ``Planner``: IK from the
+    previous pose, target and path collision-checked) for ``seed``, if every laser read
+    succeeded: (qe, plate)."""
+    from planecal.sampling.collect import Cursor, MemoryRecorder, PlansOnly, Tally, collect
+    from planecal.sampling.planner import Planner
+    from planecal.sampling.run import RunSettings
+    rs = RunSettings.for_scene(scene, samples=n, seed=seed)
+    rec, tally = MemoryRecorder(), Tally()
     q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    qe, plate = [], []
-    while len(qe) < n:
-        p = planner.plan(q0, len(qe), state, rs.max_attempts)
-        if p.q is None:
-            raise InputError(f"the sampling run's planner gave up after {rs.max_attempts} poses")
-        state, q0 = p.rng_after, p.q
-        qe.append(p.qe_goal)
-        plate.append(p.pose.plate)
-    return np.array(qe), np.array(plate, int)
+    collect(Planner(scene, rs.pose, checker), PlansOnly(), rec, n,
+            Cursor(q0, np.random.default_rng(seed).bit_generator.state), tally,
+            rs.max_attempts)
+    if tally.status != "complete":
+        raise InputError(f"the sampling run's planner gave up: {tally.reason}")
+    qe, _, plate = rec.arrays()
+    return qe, plate
 
 
 def d_optimal(A: np.ndarray, n: int, max_passes: int = 20, tol: float = 1e-9):
@@ -244,52 +243,14 @@ def load_poses(path) -> tuple[np.ndarray, np.ndarray, dict]:
 
 # ----- consuming a pose list in the sampling run ---------------------------------------------
 
-class ListPlanner:
-    """A ``Planner`` stand-in that serves a fixed pose list (encoder counts) in order,
-    each checked like the sampling run's own (target configuration and straight path from
-    where the robot is); a pose whose path is blocked is left for later. Stateful: use
-    with ``SamplingRun(..., background=False)``."""
-
-    def __init__(self, scene, counts: np.ndarray, plates: np.ndarray, checker):
-        self.robot = scene.robot
-        self.checker = checker
-        self.counts = np.asarray(counts, np.int64)
-        self.plates = np.asarray(plates, int)
-        self.left = list(range(len(self.counts)))
-
-    def index_matters(self) -> bool:
-        return False
-
-    def plan(self, q_start, index, rng_state, budget):
-        import time
-
-        from planecal.sampling.poses import SensorPose
-        from planecal.sampling.run import Plan
-        t0 = time.perf_counter()
-        out = Plan(index, q_start, [], rng_state)
-        for j in list(self.left):
-            q = counts_to_joints(self.robot, self.counts[j])
-            res = self.checker.check_config(q)
-            if res.ok:
-                res = self.checker.check_path(q_start, q)
-            if not res.ok:
-                out.rejections.append(("collision", q, f"collision (planned pose {j})"))
-                continue
-            self.left.remove(j)
-            out.q, out.qe_goal = q, self.counts[j].copy()
-            out.pose = SensorPose(int(self.plates[j]), np.zeros(3), np.zeros(3), 0.0,
-                                  np.eye(4), np.eye(4), 0.0)
-            break
-        out.check_time_s = time.perf_counter() - t0
-        return out
-
-
 def rehearse_planned(scene, counts, plates, out, twin, checker, seed: int = 0):
     """A sampling run on ``twin`` through the planned poses (``ListPlanner``)."""
     from planecal.links.base import AlwaysEnabled
-    from planecal.sampling.run import Driver, RunSettings, SamplingRun
+    from planecal.sampling.driver import Driver
+    from planecal.sampling.planner import ListPlanner
+    from planecal.sampling.run import RunSettings, SamplingRun
 
     rs = RunSettings(scene=str(scene.path), samples=len(counts), seed=seed)
-    drv = Driver(twin, AlwaysEnabled(), scene.robot)
-    return SamplingRun(drv, twin, scene, rs, out, checker, background=False,
+    drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
+    return SamplingRun(drv, scene, rs, out, checker,
                        planner=ListPlanner(scene, counts, plates, checker)).run()

@@ -1,0 +1,205 @@
+"""The sampling options ``planecal rehearse`` and ``planecal sample`` share: their flags,
+the run settings from them (or from a sidecar on ``--resume``), the planned pose list
+(``--poses``), the Rerun observer (``--rrd``) and the session they describe."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from planecal.errors import InputError
+from planecal.sampling.laserread import LaserSettings
+from planecal.sampling.poses import IK_CHOICES, PLATE_CHOICES
+from planecal.sampling.run import RunSettings, load_sidecar, sidecar_path
+from planecal.sampling.session import Session
+
+
+def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 150) -> None:
+    p.add_argument("--out", required=True, metavar="RUN.tsv",
+                   help="sample file to write (its sidecar is RUN.tsv.json)")
+    p.add_argument("--scene", default=None, help="scene name or JSON path (default thesis_final)")
+    p.add_argument("--samples", type=int, default=None,
+                   help=f"number of samples (default {default_samples}; with --resume: a new target)")
+    p.add_argument("--seed", type=int, default=None, help="random seed of the poses (default 0)")
+    p.add_argument("--cone-deg", type=float, default=None,
+                   help="half-angle of the beam cone about the plate normal (default: the scene's)")
+    p.add_argument("--fixed-distance-mm", type=float, default=None,
+                   help="measure at this distance instead of a random one")
+    p.add_argument("--distance-mm", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="range of random distances (default: the scene's)")
+    p.add_argument("--roll-deg", type=float, default=None,
+                   help="random rotation about the beam within +-this (default 180: any)")
+    p.add_argument("--margin-mm", type=float, default=None,
+                   help="keep the laser spot this far inside the plate edges (default 25)")
+    p.add_argument("--plate-choice", choices=PLATE_CHOICES, default=None,
+                   help="multi-plate scenes: plate per sample (default round_robin)")
+    p.add_argument("--ik-choice", choices=IK_CHOICES, default=None,
+                   help="IK solution per pose: wrist = the wrist branch drawn at random "
+                        "(seed 7.1.2: large joint changes), nearest = the nearest to the "
+                        "current configuration (default wrist)")
+    p.add_argument("--clearance-mm", type=float, default=None,
+                   help="collision clearance (default 10)")
+    p.add_argument("--laser-max-reads", type=int, default=None,
+                   help="give a pose up after this many laser reads without a stable buffer "
+                        "(default 1000)")
+    p.add_argument("--max-attempts", type=int, default=None,
+                   help="stop after this many poses rejected in a row (default 500)")
+    p.add_argument("--start", choices=("here", "calibration", "home"), default="here",
+                   help="move there before sampling (default: sample from where the robot is)")
+    p.add_argument("--end", choices=("stay", "calibration", "home"), default="stay",
+                   help="move there after a complete run (default stay)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the run in --out with the scene and settings of its sidecar")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    p.add_argument("--rrd", default=None, metavar="FILE",
+                   help="record the run for Rerun (needs planecal.rerun_log)")
+    p.add_argument("--poses", default=None, metavar="POSES.json",
+                   help="visit this planned pose list (planecal plan) instead of random poses; "
+                        "--samples defaults to its length")
+    p.add_argument("--foreground", action="store_true",
+                   help="plan poses in this process only (default: plan the next pose in a "
+                        "forked process while the robot moves)")
+
+
+SETTING_FLAGS = ("scene", "seed", "cone_deg", "fixed_distance_mm", "distance_mm", "roll_deg",
+                 "margin_mm", "plate_choice", "ik_choice", "clearance_mm", "laser_max_reads",
+                 "max_attempts")
+
+
+def settings_from_args(args, scene) -> RunSettings:
+    """Run settings for a new run: the scene's sampling defaults, overridden by flags."""
+    st = RunSettings.for_scene(scene, seed=0 if args.seed is None else args.seed)
+    pose = st.pose
+    if args.cone_deg is not None:
+        pose.cone_deg = args.cone_deg
+    if args.distance_mm is not None:
+        pose.distance_mm = tuple(args.distance_mm)
+        if pose.distance_mm[0] > pose.distance_mm[1]:
+            raise InputError(f"--distance-mm: LO {pose.distance_mm[0]} is above HI {pose.distance_mm[1]}")
+    pose.fixed_distance_mm = args.fixed_distance_mm
+    if args.roll_deg is not None:
+        pose.roll_deg = args.roll_deg
+    if args.margin_mm is not None:
+        if args.margin_mm < 0:
+            raise InputError(f"--margin-mm must be >= 0, got {args.margin_mm}")
+        pose.margin_m = args.margin_mm * 1e-3
+    if args.plate_choice is not None:
+        pose.plate_choice = args.plate_choice
+    if args.ik_choice is not None:
+        pose.ik_choice = args.ik_choice
+    pose.check(scene)
+    laser = LaserSettings()
+    if args.laser_max_reads is not None:
+        if args.laser_max_reads < laser.buffer_len:
+            raise InputError(f"--laser-max-reads must be at least {laser.buffer_len} (the buffer)")
+        laser.max_reads = args.laser_max_reads
+    st.laser = laser
+    if args.samples is not None:
+        st.samples = args.samples
+    if st.samples < 1:
+        raise InputError(f"--samples must be at least 1, got {st.samples}")
+    if args.clearance_mm is not None:
+        if args.clearance_mm < 0:
+            raise InputError(f"--clearance-mm must be >= 0, got {args.clearance_mm}")
+        st.clearance_m = args.clearance_mm * 1e-3
+    if args.max_attempts is not None:
+        if args.max_attempts < 1:
+            raise InputError(f"--max-attempts must be at least 1, got {args.max_attempts}")
+        st.max_attempts = args.max_attempts
+    return st
+
+
+def prepare(args, default_samples: int = 150):
+    """(scene, settings, sidecar or None) for a new run or a resumed one; refuses to
+    overwrite an existing sample file without --resume or --force."""
+    from planecal.scene import DEFAULT_SCENE, load_scene
+
+    out = Path(args.out)
+    if args.resume:
+        side = load_sidecar(out)
+        if not out.exists():
+            raise InputError(f"{out}: the sample file of the run to resume is missing")
+        given = [f"--{f.replace('_', '-')}" for f in SETTING_FLAGS if getattr(args, f) is not None]
+        if given:
+            print(f"note: --resume takes the scene and settings from {sidecar_path(out)}; "
+                  f"ignoring {' '.join(given)}", file=sys.stderr)
+        st = RunSettings.from_sidecar(side, str(sidecar_path(out)))
+        if side.get("poses") and getattr(args, "poses", None) is None:
+            args.poses = side["poses"]
+        if args.samples is not None:
+            if args.samples < 1:
+                raise InputError(f"--samples must be at least 1, got {args.samples}")
+            st.samples = args.samples
+        scene = load_scene(st.scene)
+        st.pose.check(scene)
+        return scene, st, side
+    if out.exists() and out.stat().st_size > 0 and not args.force:
+        raise InputError(f"{out}: exists; use --resume to continue that run or --force to overwrite it")
+    if out.parent and not out.parent.exists():
+        raise InputError(f"{out}: directory {out.parent} does not exist")
+    scene = load_scene(args.scene or DEFAULT_SCENE)
+    st = settings_from_args(args, scene)
+    if args.samples is None:
+        st.samples = default_samples
+    return scene, st, None
+
+
+def rerun_observer(path, scene, twin=None):
+    """The Rerun observer from planecal.rerun_log, or an InputError saying why not."""
+    try:
+        import planecal.rerun_log as rl
+    except ModuleNotFoundError as e:
+        if e.name == "planecal.rerun_log":
+            raise InputError("--rrd: Rerun logging is not available in this version "
+                             "(no planecal.rerun_log module)") from None
+        raise InputError(f"--rrd: Rerun logging cannot be loaded: missing module {e.name}") from None
+    make = getattr(rl, "sampling_observer", None)
+    if make is None:
+        raise InputError("--rrd: planecal.rerun_log has no sampling_observer(path, scene, twin); "
+                         "cannot record the run")
+    return make(path, scene=scene, twin=twin)
+
+
+def pose_list_planner(args, scene, settings: RunSettings, checker):
+    """With --poses: a planner serving the planned list (poses already in the sample file
+    of a resumed run are skipped); the run's target becomes the list's length unless
+    --samples asks for fewer. None without --poses."""
+    path = getattr(args, "poses", None)
+    if not path:
+        return None
+    import numpy as np
+
+    from planecal.samples import read_samples
+    from planecal.sampling.planner import ListPlanner
+    from planecal.studies.planning import load_poses
+
+    counts, plates, _ = load_poses(path)
+    if len(counts) == 0:
+        raise InputError(f"{path}: the pose list is empty")
+    if plates.min() < 0 or plates.max() >= len(scene.plates):
+        raise InputError(f"{path}: plate numbers must be 0..{len(scene.plates) - 1} for scene "
+                         f"{scene.name}")
+    n = len(counts)
+    if args.resume and Path(args.out).exists() and Path(args.out).stat().st_size > 0:
+        try:
+            done = read_samples(args.out).qe
+        except InputError:  # no sample yet
+            done = np.zeros((0, 6), np.int64)
+        keep = ~np.any(np.all(counts[:, None, :] == done[None, :, :], axis=2), axis=1) \
+            if len(done) else np.ones(n, bool)
+        counts, plates = counts[keep], plates[keep]
+    if args.samples is None:
+        settings.samples = n
+    elif settings.samples > n:
+        raise InputError(f"--samples {settings.samples} is more than the {n} poses in {path}")
+    return ListPlanner(scene, counts, plates, checker)
+
+
+def session_from_args(args, planner=None, observer=None, extra=None,
+                      hold_while_planning: bool = False) -> Session:
+    """The session the flags describe (start and end moves, resume, planning)."""
+    if planner is not None:  # a resumed run finds its pose list in the sidecar
+        extra = {**(extra or {}), "poses": str(Path(args.poses).resolve())}
+    return Session(out=Path(args.out), start=args.start, end=args.end, resume=args.resume,
+                   background=not args.foreground, hold_while_planning=hold_while_planning,
+                   planner=planner, observer=observer, extra=extra)

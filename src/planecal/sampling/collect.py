@@ -1,0 +1,186 @@
+"""The collect core: plan -> acquire -> account, one sample after the other. The sampling
+run (``run.SamplingRun``: sample file, sidecar, resume), every study and the pose-list
+mode call it; they differ in where the plans come from (``planner``), how a sample is
+acquired and where it goes (``Recorder``).
+
+Acquire:
+* ``DriveAcquirer`` drives the ticks: the step generator's path to the target
+  (``Driver.follow``: <= 50 counts a tick, 5 dwell ticks), then the laser read while the
+  hold delta keeps going out (``Driver.read_laser``). The real cell and ``rehearse``.
+* ``RestAcquirer`` sets the twin at rest at the target (``Twin.set_counts``: a new rest,
+  as after a move) and reads the laser the same way. For studies: the same plans,
+  rejections, counts and readings as driving there, without the ticks of the move.
+
+Account: each plan's rejected draws are reported in order (``collision``,
+``unreachable``), then a laser that gives up is a ``laser`` rejection (the robot stays
+where it moved to); ``max_attempts`` rejections in a row give up the run. With
+``BackgroundPlanner`` the next plan is made in a forked process while the robot moves.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+import numpy as np
+
+from planecal.sampling.driver import Driver, plan_move
+from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
+from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource
+from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP
+
+REJECT_KINDS = ("collision", "laser", "unreachable")
+
+
+@dataclass
+class Acquired:
+    counts: np.ndarray  # the robot's encoder counts when the laser was read
+    laser: LaserResult
+
+
+class Acquirer(Protocol):
+    """``idle``: called while the next plan is awaited (the real cell keeps ticking the
+    hold delta, so the RT link never goes quiet), or None: just wait."""
+    idle: Callable[[], None] | None
+
+    def acquire(self, plan: Plan) -> Acquired: ...
+
+
+class DriveAcquirer:
+    """Drive the ticks to the target and read the laser there (``Driver``)."""
+
+    def __init__(self, driver: Driver, laser: LaserSettings, nominal: int = NOMINAL_STEP,
+                 dwell: int = DWELL_TICKS, hold_while_planning: bool = False):
+        self.driver, self.laser = driver, laser
+        self.nominal, self.dwell = nominal, dwell
+        self.idle = driver.hold if hold_while_planning else None
+
+    def acquire(self, plan: Plan) -> Acquired:
+        drv = self.driver
+        rows = plan_move(drv, plan.qe_goal, self.nominal, self.dwell)
+        if rows is None:  # the planners check the range; this cannot happen
+            raise RuntimeError("planned target outside the encoder range")
+        drv.observer.on_path("sample", plan.q_start, plan.q, rows)
+        drv.follow(rows)
+        lr = drv.read_laser(self.laser)
+        return Acquired(drv.current.copy(), lr)
+
+
+class RestAcquirer:
+    """Put the twin at rest at the target, then read its laser as the driver would."""
+
+    def __init__(self, twin, laser: LaserSettings):
+        self.twin, self.laser = twin, laser
+        self.idle = None
+
+    def acquire(self, plan: Plan) -> Acquired:
+        twin = self.twin
+        twin.set_counts(plan.qe_goal)
+        hold = (plan.qe_goal - twin.reference_counts)[None]
+        lr = read_stable(lambda n: twin.run(np.repeat(hold, n, axis=0))[2], self.laser)
+        return Acquired(twin.current_counts, lr)
+
+
+class PlansOnly:
+    """No measurement: every plan is taken as sampled at its target (the poses a run would
+    visit if every laser read succeeded; the distance is not measured, 0)."""
+    idle = None
+
+    def acquire(self, plan: Plan) -> Acquired:
+        return Acquired(plan.qe_goal, LaserResult(0.0, "stable", 0, None, 0))
+
+
+class Recorder(Protocol):
+    """Where accepted samples and rejections go (a sample file, lists in memory)."""
+
+    def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan) -> None: ...
+
+    def reject(self, kind: str, q: np.ndarray | None, reason: str) -> None: ...
+
+
+@dataclass
+class Tally:
+    """What a collection counted; ``status`` 'complete' or 'gave_up' (then ``reason``)."""
+    samples: int = 0
+    rejected: dict = field(default_factory=lambda: {k: 0 for k in REJECT_KINDS})
+    laser_give_ups: dict = field(default_factory=lambda: {"out_of_range": 0, "not_stable": 0})
+    in_a_row: int = 0
+    status: str = "running"
+    reason: str | None = None
+    planning_s: float = 0.0  # time the planner spent on the plans taken (its own process's)
+
+
+@dataclass
+class Cursor:
+    """Where a collection stands between samples: the configuration the robot was last
+    sent to (the next path starts there) and the random state of the next plan."""
+    q: np.ndarray
+    rng_state: dict
+
+
+def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target: int,
+            cursor: Cursor, tally: Tally, max_attempts: int,
+            background: BackgroundPlanner | None = None,
+            on_progress: Callable[[Tally], None] | None = None) -> Tally:
+    """Sample until ``tally.samples`` reaches ``target`` or ``max_attempts`` poses are
+    rejected in a row (module docstring). ``cursor`` and ``tally`` are updated in place
+    (a stopped collection resumes from them). Exceptions (a dropped enable signal, a link
+    failure) propagate with cursor and tally current."""
+
+    def reject(kind, q, reason) -> bool:
+        tally.rejected[kind] += 1
+        tally.in_a_row += 1
+        recorder.reject(kind, q, reason)
+        if on_progress:
+            on_progress(tally)
+        return tally.in_a_row >= max_attempts
+
+    while tally.samples < target:
+        req = (cursor.q, tally.samples, cursor.rng_state, max_attempts - tally.in_a_row)
+        plan = background.take(*req, idle=acquirer.idle) if background else planner.plan(*req)
+        tally.planning_s += plan.check_time_s
+        if any(reject(kind, q, reason) for kind, q, reason in plan.rejections) or plan.q is None:
+            tally.status = "gave_up"
+            tally.reason = (f"{max_attempts} poses rejected in a row"
+                            if tally.in_a_row >= max_attempts else plan.reason)
+            return tally
+        cursor.rng_state = plan.rng_after
+        if background:  # plan the next pose while the robot moves (assuming this one succeeds)
+            background.submit(plan.q, tally.samples + 1, cursor.rng_state, max_attempts)
+        got = acquirer.acquire(plan)
+        cursor.q = plan.q
+        if not got.laser.ok:
+            tally.laser_give_ups[got.laser.reason] += 1
+            if reject("laser", plan.q, f"laser: {got.laser.describe()}"):
+                tally.status = "gave_up"
+                tally.reason = f"{max_attempts} poses rejected in a row"
+                return tally
+            continue
+        tally.samples += 1
+        tally.in_a_row = 0
+        recorder.sample(tally.samples - 1, got.counts, got.laser.value_mm, plan)
+        if on_progress:
+            on_progress(tally)
+    tally.status = "complete"
+    return tally
+
+
+class MemoryRecorder:
+    """Samples and rejections in memory (studies)."""
+
+    def __init__(self):
+        self.counts: list[np.ndarray] = []
+        self.d_mm: list[float] = []
+        self.plates: list[int] = []
+
+    def sample(self, index, counts, d_mm, plan):
+        self.counts.append(np.asarray(counts, np.int64).copy())
+        self.d_mm.append(float(d_mm))
+        self.plates.append(int(plan.plate))
+
+    def reject(self, kind, q, reason):
+        pass
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(qe (N,6) int64, d (N,) m, plate (N,))."""
+        return (np.array(self.counts, np.int64).reshape(-1, 6), np.array(self.d_mm) * 1e-3,
+                np.array(self.plates, int))

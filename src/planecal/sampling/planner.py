@@ -1,0 +1,275 @@
+"""Where the sampling loop's targets come from: a plan per sample (pose -> IK ->
+collision checks), from random poses (``Planner``, seed 7.1.2) or a planned pose list
+(``ListPlanner``), optionally in a forked process while the robot moves
+(``BackgroundPlanner``).
+
+A planner draws until a target is reachable and collision-free: the target configuration
+and the straight joint-space motion to it from where the robot will be (the step
+generator interpolates linearly in counts, hence in joint angles), at most ``budget``
+draws. Every rejected draw is reported with its kind (``unreachable``, ``collision``) and
+reason, in order.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+import numpy as np
+
+from planecal.encoder import counts_to_joints, joints_to_counts
+from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
+from planecal.sampling.steps import COUNT_LIMIT
+from planecal.scene import Scene
+
+
+class Verdict(Protocol):
+    ok: bool
+    pair: tuple[str, str] | None
+
+
+class Checker(Protocol):
+    """A collision checker (``planecal.collision.CollisionWorld``): stateless."""
+
+    def check_config(self, q: np.ndarray) -> Verdict: ...
+
+    def check_path(self, q0: np.ndarray, q1: np.ndarray) -> Verdict: ...
+
+
+@dataclass
+class Plan:
+    """The outcome of planning one sample from ``q_start``: the rejected draws (in order:
+    (kind, q or None, reason)) and the accepted target (``q`` None when nothing was
+    accepted: ``reason`` says why). ``rng_after`` is the generator state after the last
+    draw."""
+    index: int
+    q_start: np.ndarray
+    rejections: list
+    rng_after: dict
+    q: np.ndarray | None = None
+    qe_goal: np.ndarray | None = None
+    plate: int = 0
+    pose: SensorPose | None = None
+    check_time_s: float = 0.0
+    reason: str | None = None
+
+
+class PlanSource(Protocol):
+    """Anything that plans samples for the loop. ``pure``: the same request always gives
+    the same plan (the random state travels with it), so it may plan in another process
+    ahead of time; ``index_matters``: the plan depends on the sample index."""
+    pure: bool
+
+    def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int) -> Plan: ...
+
+    def index_matters(self) -> bool: ...
+
+
+@dataclass(frozen=True)
+class Clear:
+    ok: bool = True
+    pair: tuple[str, str] | None = None
+
+
+class NoCollisionChecks:
+    """A checker that clears everything: runs with collision checking off (studies of the
+    model alone; ``RunSettings.collision_checking`` False). Never drives a robot."""
+
+    def check_config(self, q) -> Clear:
+        return Clear()
+
+    def check_path(self, q0, q1) -> Clear:
+        return Clear()
+
+
+def _collision_reason(what: str, res: Verdict) -> str:
+    return f"collision ({what})" + (f": {res.pair[0]} - {res.pair[1]}" if res.pair else "")
+
+
+def check_move(checker: Checker, q_start: np.ndarray, q: np.ndarray) -> str | None:
+    """None when the target configuration and the straight path to it are clear, else the
+    reason."""
+    res = checker.check_config(q)
+    if not res.ok:
+        return _collision_reason("target", res)
+    res = checker.check_path(q_start, q)
+    if not res.ok:
+        return _collision_reason("path", res)
+    return None
+
+
+class Planner:
+    """Random poses (``poses.PoseGenerator``), IK, collision checks. Pure: the random
+    state comes in and goes out with the plan."""
+    pure = True
+
+    def __init__(self, scene: Scene, pose: PoseSettings, checker: Checker):
+        self.robot = scene.robot
+        self.poses = PoseGenerator(scene, pose)
+        self.checker = checker
+
+    def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int) -> Plan:
+        rng = np.random.default_rng()
+        rng.bit_generator.state = rng_state
+        t0 = time.perf_counter()
+        out = Plan(index, q_start, [], rng_state)
+        for _ in range(budget):
+            plate = self.poses.plate_for(index, rng)
+            pose = self.poses.draw(rng, plate)
+            q = self.poses.joint_target(pose, q_start, rng)
+            if q is None:
+                out.rejections.append(("unreachable", None,
+                                       "unreachable: no IK solution within limits"))
+                continue
+            qe = joints_to_counts(self.robot, q)
+            if np.any(qe < 0) or np.any(qe >= COUNT_LIMIT):
+                out.rejections.append(("unreachable", q,
+                                       "unreachable: counts outside the encoder range"))
+                continue
+            why = check_move(self.checker, q_start, q)
+            if why is not None:
+                out.rejections.append(("collision", q, why))
+                continue
+            out.q, out.qe_goal, out.pose, out.plate = q, qe, pose, pose.plate
+            break
+        else:
+            out.reason = f"{budget} poses rejected in a row"
+        out.rng_after = rng.bit_generator.state
+        out.check_time_s = time.perf_counter() - t0
+        return out
+
+    def index_matters(self) -> bool:
+        """Whether a plan depends on the sample index (round robin over several plates)."""
+        return self.poses.n_plates > 1 and self.poses.settings.plate_choice == "round_robin"
+
+
+class ListPlanner:
+    """A planned pose list (encoder counts, plate per pose) served in order, each checked
+    like a random pose (target configuration and straight path from where the robot
+    is); a pose whose path is blocked from here is left for later. Stateful: plans in the
+    run's own process. When no pose is left, or none of those left can be reached from
+    here, the plan says so (``q`` None, ``reason``)."""
+    pure = False
+
+    def __init__(self, scene: Scene, counts: np.ndarray, plates: np.ndarray, checker: Checker):
+        self.robot = scene.robot
+        self.checker = checker
+        self.counts = np.asarray(counts, np.int64).reshape(-1, 6)
+        self.plates = np.asarray(plates, int).reshape(-1)
+        self.left = list(range(len(self.counts)))
+
+    def index_matters(self) -> bool:
+        return False
+
+    def plan(self, q_start, index, rng_state, budget):
+        t0 = time.perf_counter()
+        out = Plan(index, q_start, [], rng_state)
+        for j in list(self.left)[:budget]:
+            q = counts_to_joints(self.robot, self.counts[j])
+            why = check_move(self.checker, q_start, q)
+            if why is not None:
+                out.rejections.append(("collision", q, f"{why} (planned pose {j + 1})"))
+                continue
+            self.left.remove(j)
+            out.q, out.qe_goal, out.plate = q, self.counts[j].copy(), int(self.plates[j])
+            break
+        else:
+            out.reason = ("every pose of the list is sampled" if not self.left else
+                          f"none of the {len(self.left)} poses left can be reached from here "
+                          "on a collision-free straight path")
+        out.check_time_s = time.perf_counter() - t0
+        return out
+
+
+def _planner_worker(conn, parent_end, planner) -> None:
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle, not ours
+    # the fork gave us a copy of the run's end of the pipe too: close it, so that the
+    # run's death (even SIGKILL) closes the pipe and ends this process (EOF, broken pipe)
+    parent_end.close()
+    while True:
+        try:
+            req = conn.recv()
+        except (EOFError, OSError):  # the run is gone (closed, or reset with a plan unread)
+            break
+        if req is None:
+            break
+        try:
+            plan = planner.plan(*req)
+        except Exception as e:  # report it in the run's process
+            plan = RuntimeError(f"planner: {type(e).__name__}: {e}")
+        try:
+            conn.send(plan)
+        except OSError:  # the run is gone
+            break
+
+
+@dataclass
+class BackgroundPlanner:
+    """Plans in a forked process. The run asks for the next sample's plan as soon as the
+    current target is known (the next path starts there) and the robot moves meanwhile.
+    The request is speculative only in the sample index, which matters only for
+    round-robin plate choice (after a laser rejection): then the plan made for the other
+    index is dropped and the right one is planned. Results are identical to planning in
+    the run's process (same requests, same random states; the planner is pure and the
+    checker stateless).
+
+    ``take(req, idle)`` calls ``idle()`` while it waits (the real cell keeps ticking the
+    hold delta so the RT link never goes quiet); with ``idle=None`` it just blocks."""
+    planner: Planner
+    _pending: tuple | None = field(default=None, init=False)
+
+    def __post_init__(self):
+        import multiprocessing as mp
+        ctx = mp.get_context("fork")  # the planner (with its FCL model) is inherited
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_planner_worker, args=(child, self._conn, self.planner),
+                                 daemon=True)
+        self._proc.start()
+        child.close()
+
+    def submit(self, *req) -> None:
+        self.discard()
+        self._conn.send(req)
+        self._pending = req
+
+    def take(self, *req, idle: Callable[[], None] | None = None) -> Plan:
+        if self._pending is None or not _same_request(self._pending, req,
+                                                      self.planner.index_matters()):
+            self.submit(*req)
+        if idle is not None:
+            while not self._conn.poll():
+                idle()
+        self._pending = None
+        plan = self._conn.recv()
+        if isinstance(plan, BaseException):
+            raise plan
+        return plan
+
+    def discard(self) -> None:
+        if self._pending is not None:
+            self._pending = None
+            self._conn.recv()
+
+    def close(self) -> None:
+        try:
+            self._pending = None
+            self._conn.send(None)
+        except (BrokenPipeError, OSError):
+            pass
+        self._proc.join(timeout=2)
+        if self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join()
+        self._conn.close()
+
+
+def can_fork() -> bool:
+    import multiprocessing as mp
+    return "fork" in mp.get_all_start_methods()
+
+
+def _same_request(a, b, index_matters: bool) -> bool:
+    # the budget (a[3]) may differ: giving up early is decided while consuming the plan
+    return (np.array_equal(a[0], b[0]) and a[2] == b[2]
+            and (a[1] == b[1] or not index_matters))
