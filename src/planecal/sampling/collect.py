@@ -23,6 +23,7 @@ from typing import Callable, Protocol
 
 import numpy as np
 
+from planecal.encoder import joints_to_counts
 from planecal.sampling.driver import Driver, plan_move
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource
@@ -56,13 +57,21 @@ class DriveAcquirer:
 
     def acquire(self, plan: Plan) -> Acquired:
         drv = self.driver
-        rows = plan_move(drv, plan.qe_goal, self.nominal, self.dwell)
-        if rows is None:  # the planners check the range; this cannot happen
-            raise RuntimeError("planned target outside the encoder range")
-        drv.observer.on_path("sample", plan.q_start, plan.q, rows)
-        drv.follow(rows)
+        q0 = plan.q_start
+        for q in plan.via:  # a detour's legs: no dwell on the way
+            self._leg("via", q0, q, joints_to_counts(drv.robot, q), 0)
+            q0 = q
+        self._leg("sample", q0, plan.q, plan.qe_goal, self.dwell)
         lr = drv.read_laser(self.laser)
         return Acquired(drv.current.copy(), lr)
+
+
+    def _leg(self, kind, q0, q, counts, dwell) -> None:
+        rows = plan_move(self.driver, counts, self.nominal, dwell)
+        if rows is None:  # the planners check the range; this cannot happen
+            raise RuntimeError("planned target outside the encoder range")
+        self.driver.observer.on_path(kind, q0, q, rows)
+        self.driver.follow(rows)
 
 
 class RestAcquirer:

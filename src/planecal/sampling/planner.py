@@ -8,6 +8,12 @@ and the straight joint-space motion to it from where the robot will be (the step
 generator interpolates linearly in counts, hence in joint angles), at most ``budget``
 draws. Every rejected draw is reported with its kind (``unreachable``, ``collision``) and
 reason, in order.
+
+When the straight path is blocked -- typically the wrist turning over from one branch to
+the other next to the plate -- a detour is tried (``Detour``): back out along the beam,
+move there (the wrist turns over far from the plate), approach along the target's beam.
+Its two via-points and three straight legs are checked like any path; the plan then
+carries the via-points.
 """
 from __future__ import annotations
 
@@ -17,10 +23,13 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from planecal.encoder import counts_to_joints, joints_to_counts
+from planecal.encoder import counts_in_range, counts_to_joints, joints_to_counts
+from planecal.robot import fk, ik_all
 from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.steps import COUNT_LIMIT
 from planecal.scene import Scene
+
+RETRACT_M = (0.25, 0.45)  # how far a detour backs out along the beam (tried in turn)
 
 
 class Verdict(Protocol):
@@ -52,6 +61,7 @@ class Plan:
     pose: SensorPose | None = None
     check_time_s: float = 0.0
     reason: str | None = None
+    via: list = field(default_factory=list)  # joint configurations passed on the way
 
 
 class PlanSource(Protocol):
@@ -98,15 +108,54 @@ def check_move(checker: Checker, q_start: np.ndarray, q: np.ndarray) -> str | No
     return None
 
 
+class Detour:
+    """Via-points around a blocked straight path (module docstring): the sensor backed out
+    by ``RETRACT_M`` along its beam at both ends, each by the IK solution nearest to its
+    end (same wrist branch), so the legs are: back out, move, approach."""
+
+    def __init__(self, scene: Scene, checker: Checker):
+        self.robot, self.checker = scene.robot, checker
+        self.weights = np.abs(self.robot.gains)
+        T = np.eye(4)
+        from planecal.cell import sensor_rotation
+        T[:3, :3] = sensor_rotation(scene.phi_y, scene.phi_z)
+        T[:3, 3] = scene.sensor_origin
+        self.T_fs, self.T_sf = T, np.linalg.inv(T)
+
+    def _retract(self, q: np.ndarray, d: float) -> np.ndarray | None:
+        T = fk(self.robot, q) @ self.T_fs
+        T[:3, 3] -= d * T[:3, 2]
+        Q = ik_all(self.robot, T @ self.T_sf)
+        if len(Q) == 0:
+            return None
+        v = Q[np.argmin(np.max(np.abs(Q - q) * self.weights, axis=1))]
+        return v if counts_in_range(self.robot, joints_to_counts(self.robot, v)) else None
+
+    def find(self, q0: np.ndarray, q1: np.ndarray) -> list[np.ndarray] | None:
+        for d in RETRACT_M:
+            a, b = self._retract(q0, d), self._retract(q1, d)
+            if a is None or b is None:
+                continue
+            c = self.checker
+            if (c.check_config(a).ok and c.check_config(b).ok and c.check_path(q0, a).ok
+                    and c.check_path(a, b).ok and c.check_path(b, q1).ok):
+                return [a, b]
+        return None
+
+
 class Planner:
-    """Random poses (``poses.PoseGenerator``), IK, collision checks. Pure: the random
-    state comes in and goes out with the plan."""
+    """Random poses (``poses.PoseGenerator``), IK, collision checks, and detours where the
+    wrist branch is drawn (``ik_choice`` wrist). Pure: the random state comes in and goes
+    out with the plan."""
     pure = True
 
     def __init__(self, scene: Scene, pose: PoseSettings, checker: Checker):
         self.robot = scene.robot
         self.poses = PoseGenerator(scene, pose)
         self.checker = checker
+        # detours turn the wrist over where a straight path cannot: for the deliberate
+        # wrist branches; with the nearest solution a blocked pose is drawn again
+        self.detour = Detour(scene, checker) if pose.ik_choice == "wrist" else None
 
     def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int) -> Plan:
         rng = np.random.default_rng()
@@ -127,6 +176,9 @@ class Planner:
                                        "unreachable: counts outside the encoder range"))
                 continue
             why = check_move(self.checker, q_start, q)
+            if why is not None and self.detour and why.startswith("collision (path)"):
+                out.via = self.detour.find(q_start, q) or []
+                why = None if out.via else why
             if why is not None:
                 out.rejections.append(("collision", q, why))
                 continue
@@ -154,6 +206,7 @@ class ListPlanner:
     def __init__(self, scene: Scene, counts: np.ndarray, plates: np.ndarray, checker: Checker):
         self.robot = scene.robot
         self.checker = checker
+        self.detour = Detour(scene, checker)
         self.counts = np.asarray(counts, np.int64).reshape(-1, 6)
         self.plates = np.asarray(plates, int).reshape(-1)
         self.left = list(range(len(self.counts)))
@@ -162,23 +215,36 @@ class ListPlanner:
         return False
 
     def plan(self, q_start, index, rng_state, budget):
+        """The next pose of the list reachable on a straight path; else the next one
+        reachable by a detour; the poses passed over stay for later."""
         t0 = time.perf_counter()
         out = Plan(index, q_start, [], rng_state)
+        blocked = []
         for j in list(self.left)[:budget]:
             q = counts_to_joints(self.robot, self.counts[j])
             why = check_move(self.checker, q_start, q)
-            if why is not None:
-                out.rejections.append(("collision", q, f"{why} (planned pose {j + 1})"))
-                continue
-            self.left.remove(j)
-            out.q, out.qe_goal, out.plate = q, self.counts[j].copy(), int(self.plates[j])
-            break
+            if why is None:
+                self._take(out, j, q)
+                break
+            blocked.append((j, q, why))
         else:
-            out.reason = ("every pose of the list is sampled" if not self.left else
-                          f"none of the {len(self.left)} poses left can be reached from here "
-                          "on a collision-free straight path")
+            for j, q, why in blocked:
+                via = self.detour.find(q_start, q) if why.startswith("collision (path)") else None
+                if via:
+                    self._take(out, j, q, via)
+                    break
+                out.rejections.append(("collision", q, f"{why} (planned pose {j + 1})"))
+            else:
+                out.reason = ("every pose of the list is sampled" if not self.left else
+                              f"none of the {len(self.left)} poses left can be reached from "
+                              "here, straight or by a detour")
         out.check_time_s = time.perf_counter() - t0
         return out
+
+    def _take(self, out: Plan, j: int, q: np.ndarray, via=()) -> None:
+        self.left.remove(j)
+        out.q, out.qe_goal, out.plate = q, self.counts[j].copy(), int(self.plates[j])
+        out.via = list(via)
 
 
 def _planner_worker(conn, parent_end, planner) -> None:

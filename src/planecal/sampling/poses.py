@@ -156,11 +156,12 @@ class PoseGenerator:
     def joint_target(self, pose: SensorPose, q_near: np.ndarray,
                      rng: np.random.Generator | None = None):
         """Joint angles (6,) reaching ``pose`` within the limits (``ik_choice``, module
-        docstring; ``wrist`` draws the branch from ``rng``), or None when unreachable."""
+        docstring; ``wrist`` draws the branch from ``rng``; without one, the nearest), or
+        None when unreachable."""
         Q = ik_all(self.robot, pose.T_flange)
         if len(Q) == 0:
             return None
-        if self.settings.ik_choice == "wrist":
+        if self.settings.ik_choice == "wrist" and rng is not None:
             up = rng.uniform() < 0.5
             branch = (Q[:, 4] >= 0) == up
             if branch.any():
