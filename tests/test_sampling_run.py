@@ -481,3 +481,62 @@ def test_background_planner_ends_when_the_run_is_killed(tmp_path, plan_s):
     finally:
         if run.poll() is None:
             run.kill()
+
+
+class FullDisk:
+    """``os`` for planecal.samples and planecal.params whose writes fail with ENOSPC once
+    ``left`` bytes are written (the disk fills up), the rest of ``os`` untouched."""
+
+    def __init__(self, left: int):
+        import os as _os
+        self._os, self.left = _os, left
+
+    def __getattr__(self, name):
+        return getattr(self._os, name)
+
+    def write(self, fd, data):
+        import errno
+        if len(data) > self.left:
+            n = self.left  # a partial write, then the disk is full
+            self.left = 0
+            if n:
+                return self._os.write(fd, data[:n])
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self.left -= len(data)
+        return self._os.write(fd, data)
+
+
+def test_a_full_disk_stops_the_run_with_whole_lines_and_a_resumable_record(scene, tmp_path,
+                                                                         monkeypatch):
+    import builtins
+    import errno
+
+    import planecal.samples as samples_mod
+    from planecal.sampling.run import RunWriteError
+
+    out = tmp_path / "RUN.tsv"
+    disk = FullDisk(left=250)  # the header and a few samples fit, then a line is cut
+    monkeypatch.setattr(samples_mod, "os", disk)
+    real_open = builtins.open
+
+    def open_on_full_disk(file, mode="r", *a, **k):  # the sidecar's temp file
+        if str(file).endswith(".tmp") and disk.left == 0:
+            raise OSError(errno.ENOSPC, "No space left on device", str(file))
+        return real_open(file, mode, *a, **k)
+
+    monkeypatch.setattr(builtins, "open", open_on_full_disk)
+    with pytest.raises(RunWriteError, match="No space left on device.*continue with --resume"):
+        run(scene, out, 8)
+    monkeypatch.undo()
+    text = out.read_text()
+    assert text.endswith("\n")  # whole lines only: the cut line was taken back
+    n = count_samples(out)
+    assert 1 <= n < 8 and len(read_samples(out)) == n
+    assert not list(tmp_path.glob("*.tmp"))  # no temp file left behind
+    side = load_sidecar(out)
+    assert side["samples"] in (n, n + 1)  # the sidecar is written just before each line
+    # room again: the resumed run completes without a duplicate pose
+    stats, _, _ = run(scene, out, 8, resume=True, st=settings(8))
+    s = read_samples(out)
+    assert stats.status == "complete" and len(s) == 8
+    assert len({tuple(r) for r in s.qe}) == 8

@@ -6,7 +6,7 @@ import argparse
 import importlib
 import sys
 
-from planecal.errors import InputError
+from planecal.errors import InputError, RunFailed
 
 COMMANDS = {
     "demo": "rehearse on the default twin scene, calibrate, and compare with the twin's truth",
@@ -62,6 +62,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as e:
         print(f"planecal {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except RunFailed as e:
+        print(f"planecal {args.command}: failed: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"planecal {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -81,12 +81,16 @@ def save_json(path: str | Path, data: dict, fsync: bool = False) -> None:
     sees the old or the new file, never a torn one."""
     path = Path(path)
     tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(json.dumps(data, indent=2, default=_jsonable) + "\n")
-        if fsync:
-            f.flush()
-            os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(json.dumps(data, indent=2, default=_jsonable) + "\n")
+            if fsync:
+                f.flush()
+                os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:  # disk full, a kill: no temp file left behind
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def save_params(path: str | Path, p: CellParams) -> None:

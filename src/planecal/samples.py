@@ -132,8 +132,10 @@ def write_samples(path: str | Path, qe, d_mm, plate=None) -> None:
 
 
 class SampleWriter:
-    """Appends samples one line at a time, flushed and fsynced, so nothing recorded is
-    lost when a run is interrupted. ``append=True`` continues an existing file."""
+    """Appends samples one line at a time, written unbuffered and fsynced, so nothing
+    recorded is lost when a run is interrupted. ``append=True`` continues an existing file.
+    A line that cannot be written whole (disk full) is cut off again before the error is
+    raised: the file always ends with a whole line."""
 
     def __init__(self, path: str | Path, append: bool = False, with_plate: bool = False):
         self.path = Path(path)
@@ -141,11 +143,10 @@ class SampleWriter:
         exists = self.path.exists() and self.path.stat().st_size > 0
         if append and exists:
             self._repair_tail()
-        self._f = open(self.path, "a" if append else "w", encoding="utf-8", newline="")
+        self._f = open(self.path, "ab" if append else "wb", buffering=0)
         if not (append and exists):
             header = HEADER + (["plate"] if with_plate else [])
-            self._f.write("\t".join(header) + "\n")
-            self._sync()
+            self._append("\t".join(header) + "\n")
 
     def _repair_tail(self):
         """A run killed mid-write may leave a partial last line: cut it off."""
@@ -155,13 +156,20 @@ class SampleWriter:
             with open(self.path, "r+b") as f:
                 f.truncate(cut)
 
-    def _sync(self):
-        self._f.flush()
-        os.fsync(self._f.fileno())
+    def _append(self, line: str) -> None:
+        fd = self._f.fileno()
+        size = os.fstat(fd).st_size
+        try:
+            data = line.encode("utf-8")
+            while data:
+                data = data[os.write(fd, data):]
+            os.fsync(fd)
+        except OSError:
+            os.ftruncate(fd, size)  # frees space: possible on a full disk
+            raise
 
     def write(self, qe, d_mm: float, plate: int | None = None) -> None:
-        self._f.write(format_line(qe, d_mm, plate if self.with_plate else None))
-        self._sync()
+        self._append(format_line(qe, d_mm, plate if self.with_plate else None))
 
     def close(self) -> None:
         if not self._f.closed:

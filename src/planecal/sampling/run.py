@@ -44,7 +44,7 @@ from typing import Callable
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.errors import InputError, RunFailed
 from planecal.params import load_json, save_json
 from planecal.sampling.collect import Cursor, DriveAcquirer, Tally, collect
 from planecal.sampling.driver import Driver, EnableDropped
@@ -108,6 +108,11 @@ class RunSettings:
 def sidecar_path(out: str | Path) -> Path:
     out = Path(out)
     return out.with_name(out.name + ".json")
+
+
+class RunWriteError(RunFailed):
+    """The run could not write its sample file or sidecar (disk full, ...): it stopped; the
+    samples written are in the file, which a resumed run continues."""
 
 
 class RunLock:
@@ -276,10 +281,13 @@ class SamplingRun:
 
     # -- Recorder (the collect core's)
     def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan) -> None:
-        self._writer.write(counts, d_mm, plan.plate)
-        self.observer.on_sample(index, counts, d_mm, plan.plate)
+        # the sidecar first (with the random state past this sample's plan), then the line:
+        # a kill between the two leaves the sidecar one ahead of the file, and the resumed
+        # run (the file's count wins) plans a new pose instead of drawing this one again
         self._account()
         self._save()
+        self._writer.write(counts, d_mm, plan.plate)
+        self.observer.on_sample(index, counts, d_mm, plan.plate)
 
     def reject(self, kind: str, q, reason: str) -> None:
         self.recent_rejections.append({"sample": self.stats.samples, "kind": kind,
@@ -328,6 +336,12 @@ class SamplingRun:
         except KeyboardInterrupt:
             st.status, st.reason = "stopped", "interrupted"
             raise
+        except OSError as e:  # writing the sample file or the sidecar (disk full, ...)
+            st.status, st.reason = "error", f"cannot write: {e.strerror or e}"
+            raise RunWriteError(
+                f"cannot write {e.filename or self.out}: {e.strerror or e}; the "
+                f"{count_samples(self.out)} samples taken are in {self.out}: make room and "
+                "continue with --resume") from None
         except Exception as e:  # link or laser failure: keep the record straight, re-raise
             st.status, st.reason = "error", f"{type(e).__name__}: {e}"
             raise
@@ -339,7 +353,10 @@ class SamplingRun:
             # must not leave the sidecar one short
             st.samples = count_samples(self.out)
             self._account()
-            self._save()
+            try:
+                self._save()
+            except OSError:  # the disk is still full: the last sidecar stands (the file wins)
+                pass
             if own_lock:
                 own_lock.close()
         return st
