@@ -37,3 +37,24 @@ def offsets_to_qe0(robot: Robot, delta: np.ndarray, qe0: np.ndarray | None = Non
 def counts_in_range(robot: Robot, qe: np.ndarray) -> np.ndarray:
     qe = np.asarray(qe)
     return np.all((qe >= 0) & (qe < (1 << robot.encoder_bits)), axis=-1)
+
+
+def encoder_zero_counts(robot: Robot, delta: np.ndarray, qe0: np.ndarray | None = None,
+                        q_ref: np.ndarray | None = None):
+    """The encoder offsets an operator enters into the controller to realise joint offsets
+    ``delta`` (rad), as integers: ``qe0' = rint(qe0 - g (C^-1 delta))``, from the encoder
+    offsets ``qe0`` the offsets were identified with (default robot.json's). The wrist
+    coupling applies: a delta4 or delta5 moves q5's and q6's zeros even with delta6 = 0.
+
+    Returns (qe0' int64 (6,), residual (6,) [rad]: the joint offsets the integers realise
+    minus ``delta``, flange displacement [m] of that residual at joint angles ``q_ref``
+    (default all zero): |J_v residual|)."""
+    from planecal.robot import jacobian
+    qe0 = robot.qe0 if qe0 is None else np.asarray(qe0, float)
+    exact = offsets_to_qe0(robot, delta, qe0)
+    counts = np.rint(exact).astype(np.int64)
+    realised = (qe0 - counts) / robot.gains @ robot.coupling.T  # C (qe0 - qe0') / g
+    residual = realised - np.asarray(delta, float)
+    q_ref = np.zeros(robot.n_joints) if q_ref is None else np.asarray(q_ref, float)
+    tcp = float(np.linalg.norm(jacobian(robot, q_ref)[:3] @ residual))
+    return counts, residual, tcp

@@ -1,0 +1,81 @@
+"""planecal export RESULT.json [--out FD11.json] [--current-qe0 C1,..,C6] [--scene S]
+
+The values an operator enters into the FD11 after a calibration: the new encoder offset
+of each joint, as the integer counts the controller takes (``encoder.encoder_zero_counts``:
+qe0' = qe0 - g (C^-1 delta), the wrist coupling applied, so a delta4 or delta5 moves the
+zero of q6 even while delta6 is fixed). Printed as a table: joint, current qe0, new qe0',
+the change in counts, the rounding residual per joint in urad, and its effect at the
+flange in um (at the scene's calibration position). ``--out`` writes them as JSON
+(``qe0_counts``: six integers).
+
+The current values are the encoder offsets the samples were converted with: robot.json's
+(``offset_counts``), or ``--current-qe0`` when the controller already holds others.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from planecal.errors import InputError
+
+FORMAT = "planecal-fd11-offsets/1"
+
+
+def add_arguments(p):
+    p.add_argument("result", metavar="RESULT.json",
+                   help="a calibration result (planecal calibrate --out) or parameter file")
+    p.add_argument("--out", metavar="FD11.json", help="write the values as JSON here")
+    p.add_argument("--current-qe0", metavar="C1,...,C6", default=None,
+                   help="the encoder offsets the samples were taken with, if not robot.json's")
+    p.add_argument("--scene", default="thesis_final",
+                   help="scene: robot and calibration position (default %(default)s)")
+
+
+def _counts(text: str) -> np.ndarray:
+    try:
+        v = [int(x) for x in text.split(",")]
+    except ValueError:
+        raise InputError(f"--current-qe0: expected six integers separated by commas, got {text!r}") from None
+    if len(v) != 6:
+        raise InputError(f"--current-qe0: expected six integers, got {len(v)}")
+    return np.array(v, np.int64)
+
+
+def run(args) -> int:
+    from planecal.encoder import counts_in_range, encoder_zero_counts
+    from planecal.params import load_params, save_json
+    from planecal.scene import load_scene
+
+    scene = load_scene(args.scene)
+    robot = scene.robot
+    if args.out and Path(args.out).resolve() == Path(args.result).resolve():
+        raise InputError(f"--out {args.out}: that is the result file (an input)")
+    params = load_params(args.result)
+    qe0 = robot.qe0.astype(np.int64) if args.current_qe0 is None else _counts(args.current_qe0)
+    q_ref = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
+    new, residual, tcp = encoder_zero_counts(robot, params.joint_offsets, qe0, q_ref)
+    if not counts_in_range(robot, new):
+        raise InputError(f"{args.result}: the offsets move an encoder zero outside the "
+                         f"{robot.encoder_bits}-bit range: {new.tolist()}")
+    change = new - qe0
+    print(f"FD11 encoder offsets for {robot.name} from {args.result}")
+    print(f"{'joint':<6} {'delta_urad':>11} {'current':>9} {'new':>9} {'change':>8} "
+          f"{'rounding_urad':>13}")
+    for j in range(6):
+        print(f"J{j + 1:<5} {params.joint_offsets[j] * 1e6:>11.1f} {qe0[j]:>9d} {new[j]:>9d} "
+              f"{change[j]:>+8d} {residual[j] * 1e6:>13.3f}")
+    print(f"rounding to whole counts moves the flange by {tcp * 1e6:.2f} um at the "
+          f"calibration position of {scene.name}")
+    if args.out:
+        save_json(args.out, {
+            "format": FORMAT, "robot": robot.name, "result": str(args.result),
+            "qe0_counts": [int(v) for v in new],
+            "current_qe0_counts": [int(v) for v in qe0],
+            "change_counts": [int(v) for v in change],
+            "joint_offsets_rad": [float(v) for v in params.joint_offsets],
+            "rounding_residual_urad": [float(v * 1e6) for v in residual],
+            "rounding_flange_um": tcp * 1e6,
+        })
+        print(f"written to {args.out}")
+    return 0
