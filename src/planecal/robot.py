@@ -49,7 +49,7 @@ def load_robot(name_or_path: str | Path = DEFAULT_ROBOT) -> Robot:
     """Load a robot description: a name under models/ (``mc70``) or a path to robot.json.
     Validated by ``planecal.formats.robot.RobotFile``; one-line InputError otherwise."""
     p = Path(name_or_path)
-    if not p.suffix:
+    if not p.suffix and len(p.parts) == 1:  # a name, not a path
         p = data_path("models") / str(name_or_path) / "robot.json"
     rf = validate(RobotFile, read_json(p, "robot description"), p, "robot description")
     enc, ctrl = rf.encoder, rf.controller

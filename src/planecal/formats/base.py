@@ -78,22 +78,23 @@ def read_json(path: str | Path, what: str) -> Any:
     except json.JSONDecodeError as e:
         raise InputError(f"{path}:{e.lineno}: invalid JSON: {e.msg}") from None
     except RecursionError:
-        raise InputError(f"{path}: JSON nested too deeply (more than {MAX_DEPTH} levels), "
+        raise InputError(f"{path}: JSON nested more than {MAX_DEPTH} levels deep, "
                          f"not a {what}") from None
     except ValueError as e:  # an integer literal beyond Python's digit limit
         raise InputError(f"{path}: invalid JSON: {str(e).split(':')[0]}") from None
-    _check_shape(value, path)
+    _check_shape(value, path, what)
     return value
 
 
-def _check_shape(value: Any, path: Path) -> None:
+def _check_shape(value: Any, path: Path, what: str) -> None:
     """Nesting depth and integer size, walked without recursion."""
     stack = [(value, 1, ())]
     while stack:
         v, depth, loc = stack.pop()
         if isinstance(v, (dict, list)):
             if depth > MAX_DEPTH:
-                raise InputError(f"{path}: {loc_text(loc)}: nested more than {MAX_DEPTH} levels deep")
+                raise InputError(f"{path}: JSON nested more than {MAX_DEPTH} levels deep, "
+                                 f"not a {what}")
             items = v.items() if isinstance(v, dict) else enumerate(v)
             stack.extend((x, depth + 1, loc + (k,)) for k, x in items)
         elif isinstance(v, int) and not isinstance(v, bool) and abs(v) > sys.float_info.max:
@@ -203,18 +204,22 @@ DEG_AS_RAD = Hint("degrees written as rad", math.pi / 180)
 M_AS_MM = Hint("a value in m written as mm", 1e3)
 
 
+def _num(v) -> str:
+    return str(v) if isinstance(v, int) else f"{v:g}"
+
+
 def _span(lo, hi, unit: str) -> str:
     u = f" {unit}" if unit else ""
     if lo is not None and hi is not None:
-        return f"in [{lo:g}, {hi:g}]{u}"
-    return f">= {lo:g}{u}" if lo is not None else f"<= {hi:g}{u}"
+        return f"in [{_num(lo)}, {_num(hi)}]{u}"
+    return f">= {_num(lo)}{u}" if lo is not None else f"<= {_num(hi)}{u}"
 
 
 def _bounded(lo: float | None, hi: float | None, unit: str, what: str, hint: Hint | None):
     def check(v):
         if (lo is not None and v < lo) or (hi is not None and v > hi):
             u = f" {unit}" if unit else ""
-            raise problem(f"{v:g}{u} is not a plausible {what} ({_span(lo, hi, unit)})"
+            raise problem(f"{_num(v)}{u} is not a plausible {what} ({_span(lo, hi, unit)})"
                           + (hint(v, lo, hi) if hint else ""))
         return v
     return check
