@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -104,11 +105,20 @@ def _check_shape(value: Any, path: Path, what: str) -> None:
 
 # ----- validation and its one-line message -----------------------------------------------------
 
+_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
+
+
 def loc_text(loc) -> str:
-    """('plates', 0, 'n_tilde', 2) -> 'plates[0].n_tilde[2]'."""
+    """('plates', 0, 'n_tilde', 2) -> 'plates[0].n_tilde[2]'; a key that is not a plain
+    name is quoted (repr, shortened): no control character reaches the message."""
     out = ""
     for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif _KEY.fullmatch(str(part)):
+            out += f".{part}" if out else str(part)
+        else:
+            out += f"[{_short(str(part))}]"
     return out or "(top level)"
 
 

@@ -69,7 +69,7 @@ class Plate(Model):
     name: Str | None = None
     n_tilde: NTilde
     corner_m: Point(CELL_M, "plate corner")
-    x_axis: Vector(Num, 3) = [1.0, 0.0, 0.0]
+    x_axis: Vector(Ranged(-1e3, 1e3, "", "direction component"), 3) = [1.0, 0.0, 0.0]
     size_m: Vector(Positive("m", "plate size", 10.0, MM_AS_M), 2, "numbers, x and y extent")
     thickness_m: Positive("m", "plate thickness", 1.0, MM_AS_M) = 0.01
     face: Annotated[Int, Field(json_schema_extra={"enum": [1, -1]})] = 1
@@ -88,7 +88,9 @@ class Plate(Model):
                           f"{CORNER_OFF_PLANE_M:g} m): corner and n~ describe different plates",
                           "corner_m")
         x = np.asarray(self.x_axis)
-        if np.linalg.norm(x - (x @ nhat) * nhat) < 1e-3 * max(np.linalg.norm(x), 1e-300):
+        if not np.linalg.norm(x) > 1e-9:
+            raise problem("x_axis = 0 gives no direction", "x_axis")
+        if np.linalg.norm(x - (x @ nhat) * nhat) < 1e-3 * np.linalg.norm(x):
             raise problem("lies along the plate's normal: it gives no in-plane direction",
                           "x_axis")
         return self
