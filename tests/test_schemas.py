@@ -344,6 +344,8 @@ def test_pose_list_values(tmp_path):
      "rng_state.bit_generator: Input should be 'PCG64', got 'MT19937'"),
     (("seed",), 1.5, "seed: Input should be a valid integer, got 1.5"),
     (("settings",), DELETE, "settings: missing (required)"),
+    (("scene",), "thesis\nfinal", "scene: 'thesis\\nfinal' holds a control character (newline, "
+                                  "tab, NUL, ...): not allowed in a name or a path"),
 ])
 def test_sidecar_checks(tmp_path, path, value, message):
     assert refused(tmp_path, load_sidecar, mutated(SIDECAR, path, value), "RUN.tsv.json") == message

@@ -2,4 +2,6 @@
 
 
 class InputError(Exception):
-    """Bad user input (file, line, problem). Message is one line, ready to print."""
+    """Bad user input. The message is one line, ready to print: ``FILE: field.path:
+    problem`` for JSON files (planecal.formats), ``FILE:LINE: problem`` for sample files
+    and JSON syntax, or the option and the problem."""

@@ -87,7 +87,11 @@ class Scene:
 
 def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
     p = Path(name_or_path)
-    if p.suffix == ".json" or p.exists():
+    try:
+        exists = p.exists()
+    except (OSError, ValueError):  # a NUL character, a name too long: reading will say so
+        exists = False
+    if p.suffix == ".json" or exists:
         return p
     return data_path("scenes") / f"{name_or_path}.json"
 

@@ -180,7 +180,15 @@ class Record(BaseModel):
 Num = Annotated[float, Strict(), Field(allow_inf_nan=False)]
 Int = Annotated[int, Strict()]
 Bool = Annotated[bool, Strict()]
-Str = Annotated[str, Strict(), Field(max_length=4096)]
+def _printable(v: str) -> str:
+    if _CONTROL.search(v):
+        raise problem(f"{_short(v)} holds a control character (newline, tab, NUL, ...): not "
+                      f"allowed in a name or a path")
+    return v
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+Str = Annotated[str, Strict(), Field(max_length=4096), AfterValidator(_printable)]
 
 
 def _fixed_length(n: int, what: str = "values"):
