@@ -265,7 +265,8 @@ def Positive(unit: str, what: str, hi: float, hint: Hint | None = None):
     """A number in (0, hi]."""
     return Annotated[Num, AfterValidator(_positive(unit, what)),
                      AfterValidator(_bounded(None, hi, unit, what, hint)),
-                     Field(json_schema_extra={"exclusiveMinimum": 0, "maximum": hi})]
+                     Field(description=f"{what}, {unit}",
+                           json_schema_extra={"exclusiveMinimum": 0, "maximum": hi})]
 
 
 Angle = Ranged(-2 * math.pi, 2 * math.pi, "rad", "angle", DEG_AS_RAD)
