@@ -14,9 +14,11 @@ differ: each format has 30-110 field paths, times 14 mutations; 150 examples per
 put some mutation on most fields and each mutation on many fields (the unit tests in
 test_schemas.py pin every check exactly). All 29 tests take ~5 s on an idle machine.
 """
+import atexit
 import copy
 import json
 import math
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -45,7 +47,8 @@ SETTINGS = dict(derandomize=True, database=None, deadline=None,
 FEW = settings(max_examples=40, **SETTINGS)
 MANY = settings(max_examples=150, **SETTINGS)
 
-DIR = Path(tempfile.mkdtemp(prefix="planecal-props-"))
+DIR = Path(tempfile.mkdtemp(prefix="planecal-props-"))  # one file per reader, rewritten
+atexit.register(shutil.rmtree, DIR, True)
 
 
 def _robot_ok(r):

@@ -118,11 +118,12 @@ def loc_text(loc) -> str:
         elif _KEY.fullmatch(str(part)):
             out += f".{part}" if out else str(part)
         else:
-            out += f"[{_short(str(part))}]"
+            out += f"[{short(str(part))}]"
     return out or "(top level)"
 
 
-def _short(v: Any) -> str:
+def short(v: Any) -> str:
+    """repr, at most 40 characters: user text quoted, never multi-line."""
     text = repr(v)
     return text if len(text) <= 40 else text[:37] + "..."
 
@@ -138,7 +139,7 @@ def error_line(path, e: ValidationError) -> str:
     elif err["type"] == "extra_forbidden":
         msg = "unknown key (misspelt? the format is in docs/FORMATS.md)"
     elif err["type"] != "planecal" and "input" in err:
-        msg += f", got {_short(err['input'])}"
+        msg += f", got {short(err['input'])}"
     more = f" (and {len(errs) - 1} more problem{'s' if len(errs) > 2 else ''})" if len(errs) > 1 else ""
     return f"{path}: {loc_text(loc)}: {msg}{more}"
 
@@ -182,7 +183,7 @@ Int = Annotated[int, Strict()]
 Bool = Annotated[bool, Strict()]
 def _printable(v: str) -> str:
     if _CONTROL.search(v):
-        raise problem(f"{_short(v)} holds a control character (newline, tab, NUL, ...): not "
+        raise problem(f"{short(v)} holds a control character (newline, tab, NUL, ...): not "
                       f"allowed in a name or a path")
     return v
 
@@ -306,7 +307,7 @@ def Interval(unit: str, what: str, lo: float, hi: float, hint: Hint | None = Non
 def _format_is(accepted: tuple[str, ...], what: str):
     def check(v):
         if v is not None and v not in accepted:
-            raise problem(f"{v!r} is not a {what} ({' or '.join(accepted)})")
+            raise problem(f"{short(v)} is not a {what} ({' or '.join(accepted)})")
         return v
     return check
 

@@ -22,7 +22,7 @@ from typing import Annotated, Any
 from pydantic import AfterValidator, Field, ValidationError
 
 from planecal.formats.base import (
-    DEG_AS_RAD, Angle, Bool, FormatTag, Int, Model, Num, Point, Ranged, Record, Str, Vector,
+    DEG_AS_RAD, Angle, Bool, FormatTag, Int, Model, Point, Ranged, Record, Str, Vector,
     error_line, problem)
 from planecal.formats.scene import NTilde
 
@@ -31,6 +31,10 @@ RESULT_FORMAT = "planecal-result/1"
 MAX_PLANES = 100
 
 Offset = Ranged(-math.pi, math.pi, "rad", "joint offset", DEG_AS_RAD)
+Offsets = Vector(Offset, 6, "offsets, one per joint")
+SensorOrigin = Point(1.0, "sensor origin")
+ParamsTag = FormatTag(PARAMS_FORMAT, RESULT_FORMAT, what="parameter file")
+ResultTag = FormatTag(RESULT_FORMAT, what="result file")
 
 
 def _some_plane(v):
@@ -44,15 +48,15 @@ class Plane(Model):
 
 
 class SensorParams(Model):
-    origin_m: Point(1.0, "sensor origin")
+    origin_m: SensorOrigin
     phi_y_rad: Angle
     phi_z_rad: Angle
 
 
 class ParamsFile(Record):
     """Unknown top-level keys are allowed: every result file is a parameter file."""
-    format: FormatTag(PARAMS_FORMAT, RESULT_FORMAT, what="parameter file") = None
-    joint_offsets_rad: Vector(Offset, 6, "offsets, one per joint")
+    format: ParamsTag = None
+    joint_offsets_rad: Offsets
     planes: Annotated[list[Plane], AfterValidator(_some_plane),
                       Field(max_length=MAX_PLANES, json_schema_extra={"minItems": 1})]
     sensor: SensorParams
@@ -64,20 +68,21 @@ Std = Annotated[Ranged(0.0, None, "", "standard deviation") | None,
                 Field(description="null where the parameter is not identifiable or fixed")]
 NonNeg = Ranged(0.0, None, "", "non-negative quantity")
 Count = Ranged(0, None, "", "count", base=Int)
+Std3, Std6 = Vector(Std, 3), Vector(Std, 6)
 
 
 class PlaneStd(Model):
-    n_tilde: Vector(Std, 3)
+    n_tilde: Std3
 
 
 class SensorStd(Model):
-    origin_m: Vector(Std, 3)
+    origin_m: Std3
     phi_y_rad: Std
     phi_z_rad: Std
 
 
 class StdBlock(Model):
-    joint_offsets_rad: Vector(Std, 6)
+    joint_offsets_rad: Std6
     planes: list[PlaneStd]
     sensor: SensorStd
 
@@ -99,7 +104,7 @@ class Provenance(Model):
 
 class ResultFile(ParamsFile):
     """What ``planecal calibrate --out`` writes."""
-    format: FormatTag(RESULT_FORMAT, what="result file") = None
+    format: ResultTag = None
     std: StdBlock
     residual_rms_mm: NonNeg
     residual_rms_initial_mm: NonNeg

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 from pydantic import AfterValidator, Field, model_validator
 
-from planecal.formats.base import Int, Ranged, Record, Str, Vector, problem
+from planecal.formats.base import Int, Ranged, Record, Str, Vector, problem, short
 from planecal.formats.robot import N_JOINTS
 
 POSES_FORMAT = "planecal-poses/1"
@@ -19,7 +19,7 @@ COUNT_BITS = 24  # the sample files' (and FD11's) encoder range
 
 def _is_poses(v):
     if v != POSES_FORMAT:
-        raise problem(f"{v!r} is not a planecal pose list ({POSES_FORMAT})")
+        raise problem(f"{short(v)} is not a planecal pose list ({POSES_FORMAT})")
     return v
 
 
@@ -27,12 +27,17 @@ Counts = Vector(Ranged(0, (1 << COUNT_BITS) - 1, "", f"{COUNT_BITS}-bit encoder 
                        base=Int), N_JOINTS, "counts, one per joint")
 
 
+PosesTag = Annotated[Str, AfterValidator(_is_poses), Field(json_schema_extra={
+    "enum": [POSES_FORMAT]})]
+PlateIndex = Ranged(0, 99, "", "plate index (0-based)", base=Int)
+CountRows = Annotated[list[Counts], Field(min_length=1, max_length=MAX_POSES)]
+PlateIndices = Annotated[list[PlateIndex], Field(max_length=MAX_POSES)]
+
+
 class PosesFile(Record):
-    format: Annotated[Str, AfterValidator(_is_poses), Field(json_schema_extra={
-        "enum": [POSES_FORMAT]})]
-    counts: Annotated[list[Counts], Field(min_length=1, max_length=MAX_POSES)]
-    plates: Annotated[list[Ranged(0, 99, "", "plate index (0-based)", base=Int)],
-                      Field(max_length=MAX_POSES)]
+    format: PosesTag
+    counts: CountRows
+    plates: PlateIndices
     scene: Str | None = None
     seed: Int | None = None
     samples: Int | None = None

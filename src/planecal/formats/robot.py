@@ -14,33 +14,49 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from planecal.formats.base import (
-    MM_AS_M, Angle, FormatTag, Int, Model, Num, Ranged, Str, Vector, problem)
+    MM_AS_M, Angle, FormatTag, Int, Model, Num, Ranged, Str, Vector, problem, short)
 
 ROBOT_FORMAT = "planecal-robot/1"
 N_JOINTS = 6
 MAX_LINK_M = 5.0  # the largest industrial arms reach ~4 m in all
 
 
-class DHRow(Model):
-    """One standard DH row: T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)."""
-    theta0_rad: Angle
-    d_m: Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "link offset d", MM_AS_M)
-    a_m: Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "link length a", MM_AS_M)
-    alpha_rad: Angle
-
-
+# the field types (aliases: a call inside an annotation reads badly to linters)
+LinkD = Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "link offset d", MM_AS_M)
+LinkA = Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "link length a", MM_AS_M)
 Degrees = Ranged(-1080.0, 1080.0, "deg", "joint limit")
-
-
+Limits = Vector(Vector(Degrees, 2, "numbers, [lower, upper]"), N_JOINTS,
+                "[lower, upper] pairs, one per joint")
 Joint = Ranged(1, N_JOINTS, "", "joint number (1-based)", base=Int)
 CouplingEntry = Annotated[tuple[Joint, Joint, Num], Field(
     description="[row, col, value], 1-based: C[row, col] = value")]
+Gains = Vector(Num, N_JOINTS, "gains, one per joint")
+JointCounts = Vector(Int, N_JOINTS, "counts, one per joint")
+Bits = Ranged(8, 32, "bits", "encoder width", base=Int)
+Tick = Ranged(1e-4, 1.0, "s", "control tick")
+StepLimit = Ranged(1, 1 << 20, "counts", "step limit", base=Int)
+TripLimit = Ranged(1, 1 << 20, "counts", "trip limit", base=Int)
+RobotTag = FormatTag(ROBOT_FORMAT, what="robot description")
+Repeatability = Ranged(0.0, 5.0, "mm", "repeatability")
+Name = Annotated[Str, Field(min_length=1)]
+Solver = Annotated[Str | None, Field(json_schema_extra={"enum": ["spherical_wrist", None]})]
+
+
+class DHRow(Model):
+    """One standard DH row: T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)."""
+    theta0_rad: Angle
+    d_m: LinkD
+    a_m: LinkA
+    alpha_rad: Angle
+
+
+DHRows = Vector(DHRow, N_JOINTS, "rows, one per joint")
 
 
 class Encoder(Model):
-    gain_counts_per_rad: Vector(Num, N_JOINTS, "gains, one per joint")
-    offset_counts: Vector(Int, N_JOINTS, "counts, one per joint")
-    bits: Ranged(8, 32, "bits", "encoder width", base=Int) = 24
+    gain_counts_per_rad: Gains
+    offset_counts: JointCounts
+    bits: Bits = 24
     coupling: list[CouplingEntry] = []
     coupling_note: Str | None = None
 
@@ -69,10 +85,10 @@ class Encoder(Model):
 
 
 class Controller(Model):
-    tick_s: Ranged(1e-4, 1.0, "s", "control tick")
-    max_step_counts: Ranged(1, 1 << 20, "counts", "step limit", base=Int)
-    trip_step_counts: Ranged(1, 1 << 20, "counts", "trip limit", base=Int)
-    home_counts: Vector(Int, N_JOINTS, "counts, one per joint")
+    tick_s: Tick
+    max_step_counts: StepLimit
+    trip_step_counts: TripLimit
+    home_counts: JointCounts
 
     @model_validator(mode="after")
     def trip_above_step(self):
@@ -85,23 +101,21 @@ class Controller(Model):
 
 class RobotFile(Model):
     """``models/<robot>/robot.json``."""
-    format: FormatTag(ROBOT_FORMAT, what="robot description") = None
-    name: Annotated[Str, Field(min_length=1)]
+    format: RobotTag = None
+    name: Name
     source: Str | None = None
     dh_convention: Str | None = None
-    dh: Vector(DHRow, N_JOINTS, "rows, one per joint")
-    joint_limits_deg: Vector(Vector(Degrees, 2, "numbers, [lower, upper]"), N_JOINTS,
-                             "[lower, upper] pairs, one per joint")
+    dh: DHRows
+    joint_limits_deg: Limits
     encoder: Encoder
-    inverse_kinematics: Annotated[Str | None, Field(json_schema_extra={
-        "enum": ["spherical_wrist", None]})] = None
-    repeatability_mm: Ranged(0.0, 5.0, "mm", "repeatability") = 0.0
+    inverse_kinematics: Solver = None
+    repeatability_mm: Repeatability = 0.0
     controller: Controller
 
     @model_validator(mode="after")
     def physical(self):
         if self.inverse_kinematics not in (None, "spherical_wrist"):
-            raise problem(f"{self.inverse_kinematics!r} is not a known solver "
+            raise problem(f"{short(self.inverse_kinematics)} is not a known solver "
                           f"('spherical_wrist' or null)", "inverse_kinematics")
         for j, (lo, hi) in enumerate(self.joint_limits_deg):
             if not lo < hi:

@@ -50,6 +50,27 @@ def _some_plate(v):
     return v
 
 
+SensorOrigin = Point(1.0, "sensor origin")
+LaserWindow = Interval("mm", "laser window", 1.0, 10000.0, M_AS_MM)
+Corner = Point(CELL_M, "plate corner")
+Direction = Vector(Ranged(-1e3, 1e3, "", "direction component"), 3)
+PlateSize = Vector(Positive("m", "plate size", 10.0, MM_AS_M), 2, "numbers, x and y extent")
+Thickness = Positive("m", "plate thickness", 1.0, MM_AS_M)
+Face = Annotated[Int, Field(json_schema_extra={"enum": [1, -1]})]
+Centre = Point(CELL_M, "obstacle centre")
+BoxSize = Vector(Positive("m", "obstacle size", CELL_M, MM_AS_M), 3, "numbers, full extents")
+Angles = Vector(Angle, 3)
+JointCounts = Vector(Int, N_JOINTS, "counts, one per joint")
+JointDegrees = Vector(Ranged(-1080.0, 1080.0, "deg", "joint angle"), N_JOINTS,
+                      "angles, one per joint")
+Cone = Ranged(0.0, 89.999, "deg", "beam cone half-angle")
+Distances = Interval("mm", "sampling distance range", 1.0, 10000.0, M_AS_MM)
+SceneTag = FormatTag(SCENE_FORMAT, what="scene")
+Description = Annotated[str, Field(max_length=100_000)]
+RobotName = Annotated[Str, Field(min_length=1)]
+FloorZ = Ranged(-CELL_M, CELL_M, "m", "floor height", MM_AS_M)
+
+
 @dataclass(frozen=True)
 class RobotBounds:
     """What a scene is checked against from its robot (validation context ``robot``)."""
@@ -59,20 +80,20 @@ class RobotBounds:
 
 
 class Sensor(Model):
-    origin_m: Point(1.0, "sensor origin")
+    origin_m: SensorOrigin
     phi_y_rad: Angle
     phi_z_rad: Angle
-    range_mm: Interval("mm", "laser window", 1.0, 10000.0, M_AS_MM) = [65.0, 95.0]
+    range_mm: LaserWindow = [65.0, 95.0]
 
 
 class Plate(Model):
     name: Str | None = None
     n_tilde: NTilde
-    corner_m: Point(CELL_M, "plate corner")
-    x_axis: Vector(Ranged(-1e3, 1e3, "", "direction component"), 3) = [1.0, 0.0, 0.0]
-    size_m: Vector(Positive("m", "plate size", 10.0, MM_AS_M), 2, "numbers, x and y extent")
-    thickness_m: Positive("m", "plate thickness", 1.0, MM_AS_M) = 0.01
-    face: Annotated[Int, Field(json_schema_extra={"enum": [1, -1]})] = 1
+    corner_m: Corner
+    x_axis: Direction = [1.0, 0.0, 0.0]
+    size_m: PlateSize
+    thickness_m: Thickness = 0.01
+    face: Face = 1
     stand: Bool = True
 
     @model_validator(mode="after")
@@ -105,33 +126,32 @@ class Plate(Model):
 
 class Obstacle(Model):
     name: Str | None = None
-    center_m: Point(CELL_M, "obstacle centre")
-    size_m: Vector(Positive("m", "obstacle size", CELL_M, MM_AS_M), 3, "numbers, full extents")
-    rpy_rad: Vector(Angle, 3) = [0.0, 0.0, 0.0]
+    center_m: Centre
+    size_m: BoxSize
+    rpy_rad: Angles = [0.0, 0.0, 0.0]
 
 
 class Positions(Model):
-    home_counts: Vector(Int, N_JOINTS, "counts, one per joint") | None = None
-    calibration_deg: Vector(Ranged(-1080.0, 1080.0, "deg", "joint angle"), N_JOINTS,
-                            "angles, one per joint") | None = None
+    home_counts: JointCounts | None = None
+    calibration_deg: JointDegrees | None = None
 
 
 class Sampling(Model):
-    cone_deg: Ranged(0.0, 89.999, "deg", "beam cone half-angle") = 30.0
-    distance_mm: Interval("mm", "sampling distance range", 1.0, 10000.0, M_AS_MM) = [70.0, 90.0]
+    cone_deg: Cone = 30.0
+    distance_mm: Distances = [70.0, 90.0]
 
 
 class SceneFile(Model):
     """``scenes/<name>.json``."""
-    format: FormatTag(SCENE_FORMAT, what="scene") = None
+    format: SceneTag = None
     name: Str | None = None
-    description: Annotated[str, Field(max_length=100_000)] = ""
-    robot: Annotated[Str, Field(min_length=1)] = "mc70"
+    description: Description = ""
+    robot: RobotName = "mc70"
     sensor: Sensor
     plates: Annotated[list[Plate], AfterValidator(_some_plate),
                       Field(max_length=100, json_schema_extra={"minItems": 1})]
     obstacles: Annotated[list[Obstacle], Field(max_length=10_000)] = []
-    floor_z_m: Ranged(-CELL_M, CELL_M, "m", "floor height", MM_AS_M) = 0.0
+    floor_z_m: FloorZ = 0.0
     positions: Positions = Positions()
     sampling: Sampling = Sampling()
 
