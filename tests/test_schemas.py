@@ -131,6 +131,21 @@ def test_robot_checks(tmp_path, path, value, message):
     assert refused(tmp_path, load_robot, mutated(ROBOT, path, value)) == message
 
 
+def test_an_ill_conditioned_coupling_is_refused(tmp_path):
+    # C[1, 2] = 10, C[2, 1] = 0.099999999: det = 1e-8 (not singular), condition number
+    # ~ (10.05 * 10.05) / 1e-8 ~ 1e10 (numpy's, checked against it below)
+    doc = mutated(ROBOT, ("encoder", "coupling"), [[1, 2, 10.0], [2, 1, 0.099999999]])
+    C = np.eye(6)
+    C[0, 1], C[1, 0] = 10.0, 0.099999999
+    cond = np.linalg.cond(C)
+    assert 1e9 < cond < 2e10 and abs(np.linalg.det(C) - 1e-8) < 1e-15
+    assert refused(tmp_path, load_robot, doc) == (
+        f"encoder.coupling: the coupling matrix C is ill-conditioned (condition number "
+        f"{cond:.3g}): counts from joint angles would be noise")
+    assert refused(tmp_path, load_robot, mutated(ROBOT, ("encoder", "coupling", 0, 2), 1e308)) == (
+        "encoder.coupling[0][2]: 1e+308 is not a plausible coupling coefficient (in [-10, 10])")
+
+
 def test_a_non_singular_coupling_term_is_accepted(tmp_path):
     # C[4, 5] = 1 with C[5, 4] = -0.0111: det(C) = 1 + 0.0111, far from singular
     r = load_robot(_write(tmp_path / "r.json",

@@ -28,7 +28,8 @@ Degrees = Ranged(-1080.0, 1080.0, "deg", "joint limit")
 Limits = Vector(Vector(Degrees, 2, "numbers, [lower, upper]"), N_JOINTS,
                 "[lower, upper] pairs, one per joint")
 Joint = Ranged(1, N_JOINTS, "", "joint number (1-based)", base=Int)
-CouplingEntry = Annotated[tuple[Joint, Joint, Num], Field(
+CouplingValue = Ranged(-10.0, 10.0, "", "coupling coefficient")  # the MC70's are ~0.017
+CouplingEntry = Annotated[tuple[Joint, Joint, CouplingValue], Field(
     description="[row, col, value], 1-based: C[row, col] = value")]
 Gains = Vector(Num, N_JOINTS, "gains, one per joint")
 JointCounts = Vector(Int, N_JOINTS, "counts, one per joint")
@@ -71,10 +72,13 @@ class Encoder(Model):
                 raise problem(f"{c} is outside the {self.bits}-bit encoder range "
                               f"0..{(1 << self.bits) - 1}", "offset_counts", j)
         C = self.coupling_matrix()
-        det = float(np.linalg.det(C))
-        if not (math.isfinite(det) and abs(det) > 1e-9 and np.linalg.cond(C) < 1e9):
+        det, cond = float(np.linalg.det(C)), float(np.linalg.cond(C))
+        if not abs(det) > 1e-9:
             raise problem(f"the coupling matrix C is singular (det {det:.3g}): joint angles "
                           f"q = C x cannot be turned back into counts", "coupling")
+        if not cond < 1e9:
+            raise problem(f"the coupling matrix C is ill-conditioned (condition number "
+                          f"{cond:.3g}): counts from joint angles would be noise", "coupling")
         return self
 
     def coupling_matrix(self) -> np.ndarray:
