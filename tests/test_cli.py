@@ -101,7 +101,7 @@ def test_bad_parameter_file(tmp_path, capsys):
     p = tmp_path / "p.json"
     p.write_text('{"joint_offsets_rad": [0, 0, 0], "planes": [], "sensor": {}}')
     assert main(["predict", SEED, "--params", str(p)]) == 2
-    assert "'joint_offsets_rad' must be a list of 6 numbers" in capsys.readouterr().err
+    assert "p.json: joint_offsets_rad: must hold 6 offsets, one per joint, got 3" in capsys.readouterr().err
     p.write_text('{"joint_offsets_rad": [0, 0,')
     assert main(["predict", SEED, "--params", str(p)]) == 2
     assert "p.json:1: invalid JSON" in capsys.readouterr().err

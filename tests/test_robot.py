@@ -97,5 +97,5 @@ def test_bad_robot_file(tmp_path):
     raw = json.loads((load_robot().source).read_text())
     raw["encoder"]["gain_counts_per_rad"] = raw["encoder"]["gain_counts_per_rad"][:5]
     p.write_text(json.dumps(raw))
-    with pytest.raises(InputError, match="'gains' has 5 entries"):
+    with pytest.raises(InputError, match="robot.json: encoder.gain_counts_per_rad: must hold 6 gains, one per joint, got 5$"):
         load_robot(p)

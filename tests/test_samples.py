@@ -3,7 +3,7 @@ import pytest
 
 from conftest import SEED_DM, SEED_QE
 from planecal.errors import InputError
-from planecal.samples import SampleWriter, read_samples, write_samples
+from planecal.samples import HEADER, SampleWriter, read_samples, write_samples
 from planecal.paths import data_path
 
 
@@ -83,3 +83,132 @@ def test_plate_column(tmp_path):
     write_samples(p, SEED_QE, SEED_DM, plate=np.array([0, 1, 2, 1, 0]))
     s = read_samples(p)
     assert list(s.plate) == [0, 1, 2, 1, 0]
+
+
+# ----- bounded reading and files without information (issue 16) -----------------------------
+
+ROW = "8416544\t8371251\t8443192\t8360940\t8321861\t8334082\t{dm}{plate}\n"
+
+
+def _rows(dms, plates=None):
+    return "".join(ROW.format(dm=dm, plate="" if plates is None or plates[i] is None
+                              else f"\t{plates[i]}") for i, dm in enumerate(dms))
+
+
+def test_plate_column_on_some_lines_only_is_refused(tmp_path):
+    p = tmp_path / "m.tsv"
+    p.write_text("q1\tq2\tq3\tq4\tq5\tq6\tDm\tplate\n" + _rows([80, 81, 82, 83], [1, 2, None, 3]))
+    with pytest.raises(InputError, match=r"^.*m.tsv:4: 7 columns, but line 2 has 8: the plate "
+                                         r"column must be on every line or on none$"):
+        read_samples(p)
+
+
+def test_one_row_repeated_has_no_information(tmp_path):
+    p = tmp_path / "same.tsv"
+    p.write_text("q1\tq2\tq3\tq4\tq5\tq6\tDm\n" + _rows(["85,30"] * 40))
+    with pytest.raises(InputError, match=r"same.tsv: all 40 samples are line 2 repeated: no "
+                                         r"information to calibrate from$"):
+        read_samples(p)
+    p.write_text(_rows(["85,30"] * 39 + ["85,31"]))  # one pose, noise in the reading: data
+    assert len(read_samples(p)) == 40
+
+
+def test_readings_outside_the_scene_laser_window(tmp_path):
+    from planecal.samples import check_samples
+    from planecal.scene import load_scene
+    scene = load_scene("thesis_final")  # ZS-LD80 window 65-95 mm
+    p = tmp_path / "w.tsv"
+    p.write_text(_rows([80, 95, 500, 65]))
+    s = read_samples(p)  # plausible for some laser: read
+    with pytest.raises(InputError, match=r"w.tsv:3: Dm = 500 mm is outside the laser window "
+                                         r"65-95 mm of scene thesis_final: not a reading this "
+                                         r"sensor gives \(1 such samples\)$"):
+        check_samples(s, scene)
+    with pytest.raises(InputError, match=r"w.tsv:3: Dm = 500 mm is outside"):
+        read_samples(p, scene)
+    p.write_text(_rows([80, 95, 65]))
+    assert len(read_samples(p, scene)) == 3  # the window's ends are readings
+
+
+def test_plate_numbers_the_scene_lacks(tmp_path):
+    from planecal.samples import read_many
+    from planecal.scene import load_scene
+    p = tmp_path / "k.tsv"
+    p.write_text(_rows([80, 81, 82], [1, 3, 4]))
+    with pytest.raises(InputError, match=r"k.tsv:3: plate 4, but scene three_plates has 3 plates$"):
+        read_many([data_path("examples", "seed_samples.tsv"), p], load_scene("three_plates"))
+    with pytest.raises(InputError, match=r"k.tsv:2: plate 3, but scene thesis_final has 1 plate$"):
+        read_samples(p, load_scene("thesis_final"))
+
+
+@pytest.mark.parametrize("content, message", [
+    ("1\t2\t3\t4\t5\t6\t1e308\n",
+     r"x.tsv:1: column Dm = 1e308 mm is not a plausible laser distance \(at most 10000 mm\)$"),
+    ("1\t2\t3\t\u0663\t5\t6\t80\n", r"x.tsv:1: column q4 is not an integer encoder count: '\u0663'$"),
+    ("1\t2\t3\t4\t5\t6\t8\u0660\n", r"x.tsv:1: column Dm is not a number: '8\u0660'$"),
+    ("1\t2\t3\t4_0\t5\t6\t80\n", r"x.tsv:1: column q4 is not an integer encoder count: '4_0'$"),
+    ("1\t2\t3\t4\t5\t6\t80\t1x\n", r"x.tsv:1: column plate must be a 1-based plate number, got '1x'$"),
+    ("1\t2\t3\t4\t5\t6\t80\n\x00\x00", r"x.tsv:2: binary data \(NUL bytes\), not a text sample "
+                                       r"file \(UTF-16\? save it as UTF-8\)$"),
+    ("1\t2\t3\t4\t5\t6\t80" + " " * 2000 + "\n",
+     r"x.tsv:1: line longer than 1024 characters, not a sample file \(a sample line is ~60\)$"),
+])
+def test_implausible_lines(tmp_path, content, message):
+    p = tmp_path / "x.tsv"
+    p.write_text(content, encoding="utf-8")
+    with pytest.raises(InputError, match=message):
+        read_samples(p)
+
+
+def test_utf16_file_is_named_binary(tmp_path):
+    p = tmp_path / "u16.tsv"
+    p.write_text("q1\tq2\tq3\tq4\tq5\tq6\tDm\n", encoding="utf-16")
+    with pytest.raises(InputError, match=r"u16.tsv:1: binary data \(NUL bytes\)"):
+        read_samples(p)
+
+
+def test_caps_on_lines_and_size(tmp_path, monkeypatch):
+    import planecal.samples as samples
+    p = tmp_path / "long.tsv"
+    p.write_text(_rows([80 + i * 0.01 for i in range(12)]))
+    monkeypatch.setattr(samples, "MAX_LINES", 10)
+    with pytest.raises(InputError, match=r"long.tsv: more than 10 lines, too many for a sample "
+                                         r"file \(a run has hundreds\)$"):
+        read_samples(p)
+    monkeypatch.setattr(samples, "MAX_LINES", 12)
+    assert len(read_samples(p)) == 12
+    monkeypatch.setattr(samples, "MAX_FILE_BYTES", 2**20)
+    big = tmp_path / "big.tsv"
+    big.write_bytes(b"#" * (3 * 2**20))
+    with pytest.raises(InputError, match=r"big.tsv: 3 MiB is too large for a sample file \(at "
+                                         r"most 1 MiB; a 150-sample run is ~10 kB\)$"):
+        read_samples(big)
+
+
+def test_special_paths(tmp_path):
+    with pytest.raises(InputError, match=r"^/dev/zero:1: binary data \(NUL bytes\)"):
+        read_samples("/dev/zero")
+    with pytest.raises(InputError, match=r"is a directory, not a sample file$"):
+        read_samples(tmp_path)
+
+
+def test_calibrate_dev_zero_exits_2_with_one_line(capsys):
+    from planecal.cli import main
+    assert main(["calibrate", "/dev/zero"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("planecal calibrate: error: /dev/zero:1: binary data (NUL bytes), not a text "
+                   "sample file (UTF-16? save it as UTF-8)\n")
+
+
+def test_large_file_is_stored_compactly(tmp_path):
+    """20,000 samples: the arrays are the int64/float64 the callers get, line numbers kept."""
+    rng = np.random.default_rng(0)
+    qe = rng.integers(8_000_000, 9_000_000, (20_000, 6))
+    dm = rng.uniform(65, 95, 20_000)
+    p = tmp_path / "n.tsv"
+    from planecal.samples import format_line  # write_samples fsyncs each line: slow here
+    p.write_text("\t".join(HEADER) + "\n" + "".join(format_line(q, d) for q, d in zip(qe, dm)))
+    s = read_samples(p)
+    np.testing.assert_array_equal(s.qe, qe)
+    np.testing.assert_allclose(s.d_mm, dm, atol=5e-7)
+    assert s.qe.dtype == np.int64 and s.lines[0] == 2 and s.lines[-1] == 20_001

@@ -1,8 +1,11 @@
-"""The one error type for bad input: the CLI prints it as one line and exits 2."""
+"""The error types the CLI turns into one line: bad input (exit 2) and a run or fit that
+failed (exit 1)."""
 
 
 class InputError(Exception):
-    """Bad user input (file, line, problem). Message is one line, ready to print."""
+    """Bad user input. The message is one line, ready to print: ``FILE: field.path:
+    problem`` for JSON files (planecal.formats), ``FILE:LINE: problem`` for sample files
+    and JSON syntax, or the option and the problem."""
 
 
 class RunFailed(Exception):

@@ -1,23 +1,26 @@
 """Parameter files (JSON), the format others script against:
 
-    {"joint_offsets_rad": [6 numbers],
+    {"format": "planecal-params/1",
+     "joint_offsets_rad": [6 numbers],
      "planes": [{"n_tilde": [x, y, z]}, ...],
      "sensor": {"origin_m": [x, y, z], "phi_y_rad": .., "phi_z_rad": ..}}
 
-Result files hold the same keys plus ``std`` (same shape, null where not identifiable),
-``residual_rms_mm``, ``iterations``, ``outliers`` and ``identifiability``.
+Result files (``planecal-result/1``) hold the same keys plus ``std`` (same shape, null
+where not identifiable), ``residual_rms_mm``, ``iterations``, ``outliers``,
+``identifiability`` and ``provenance``. The models and their checks are in
+``planecal.formats.params``; files without ``format`` (older ones) are read alike.
 """
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 
 import numpy as np
 
 from planecal.cell import CellParams
-from planecal.errors import InputError
+from planecal.formats.base import read_json, validate
+from planecal.formats.params import PARAMS_FORMAT, ParamsFile
 
 
 def params_to_dict(p: CellParams) -> dict:
@@ -29,51 +32,23 @@ def params_to_dict(p: CellParams) -> dict:
     }
 
 
-def _numbers(path, key, value, n):
-    if not isinstance(value, list) or len(value) != n:
-        raise InputError(f"{path}: '{key}' must be a list of {n} numbers")
-    out = []
-    for v in value:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise InputError(f"{path}: '{key}' holds {v!r}, not a finite number")
-        out.append(float(v))
-    return out
+def params_from_dict(d, path: str = "<params>") -> CellParams:
+    """CellParams from a parsed parameter (or result) file, validated by
+    ``planecal.formats.params.ParamsFile``; one-line InputError otherwise."""
+    pf = validate(ParamsFile, d, path, "parameter file")
+    s = pf.sensor
+    return CellParams(pf.joint_offsets_rad, s.origin_m, s.phi_y_rad, s.phi_z_rad,
+                      [p.n_tilde for p in pf.planes])
 
 
-def params_from_dict(d: dict, path: str = "<params>") -> CellParams:
-    if not isinstance(d, dict):
-        raise InputError(f"{path}: a parameter file is a JSON object")
-    for key in ("joint_offsets_rad", "planes", "sensor"):
-        if key not in d:
-            raise InputError(f"{path}: missing key '{key}'")
-    offsets = _numbers(path, "joint_offsets_rad", d["joint_offsets_rad"], 6)
-    planes = d["planes"]
-    if not isinstance(planes, list) or not planes:
-        raise InputError(f"{path}: 'planes' must be a non-empty list of {{\"n_tilde\": [x, y, z]}}")
-    n = [_numbers(path, f"planes[{i}].n_tilde", (p or {}).get("n_tilde") if isinstance(p, dict)
-                  else None, 3) for i, p in enumerate(planes)]
-    s = d["sensor"]
-    if not isinstance(s, dict):
-        raise InputError(f"{path}: 'sensor' must be an object")
-    origin = _numbers(path, "sensor.origin_m", s.get("origin_m"), 3)
-    angles = _numbers(path, "sensor.phi_y_rad/phi_z_rad", [s.get("phi_y_rad"), s.get("phi_z_rad")], 2)
-    return CellParams(offsets, origin, angles[0], angles[1], n)
-
-
-def load_json(path: str | Path) -> dict:
-    path = Path(path)
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"{path}:{e.lineno}: invalid JSON: {e.msg}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file") from None
+def load_json(path: str | Path, what: str = "JSON file"):
+    """Parsed JSON, read within planecal's bounds (size, nesting, binary data); one-line
+    InputError otherwise. Validation is the caller's (``planecal.formats``)."""
+    return read_json(path, what)
 
 
 def load_params(path: str | Path) -> CellParams:
-    return params_from_dict(load_json(path), str(path))
+    return params_from_dict(read_json(path, "parameter file"), str(path))
 
 
 def save_json(path: str | Path, data: dict, fsync: bool = False) -> None:
@@ -94,7 +69,7 @@ def save_json(path: str | Path, data: dict, fsync: bool = False) -> None:
 
 
 def save_params(path: str | Path, p: CellParams) -> None:
-    save_json(path, params_to_dict(p))
+    save_json(path, {"format": PARAMS_FORMAT, **params_to_dict(p)})
 
 
 def _jsonable(v):

@@ -8,13 +8,14 @@ Every function is vectorized over leading axes of ``q``.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from planecal.errors import InputError
+from planecal.formats.base import read_json, validate
+from planecal.formats.robot import RobotFile
 from planecal.paths import data_path
 
 DEFAULT_ROBOT = "mc70"
@@ -44,53 +45,33 @@ class Robot:
     def n_joints(self) -> int:
         return len(self.d)
 
-
 def load_robot(name_or_path: str | Path = DEFAULT_ROBOT) -> Robot:
-    """Load a robot description: a name under models/ (``mc70``) or a path to robot.json."""
+    """Load a robot description: a name under models/ (``mc70``) or a path to robot.json.
+    Validated by ``planecal.formats.robot.RobotFile``; one-line InputError otherwise."""
     p = Path(name_or_path)
-    if not p.suffix:
+    if not p.suffix and len(p.parts) == 1:  # a name, not a path
         p = data_path("models") / str(name_or_path) / "robot.json"
-    try:
-        raw = json.loads(p.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{p}: robot description not found") from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"{p}:{e.lineno}: invalid JSON: {e.msg}") from None
-    try:
-        dh = raw["dh"]
-        n = len(dh)
-        enc = raw["encoder"]
-        C = np.eye(n)
-        for row, col, value in enc.get("coupling", []):
-            C[row - 1, col - 1] = value
-        ctrl = raw["controller"]
-        robot = Robot(
-            name=raw["name"],
-            theta0=np.array([j["theta0_rad"] for j in dh], float),
-            d=np.array([j["d_m"] for j in dh], float),
-            a=np.array([j["a_m"] for j in dh], float),
-            alpha=np.array([j["alpha_rad"] for j in dh], float),
-            limits=np.deg2rad(np.array(raw["joint_limits_deg"], float)),
-            gains=np.array(enc["gain_counts_per_rad"], float),
-            qe0=np.array(enc["offset_counts"], float),
-            coupling=C,
-            encoder_bits=int(enc.get("bits", 24)),
-            ik_kind=raw.get("inverse_kinematics"),
-            repeatability_m=float(raw.get("repeatability_mm", 0.0)) * 1e-3,
-            tick_s=float(ctrl["tick_s"]),
-            max_step_counts=int(ctrl["max_step_counts"]),
-            trip_step_counts=int(ctrl["trip_step_counts"]),
-            home_counts=np.array(ctrl["home_counts"], np.int64),
-            source=p,
-        )
-    except (KeyError, TypeError, ValueError) as e:
-        raise InputError(f"{p}: bad robot description: {type(e).__name__}: {e}") from None
-    for name in ("theta0", "a", "alpha", "gains", "qe0", "home_counts"):
-        if len(getattr(robot, name)) != n:
-            raise InputError(f"{p}: '{name}' has {len(getattr(robot, name))} entries, dh has {n}")
-    if robot.limits.shape != (n, 2):
-        raise InputError(f"{p}: joint_limits_deg must hold {n} [lower, upper] pairs")
-    return robot
+    rf = validate(RobotFile, read_json(p, "robot description"), p, "robot description")
+    enc, ctrl = rf.encoder, rf.controller
+    return Robot(
+        name=rf.name,
+        theta0=np.array([j.theta0_rad for j in rf.dh]),
+        d=np.array([j.d_m for j in rf.dh]),
+        a=np.array([j.a_m for j in rf.dh]),
+        alpha=np.array([j.alpha_rad for j in rf.dh]),
+        limits=np.deg2rad(np.array(rf.joint_limits_deg, float)),
+        gains=np.array(enc.gain_counts_per_rad, float),
+        qe0=np.array(enc.offset_counts, float),
+        coupling=enc.coupling_matrix(),
+        encoder_bits=enc.bits,
+        ik_kind=rf.inverse_kinematics,
+        repeatability_m=rf.repeatability_mm * 1e-3,
+        tick_s=ctrl.tick_s,
+        max_step_counts=ctrl.max_step_counts,
+        trip_step_counts=ctrl.trip_step_counts,
+        home_counts=np.array(ctrl.home_counts, np.int64),
+        source=p,
+    )
 
 
 def full_angles(robot: Robot, q: np.ndarray, delta: np.ndarray | None = None) -> np.ndarray:

@@ -7,13 +7,26 @@ optional, CRLF line ends are fine, blank lines are skipped. An optional 8th colu
 ``plate`` (1-based plate index) is read and written for multi-plate runs.
 Dm = 0 is the ZS-LD80's out-of-range reading: such samples are skipped and counted.
 planecal writes dot decimals with 6 digits (1 nm, below any laser noise), header included.
+
+Reading streams the file within bounds (``MAX_FILE_BYTES``, ``MAX_LINES``,
+``MAX_LINE_CHARS``, no NUL bytes): a binary file or /dev/zero ends on its first line.
+Refused with the line named: a plate column on some lines only, a distance above
+``MAX_DM_MM``; with the file named: a file whose samples are all one line repeated (no
+information). ``check_samples(samples, scene)`` refuses readings outside the scene's laser
+window and plate numbers the scene lacks (``read_samples(path, scene)`` does both).
 """
 from __future__ import annotations
 
+import io
+import itertools
 import math
 import os
+import re
+import stat
+from array import array
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -21,6 +34,12 @@ from planecal.errors import InputError
 
 HEADER = ["q1", "q2", "q3", "q4", "q5", "q6", "Dm"]
 COUNT_LIMIT = 1 << 24
+# bounds of what a sample file can be: a run has hundreds of ~60-character lines
+MAX_FILE_BYTES = 32 * 2**20
+MAX_LINES = 200_000
+MAX_LINE_CHARS = 1024
+MAX_DM_MM = 10_000.0  # no laser distance sensor used for this measures 10 m
+_INT = re.compile(r"[+-]?[0-9]+")
 
 
 @dataclass
@@ -43,76 +62,157 @@ def _is_header(fields: list[str]) -> bool:
     return [f.strip().lower() for f in fields[:7]] == [h.lower() for h in HEADER]
 
 
-def read_samples(path: str | Path) -> Samples:
-    path = Path(path)
+def _open(path: Path):
+    """The file as text, read lazily; size checked first where the size is known."""
     try:
-        raw = path.read_bytes()
+        raw = open(path, "rb")
     except FileNotFoundError:
         raise InputError(f"{path}: file not found") from None
     except IsADirectoryError:
         raise InputError(f"{path}: is a directory, not a sample file") from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-    qe, d, plate, lines = [], [], [], []
-    n_zero = 0
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        if not line.strip():
-            continue
-        fields = line.strip().split("\t") if "\t" in line else line.split()
-        if _is_header(fields):
-            if qe or n_zero:
-                raise InputError(f"{path}:{lineno}: header line in the middle of the data")
-            continue
-        if len(fields) not in (7, 8):
-            raise InputError(f"{path}:{lineno}: expected 7 tab-separated columns "
-                             f"(q1..q6, Dm), found {len(fields)}")
-        counts = []
-        for j, f in enumerate(fields[:6]):
-            try:
-                c = int(f.strip())
-            except ValueError:
-                raise InputError(f"{path}:{lineno}: column q{j + 1} is not an integer "
-                                 f"encoder count: {f.strip()!r}") from None
-            if not 0 <= c < COUNT_LIMIT:
-                raise InputError(f"{path}:{lineno}: column q{j + 1} = {c} is outside the "
-                                 f"24-bit encoder range 0..{COUNT_LIMIT - 1}")
-            counts.append(c)
-        dm_text = fields[6].strip().replace(",", ".")
+    except PermissionError:
+        raise InputError(f"{path}: cannot read the sample file (permission denied)") from None
+    except (OSError, ValueError) as e:
+        raise InputError(f"{path}: cannot open the sample file "
+                         f"({getattr(e, 'strerror', None) or e})") from None
+    st = os.fstat(raw.fileno())
+    if stat.S_ISREG(st.st_mode) and st.st_size > MAX_FILE_BYTES:
+        raw.close()
+        raise InputError(f"{path}: {st.st_size / 2**20:.0f} MiB is too large for a sample file "
+                         f"(at most {MAX_FILE_BYTES // 2**20} MiB; a 150-sample run is ~10 kB)")
+    return io.TextIOWrapper(raw, encoding="utf-8-sig", errors="replace", newline=None)
+
+
+def _lines(path: Path, f):
+    """(line number, text) of each line, streaming: a line cap, a line-length cap and no
+    NUL bytes, so /dev/zero or a binary file ends on its first line."""
+    for lineno in itertools.count(1):
         try:
-            dm = float(dm_text)
-        except ValueError:
-            raise InputError(f"{path}:{lineno}: column Dm is not a number: {fields[6].strip()!r}") from None
-        if not math.isfinite(dm) or dm < 0:
-            raise InputError(f"{path}:{lineno}: column Dm = {fields[6].strip()!r} is not a "
-                             f"finite, non-negative distance in mm")
-        k = 0
-        if len(fields) == 8:
+            line = f.readline(MAX_LINE_CHARS + 1)
+        except OSError as e:
+            raise InputError(f"{path}:{lineno}: cannot read ({e.strerror})") from None
+        if not line:
+            return
+        if "\0" in line:
+            raise InputError(f"{path}:{lineno}: binary data (NUL bytes), not a text sample file "
+                             f"(UTF-16? save it as UTF-8)")
+        if len(line) > MAX_LINE_CHARS and not line.endswith("\n"):
+            raise InputError(f"{path}:{lineno}: line longer than {MAX_LINE_CHARS} characters, "
+                             f"not a sample file (a sample line is ~60)")
+        if lineno > MAX_LINES:
+            raise InputError(f"{path}: more than {MAX_LINES} lines, too many for a sample file "
+                             f"(a run has hundreds)")
+        yield lineno, line.rstrip("\n")
+
+
+def _integer(text: str, digits: int) -> int | None:
+    return int(text) if _INT.fullmatch(text) and len(text.lstrip("+-")) <= digits else None
+
+
+def read_samples(path: str | Path, scene: "SceneLike | None" = None) -> Samples:
+    """Read a sample file (module docstring). With ``scene``, also ``check_samples``."""
+    path = Path(path)
+    qe, d, plate, lines = array("q"), array("d"), array("q"), array("q")
+    n_zero = 0
+    columns = first = None  # the first data line's column count and number
+    with _open(path) as f:
+        for lineno, line in _lines(path, f):
+            if not line.strip():
+                continue
+            fields = line.strip().split("\t") if "\t" in line else line.split()
+            if _is_header(fields):
+                if len(lines) or n_zero:
+                    raise InputError(f"{path}:{lineno}: header line in the middle of the data")
+                continue
+            if len(fields) not in (7, 8):
+                raise InputError(f"{path}:{lineno}: expected 7 tab-separated columns "
+                                 f"(q1..q6, Dm), found {len(fields)}")
+            if columns is None:
+                columns, first = len(fields), lineno
+            elif len(fields) != columns:
+                raise InputError(f"{path}:{lineno}: {len(fields)} columns, but line {first} has "
+                                 f"{columns}: the plate column must be on every line or on none")
+            counts = []
+            for j, text in enumerate(fields[:6]):
+                c = _integer(text.strip(), 12)
+                if c is None:
+                    raise InputError(f"{path}:{lineno}: column q{j + 1} is not an integer "
+                                     f"encoder count: {text.strip()!r}")
+                if not 0 <= c < COUNT_LIMIT:
+                    raise InputError(f"{path}:{lineno}: column q{j + 1} = {c} is outside the "
+                                     f"24-bit encoder range 0..{COUNT_LIMIT - 1}")
+                counts.append(c)
+            dm_text = fields[6].strip()
             try:
-                k = int(fields[7].strip()) - 1
+                dm = float(dm_text.replace(",", ".")) if dm_text.isascii() else None
             except ValueError:
-                k = -1
-            if k < 0:
-                raise InputError(f"{path}:{lineno}: column plate must be a 1-based plate "
-                                 f"number, got {fields[7].strip()!r}")
-        if dm == 0.0:
-            n_zero += 1
-            continue
-        qe.append(counts)
-        d.append(dm)
-        plate.append(k)
-        lines.append(lineno)
-    if not qe:
+                dm = None
+            if dm is None:
+                raise InputError(f"{path}:{lineno}: column Dm is not a number: {dm_text!r}")
+            if not math.isfinite(dm) or dm < 0:
+                raise InputError(f"{path}:{lineno}: column Dm = {dm_text!r} is not a "
+                                 f"finite, non-negative distance in mm")
+            if dm > MAX_DM_MM:
+                raise InputError(f"{path}:{lineno}: column Dm = {dm_text} mm is not a plausible "
+                                 f"laser distance (at most {MAX_DM_MM:g} mm)")
+            k = 0
+            if len(fields) == 8:
+                k = (_integer(fields[7].strip(), 6) or 0) - 1
+                if k < 0:
+                    raise InputError(f"{path}:{lineno}: column plate must be a 1-based plate "
+                                     f"number, got {fields[7].strip()!r}")
+            if dm == 0.0:
+                n_zero += 1
+                continue
+            qe.extend(counts)
+            d.append(dm)
+            plate.append(k)
+            lines.append(lineno)
+    if not len(lines):
         what = f" ({n_zero} laser zeros)" if n_zero else ""
         raise InputError(f"{path}: no samples in the file{what}")
-    return Samples(np.array(qe, np.int64), np.array(d), np.array(plate, int),
-                   np.array(lines, int), n_zero, path)
+    s = Samples(np.frombuffer(qe, np.int64).reshape(-1, 6).copy(), np.frombuffer(d).copy(),
+                np.frombuffer(plate, np.int64).astype(int), np.frombuffer(lines, np.int64).astype(int),
+                n_zero, path)
+    if len(s) > 1 and (np.all(s.qe == s.qe[0]) and np.all(s.d_mm == s.d_mm[0])
+                       and np.all(s.plate == s.plate[0])):
+        raise InputError(f"{path}: all {len(s)} samples are line {s.lines[0]} repeated: no "
+                         f"information to calibrate from")
+    if scene is not None:
+        check_samples(s, scene)
+    return s
 
 
-def read_many(paths) -> Samples:
-    """Read several sample files into one set (lines keep their per-file numbers)."""
-    sets = [read_samples(p) for p in paths]
+class SceneLike(Protocol):
+    """What ``check_samples`` needs of a ``planecal.scene.Scene``."""
+    name: str
+    laser_range_mm: tuple[float, float]
+    plates: list
+
+
+def check_samples(samples: Samples, scene: SceneLike) -> None:
+    """Refuse readings the scene's sensor cannot give (outside its laser window; the
+    ZS-LD80 reports 0 there, skipped on reading) and plate numbers the scene lacks.
+    The message names the file and line of the first such sample."""
+    where = samples.path if samples.path is not None else "samples"
+    lo, hi = scene.laser_range_mm
+    out = (samples.d_mm < lo) | (samples.d_mm > hi)
+    if out.any():
+        i = int(np.argmax(out))
+        raise InputError(f"{where}:{samples.lines[i]}: Dm = {samples.d_mm[i]:g} mm is outside "
+                         f"the laser window {lo:g}-{hi:g} mm of scene {scene.name}: not a "
+                         f"reading this sensor gives ({int(out.sum())} such samples)")
+    n = len(scene.plates)
+    if samples.plate.max() >= n:
+        i = int(np.argmax(samples.plate >= n))
+        raise InputError(f"{where}:{samples.lines[i]}: plate {samples.plate[i] + 1}, but scene "
+                         f"{scene.name} has {n} plate{'s' if n > 1 else ''}")
+
+
+def read_many(paths, scene: SceneLike | None = None) -> Samples:
+    """Read several sample files into one set (lines keep their per-file numbers); with
+    ``scene`` each file is checked against it (``check_samples``)."""
+    sets = [read_samples(p, scene) for p in paths]
     return Samples(np.concatenate([s.qe for s in sets]), np.concatenate([s.d_mm for s in sets]),
                    np.concatenate([s.plate for s in sets]), np.concatenate([s.lines for s in sets]),
                    sum(s.n_zero for s in sets), sets[0].path if len(sets) == 1 else None)

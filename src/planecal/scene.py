@@ -18,9 +18,11 @@ import numpy as np
 
 from planecal.cell import CellParams, point_normal_from_n_tilde
 from planecal.errors import InputError
-from planecal.params import load_json
+from planecal.formats.base import read_json, validate
+from planecal.formats.robot import reach_m
+from planecal.formats.scene import RobotBounds, SceneFile
 from planecal.paths import data_path
-from planecal.robot import Robot, load_robot
+from planecal.robot import DEFAULT_ROBOT, Robot, load_robot
 
 DEFAULT_SCENE = "thesis_final"
 
@@ -85,63 +87,48 @@ class Scene:
 
 def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
     p = Path(name_or_path)
-    if p.suffix == ".json" or p.exists():
+    try:
+        exists = p.exists()
+    except (OSError, ValueError):  # a NUL character, a name too long: reading will say so
+        exists = False
+    if p.suffix == ".json" or exists:
         return p
     return data_path("scenes") / f"{name_or_path}.json"
 
 
-def _vec(path, obj, key, n, default=None):
-    v = obj.get(key, default)
-    try:
-        a = np.asarray(v, float)
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: '{key}' must be {n} numbers") from None
-    if a.shape != (n,) or not np.all(np.isfinite(a)):
-        raise InputError(f"{path}: '{key}' must be {n} finite numbers, got {v!r}")
-    return a
-
-
 def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
+    """A scene by name (scenes/<name>.json) or path, validated by
+    ``planecal.formats.scene.SceneFile`` against its robot (home counts within the
+    encoder's bits, plates within reach); one-line InputError otherwise."""
     path = scene_path(name_or_path)
-    raw = load_json(path)
-    try:
-        robot = load_robot(raw.get("robot", "mc70"))
-        s = raw["sensor"]
-        plates = []
-        for i, p in enumerate(raw["plates"]):
-            where = f"{path}: plates[{i}]"
-            n_tilde = _vec(where, p, "n_tilde", 3)
-            plates.append(Plate(
-                name=p.get("name", f"plate{i + 1}"), n_tilde=n_tilde,
-                corner=_vec(where, p, "corner_m", 3), x_hint=_vec(where, p, "x_axis", 3, [1, 0, 0]),
-                size=_vec(where, p, "size_m", 2), thickness=float(p.get("thickness_m", 0.01)),
-                face=int(p.get("face", 1)), stand=bool(p.get("stand", True))))
-            if plates[-1].face not in (1, -1):
-                raise InputError(f"{where}: 'face' must be +1 or -1")
-        if not plates:
-            raise InputError(f"{path}: a scene needs at least one plate")
-        obstacles = [Box(o.get("name", f"obstacle{i + 1}"), _vec(path, o, "center_m", 3),
-                         _vec(path, o, "size_m", 3), _vec(path, o, "rpy_rad", 3, [0, 0, 0]))
-                     for i, o in enumerate(raw.get("obstacles", []))]
-        pos = raw.get("positions", {})
-        samp = raw.get("sampling", {})
-        cal = pos.get("calibration_deg")
-        scene = Scene(
-            name=raw.get("name", path.stem), path=path, description=raw.get("description", ""),
-            robot=robot, sensor_origin=_vec(path, s, "origin_m", 3),
-            phi_y=float(s["phi_y_rad"]), phi_z=float(s["phi_z_rad"]),
-            laser_range_mm=tuple(s.get("range_mm", [65.0, 95.0])),
-            plates=plates, obstacles=obstacles, floor_z=float(raw.get("floor_z_m", 0.0)),
-            home_counts=np.asarray(pos.get("home_counts", robot.home_counts), np.int64),
-            calibration_q=None if cal is None else np.deg2rad(_vec(path, pos, "calibration_deg", 6)),
-            cone_deg=float(samp.get("cone_deg", 30.0)),
-            distance_mm=tuple(samp.get("distance_mm", [70.0, 90.0])),
-        )
-    except KeyError as e:
-        raise InputError(f"{path}: missing key {e}") from None
-    except (TypeError, ValueError) as e:
-        raise InputError(f"{path}: {e}") from None
-    return scene
+    raw = read_json(path, "scene")
+    robot = bounds = None
+    ref = raw.get("robot", DEFAULT_ROBOT) if isinstance(raw, dict) else None
+    if isinstance(ref, str) and ref:  # otherwise validation names the problem
+        try:
+            robot = load_robot(ref)
+        except InputError as e:
+            raise InputError(f"{path}: robot: {e}") from None
+        bounds = RobotBounds(robot.name, reach_m(robot.d, robot.a), robot.encoder_bits)
+    sf = validate(SceneFile, raw, path, "scene", {"robot": bounds})
+    plates = [Plate(name=p.name or f"plate{i + 1}", n_tilde=np.array(p.n_tilde),
+                    corner=np.array(p.corner_m), x_hint=np.array(p.x_axis),
+                    size=np.array(p.size_m), thickness=p.thickness_m, face=p.face,
+                    stand=p.stand)
+              for i, p in enumerate(sf.plates)]
+    obstacles = [Box(o.name or f"obstacle{i + 1}", np.array(o.center_m), np.array(o.size_m),
+                     np.array(o.rpy_rad)) for i, o in enumerate(sf.obstacles)]
+    pos, s = sf.positions, sf.sensor
+    home = robot.home_counts if pos.home_counts is None else pos.home_counts
+    return Scene(
+        name=sf.name or path.stem, path=path, description=sf.description, robot=robot,
+        sensor_origin=np.array(s.origin_m), phi_y=s.phi_y_rad, phi_z=s.phi_z_rad,
+        laser_range_mm=tuple(s.range_mm), plates=plates, obstacles=obstacles,
+        floor_z=sf.floor_z_m, home_counts=np.asarray(home, np.int64),
+        calibration_q=(None if pos.calibration_deg is None
+                       else np.deg2rad(np.array(pos.calibration_deg))),
+        cone_deg=sf.sampling.cone_deg, distance_mm=tuple(sf.sampling.distance_mm),
+    )
 
 
 def nominal_params(scene: Scene) -> CellParams:

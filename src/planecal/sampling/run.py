@@ -45,7 +45,9 @@ from typing import Callable
 import numpy as np
 
 from planecal.errors import InputError, RunFailed
-from planecal.params import load_json, save_json
+from planecal.formats import load_sidecar as read_sidecar
+from planecal.formats.run import SIDECAR_FORMAT
+from planecal.params import save_json
 from planecal.sampling.collect import Cursor, DriveAcquirer, Tally, collect
 from planecal.sampling.driver import Driver, EnableDropped
 from planecal.sampling.laserread import LaserSettings
@@ -55,7 +57,6 @@ from planecal.sampling.poses import PoseSettings
 from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP
 from planecal.scene import Scene
 
-SIDECAR_FORMAT = "planecal-run/1"
 RECENT_REJECTIONS = 50  # kept in the sidecar with their reasons
 
 
@@ -140,13 +141,11 @@ class RunLock:
 
 
 def load_sidecar(out: str | Path) -> dict:
+    """The run's sidecar, validated (``formats.run``): a plain dict."""
     p = sidecar_path(out)
     if not p.exists():
         raise InputError(f"{p}: no run sidecar to resume from")
-    side = load_json(p)
-    if not isinstance(side, dict) or side.get("format") != SIDECAR_FORMAT:
-        raise InputError(f"{p}: not a planecal run sidecar (format {SIDECAR_FORMAT})")
-    return side
+    return read_sidecar(p)
 
 
 def count_samples(path: Path) -> int:

@@ -38,9 +38,9 @@ from planecal.cell import parameter_names, predict_with_jacobian
 from planecal.encoder import counts_in_range, joints_to_counts
 from planecal.errors import InputError
 from planecal.fit import noise_variance
+from planecal.formats.base import read_json, validate
+from planecal.formats.poses import POSES_FORMAT, PosesFile
 from planecal.studies.common import BUFFER_LEN, covariances
-
-POSES_FORMAT = "planecal-poses/1"
 
 
 def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = None):
@@ -227,18 +227,11 @@ def plan(scene, n: int, m: int, seed: int = 0, free_names=None, checker=None,
 
 
 def load_poses(path) -> tuple[np.ndarray, np.ndarray, dict]:
-    from planecal.params import load_json
-    d = load_json(path)
-    if not isinstance(d, dict) or d.get("format") != POSES_FORMAT:
-        raise InputError(f"{path}: not a planecal pose list (format {POSES_FORMAT})")
-    try:
-        qe = np.asarray(d["counts"], np.int64).reshape(-1, 6)
-        plate = np.asarray(d["plates"], int).reshape(-1)
-    except (KeyError, ValueError, TypeError) as e:
-        raise InputError(f"{path}: bad pose list ({type(e).__name__}: {e})") from None
-    if len(plate) != len(qe):
-        raise InputError(f"{path}: {len(qe)} poses but {len(plate)} plate numbers")
-    return qe, plate, d
+    """(counts (n, 6) int64, plates (n,), the whole document) of a pose list, validated by
+    ``planecal.formats.poses.PosesFile``; one-line InputError otherwise."""
+    d = read_json(path, "pose list")
+    pf = validate(PosesFile, d, path, "pose list")
+    return np.array(pf.counts, np.int64).reshape(-1, 6), np.array(pf.plates, int), d
 
 
 # ----- consuming a pose list in the sampling run ---------------------------------------------

@@ -1,0 +1,147 @@
+"""Parameter files (``planecal-params/1``) and result files (``planecal-result/1``).
+
+A parameter file holds the cell's parameters (cell.CellParams) in SI units::
+
+    {"format": "planecal-params/1",
+     "joint_offsets_rad": [6 numbers],
+     "planes": [{"n_tilde": [x, y, z]}, ...],
+     "sensor": {"origin_m": [x, y, z], "phi_y_rad": .., "phi_z_rad": ..}}
+
+A result file is a parameter file plus the fit's report (std, residuals, identifiability)
+and its provenance (inputs with their SHA-256, scene, robot, planecal version, date); it
+can be read wherever a parameter file is (``--initial``, ``--truth``, ``--params``).
+Files without ``format`` (written before it existed) are read as parameter files.
+"""
+import hashlib
+import math
+from collections.abc import Iterable
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, Field, ValidationError
+
+from planecal.formats.base import (
+    DEG_AS_RAD, Angle, Bool, FormatTag, Int, Model, Point, Ranged, Record, Str, Vector,
+    error_line, problem)
+from planecal.formats.scene import NTilde
+
+PARAMS_FORMAT = "planecal-params/1"
+RESULT_FORMAT = "planecal-result/1"
+MAX_PLANES = 100
+
+Offset = Ranged(-math.pi, math.pi, "rad", "joint offset", DEG_AS_RAD)
+Offsets = Vector(Offset, 6, "offsets, one per joint")
+SensorOrigin = Point(1.0, "sensor origin")
+ParamsTag = FormatTag(PARAMS_FORMAT, RESULT_FORMAT, what="parameter file")
+ResultTag = FormatTag(RESULT_FORMAT, what="result file")
+
+
+def _some_plane(v):
+    if not v:
+        raise problem("needs at least one plane")
+    return v
+
+
+class Plane(Model):
+    n_tilde: NTilde
+
+
+class SensorParams(Model):
+    origin_m: SensorOrigin
+    phi_y_rad: Angle
+    phi_z_rad: Angle
+
+
+class ParamsFile(Record):
+    """Unknown top-level keys are allowed: every result file is a parameter file."""
+    format: ParamsTag = None
+    joint_offsets_rad: Offsets
+    planes: Annotated[list[Plane], AfterValidator(_some_plane),
+                      Field(max_length=MAX_PLANES, json_schema_extra={"minItems": 1})]
+    sensor: SensorParams
+
+
+# ----- result files --------------------------------------------------------------------------
+
+Std = Annotated[Ranged(0.0, None, "", "standard deviation") | None,
+                Field(description="null where the parameter is not identifiable or fixed")]
+NonNeg = Ranged(0.0, None, "", "non-negative quantity")
+Count = Ranged(0, None, "", "count", base=Int)
+Std3, Std6 = Vector(Std, 3), Vector(Std, 6)
+
+
+class PlaneStd(Model):
+    n_tilde: Std3
+
+
+class SensorStd(Model):
+    origin_m: Std3
+    phi_y_rad: Std
+    phi_z_rad: Std
+
+
+class StdBlock(Model):
+    joint_offsets_rad: Std6
+    planes: list[PlaneStd]
+    sensor: SensorStd
+
+
+class InputFile(Model):
+    role: Str
+    path: Str
+    sha256: Annotated[str, Field(pattern=r"^[0-9a-f]{64}$")]
+    bytes: Count
+
+
+class Provenance(Model):
+    planecal_version: Str
+    created_utc: Str
+    inputs: list[InputFile]
+    scene: Str | None = None
+    robot: Str | None = None
+
+
+class ResultFile(ParamsFile):
+    """What ``planecal calibrate --out`` writes."""
+    format: ResultTag = None
+    std: StdBlock
+    residual_rms_mm: NonNeg
+    residual_rms_initial_mm: NonNeg
+    residual_max_mm: NonNeg
+    iterations: Count
+    converged: Bool
+    outliers: list[Count]
+    samples_used: Count
+    identifiability: dict[str, Any]
+    free: list[Str]
+    provenance: Provenance | None = None
+
+
+def provenance(inputs: Iterable[tuple[str, str | Path]], scene: str | None = None,
+               robot: str | None = None) -> dict:
+    """A result's provenance: each input (role, path) with its size and SHA-256, the scene
+    and robot names, planecal's version and the time (UTC)."""
+    from planecal import __version__
+    files = []
+    for role, path in inputs:
+        with open(path, "rb") as f:
+            digest = hashlib.file_digest(f, "sha256")
+            size = f.tell()
+        files.append({"role": role, "path": str(path), "sha256": digest.hexdigest(),
+                      "bytes": size})
+    return {"planecal_version": __version__,
+            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "inputs": files, "scene": scene, "robot": robot}
+
+
+def result_document(result: dict, prov: dict) -> dict:
+    """The result file's content: ``format``, the fit's ``result`` (calibrate's
+    ``result_dict``) and ``prov`` (``provenance(...)``), checked against ResultFile.
+    A failure here is planecal's bug, not the user's: ValueError."""
+    doc = {"format": RESULT_FORMAT, **result, "provenance": prov}
+    try:
+        ResultFile.model_validate(doc)
+    except ValidationError as e:
+        raise ValueError(error_line("result", e)) from None
+    return doc

@@ -1,0 +1,146 @@
+"""The robot description, ``models/<robot>/robot.json`` (format ``planecal-robot/1``).
+
+Six joints (planecal's parameter vector, sample files and IK are built for six), standard
+DH rows, joint limits in degrees, the encoder model ``q = C x, x = (qe - qe0) / g`` and the
+controller's step limits and home counts. Checked: every number finite, lengths and angles
+of plausible size, non-zero gains, coupling entries on existing joints and a non-singular
+C, counts within the encoder's bits, the trip limit above the step limit.
+"""
+
+import math
+from typing import Annotated
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from planecal.formats.base import (
+    MM_AS_M, Angle, FormatTag, Int, Model, Num, Ranged, Str, Vector, problem, short)
+
+ROBOT_FORMAT = "planecal-robot/1"
+N_JOINTS = 6
+MAX_LINK_M = 5.0  # the largest industrial arms reach ~4 m in all
+
+
+# the field types (aliases: a call inside an annotation reads badly to linters)
+LinkD = Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "link offset d", MM_AS_M)
+LinkA = Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "link length a", MM_AS_M)
+Degrees = Ranged(-1080.0, 1080.0, "deg", "joint limit")
+Limits = Vector(Vector(Degrees, 2, "numbers, [lower, upper]"), N_JOINTS,
+                "[lower, upper] pairs, one per joint")
+Joint = Ranged(1, N_JOINTS, "", "joint number (1-based)", base=Int)
+CouplingValue = Ranged(-10.0, 10.0, "", "coupling coefficient")  # the MC70's are ~0.017
+CouplingEntry = Annotated[tuple[Joint, Joint, CouplingValue], Field(
+    description="[row, col, value], 1-based: C[row, col] = value")]
+Gains = Vector(Num, N_JOINTS, "gains, one per joint")
+JointCounts = Vector(Int, N_JOINTS, "counts, one per joint")
+Bits = Ranged(8, 32, "bits", "encoder width", base=Int)
+Tick = Ranged(1e-4, 1.0, "s", "control tick")
+StepLimit = Ranged(1, 1 << 20, "counts", "step limit", base=Int)
+TripLimit = Ranged(1, 1 << 20, "counts", "trip limit", base=Int)
+RobotTag = FormatTag(ROBOT_FORMAT, what="robot description")
+Repeatability = Ranged(0.0, 5.0, "mm", "repeatability")
+Name = Annotated[Str, Field(min_length=1)]
+Solver = Annotated[Str | None, Field(json_schema_extra={"enum": ["spherical_wrist", None]})]
+
+
+class DHRow(Model):
+    """One standard DH row: T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)."""
+    theta0_rad: Angle
+    d_m: LinkD
+    a_m: LinkA
+    alpha_rad: Angle
+
+
+DHRows = Vector(DHRow, N_JOINTS, "rows, one per joint")
+
+
+class Encoder(Model):
+    gain_counts_per_rad: Gains
+    offset_counts: JointCounts
+    bits: Bits = 24
+    coupling: list[CouplingEntry] = []
+    coupling_note: Str | None = None
+
+    @model_validator(mode="after")
+    def physical(self):
+        for j, g in enumerate(self.gain_counts_per_rad):
+            if not abs(g) >= 1.0:
+                raise problem(f"{g:g} counts/rad: an encoder gain must be non-zero (its sign "
+                              f"is the direction), at least 1 count/rad", "gain_counts_per_rad", j)
+        for j, c in enumerate(self.offset_counts):
+            if not 0 <= c < 1 << self.bits:
+                raise problem(f"{c} is outside the {self.bits}-bit encoder range "
+                              f"0..{(1 << self.bits) - 1}", "offset_counts", j)
+        C = self.coupling_matrix()
+        det, cond = float(np.linalg.det(C)), float(np.linalg.cond(C))
+        if not abs(det) > 1e-9:
+            raise problem(f"the coupling matrix C is singular (det {det:.3g}): joint angles "
+                          f"q = C x cannot be turned back into counts", "coupling")
+        if not cond < 1e9:
+            raise problem(f"the coupling matrix C is ill-conditioned (condition number "
+                          f"{cond:.3g}): counts from joint angles would be noise", "coupling")
+        return self
+
+    def coupling_matrix(self) -> np.ndarray:
+        C = np.eye(N_JOINTS)
+        for row, col, value in self.coupling:
+            C[row - 1, col - 1] = value
+        return C
+
+
+class Controller(Model):
+    tick_s: Tick
+    max_step_counts: StepLimit
+    trip_step_counts: TripLimit
+    home_counts: JointCounts
+
+    @model_validator(mode="after")
+    def trip_above_step(self):
+        if self.trip_step_counts < self.max_step_counts:
+            raise problem(f"{self.trip_step_counts} counts is below the step limit "
+                          f"max_step_counts = {self.max_step_counts}: every step would trip",
+                          "trip_step_counts")
+        return self
+
+
+class RobotFile(Model):
+    """``models/<robot>/robot.json``."""
+    format: RobotTag = None
+    name: Name
+    source: Str | None = None
+    dh_convention: Str | None = None
+    dh: DHRows
+    joint_limits_deg: Limits
+    encoder: Encoder
+    inverse_kinematics: Solver = None
+    repeatability_mm: Repeatability = 0.0
+    controller: Controller
+
+    @model_validator(mode="after")
+    def physical(self):
+        if self.inverse_kinematics not in (None, "spherical_wrist"):
+            raise problem(f"{short(self.inverse_kinematics)} is not a known solver "
+                          f"('spherical_wrist' or null)", "inverse_kinematics")
+        for j, (lo, hi) in enumerate(self.joint_limits_deg):
+            if not lo < hi:
+                raise problem(f"[{lo:g}, {hi:g}] deg: the lower limit must be below the upper",
+                              "joint_limits_deg", j)
+        top = 1 << self.encoder.bits
+        for j, c in enumerate(self.controller.home_counts):
+            if not 0 <= c < top:
+                raise problem(f"{c} is outside the {self.encoder.bits}-bit encoder range "
+                              f"0..{top - 1}", "controller", "home_counts", j)
+        if self.reach_m() < 0.05:
+            raise problem(f"the DH lengths add up to a reach of {self.reach_m():g} m: not an "
+                          f"arm (lengths in km?)", "dh")
+        return self
+
+    def reach_m(self) -> float:
+        return reach_m([r.d_m for r in self.dh], [r.a_m for r in self.dh])
+
+
+def reach_m(d, a) -> float:
+    """Largest distance of the flange from the base origin: each DH link moves the origin
+    by a u + d z with u perpendicular to z, so by sqrt(a^2 + d^2)."""
+    return float(sum(math.hypot(x, y) for x, y in zip(d, a)))
+
