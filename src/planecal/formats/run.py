@@ -15,7 +15,8 @@ from planecal.formats.base import (
 
 SIDECAR_FORMAT = "planecal-run/1"
 STATUSES = ("running", "complete", "stopped", "gave_up", "error")
-PLATE_CHOICES = ("round_robin", "random")  # sampling.poses.PLATE_CHOICES
+PLATE_CHOICES = ("round_robin", "random")  # plate per sample (sampling.poses)
+IK_CHOICES = ("wrist", "nearest")  # IK solution per pose (sampling.poses)
 
 
 def _is_sidecar(v):
@@ -39,6 +40,7 @@ Cone = Ranged(0.0, 89.999, "deg", "beam cone half-angle")
 Margin = Ranged(0.0, 1.0, "m", "plate margin")
 Roll = Ranged(0.0, 180.0, "deg", "roll range")
 PlateChoice = _one_of(PLATE_CHOICES, "plate choice")
+IkChoice = _one_of(IK_CHOICES, "IK choice")
 BufferLen = Ranged(1, 1_000_000, "readings", "buffer length", base=Int)
 Spread = Ranged(0.0, 100.0, "mm", "spread limit")
 OutOfRange = Ranged(0, 100_000_000, "readings", "out-of-range limit", base=Int)
@@ -68,6 +70,7 @@ class PoseSettings(Model):
     margin_m: Margin
     roll_deg: Roll
     plate_choice: PlateChoice
+    ik_choice: IkChoice = "nearest"  # runs recorded before the choice existed
 
 
 class LaserSettings(Model):

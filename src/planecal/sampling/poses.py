@@ -42,11 +42,10 @@ import numpy as np
 from planecal.cell import sensor_rotation
 from planecal.encoder import joints_to_counts
 from planecal.errors import InputError
+from planecal.formats.run import IK_CHOICES, PLATE_CHOICES  # the sidecar's allowed values
 from planecal.robot import ik_all
 from planecal.scene import Scene
 
-PLATE_CHOICES = ("round_robin", "random")
-IK_CHOICES = ("wrist", "nearest")
 
 
 @dataclass
