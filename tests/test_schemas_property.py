@@ -28,8 +28,8 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from planecal.errors import InputError
 from planecal.formats import (
-    MODELS, PARAMS_FORMAT, POSES_FORMAT, RESULT_FORMAT, ROBOT_FORMAT, SCENE_FORMAT,
-    SIDECAR_FORMAT, load_sidecar)
+    ERRORS_FORMAT, MODELS, PARAMS_FORMAT, POSES_FORMAT, RESULT_FORMAT, ROBOT_FORMAT,
+    SCENE_FORMAT, SIDECAR_FORMAT, load_sidecar)
 from planecal.formats.params import provenance, result_document
 from planecal.params import load_params
 from planecal.paths import data_path
@@ -83,6 +83,20 @@ def _sidecar_ok(side):
         assert "\n" not in str(e) and "\r" not in str(e), str(e)
 
 
+def _load_profile(path):
+    from planecal.twin.profile import load_profile
+    return load_profile(path, load_robot())
+
+
+def _profile_ok(prof):
+    """What a twin does with it: the options, a world's geometry, all finite."""
+    from planecal.kinematics import fk as kin_fk
+    from planecal.twin.profile import draw_geometry
+    prof.options().joint_errors(load_robot())
+    kin = draw_geometry(load_robot(), prof, np.random.default_rng(0))
+    assert np.all(np.isfinite(kin_fk(kin, np.zeros(6))))
+
+
 def _result():
     params = json.loads(data_path("examples", "table10_params.json").read_text())
     std = {"joint_offsets_rad": [None, 1e-4, 1e-4, 1e-4, 1e-4, None],
@@ -107,6 +121,9 @@ READERS = {
     RESULT_FORMAT: (load_params, _result(), _params_ok),
     POSES_FORMAT: (load_poses, POSES, _poses_ok),
     SIDECAR_FORMAT: (load_sidecar, SIDECAR, _sidecar_ok),
+    ERRORS_FORMAT: (_load_profile,
+                    json.loads(data_path("models", "mc70", "errors", "realistic.json").read_text()),
+                    _profile_ok),
 }
 
 

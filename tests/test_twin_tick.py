@@ -6,6 +6,8 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "disable")
 
+from dataclasses import replace  # noqa: E402
+
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -14,7 +16,6 @@ import planecal.twin.core as core  # noqa: E402
 from planecal.twin import EncoderJumpError, Twin, TwinOptions  # noqa: E402
 from planecal.twin import ticks as T  # noqa: E402
 from planecal.twin.beam import BeamCaster  # noqa: E402
-from planecal.twin.errors import JointErrors  # noqa: E402
 from planecal.twin.laser import seen_mask  # noqa: E402
 
 SCENES = ["thesis_final", "appendix_d", "three_plates"]
@@ -90,14 +91,9 @@ ERRORS = TwinOptions(stiffness_nm_per_rad=(3e6, 2e6), backlash_rad=(2e-4,) * 6)
 
 
 def with_all_errors(opts):
-    """A twin options object whose joint errors are all on (gear and quantisation too)."""
-    class AllErrors(type(opts)):
-        def joint_errors(self, robot):
-            base = TwinOptions.joint_errors(self, robot)
-            gear = tuple(((2e-5, 1.0, 0.3 * j), (5e-6, 37.0, 1.1)) for j in range(6))
-            return JointErrors(base.repeatability_m, True, gear, base.backlash_rad,
-                               base.compliance_rad_per_nm)
-    return AllErrors(**{f: getattr(opts, f) for f in opts.__dataclass_fields__})
+    """The options with every joint error on (gear harmonics and quantisation too)."""
+    gear = tuple(g for j in range(1, 7) for g in ((j, 2e-5, 1.0), (j, 5e-6, 37.0)))
+    return replace(opts, quantization=True, gear=gear, payload=(2.0, (0.0, 0.0, 0.1)))
 
 
 @pytest.mark.parametrize("name,opts", [

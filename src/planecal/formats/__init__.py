@@ -9,7 +9,7 @@ bounded reader they share, and the JSON Schemas published in docs/schemas/.
 | planecal-result/1     | calibrate --out              | params.ResultFile      | (as a parameter file)       |
 | planecal-poses/1      | plan --out                   | poses.PosesFile        | studies.planning.load_poses |
 | planecal-run/1        | RUN.tsv.json (sidecar)       | run.SidecarFile        | load_sidecar below          |
-| planecal-error-profile/1 | (not yet defined)         | --                     | --                          |
+| planecal-errors/1     | models/<robot>/errors/*.json | errors.ErrorProfileFile | planecal.twin.profile       |
 
 Every error is one line, ``FILE: field.path: problem`` (``planecal.errors.InputError``).
 Sample files (TSV) are read by ``planecal.samples``, which shares the bounds.
@@ -26,13 +26,14 @@ from typing import Any
 from pydantic import BaseModel
 
 from planecal.formats.base import InputError, read_json, validate
+from planecal.formats.errors import ERRORS_FORMAT, ErrorProfileFile
 from planecal.formats.params import PARAMS_FORMAT, RESULT_FORMAT, ParamsFile, ResultFile
 from planecal.formats.poses import POSES_FORMAT, PosesFile
 from planecal.formats.robot import ROBOT_FORMAT, RobotFile
 from planecal.formats.run import SIDECAR_FORMAT, SidecarFile
 from planecal.formats.scene import SCENE_FORMAT, SceneFile
 
-# format -> model; the error profile of the realistic twin will be one more entry
+# format -> model
 MODELS: dict[str, type[BaseModel]] = {
     ROBOT_FORMAT: RobotFile,
     SCENE_FORMAT: SceneFile,
@@ -40,6 +41,7 @@ MODELS: dict[str, type[BaseModel]] = {
     RESULT_FORMAT: ResultFile,
     POSES_FORMAT: PosesFile,
     SIDECAR_FORMAT: SidecarFile,
+    ERRORS_FORMAT: ErrorProfileFile,
 }
 
 

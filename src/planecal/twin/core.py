@@ -55,10 +55,14 @@ class TwinOptions:
 
     servo: 'ideal' or 'lag' (first order, ``tau_s``); laser_noise_mm: Gaussian std of a
     reading; laser_quantum_mm: rounding of a reading; repeatability_mm: None = the
-    robot's (robot.json), 0 = off; stiffness_nm_per_rad: (k2, k3) joint 2/3 stiffness
-    for gravity compliance, None = off; backlash_rad: (6,) backlash, None = off;
-    noise_seed: seed of the noise streams (None: derived from the truth seed);
-    check_steps: trip on FD11 encoder jumps."""
+    robot's (robot.json), 0 = off; stiffness_nm_per_rad: the stiffness of each joint that
+    yields to gravity, 6 values (None: rigid) or (k2, k3), None = all rigid; backlash_rad:
+    (6,) backlash, None = off; quantization: the motors' sub-count positions; gear:
+    harmonics of the gear transmission error, (joint 1-based, amplitude rad, cycles per
+    revolution) each, their phases from the truth; payload: (mass kg, centre of mass in
+    the flange frame m) of the tool, for the gravity torque; noise_seed: seed of the noise
+    streams (None: derived from the truth seed); check_steps: trip on FD11 encoder jumps.
+    An error profile (``twin.profile``) makes these from its file."""
     servo: str = "lag"
     tau_s: float = 0.03
     laser_noise_mm: float = 0.001
@@ -66,6 +70,9 @@ class TwinOptions:
     repeatability_mm: float | None = None
     stiffness_nm_per_rad: tuple | None = None
     backlash_rad: tuple | None = None
+    quantization: bool = False
+    gear: tuple = ()
+    payload: tuple | None = None
     noise_seed: int | None = None
     check_steps: bool = True
 
@@ -83,13 +90,22 @@ class TwinOptions:
         base = cls(servo="ideal", laser_noise_mm=0.0, repeatability_mm=0.0)
         return replace(base, **kw)
 
-    def joint_errors(self, robot) -> JointErrors:
+    def joint_errors(self, robot, gear_phases=()) -> JointErrors:
+        """The tick's joint errors; ``gear_phases``: the truth's, one per harmonic."""
         rep = robot.repeatability_m if self.repeatability_mm is None else self.repeatability_mm * 1e-3
         comp = None
         if self.stiffness_nm_per_rad is not None:
-            k2, k3 = np.asarray(self.stiffness_nm_per_rad, float).reshape(2)
-            comp = (0.0, 1.0 / k2, 1.0 / k3, 0.0, 0.0, 0.0)
-        return JointErrors(repeatability_m=rep, backlash_rad=self.backlash_rad,
+            k = list(self.stiffness_nm_per_rad)
+            k = [None, *k, None, None, None] if len(k) == 2 else k
+            comp = tuple(0.0 if v is None else 1.0 / float(v) for v in k)
+        phases = tuple(gear_phases) or (0.0,) * len(self.gear)
+        if len(phases) != len(self.gear):
+            raise InputError(f"twin: {len(phases)} gear phases for {len(self.gear)} harmonics")
+        gear = [[] for _ in range(robot.n_joints)]
+        for (joint, amp, cycles), phi in zip(self.gear, phases):
+            gear[int(joint) - 1].append((amp, cycles, phi))
+        return JointErrors(repeatability_m=rep, quantization=self.quantization,
+                           gear=tuple(tuple(g) for g in gear), backlash_rad=self.backlash_rad,
                            compliance_rad_per_nm=comp)
 
 
@@ -150,12 +166,14 @@ class Twin:
         self.robot = robot = self.scene.robot
         self.options = opt = options or TwinOptions()
         self.seed = seed
-        self._truth = resolve_truth(self.scene, truth, seed)
+        self._world = world = resolve_truth(self.scene, truth, seed)
+        self._truth = world.params
         start = self._start_counts(start_counts)
         cal_qpos = None
         if self.scene.calibration_q is not None:
             cal_qpos = self.scene.calibration_q + self._truth.joint_offsets
-        self.spec = scene_spec(self.scene, self._truth, calibration_qpos=cal_qpos)
+        self.spec = scene_spec(self.scene, self._truth, calibration_qpos=cal_qpos,
+                               kin=world.kinematics)
         self.model = self.spec.compile()
         self._data = mujoco.MjData(self.model)
         self._data_synced = False
@@ -173,7 +191,7 @@ class Twin:
             np.random.default_rng(s) for s in np.random.SeedSequence(noise_seed).spawn(3))
         self._laser = LaserNoise(self.scene.laser_range_mm, opt.laser_noise_mm,
                                  opt.laser_quantum_mm, rng_laser)
-        self.errors = errors = opt.joint_errors(robot)
+        self.errors = errors = opt.joint_errors(robot, world.gear_phases)
         self._sigma = errors.sigma(robot)
         if opt.servo == "lag" and not opt.tau_s > 0:
             raise InputError(f"twin: servo time constant must be > 0, got {opt.tau_s!r}")
@@ -195,7 +213,7 @@ class Twin:
         errors.fill(F)
         self._S, self._F = S, F
         links = [self.model.body(link_body_name(i + 1)).id for i in range(robot.n_joints)]
-        self._W = (errors.harmonics(),) + gravity_model(self.model, robot, links)
+        self._W = (errors.harmonics(),) + gravity_model(self.model, robot, links, opt.payload)
         self._eps_block = np.zeros((0, 6))
         self._u_block = np.zeros((0, 6))
         self._stop = np.zeros(3, np.int64)
@@ -389,6 +407,11 @@ class Twin:
     def truth(self) -> CellParams:
         """The hidden truth (a copy). Calibration code must not read it."""
         return self._truth.copy()
+
+    @property
+    def true_kinematics(self):
+        """The true robot's geometry (``kinematics.Kinematics``; None: robot.json's)."""
+        return self._world.kinematics
 
     @property
     def qpos(self) -> np.ndarray:

@@ -95,18 +95,25 @@ def _body_pose(model: mujoco.MjModel, b: int) -> np.ndarray:
     return T
 
 
-def gravity_model(model: mujoco.MjModel, robot: Robot, link_bodies: list[int]):
+def gravity_model(model: mujoco.MjModel, robot: Robot, link_bodies: list[int],
+                  payload=None):
     """(base pose (4,4), body poses before each hinge (6,4,4), mass bodies (m,), mass
     points in their body frames (m,3), masses (m,), gravity (3,)) of the twin's model:
-    the chain MuJoCo computes, with ``LUMPED_MASSES`` placed on it (DH frame k's points
-    moved into body k's frame by the frame's fixed part)."""
-    from planecal.twin.mjcf import fixed_transform
+    the chain MuJoCo computes, with ``LUMPED_MASSES`` placed on it (standard DH frame k's
+    points moved into body k's frame by ``mjcf.dh_site``) and the ``payload`` (mass,
+    centre of mass in the flange frame) on the flange."""
+    from planecal.twin.mjcf import FLANGE_SITE, dh_site
     base = _body_pose(model, int(model.body_parentid[link_bodies[0]]))
     P = np.array([_body_pose(model, b) for b in link_bodies])
-    mbody, mcom, mkg = [], [], []
-    for frame, p, m in LUMPED_MASSES:
-        T = fixed_transform(robot, frame - 1)
-        mbody.append(frame)
-        mcom.append(T[:3, :3] @ np.asarray(p, float) + T[:3, 3])
-        mkg.append(m)
-    return (base, P, np.array(mbody, np.int64), np.array(mcom), np.array(mkg), GRAVITY.copy())
+    points = [(frame, dh_site(robot, frame), p, m) for frame, p, m in LUMPED_MASSES]
+    if payload is not None:
+        s = model.site(FLANGE_SITE).id
+        T = np.eye(4)
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, model.site_quat[s])
+        T[:3, :3], T[:3, 3] = R.reshape(3, 3), model.site_pos[s]
+        points.append((len(link_bodies), T, payload[1], payload[0]))
+    mbody = np.array([f for f, _, _, _ in points], np.int64)
+    mcom = np.array([T[:3, :3] @ np.asarray(p, float) + T[:3, 3] for _, T, p, _ in points])
+    mkg = np.array([m for _, _, _, m in points], float)
+    return base, P, mbody, mcom, mkg, GRAVITY.copy()

@@ -21,13 +21,14 @@ from planecal.twin.truth import resolve_truth
 
 def export_scene(scene_name, out: Path, truth=None, seed: int | None = None) -> Path:
     scene = load_scene(scene_name)
-    params = None
+    world = None
     if truth is not None or seed is not None:
-        params = resolve_truth(scene, truth, 0 if seed is None else seed)
+        world = resolve_truth(scene, truth, 0 if seed is None else seed)
     cal = scene.calibration_q
-    if cal is not None and params is not None:
-        cal = cal + params.joint_offsets
-    spec = scene_spec(scene, params, calibration_qpos=cal)
+    if cal is not None and world is not None:
+        cal = cal + world.params.joint_offsets
+    spec = scene_spec(scene, None if world is None else world.params, calibration_qpos=cal,
+                      kin=None if world is None else world.kinematics)
     spec.compile()  # fail here, not in the viewer
     out = Path(out)
     out.write_text(to_xml_exact(spec))

@@ -2,13 +2,16 @@
 
 Robot (``robot_spec``; written to ``models/<robot>/<robot>.xml`` by scripts/build_mjcf.py)
 ------------------------------------------------------------------------------------------
-* body ``base`` (fixed on the world) carries the shapes of DH frame 0;
-* body ``link<i>`` (i = 1..6) is DH frame i-1 turned by joint i: its pos/quat relative to
-  its parent is the fixed part ``Rz(theta0) Tz(d) Tx(a) Rx(alpha)`` of link i-1 (identity
-  for link1) and its hinge ``joint<i>`` turns about local z through the origin. So with
-  ``qpos = q + delta`` (joint angles from the encoder model plus joint offsets) the sites
-  ``frame<i>`` (the fixed part of link i on body link<i>) are the DH frames of
-  ``robot.fk_frames(robot, q, delta)``; site ``flange`` = frame 6.
+Built from the robot's whole geometric model (``kinematics.Kinematics``: robot.json's, or
+the twin's true robot):
+* body ``base`` carries the shapes of DH frame 0, at the model's base frame;
+* body ``link<i>`` (i = 1..6) is the model's frame i: its pos/quat relative to its parent
+  is joint i's fixed part ``Rx(alpha) Tx(a) Ry(beta) Rz(theta) Tz(d)`` and its hinge
+  ``joint<i>`` turns about local z through the origin. So with ``qpos = q + delta``
+  (joint angles from the encoder model plus joint offsets) the sites ``frame<i>`` (at
+  ``dh_site(robot, i)`` = Tx(a_i) Rx(alpha_i) of robot.json's standard DH on body
+  link<i>) are the standard DH frames of ``robot.fk_frames(robot, q, delta)`` for the
+  nominal model; site ``flange`` is the model's flange frame.
 * geoms: ``v_<link>`` visual (group 1, contype = conaffinity = 0, massless),
   ``c_<link>`` collision (group 3), both convex meshes from ``planecal.geometry``.
   Sites of the DH frames are in group 4.
@@ -31,6 +34,7 @@ import numpy as np
 
 from planecal.cell import CellParams
 from planecal.geometry import robot_link_meshes, scene_meshes, sensor_pose, tool_meshes
+from planecal.kinematics import Kinematics, from_robot
 from planecal.robot import Robot
 
 GROUP_ENV = 0  # plates, stands, floor, obstacles: visible and seen by the laser
@@ -58,16 +62,21 @@ def link_body_name(i: int) -> str:
     return f"link{i}"
 
 
-def fixed_transform(robot: Robot, i: int) -> np.ndarray:
-    """The fixed part Rz(theta0) Tz(d) Tx(a) Rx(alpha) of joint i (0-based), 4x4,
-    with round-off zeros (|x| < 1e-15, e.g. cos(pi/2)) made exact."""
-    ct, st = np.cos(robot.theta0[i]), np.sin(robot.theta0[i])
-    ca, sa = np.cos(robot.alpha[i]), np.sin(robot.alpha[i])
-    a, d = robot.a[i], robot.d[i]
-    T = np.array([[ct, -st * ca, st * sa, a * ct],
-                  [st, ct * ca, -ct * sa, a * st],
-                  [0.0, sa, ca, d],
+def dh_site(robot: Robot, i: int) -> np.ndarray:
+    """Standard DH frame i in the model's frame i (1-based i; identity for 0):
+    Tx(a_i) Rx(alpha_i) of robot.json's row i. The link shapes (``geometry``, in standard
+    DH frames) hang off their body by it."""
+    if i == 0:
+        return np.eye(4)
+    c, s = np.cos(robot.alpha[i - 1]), np.sin(robot.alpha[i - 1])
+    T = np.array([[1.0, 0.0, 0.0, robot.a[i - 1]], [0.0, c, -s, 0.0], [0.0, s, c, 0.0],
                   [0.0, 0.0, 0.0, 1.0]])
+    T[np.abs(T) < 1e-15] = 0.0
+    return T
+
+
+def _clean(T: np.ndarray) -> np.ndarray:
+    T = np.array(T, float)
     T[np.abs(T) < 1e-15] = 0.0
     return T
 
@@ -108,33 +117,33 @@ def _set_collision_flags(g, kind):
         g.contype, g.conaffinity = 1, 1
 
 
-def robot_spec(robot: Robot) -> mujoco.MjSpec:
-    """The robot alone (see the module docstring for the body/joint/geom layout)."""
+def robot_spec(robot: Robot, kin: Kinematics | None = None) -> mujoco.MjSpec:
+    """The robot alone (see the module docstring for the body/joint/geom layout), built
+    from ``kin`` (default: robot.json's nominal model)."""
+    kin = from_robot(robot) if kin is None else kin
     spec = mujoco.MjSpec()
     spec.modelname = robot.name.replace(" ", "_")
     spec.compiler.degree = False
-    base = spec.worldbody.add_body(name=BASE_BODY)
+    base = spec.worldbody.add_body(name=BASE_BODY, **_pose_kwargs(_clean(kin.base)))
     bodies = [base]
     parent = base
     for i in range(robot.n_joints):
-        pose = {} if i == 0 else _pose_kwargs(fixed_transform(robot, i - 1))
-        b = parent.add_body(name=link_body_name(i + 1), **pose)
+        b = parent.add_body(name=link_body_name(i + 1), **_pose_kwargs(_clean(kin.joint_transform(i))))
         b.add_joint(name=f"joint{i + 1}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1],
                     range=robot.limits[i].tolist(), limited=mujoco.mjtLimited.mjLIMITED_TRUE,
                     damping=100.0, armature=1.0)
         site = {"name": f"frame{i + 1}", "group": GROUP_FRAMES, "size": [0.02, 0, 0],
-                **_pose_kwargs(fixed_transform(robot, i))}
+                **_pose_kwargs(dh_site(robot, i + 1))}
         b.add_site(**site)
         bodies.append(b)
         parent = b
     n = robot.n_joints
     bodies[n].add_site(name=FLANGE_SITE, group=GROUP_FRAMES, size=[0.01, 0, 0],
-                       **_pose_kwargs(fixed_transform(robot, n - 1)))
+                       **_pose_kwargs(_clean(kin.flange)))
     for kind, group in (("visual", GROUP_VISUAL), ("collision", GROUP_COLLISION)):
         for lm in robot_link_meshes(robot, kind):
-            # body k holds DH frame k's shapes; link<k> is frame k-1 turned by joint k,
-            # so the vertices move by frame k's fixed part
-            T = np.eye(4) if lm.body == 0 else fixed_transform(robot, lm.body - 1)
+            # body k holds standard DH frame k's shapes, which sits at dh_site(k) on it
+            T = dh_site(robot, lm.body)
             v = lm.mesh.vertices @ T[:3, :3].T + T[:3, 3]
             _add_mesh_geom(spec, bodies[lm.body], f"{kind[0]}_{lm.name}", lm.mesh, v, kind, group)
     # MuJoCo filters parent-child contacts, but not for a body welded to the world
@@ -144,14 +153,17 @@ def robot_spec(robot: Robot) -> mujoco.MjSpec:
     return spec
 
 
-def add_tool(spec: mujoco.MjSpec, robot: Robot, scene, sensor: CellParams | None = None):
-    """Adapter, laser head and the ``laser`` site on the flange (DH frame 6).
+def add_tool(spec: mujoco.MjSpec, robot: Robot, scene, sensor: CellParams | None = None,
+             kin: Kinematics | None = None):
+    """Adapter, laser head and the ``laser`` site on the flange (``kin``'s flange frame,
+    default robot.json's).
 
     ``sensor`` (a CellParams) places the head and the site (the twin's truth); default:
     the scene's nominal sensor pose."""
     n = robot.n_joints
+    kin = from_robot(robot) if kin is None else kin
     flange_body = spec.body(link_body_name(n))
-    tool = flange_body.add_body(name=TOOL_BODY, **_pose_kwargs(fixed_transform(robot, n - 1)))
+    tool = flange_body.add_body(name=TOOL_BODY, **_pose_kwargs(_clean(kin.flange)))
     for kind, group, rgba_kind in (("visual", GROUP_VISUAL, "tool"),
                                    ("collision", GROUP_COLLISION, "collision")):
         for lm in tool_meshes(scene, kind, sensor):
@@ -197,14 +209,16 @@ def add_cell(spec: mujoco.MjSpec, scene, planes: np.ndarray | None = None) -> li
     return names
 
 
-def scene_spec(scene, truth: CellParams | None = None, calibration_qpos=None) -> mujoco.MjSpec:
-    """Robot + tool + cell. ``truth`` places the sensor and the plates (default nominal);
-    the joint offsets go into qpos at run time, not into the model."""
+def scene_spec(scene, truth: CellParams | None = None, calibration_qpos=None,
+               kin: Kinematics | None = None) -> mujoco.MjSpec:
+    """Robot + tool + cell. ``truth`` places the sensor and the plates (default nominal),
+    ``kin`` is the robot's geometry (default robot.json's); the joint offsets go into qpos
+    at run time, not into the model."""
     robot = scene.robot
-    spec = robot_spec(robot)
+    spec = robot_spec(robot, kin)
     spec.modelname = f"{spec.modelname}_{scene.name}"
     spec.option.gravity = [0.0, 0.0, 0.0]  # kinematic twin: keep a viewer's simulation still
-    add_tool(spec, robot, scene, truth)
+    add_tool(spec, robot, scene, truth, kin)
     add_cell(spec, scene, None if truth is None else truth.planes)
     if calibration_qpos is not None:
         key = spec.add_key(name="calibration")

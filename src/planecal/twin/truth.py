@@ -6,7 +6,8 @@ Calibration code never reads this; tests compare its result with it.
 Default tolerances (``Tolerances``), each a hard bound, drawn uniformly:
 * joint offsets delta_2..delta_5: |delta_i| <= 3 mrad. delta_1 and delta_6 stay 0
   (no plane calibration can see them: delta_1 is a rotation of the plates about the
-  base axis, delta_6 a roll of the sensor) unless ``offsets_all=True``.
+  base axis, delta_6 a roll of the sensor) unless ``offsets_all=True``; ``offset_rad``
+  may also give one bound per joint (an error profile's).
 * sensor origin: a displacement of length <= 10 mm in a uniformly random direction.
 * sensor angles: phi_y and phi_z each moved by <= 0.035 rad, so the beam direction
   moves by <= 0.05 rad.
@@ -21,18 +22,38 @@ import numpy as np
 
 from planecal.cell import CellParams, n_tilde_from_point_normal, point_normal_from_n_tilde
 from planecal.errors import InputError
+from planecal.kinematics import Kinematics
 from planecal.params import load_params
 from planecal.scene import Scene, nominal_params
 
 
 @dataclass(frozen=True)
 class Tolerances:
-    offset_rad: float = 3e-3
+    offset_rad: float | tuple = 3e-3
     offsets_all: bool = False  # also perturb delta_1 and delta_6
     origin_m: float = 0.010
     angle_rad: float = 0.035
     plane_point_m: float = 0.010
     plane_normal_rad: float = 0.05
+
+    def offset_bounds(self) -> np.ndarray:
+        """The bound of each joint's offset (6,)."""
+        if np.ndim(self.offset_rad):
+            return np.asarray(self.offset_rad, float).reshape(6)
+        b = np.full(6, float(self.offset_rad))
+        if not self.offsets_all:
+            b[[0, 5]] = 0.0
+        return b
+
+
+@dataclass(frozen=True)
+class Truth:
+    """A world's hidden truth: the cell (``params``: joint offsets, sensor pose, planes),
+    the robot's true geometry (``kinematics``; None: robot.json's exactly) and the phases
+    of its gear errors (one per harmonic of the twin's options)."""
+    params: CellParams
+    kinematics: Kinematics | None = None
+    gear_phases: tuple = ()
 
 
 def _ball(rng, radius):
@@ -53,9 +74,8 @@ def draw_truth(scene: Scene, seed: int = 0, tol: Tolerances = Tolerances()) -> C
     """Hidden truth around the scene's nominal parameters (see the module docstring)."""
     rng = np.random.default_rng(seed)
     nom = nominal_params(scene)
-    delta = rng.uniform(-tol.offset_rad, tol.offset_rad, 6)
-    if not tol.offsets_all:
-        delta[0] = delta[5] = 0.0
+    b = tol.offset_bounds()
+    delta = rng.uniform(-b, b, 6) + 0.0  # (+ 0.0: no -0.0 where a bound is 0)
     origin = nom.sensor_origin + _ball(rng, tol.origin_m)
     phi_y = nom.phi_y + rng.uniform(-tol.angle_rad, tol.angle_rad)
     phi_z = nom.phi_z + rng.uniform(-tol.angle_rad, tol.angle_rad)
@@ -75,15 +95,19 @@ def load_truth(scene: Scene, path) -> CellParams:
     return p
 
 
-def resolve_truth(scene: Scene, truth=None, seed: int = 0) -> CellParams:
-    """``truth`` as given: None -> draw_truth(scene, seed); a CellParams; a path; or
-    the string 'nominal' (truth = the nominal values)."""
-    if truth is None:
-        return draw_truth(scene, seed)
-    if isinstance(truth, CellParams):
-        if truth.n_planes != len(scene.plates):
-            raise InputError(f"truth: {truth.n_planes} planes for {len(scene.plates)} plates")
-        return truth.copy()
-    if isinstance(truth, str) and truth == "nominal":
-        return nominal_params(scene)
-    return load_truth(scene, truth)
+def resolve_truth(scene: Scene, truth=None, seed: int = 0) -> Truth:
+    """``truth`` as given: None -> draw_truth(scene, seed); a Truth; a CellParams; a path;
+    or the string 'nominal' (truth = the nominal values)."""
+    if isinstance(truth, Truth):
+        params = truth.params
+    elif truth is None:
+        return Truth(draw_truth(scene, seed))
+    elif isinstance(truth, CellParams):
+        params = truth
+    elif isinstance(truth, str) and truth == "nominal":
+        return Truth(nominal_params(scene))
+    else:
+        return Truth(load_truth(scene, truth))
+    if params.n_planes != len(scene.plates):
+        raise InputError(f"truth: {params.n_planes} planes for {len(scene.plates)} plates")
+    return truth if isinstance(truth, Truth) else Truth(params.copy())

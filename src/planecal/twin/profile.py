@@ -1,0 +1,112 @@
+"""Error profiles: how the twin's world differs from the nominal model (format
+``planecal-errors/1``, ``formats.errors``). Named profiles live beside the robot,
+``models/<robot>/errors/<name>.json`` (``ideal``, ``realistic``); any copy a user edits is
+given by its path (``--errors FILE.json``).
+
+A profile and a seed make a world (``draw_world``): the hidden truth -- the cell's joint
+offsets, sensor pose and plates (``truth.draw_truth``, the same draws for the same seed
+as the first twin), the robot's true geometry (``kinematics.Kinematics``) and the phases
+of the gear errors, both from a stream of their own -- and the twin's options (servo,
+laser, the errors the tick adds to the joints).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from planecal.errors import InputError
+from planecal.formats import read_json, validate
+from planecal.formats.errors import ErrorProfileFile
+from planecal.kinematics import Kinematics, frame_error, from_robot, parallel_pairs
+from planecal.robot import Robot
+from planecal.scene import Scene
+from planecal.twin.core import TwinOptions
+from planecal.twin.truth import Tolerances, Truth, draw_truth
+
+PROFILES = ("ideal", "realistic")
+DEFAULT_PROFILE = "realistic"
+
+
+@dataclass(frozen=True)
+class ErrorProfile:
+    name: str
+    path: Path
+    doc: ErrorProfileFile
+
+    def tolerances(self) -> Tolerances:
+        c = self.doc.cell
+        return Tolerances(offset_rad=tuple(c.joint_offsets_rad), origin_m=c.sensor_origin_m,
+                          angle_rad=c.sensor_angles_rad, plane_point_m=c.plane_point_m,
+                          plane_normal_rad=c.plane_normal_rad)
+
+    def options(self, **kw) -> TwinOptions:
+        """The twin's options of this profile (``kw`` overrides: noise_seed, check_steps)."""
+        d = self.doc
+        j = d.joints
+        stiff = tuple(k for k in j.stiffness_nm_per_rad)
+        payload = None if d.payload is None else (d.payload.mass_kg, tuple(d.payload.com_m))
+        opts = TwinOptions(
+            servo=d.servo.mode, tau_s=d.servo.tau_s, laser_noise_mm=d.laser.noise_mm,
+            laser_quantum_mm=d.laser.quantum_mm, repeatability_mm=j.repeatability_mm,
+            stiffness_nm_per_rad=stiff if any(k is not None for k in stiff) else None,
+            backlash_rad=tuple(j.backlash_rad) if any(j.backlash_rad) else None,
+            quantization=j.quantization,
+            gear=tuple((h.joint, h.amplitude_rad, h.cycles_per_rev) for h in j.gear),
+            payload=payload)
+        return replace(opts, **kw)
+
+
+def profile_path(name_or_path: str | Path, robot: Robot) -> Path:
+    """A named profile beside the robot (``models/<robot>/errors/<name>.json``) or a path."""
+    p = Path(name_or_path)
+    if str(name_or_path) in PROFILES or (not p.suffix and len(p.parts) == 1):
+        if robot.source is None:
+            raise InputError(f"--errors {name_or_path}: the robot has no folder of profiles")
+        p = robot.source.parent / "errors" / f"{name_or_path}.json"
+        if not p.exists():
+            raise InputError(f"--errors {name_or_path}: no such profile (the named ones: "
+                             f"{', '.join(PROFILES)}; or give a file path)")
+    return p
+
+
+def load_profile(name_or_path: str | Path, robot: Robot) -> ErrorProfile:
+    """A named profile or a profile file, validated (one-line InputError otherwise)."""
+    p = profile_path(name_or_path, robot)
+    doc = validate(ErrorProfileFile, read_json(p, "error profile"), p, "error profile")
+    return ErrorProfile(doc.name, p, doc)
+
+
+def draw_geometry(robot: Robot, profile: ErrorProfile, rng: np.random.Generator) -> Kinematics:
+    """The robot's true geometry: robot.json's, every parameter moved by a normal draw of
+    the profile's std (beta only where consecutive axes are parallel), the base and
+    flange frames by a translation and a small rotation."""
+    nom = from_robot(robot)
+    g = profile.doc.geometry
+    if g is None:
+        return nom
+    n = robot.n_joints
+    beta = np.zeros(n)
+    par = parallel_pairs(nom)
+    alpha = nom.alpha + rng.normal(0.0, g.alpha_rad)
+    a = nom.a + rng.normal(0.0, g.a_m)
+    d = nom.d + rng.normal(0.0, g.d_m)
+    b = rng.normal(0.0, g.beta_rad)
+    beta[par] = b[par]
+    base = frame_error(np.concatenate([rng.normal(0.0, g.base.translation_m, 3),
+                                       rng.normal(0.0, g.base.rotation_rad, 3)]))
+    flange = nom.flange @ frame_error(np.concatenate([rng.normal(0.0, g.flange.translation_m, 3),
+                                                      rng.normal(0.0, g.flange.rotation_rad, 3)]))
+    return Kinematics(alpha, a, beta, nom.theta, d, base, flange)
+
+
+def draw_world(scene: Scene, seed: int, profile: ErrorProfile) -> tuple[Truth, TwinOptions]:
+    """The hidden truth and the twin's options of ``profile`` for ``seed`` (module
+    docstring). The cell's draws are the first twin's for the same seed; the geometry and
+    the gear phases come from a second stream, so adding them changes nothing else."""
+    params = draw_truth(scene, seed, profile.tolerances())
+    rng = np.random.default_rng([seed, 1])
+    kin = draw_geometry(scene.robot, profile, rng)
+    phases = tuple(float(v) for v in rng.uniform(0.0, 2 * np.pi, len(profile.doc.joints.gear)))
+    return Truth(params, kin, phases), profile.options()
