@@ -40,6 +40,8 @@ class Robot:
     trip_step_counts: int
     home_counts: np.ndarray  # (6,) int64
     source: Path | None = None
+    # (standard DH frame, centre of mass in it [m] (3,), mass [kg]): the arm's masses
+    masses: tuple = ()
 
     @property
     def n_joints(self) -> int:
@@ -71,6 +73,7 @@ def load_robot(name_or_path: str | Path = DEFAULT_ROBOT) -> Robot:
         trip_step_counts=ctrl.trip_step_counts,
         home_counts=np.array(ctrl.home_counts, np.int64),
         source=p,
+        masses=tuple((m.frame, np.array(m.com_m, float), m.mass_kg) for m in rf.masses),
     )
 
 

@@ -40,6 +40,10 @@ TripLimit = Ranged(1, 1 << 20, "counts", "trip limit", base=Int)
 RobotTag = FormatTag(ROBOT_FORMAT, what="robot description")
 Repeatability = Ranged(0.0, 5.0, "mm", "repeatability")
 Name = Annotated[Str, Field(min_length=1)]
+Frame = Ranged(1, N_JOINTS, "", "standard DH frame (1-based)", base=Int)
+LinkMass = Ranged(0.0, 10000.0, "kg", "link mass")
+Com = Vector(Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "centre of mass coordinate", MM_AS_M), 3,
+             "coordinates in the frame")
 Solver = Annotated[Str | None, Field(json_schema_extra={"enum": ["spherical_wrist", None]})]
 
 
@@ -103,6 +107,15 @@ class Controller(Model):
         return self
 
 
+class PointMass(Model):
+    """A mass of the arm, lumped at its centre of mass in standard DH frame ``frame``
+    (the link it moves with): for the gravity torque on the joints."""
+    frame: Frame
+    com_m: Com
+    mass_kg: LinkMass
+    what: Str | None = None
+
+
 class RobotFile(Model):
     """``models/<robot>/robot.json``."""
     format: RobotTag = None
@@ -115,6 +128,8 @@ class RobotFile(Model):
     inverse_kinematics: Solver = None
     repeatability_mm: Repeatability = 0.0
     controller: Controller
+    masses: list[PointMass] = []
+    masses_source: Str | None = None
 
     @model_validator(mode="after")
     def physical(self):

@@ -91,14 +91,16 @@ class TwinOptions:
         return replace(base, **kw)
 
     def joint_errors(self, robot, gear_phases=()) -> JointErrors:
-        """The tick's joint errors; ``gear_phases``: the truth's, one per harmonic."""
+        """The tick's joint errors; ``gear_phases``: the truth's, one per harmonic (none:
+        all 0; options without gear harmonics ignore them)."""
         rep = robot.repeatability_m if self.repeatability_mm is None else self.repeatability_mm * 1e-3
         comp = None
         if self.stiffness_nm_per_rad is not None:
             k = list(self.stiffness_nm_per_rad)
             k = [None, *k, None, None, None] if len(k) == 2 else k
             comp = tuple(0.0 if v is None else 1.0 / float(v) for v in k)
-        phases = tuple(gear_phases) or (0.0,) * len(self.gear)
+        phases = tuple(gear_phases) if self.gear else ()
+        phases = phases or (0.0,) * len(self.gear)
         if len(phases) != len(self.gear):
             raise InputError(f"twin: {len(phases)} gear phases for {len(self.gear)} harmonics")
         gear = [[] for _ in range(robot.n_joints)]
@@ -173,7 +175,7 @@ class Twin:
         if self.scene.calibration_q is not None:
             cal_qpos = self.scene.calibration_q + self._truth.joint_offsets
         self.spec = scene_spec(self.scene, self._truth, calibration_qpos=cal_qpos,
-                               kin=world.kinematics)
+                               kin=world.kinematics, payload=opt.payload)
         self.model = self.spec.compile()
         self._data = mujoco.MjData(self.model)
         self._data_synced = False
@@ -213,7 +215,7 @@ class Twin:
         errors.fill(F)
         self._S, self._F = S, F
         links = [self.model.body(link_body_name(i + 1)).id for i in range(robot.n_joints)]
-        self._W = (errors.harmonics(),) + gravity_model(self.model, robot, links, opt.payload)
+        self._W = (errors.harmonics(),) + gravity_model(self.model, links, self.tool_body)
         self._eps_block = np.zeros((0, 6))
         self._u_block = np.zeros((0, 6))
         self._stop = np.zeros(3, np.int64)

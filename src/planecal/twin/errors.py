@@ -12,7 +12,8 @@ gravity model). The tick applies them (``ticks.joint_row``, in the order written
 * backlash: joint j's output trails its motor by b_j / 2 against the direction of its
   last motion.
 * gravity compliance: joint j yields c_j tau_j, c = 1/k the joint's compliance and tau
-  the gravity torque of point masses on the links (``LUMPED_MASSES``).
+  the gravity torque of the links' masses (robot.json ``masses``) and the payload, as
+  the twin's MuJoCo model holds them (``gravity_model``).
 """
 from __future__ import annotations
 
@@ -24,13 +25,6 @@ import numpy as np
 from planecal.robot import Robot, repeatability_sigma
 from planecal.twin import ticks
 
-# (DH frame, point in that frame [m], mass [kg]): an MC70-sized arm (~570 kg in all)
-LUMPED_MASSES = [
-    (2, (-0.45, 0.0, 0.0), 110.0),  # upper arm
-    (3, (0.0, 0.0, 0.05), 90.0),  # elbow housing, J4 motor
-    (4, (0.0, 0.45, 0.0), 45.0),  # forearm tube
-    (5, (0.0, 0.0, 0.05), 20.0),  # wrist and tool
-]
 GRAVITY = np.array([0.0, 0.0, -9.81])
 EPS_BLOCK = 64  # rests drawn at once (perturbations, quantisation)
 MAX_HARMONICS = 4
@@ -95,25 +89,20 @@ def _body_pose(model: mujoco.MjModel, b: int) -> np.ndarray:
     return T
 
 
-def gravity_model(model: mujoco.MjModel, robot: Robot, link_bodies: list[int],
-                  payload=None):
-    """(base pose (4,4), body poses before each hinge (6,4,4), mass bodies (m,), mass
-    points in their body frames (m,3), masses (m,), gravity (3,)) of the twin's model:
-    the chain MuJoCo computes, with ``LUMPED_MASSES`` placed on it (standard DH frame k's
-    points moved into body k's frame by ``mjcf.dh_site``) and the ``payload`` (mass,
-    centre of mass in the flange frame) on the flange."""
-    from planecal.twin.mjcf import FLANGE_SITE, dh_site
+def gravity_model(model: mujoco.MjModel, link_bodies: list[int], tool_body: int):
+    """(base pose (4,4), body poses before each hinge (6,4,4), mass bodies (m,), centres
+    of mass in their body frames (m,3), masses (m,), gravity (3,)) of the twin's model:
+    the chain and the inertials MuJoCo holds (links 1..6, the tool's on link 6)."""
     base = _body_pose(model, int(model.body_parentid[link_bodies[0]]))
     P = np.array([_body_pose(model, b) for b in link_bodies])
-    points = [(frame, dh_site(robot, frame), p, m) for frame, p, m in LUMPED_MASSES]
-    if payload is not None:
-        s = model.site(FLANGE_SITE).id
-        T = np.eye(4)
-        R = np.zeros(9)
-        mujoco.mju_quat2Mat(R, model.site_quat[s])
-        T[:3, :3], T[:3, 3] = R.reshape(3, 3), model.site_pos[s]
-        points.append((len(link_bodies), T, payload[1], payload[0]))
-    mbody = np.array([f for f, _, _, _ in points], np.int64)
-    mcom = np.array([T[:3, :3] @ np.asarray(p, float) + T[:3, 3] for _, T, p, _ in points])
-    mkg = np.array([m for _, _, _, m in points], float)
-    return base, P, mbody, mcom, mkg, GRAVITY.copy()
+    mbody, mcom, mkg = [], [], []
+    for k, b in enumerate(link_bodies, 1):
+        mbody.append(k)
+        mcom.append(model.body_ipos[b].copy())
+        mkg.append(float(model.body_mass[b]))
+    T = _body_pose(model, tool_body)  # on the last link
+    mbody.append(len(link_bodies))
+    mcom.append(T[:3, :3] @ model.body_ipos[tool_body] + T[:3, 3])
+    mkg.append(float(model.body_mass[tool_body]))
+    return (base, P, np.array(mbody, np.int64), np.array(mcom), np.array(mkg),
+            GRAVITY.copy())

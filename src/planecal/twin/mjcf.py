@@ -14,6 +14,9 @@ the twin's true robot):
   nominal model; site ``flange`` is the model's flange frame.
 * geoms: ``v_<link>`` visual (group 1, contype = conaffinity = 0, massless),
   ``c_<link>`` collision (group 3), both convex meshes from ``planecal.geometry``.
+* inertials: each body's mass and centre of mass are robot.json's ``masses`` of its link
+  (the tool's: the payload); the geoms carry none. The twin's gravity model reads them
+  back from the compiled model.
   Sites of the DH frames are in group 4.
 
 Scene (``scene_spec``): the robot, a ``tool`` body on the flange (adapter + ZS-LD80 head,
@@ -75,6 +78,26 @@ def dh_site(robot: Robot, i: int) -> np.ndarray:
     return T
 
 
+MIN_MASS_KG = 1e-9  # MuJoCo needs a moving body to have some mass
+
+
+def set_inertial(body, masses) -> None:
+    """The body's inertial from point masses ``(position in the body frame, mass)``: their
+    total mass at their centre of mass (and their inertia about it); MIN_MASS_KG when
+    there are none. The body's geoms add nothing."""
+    pts = [(np.asarray(p, float), float(m)) for p, m in masses if m > 0]
+    M = sum(m for _, m in pts)
+    body.explicitinertial = True
+    if not M:
+        body.mass, body.ipos, body.inertia = MIN_MASS_KG, [0, 0, 0], [MIN_MASS_KG] * 3
+        return
+    c = sum(m * p for p, m in pts) / M
+    I = sum(m * (np.dot(p - c, p - c) * np.eye(3) - np.outer(p - c, p - c)) for p, m in pts)
+    body.mass, body.ipos = M, c.tolist()
+    body.fullinertia = (np.array([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
+                        + np.array([1, 1, 1, 0, 0, 0]) * 1e-6 * M).tolist()
+
+
 def _clean(T: np.ndarray) -> np.ndarray:
     T = np.array(T, float)
     T[np.abs(T) < 1e-15] = 0.0
@@ -125,10 +148,15 @@ def robot_spec(robot: Robot, kin: Kinematics | None = None) -> mujoco.MjSpec:
     spec.modelname = robot.name.replace(" ", "_")
     spec.compiler.degree = False
     base = spec.worldbody.add_body(name=BASE_BODY, **_pose_kwargs(_clean(kin.base)))
+    set_inertial(base, [])
     bodies = [base]
     parent = base
     for i in range(robot.n_joints):
-        b = parent.add_body(name=link_body_name(i + 1), **_pose_kwargs(_clean(kin.joint_transform(i))))
+        b = parent.add_body(name=link_body_name(i + 1),
+                            **_pose_kwargs(_clean(kin.joint_transform(i))))
+        X = dh_site(robot, i + 1)
+        set_inertial(b, [(X[:3, :3] @ com + X[:3, 3], m) for frame, com, m in robot.masses
+                         if frame == i + 1])
         b.add_joint(name=f"joint{i + 1}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1],
                     range=robot.limits[i].tolist(), limited=mujoco.mjtLimited.mjLIMITED_TRUE,
                     damping=100.0, armature=1.0)
@@ -154,9 +182,10 @@ def robot_spec(robot: Robot, kin: Kinematics | None = None) -> mujoco.MjSpec:
 
 
 def add_tool(spec: mujoco.MjSpec, robot: Robot, scene, sensor: CellParams | None = None,
-             kin: Kinematics | None = None):
+             kin: Kinematics | None = None, payload=None):
     """Adapter, laser head and the ``laser`` site on the flange (``kin``'s flange frame,
-    default robot.json's).
+    default robot.json's); ``payload`` (mass kg, centre of mass in the flange frame) is
+    the tool body's inertial.
 
     ``sensor`` (a CellParams) places the head and the site (the twin's truth); default:
     the scene's nominal sensor pose."""
@@ -164,6 +193,7 @@ def add_tool(spec: mujoco.MjSpec, robot: Robot, scene, sensor: CellParams | None
     kin = from_robot(robot) if kin is None else kin
     flange_body = spec.body(link_body_name(n))
     tool = flange_body.add_body(name=TOOL_BODY, **_pose_kwargs(_clean(kin.flange)))
+    set_inertial(tool, [] if payload is None else [(payload[1], payload[0])])
     for kind, group, rgba_kind in (("visual", GROUP_VISUAL, "tool"),
                                    ("collision", GROUP_COLLISION, "collision")):
         for lm in tool_meshes(scene, kind, sensor):
@@ -210,15 +240,15 @@ def add_cell(spec: mujoco.MjSpec, scene, planes: np.ndarray | None = None) -> li
 
 
 def scene_spec(scene, truth: CellParams | None = None, calibration_qpos=None,
-               kin: Kinematics | None = None) -> mujoco.MjSpec:
+               kin: Kinematics | None = None, payload=None) -> mujoco.MjSpec:
     """Robot + tool + cell. ``truth`` places the sensor and the plates (default nominal),
-    ``kin`` is the robot's geometry (default robot.json's); the joint offsets go into qpos
-    at run time, not into the model."""
+    ``kin`` is the robot's geometry (default robot.json's), ``payload`` the tool's mass;
+    the joint offsets go into qpos at run time, not into the model."""
     robot = scene.robot
     spec = robot_spec(robot, kin)
     spec.modelname = f"{spec.modelname}_{scene.name}"
     spec.option.gravity = [0.0, 0.0, 0.0]  # kinematic twin: keep a viewer's simulation still
-    add_tool(spec, robot, scene, truth, kin)
+    add_tool(spec, robot, scene, truth, kin, payload)
     add_cell(spec, scene, None if truth is None else truth.planes)
     if calibration_qpos is not None:
         key = spec.add_key(name="calibration")
