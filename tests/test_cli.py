@@ -118,7 +118,8 @@ def test_console_script_runs_without_traceback(tmp_path):
 
 def test_demo_end_to_end(tmp_path, capsys):
     """The README's main job, shortened: rehearse on the twin, calibrate, compare."""
-    assert main(["demo", "--samples", "40", "--seed", "3", "--dir", str(tmp_path)]) == 0
+    assert main(["demo", "--samples", "40", "--seed", "3", "--dir", str(tmp_path),
+                 "--errors", "ideal"]) == 0
     out = capsys.readouterr().out
     assert "3 reported standard deviations of the truth" in out
     r = json.loads((tmp_path / "result.json").read_text())

@@ -182,3 +182,39 @@ def test_realistic_profile_draws_every_joint_offset_and_the_geometry():
     assert opts.quantization and opts.gear and opts.stiffness_nm_per_rad is not None
     again, _ = draw_world(SCENE, 1, prof)
     assert np.array_equal(again.kinematics.a, kin.a) and again.gear_phases == world.gear_phases
+
+
+def test_a_joint_held_by_gravity_rests_on_one_flank_whichever_way_it_came():
+    # J2 carries its links: with a preload below its gravity torque the backlash side is
+    # gravity's, not the direction of motion; J1 (no preload) follows the motion
+    b = (2e-4, 3e-4, 0.0, 0.0, 0.0, 0.0)
+    opts = replace(EXACT, backlash_rad=b, backlash_preload_nm=(None, 200.0, None, None, None, None))
+    twin = Twin(SCENE, options=opts)
+    d0 = twin.current_counts - twin.reference_counts
+    for sign in (1, -1, 1):
+        rows = d0 + np.outer(np.arange(1, 8), [15 * sign, 15 * sign, 0, 0, 0, 0])
+        twin.run(rows, read=False)
+        d0 = rows[-1]
+        err = twin.qpos - nominal_q(twin)
+        tau = gravity_torque_mujoco(twin, nominal_q(twin))
+        assert abs(tau[1]) > 200
+        assert err[1] == pytest.approx(0.5 * b[1] * np.sign(tau[1]), abs=1e-15)
+        assert err[0] == pytest.approx(-0.5 * b[0] * np.sign(ROBOT.gains[0]) * sign, abs=1e-15)
+
+
+def test_laser_linearity_error_is_its_two_harmonics_over_the_window():
+    a, p1, p2 = 0.03, 1.1, -0.4
+    world = Truth(draw_truth(SCENE, 0), laser_phases=(p1, p2))
+    lin = Twin(SCENE, truth=world, options=replace(EXACT, laser_linearity_mm=a,
+                                                   check_steps=False))
+    flat = Twin(SCENE, truth=world, options=replace(EXACT, check_steps=False))
+    d0 = lin.current_counts - lin.reference_counts
+    # a ramp along the beam's direction walks the distance through the window
+    rows = d0 + np.outer(np.arange(-300, 300), [0, 6, -9, 0, 3, 0])
+    got, want = lin.run(rows, read=True)[2], flat.run(rows, read=True)[2]
+    ok = np.isfinite(got) & np.isfinite(want)
+    assert ok.sum() > 100
+    x = 2 * np.pi * (want[ok] - 65.0) / 30.0
+    model = 0.7 * a * np.sin(x + p1) + 0.3 * a * np.sin(2 * x + p2)
+    np.testing.assert_allclose(got[ok] - want[ok], model, atol=1e-12)
+    assert np.ptp(want[ok]) > 10 and np.abs(got[ok] - want[ok]).max() <= a

@@ -4,9 +4,10 @@ in-process twin."""
 import numpy as np
 
 from planecal.cli import main
+from planecal.commands.rehearse import make_twin
 from planecal.links.emulators import Emulators
 from planecal.samples import read_samples
-from planecal.twin import Twin
+from planecal.scene import load_scene
 
 
 def test_sample_over_udp_and_serial_equals_rehearsal_in_process(tmp_path, capsys):
@@ -14,7 +15,7 @@ def test_sample_over_udp_and_serial_equals_rehearsal_in_process(tmp_path, capsys
     local = tmp_path / "local.tsv"
     assert main(["rehearse", "--out", str(local), "--twin-seed", "7", *common]) == 0
     wire = tmp_path / "wire.tsv"
-    twin = Twin("thesis_final", seed=7)
+    twin = make_twin(load_scene("thesis_final"), 7, "realistic")  # rehearse's default world
     with Emulators(twin, rt_port=0, reply_port=None) as emu:
         code = main(["sample", "--rt", "127.0.0.1", "--rt-port", str(emu.fd11.rt_port),
                      "--local-port", "0", "--rt-tick-s", "0", "--laser", emu.laser.port,

@@ -23,6 +23,8 @@ def add_arguments(p):
     p.add_argument("--samples", type=int, default=150, help="samples to take (default %(default)s)")
     p.add_argument("--seed", type=int, default=1, help="seed of poses and twin truth (default %(default)s)")
     p.add_argument("--dir", default="runs/demo", help="output directory (default %(default)s)")
+    p.add_argument("--errors", default="realistic", metavar="ideal|realistic|FILE.json",
+                   help="the twin's error profile (default %(default)s)")
     p.add_argument("--rrd", nargs="?", const="auto", default=None,
                    help="also write Rerun recordings of the run and of the fit (a directory, "
                         "a file name, or nothing for recordings/)")
@@ -45,7 +47,8 @@ def run(args) -> int:
     rp = argparse.ArgumentParser(prog="planecal rehearse")
     rehearse.add_arguments(rp)
     argv = ["--out", str(run_file), "--truth", str(truth_file), "--force",
-            "--scene", args.scene, "--samples", str(args.samples), "--seed", str(args.seed)]
+            "--scene", args.scene, "--samples", str(args.samples), "--seed", str(args.seed),
+            "--errors", args.errors]
     if args.rrd:
         argv += ["--rrd", args.rrd]
     print(f"== rehearsal on the twin ({args.scene}, {args.samples} samples, seed {args.seed})")

@@ -30,33 +30,40 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from planecal.commands.sampling_options import add_sampling_arguments
 
     add_sampling_arguments(p)
+    add_errors_argument(p)
     p.add_argument("--truth", default=None, metavar="TRUTH.json",
-                   help="write the twin's true parameters here (parameter-file format)")
+                   help="write the twin's hidden truth here (parameter-file format, with the "
+                        "robot's true geometry)")
     p.add_argument("--twin-seed", type=int, default=None,
                    help="seed of the twin's hidden truth and noise (default: --seed)")
     p.add_argument("--exact", action="store_true",
-                   help="twin without error sources (ideal servo, no laser noise, no "
-                        "repeatability error)")
+                   help="no random noise (ideal servo, no laser noise, repeatability or "
+                        "quantisation); the profile's systematic errors stay")
 
 
-def make_twin(scene, seed: int, exact: bool):
-    try:
-        from planecal.twin import Twin, TwinOptions
-    except ModuleNotFoundError as e:
-        if e.name and e.name.startswith("planecal.twin"):
-            raise InputError("the MuJoCo twin (planecal.twin) is not available in this version") from None
-        raise
-    return Twin(scene, seed=seed, options=TwinOptions.exact() if exact else TwinOptions())
+def add_errors_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
+                   help="the twin's error profile: realistic (default: a robot of the MC70's "
+                        "class), ideal (the nominal robot), or a profile file (copy "
+                        "models/mc70/errors/realistic.json and edit it)")
+
+
+def make_twin(scene, seed: int, errors: str, exact: bool = False):
+    """The twin of the error profile ``errors`` for ``seed`` (exact: no random noise)."""
+    from dataclasses import replace
+
+    from planecal.twin import Twin
+    from planecal.twin.profile import draw_world, load_profile
+
+    world, opts = draw_world(scene, seed, load_profile(errors, scene.robot))
+    if exact:
+        opts = replace(opts, servo="ideal", laser_noise_mm=0.0, repeatability_mm=0.0,
+                       quantization=False)
+    return Twin(scene, truth=world, seed=seed, options=opts)
 
 
 def make_checker(scene, clearance_m: float):
-    try:
-        from planecal.collision import CollisionWorld
-    except ModuleNotFoundError as e:
-        if e.name == "planecal.collision":
-            raise InputError("collision checking (planecal.collision) is not available in this "
-                             "version; rehearse does not run without it") from None
-        raise
+    from planecal.collision import CollisionWorld
     return CollisionWorld(scene, clearance_m=clearance_m)
 
 
@@ -64,27 +71,33 @@ def run(args) -> int:
     from planecal.commands.sampling_options import (pose_list_planner, prepare, rerun_observer,
                                                     session_from_args)
     from planecal.links.base import AlwaysEnabled
-    from planecal.params import save_params
     from planecal.sampling.session import print_summary, run_session
+    from planecal.twin.profile import DEFAULT_PROFILE, save_truth
 
     scene, settings, side = prepare(args)
     if side is not None:
         twin_info = side.get("twin") or {}
         twin_seed = int(twin_info.get("seed", settings.seed))
         exact = bool(twin_info.get("exact", False))
+        errors = twin_info.get("errors", "ideal")  # runs before profiles: the ideal world
+        if args.errors is not None and args.errors != errors:
+            raise InputError(f"--errors {args.errors}: the run in {args.out} was sampled in "
+                             f"the {errors} world; --resume continues it there")
     else:
         twin_seed = settings.seed if args.twin_seed is None else args.twin_seed
         exact = args.exact
-    twin = make_twin(scene, twin_seed, exact)
+        errors = args.errors or DEFAULT_PROFILE
+    twin = make_twin(scene, twin_seed, errors, exact)
     checker = make_checker(scene, settings.clearance_m)
     if args.truth:
         try:
-            save_params(args.truth, twin.truth)
+            save_truth(args.truth, twin)
         except OSError as e:
             raise InputError(f"--truth {args.truth}: cannot write ({e.strerror})") from None
     observer = rerun_observer(args.rrd, scene, twin) if args.rrd else None
     session = session_from_args(args, pose_list_planner(args, scene, settings, checker),
-                                observer, extra={"twin": {"seed": twin_seed, "exact": exact}})
+                                observer, extra={"twin": {"seed": twin_seed, "exact": exact,
+                                                          "errors": str(errors)}})
     try:
         code, summary = run_session(session, scene, settings, twin, twin, AlwaysEnabled(),
                                     checker)
@@ -96,6 +109,7 @@ def run(args) -> int:
     robot_s = summary["session_robot_time_s"]
     summary["speedup"] = round(robot_s / wall, 1) if wall > 0 else None
     summary["twin_seed"] = twin_seed
+    summary["errors"] = str(errors)
     if args.foreground:
         summary["collision"] = checker.summary()
     summary["cpu_count"] = os.cpu_count()

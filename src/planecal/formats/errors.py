@@ -13,13 +13,16 @@ Sections (every magnitude carries a ``source`` string saying where it comes from
   axis).
 * ``joints``: the errors the tick adds to each joint angle (``twin.ticks``):
   repeatability (mm at the flange, 3 sigma; null: robot.json's), encoder quantisation,
-  backlash per joint [rad], gear transmission error per joint (harmonics: amplitude
-  [rad] and cycles per joint revolution; phases drawn with the truth), stiffness of the
-  joints that yield to gravity [N m/rad] (null: rigid).
+  backlash per joint [rad] and the gravity torque that holds a joint on one flank
+  (``backlash_preload_nm``; null: the direction of motion decides), gear transmission
+  error per joint (harmonics: amplitude [rad] and cycles per joint revolution; phases
+  drawn with the truth), stiffness of the joints that yield to gravity [N m/rad] (null:
+  rigid).
 * ``payload``: the tool on the flange (sensor + adapter): mass and centre of mass in the
   flange frame, for the gravity torque.
 * ``thermal``: growth of the links over a run (off unless ``enabled``).
-* ``servo`` and ``laser``: the servo model and the laser's noise.
+* ``servo`` and ``laser``: the servo model; the laser's noise, quantum and linearity
+  error (amplitude [mm], its phases drawn with the truth).
 """
 from typing import Annotated
 
@@ -58,6 +61,9 @@ Quantum = Ranged(0.0, 1.0, "mm", "laser quantum")
 Backlashes = Vector(Backlash, N_JOINTS, "backlash, one per joint")
 Stiffnesses = Vector(Stiffness | None, N_JOINTS, "stiffnesses (or null: rigid), one per joint")
 Com = Vector(Offset, 3, "coordinates in the flange frame")
+Preload = Ranged(0.0, 1e6, "N m", "preload torque")
+Preloads = Vector(Preload | None, N_JOINTS, "preload torques (or null: none), one per joint")
+Linearity = Ranged(0.0, 1.0, "mm", "laser linearity")
 Tau = Ranged(1e-4, 10.0, "s", "servo time constant")
 Noise = Ranged(0.0, 1.0, "mm", "laser noise")
 
@@ -96,6 +102,7 @@ class Joints(Model):
     repeatability_mm: Repeatability | None = None
     quantization: Bool = False
     backlash_rad: Backlashes
+    backlash_preload_nm: Preloads | None = None
     gear: list[Harmonic] = []
     stiffness_nm_per_rad: Stiffnesses
     source: Source
@@ -137,6 +144,8 @@ class Servo(Model):
 class Laser(Model):
     noise_mm: Noise
     quantum_mm: Quantum | None = None
+    linearity_mm: Linearity = 0.0
+    source: Source | None = None
 
 
 class ErrorProfileFile(Model):

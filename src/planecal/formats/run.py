@@ -115,9 +115,12 @@ Rejections = Annotated[list[Rejection], Field(max_length=10_000)]
 
 
 class TwinInfo(Record):
-    """Added by ``planecal rehearse``."""
+    """Added by ``planecal rehearse``: the twin's seed, its error profile (a name or a
+    path; runs recorded before profiles existed were the ideal world) and ``exact`` (no
+    random noise)."""
     seed: Count
     exact: Bool = False
+    errors: Str = "ideal"
 
 
 def _distance_or_range(v):

@@ -57,7 +57,11 @@ class TwinOptions:
     reading; laser_quantum_mm: rounding of a reading; repeatability_mm: None = the
     robot's (robot.json), 0 = off; stiffness_nm_per_rad: the stiffness of each joint that
     yields to gravity, 6 values (None: rigid) or (k2, k3), None = all rigid; backlash_rad:
-    (6,) backlash, None = off; quantization: the motors' sub-count positions; gear:
+    (6,) backlash, None = off; backlash_preload_nm: (6,) the gravity torque that holds a
+    joint on one flank of its backlash (None or 0: by the direction of motion);
+    laser_linearity_mm: amplitude of the laser's linearity error (0.7 and 0.3 of it at one
+    and two periods over the window, phases from the truth); quantization: the motors'
+    sub-count positions; gear:
     harmonics of the gear transmission error, (joint 1-based, amplitude rad, cycles per
     revolution) each, their phases from the truth; payload: (mass kg, centre of mass in
     the flange frame m) of the tool, for the gravity torque; noise_seed: seed of the noise
@@ -67,9 +71,11 @@ class TwinOptions:
     tau_s: float = 0.03
     laser_noise_mm: float = 0.001
     laser_quantum_mm: float | None = None
+    laser_linearity_mm: float = 0.0
     repeatability_mm: float | None = None
     stiffness_nm_per_rad: tuple | None = None
     backlash_rad: tuple | None = None
+    backlash_preload_nm: tuple | None = None
     quantization: bool = False
     gear: tuple = ()
     payload: tuple | None = None
@@ -79,7 +85,8 @@ class TwinOptions:
     def __post_init__(self):
         if self.servo not in ("ideal", "lag"):
             raise InputError(f"twin: servo must be 'ideal' or 'lag', got {self.servo!r}")
-        for name in ("tau_s", "laser_noise_mm", "laser_quantum_mm", "repeatability_mm"):
+        for name in ("tau_s", "laser_noise_mm", "laser_quantum_mm", "repeatability_mm",
+                     "laser_linearity_mm"):
             v = getattr(self, name)
             if v is not None and not (np.isfinite(v) and v >= 0 and (v > 0 or name != "tau_s")):
                 raise InputError(f"twin: {name} must be a finite number >= 0"
@@ -108,6 +115,7 @@ class TwinOptions:
             gear[int(joint) - 1].append((amp, cycles, phi))
         return JointErrors(repeatability_m=rep, quantization=self.quantization,
                            gear=tuple(tuple(g) for g in gear), backlash_rad=self.backlash_rad,
+                           backlash_preload_nm=self.backlash_preload_nm,
                            compliance_rad_per_nm=comp)
 
 
@@ -192,7 +200,8 @@ class Twin:
         rng_laser, self._rng_eps, self._rng_u = (
             np.random.default_rng(s) for s in np.random.SeedSequence(noise_seed).spawn(3))
         self._laser = LaserNoise(self.scene.laser_range_mm, opt.laser_noise_mm,
-                                 opt.laser_quantum_mm, rng_laser)
+                                 opt.laser_quantum_mm, rng_laser, opt.laser_linearity_mm,
+                                 world.laser_phases)
         self.errors = errors = opt.joint_errors(robot, world.gear_phases)
         self._sigma = errors.sigma(robot)
         if opt.servo == "lag" and not opt.tau_s > 0:
@@ -311,7 +320,7 @@ class Twin:
             i = 0
             while True:
                 laser.left = t.laser(row_of[:m], dist, prev, i, laser.block, laser.left,
-                                     noise, laser.quantum_mm, laser.lo, laser.hi,
+                                     noise, laser.quantum_mm, laser.lo, laser.hi, laser.lin,
                                      readings, stop)
                 if stop[0] != T.NEED_BLOCK:
                     break
@@ -336,7 +345,7 @@ class Twin:
         while True:
             laser.left = self._t.laser(_ROW_PREV, _NO_DIST, self._dist, 0, laser.block,
                                        laser.left, laser.noise_mm > 0.0, laser.quantum_mm,
-                                       laser.lo, laser.hi, out, stop)
+                                       laser.lo, laser.hi, laser.lin, out, stop)
             if stop[0] != T.NEED_BLOCK:
                 break
             laser.refill()

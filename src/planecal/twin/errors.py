@@ -10,7 +10,8 @@ gravity model). The tick applies them (``ticks.joint_row``, in the order written
 * gear transmission error: per joint, sum_h A_h sin(f_h q + phi_h) (amplitude A [rad],
   f [1/rad]: periods per radian of the joint, phase [rad]).
 * backlash: joint j's output trails its motor by b_j / 2 against the direction of its
-  last motion.
+  last motion; a joint whose gravity torque reaches its preload rests on the flank gravity
+  pushes it to, whichever way it came (J2 and J3 carry their links' weight).
 * gravity compliance: joint j yields c_j tau_j, c = 1/k the joint's compliance and tau
   the gravity torque of the links' masses (robot.json ``masses``) and the payload, as
   the twin's MuJoCo model holds them (``gravity_model``).
@@ -40,6 +41,7 @@ class JointErrors:
     quantization: bool = False
     gear: tuple = ()
     backlash_rad: tuple | None = None
+    backlash_preload_nm: tuple | None = None
     compliance_rad_per_nm: tuple | None = None
 
     def flags(self) -> int:
@@ -55,6 +57,9 @@ class JointErrors:
         if (self.compliance_rad_per_nm is not None
                 and np.any(np.asarray(self.compliance_rad_per_nm) != 0)):
             f |= ticks.COMPLY
+        if (f & ticks.BACKLASH and self.backlash_preload_nm is not None
+                and np.any(np.nan_to_num(np.asarray(self.backlash_preload_nm, float)) > 0)):
+            f |= ticks.PRELOADED
         return f
 
     def sigma(self, robot: Robot) -> float:
@@ -78,6 +83,9 @@ class JointErrors:
         if self.compliance_rad_per_nm is not None:
             F[ticks.COMP:ticks.COMP + 6] = np.asarray(self.compliance_rad_per_nm,
                                                       float).reshape(6)
+        if self.backlash_preload_nm is not None:
+            F[ticks.PRELOAD:ticks.PRELOAD + 6] = np.nan_to_num(
+                np.asarray(self.backlash_preload_nm, float).reshape(6))
 
 
 def _body_pose(model: mujoco.MjModel, b: int) -> np.ndarray:

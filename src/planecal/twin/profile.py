@@ -52,6 +52,9 @@ class ErrorProfile:
             laser_quantum_mm=d.laser.quantum_mm, repeatability_mm=j.repeatability_mm,
             stiffness_nm_per_rad=stiff if any(k is not None for k in stiff) else None,
             backlash_rad=tuple(j.backlash_rad) if any(j.backlash_rad) else None,
+            backlash_preload_nm=(None if j.backlash_preload_nm is None
+                                 else tuple(j.backlash_preload_nm)),
+            laser_linearity_mm=d.laser.linearity_mm,
             quantization=j.quantization,
             gear=tuple((h.joint, h.amplitude_rad, h.cycles_per_rev) for h in j.gear),
             payload=payload)
@@ -109,4 +112,23 @@ def draw_world(scene: Scene, seed: int, profile: ErrorProfile) -> tuple[Truth, T
     rng = np.random.default_rng([seed, 1])
     kin = draw_geometry(scene.robot, profile, rng)
     phases = tuple(float(v) for v in rng.uniform(0.0, 2 * np.pi, len(profile.doc.joints.gear)))
-    return Truth(params, kin, phases), profile.options()
+    laser = tuple(float(v) for v in rng.uniform(0.0, 2 * np.pi, 2))
+    return Truth(params, kin, phases, laser), profile.options()
+
+
+def save_truth(path, twin) -> None:
+    """The twin's hidden truth as a parameter file (``params``: what a level-1 calibration
+    is compared with), plus the world it was drawn in: the robot's true geometry and the
+    gear phases (``world``; extra keys a parameter-file reader keeps)."""
+    from planecal.params import PARAMS_FORMAT, params_to_dict, save_json
+    doc = {"format": PARAMS_FORMAT, **params_to_dict(twin.truth)}
+    kin = twin.true_kinematics
+    world = {"gear_phases_rad": list(twin._world.gear_phases),
+             "laser_linearity_phases_rad": list(twin._world.laser_phases)}
+    if kin is not None:
+        world["kinematics"] = {"alpha_rad": kin.alpha.tolist(), "a_m": kin.a.tolist(),
+                               "beta_rad": kin.beta.tolist(), "theta_rad": kin.theta.tolist(),
+                               "d_m": kin.d.tolist(), "base": kin.base.tolist(),
+                               "flange": kin.flange.tolist()}
+    doc["world"] = world
+    save_json(path, doc)

@@ -30,15 +30,18 @@ The joint row, in this order (rad; ``joint_row``):
     x  = counts - qe0 (+ u)                  motor side, counts from the zero reference
     q  = M x                                 M = C diag(1/g): gains and wrist coupling
     q += sum_h A_h sin(f_h q + phi_h)        gear transmission error (per joint)
-    q -= b / 2 * direction                   backlash: the output trails its motor
+    q -= b / 2 * direction                   backlash: the output trails its motor; a
+                                             joint held by gravity (|tau| >= its preload
+                                             torque) rests on the flank tau pushes it to
     q += delta_true                          the true joint zero offsets
     q += eps                                 repeatability perturbation of this rest
     q += c * tau_gravity(q)                  gravity compliance (c = 1/k per joint), the
                                              torque at the deflected pose (3 passes)
 
 ``laser`` then turns each reading tick's true distance into a reading: mm = 1000 d +
-noise (N(0, sigma^2) from a block drawn ahead), optional quantum, and the 65-95 mm window
-(NaN outside, and for no hit, d < 0).
+linearity error (``a1 sin(2 pi x + p1) + a2 sin(4 pi x + p2)``, x the place of the
+distance in the 65-95 mm window) + noise (N(0, sigma^2) from a block drawn ahead),
+optional quantum, and the window (NaN outside, and for no hit, d < 0).
 
 State travels in two arrays, ``S`` (int64) and ``F`` (float64), laid out by the indices
 below, and the world (``W``): gear harmonics and the gravity model (body poses, masses).
@@ -82,10 +85,12 @@ M = 26           # [26:62] q = M (counts - qe0), row-major 6 x 6
 BACK = 62        # [62:68] backlash per joint (rad, full width)
 COMP = 68        # [68:74] compliance per joint (rad / N m)
 QNOW = 74        # [74:80] the joint row of the current state
-NF = 80
+PRELOAD = 80     # [80:86] backlash: a gravity torque at least this (N m, > 0) holds the
+                 # joint on one flank (0: by the direction of motion only)
+NF = 86
 
 # FLAGS bits
-REPEAT, QUANT, GEAR, BACKLASH, COMPLY = 1, 2, 4, 8, 16
+REPEAT, QUANT, GEAR, BACKLASH, COMPLY, PRELOADED = 1, 2, 4, 8, 16, 32
 
 # why a function returned (``stop[0]``; ``stop[1]`` = the tick it stopped at; for
 # NEED_BLOCK ``stop[2]`` = the block: 0 perturbations, 1 quantisation, 2 laser noise)
@@ -156,16 +161,22 @@ def joint_row(S, F, W, out):
                 if G[j, h, 0] != 0.0:
                     e += G[j, h, 0] * np.sin(G[j, h, 1] * q[j] + G[j, h, 2])
             q[j] = q[j] + e
+    tau = np.zeros(6)
+    if flags & BACKLASH and flags & PRELOADED:  # the flank gravity holds a joint on
+        gravity_torque(q, W, tau)
     for j in range(6):
         v = q[j]
         if flags & BACKLASH:
-            v = v - 0.5 * F[BACK + j] * S[DIR + j]
+            side = np.float64(S[DIR + j])
+            pre = F[PRELOAD + j]
+            if pre > 0.0 and abs(tau[j]) >= pre:
+                side = -1.0 if tau[j] > 0.0 else 1.0  # trails against: rests towards tau
+            v = v - 0.5 * F[BACK + j] * side
         v = v + F[DELTA + j]
         if flags & REPEAT:
             v = v + F[EPS + j]
         q[j] = v
     if flags & COMPLY:
-        tau = np.empty(6)
         theta = q.copy()
         for _ in range(3):  # the torque at the deflected pose: each pass gains c dtau/dq
             # (~1e-3 for an arm like the MC70's), 3 passes leave ~1e-10 of the deflection
@@ -281,12 +292,15 @@ def advance(D, i0, S, F, W, eps_block, u_block, cur_out, row_of, Q, k0, stop):
     return k
 
 
-def laser(row_of, dist, prev, i0, block, left, noise, quantum, lo, hi, out, stop):
+def laser(row_of, dist, prev, i0, block, left, noise, quantum, lo, hi, lin, out, stop):
     """Readings [mm] (NaN: none) of ticks ``i0..``: tick i reads ``dist[row_of[i]]`` [m]
-    (``prev`` for -1; < 0: no hit, no noise drawn). Noise: ``block[left - 1]``, then
-    ``left - 1`` ... (``noise`` False: none). Returns the new ``left``; ``stop[0]`` DONE or
-    NEED_BLOCK (the noise block is used up at tick ``stop[1]``: refill, call again)."""
+    (``prev`` for -1; < 0: no hit, no noise drawn). Linearity error ``lin`` = (a1, p1,
+    a2, p2) (module docstring; zeros: none). Noise: ``block[left - 1]``, then ``left - 1``
+    ... (``noise`` False: none). Returns the new ``left``; ``stop[0]`` DONE or NEED_BLOCK
+    (the noise block is used up at tick ``stop[1]``: refill, call again)."""
     n = row_of.shape[0]
+    linear = lin[0] != 0.0 or lin[2] != 0.0
+    span = hi - lo
     for i in range(i0, n):
         r = row_of[i]
         d = prev if r < 0 else dist[r]
@@ -294,6 +308,9 @@ def laser(row_of, dist, prev, i0, block, left, noise, quantum, lo, hi, out, stop
             out[i] = np.nan
             continue
         mm = d * 1000.0
+        if linear:
+            x = 2.0 * np.pi * (mm - lo) / span
+            mm = mm + lin[0] * np.sin(x + lin[1]) + lin[2] * np.sin(2.0 * x + lin[3])
         if noise:
             if left == 0:
                 stop[0] = NEED_BLOCK

@@ -49,11 +49,13 @@ class Tolerances:
 @dataclass(frozen=True)
 class Truth:
     """A world's hidden truth: the cell (``params``: joint offsets, sensor pose, planes),
-    the robot's true geometry (``kinematics``; None: robot.json's exactly) and the phases
-    of its gear errors (one per harmonic of the twin's options)."""
+    the robot's true geometry (``kinematics``; None: robot.json's exactly), the phases of
+    its gear errors (one per harmonic of the twin's options) and of the laser's linearity
+    error."""
     params: CellParams
     kinematics: Kinematics | None = None
     gear_phases: tuple = ()
+    laser_phases: tuple = (0.0, 0.0)
 
 
 def _ball(rng, radius):
