@@ -7,7 +7,7 @@ import pytest
 from planecal.cli import main
 from planecal.params import load_params
 from planecal.samples import read_samples
-from planecal.sampling.run import load_sidecar
+from planecal.sampling.runfiles import load_sidecar
 from planecal.sampling.session import Progress
 from planecal.sampling.run import RunStats
 
@@ -82,7 +82,7 @@ def test_rehearse_refuses_to_overwrite_a_run(tmp_path, capsys):
 
 
 def test_a_second_run_on_the_same_file_is_refused(tmp_path, capsys):
-    from planecal.sampling.run import RunLock
+    from planecal.sampling.runfiles import RunLock
 
     out = tmp_path / "RUN.tsv"
     lock = RunLock(out)  # as a run in another process holds it

@@ -14,7 +14,7 @@ from planecal.sampling import (Driver, EnableDropped, FollowingMonitor, NullObse
                                PathBlocked,
                                PoseSettings, RunSettings, SamplingRun, load_sidecar,
                                move_home, move_to_calibration, sidecar_path)
-from planecal.sampling.run import count_samples
+from planecal.sampling.runfiles import count_samples
 from planecal.scene import load_scene
 
 
@@ -448,7 +448,7 @@ def test_background_planner_ends_when_the_run_is_killed(tmp_path, plan_s):
     script = tmp_path / "run.py"
     script.write_text(
         "import sys, time\n"
-        "from planecal.sampling.run import BackgroundPlanner\n"
+        "from planecal.sampling.planner import BackgroundPlanner\n"
         "class P:\n"
         f"    def plan(self, *req): time.sleep({plan_s}); return req\n"
         "    def index_matters(self): return False\n"
@@ -512,7 +512,7 @@ def test_a_full_disk_stops_the_run_with_whole_lines_and_a_resumable_record(scene
     import errno
 
     import planecal.samples as samples_mod
-    from planecal.sampling.run import RunWriteError
+    from planecal.sampling.runfiles import RunWriteError
 
     out = tmp_path / "RUN.tsv"
     disk = FullDisk(left=250)  # the header and a few samples fit, then a line is cut

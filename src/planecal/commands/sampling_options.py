@@ -10,7 +10,8 @@ from pathlib import Path
 from planecal.errors import InputError
 from planecal.sampling.laserread import LaserSettings
 from planecal.sampling.poses import IK_CHOICES, PLATE_CHOICES
-from planecal.sampling.run import RunSettings, load_sidecar, sidecar_path
+from planecal.sampling.run import RunSettings
+from planecal.sampling.runfiles import load_sidecar, sidecar_path
 from planecal.sampling.session import Session
 
 

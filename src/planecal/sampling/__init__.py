@@ -5,7 +5,8 @@ real cell (``planecal sample``) and the studies.
 Modules, top to bottom: ``poses`` (random sensor poses, IK choice), ``steps`` (step
 generator), ``laserread`` (stable laser read), ``observer`` (hooks), ``driver`` (the
 link's delta, checked moves), ``planner`` (plans: random, a pose list, in the
-background), ``collect`` (plan -> acquire -> account), ``run`` (sample file, sidecar,
+background), ``collect`` (plan -> acquire -> account), ``runfiles`` (sample file, sidecar,
+lock), ``run`` (the run: collect into the files,
 resume), ``session`` (start/end moves, progress), ``enable`` (the real cell's enable
 signal)."""
 from planecal.sampling.collect import (Cursor, DriveAcquirer, MemoryRecorder, RestAcquirer,
@@ -17,8 +18,8 @@ from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.observer import NullObserver, Observer
 from planecal.sampling.planner import ListPlanner, Plan, Planner
 from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
-from planecal.sampling.run import (RunSettings, RunStats, SamplingRun, load_sidecar,
-                                   sidecar_path)
+from planecal.sampling.run import RunSettings, RunStats, SamplingRun
+from planecal.sampling.runfiles import load_sidecar, sidecar_path
 from planecal.sampling.steps import MAX_STEP, NOMINAL_STEP, step_path
 
 __all__ = ["Cursor", "DriveAcquirer", "Driver", "EnableDropped", "FollowingMonitor",

@@ -23,7 +23,6 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from planecal.encoder import joints_to_counts
 from planecal.sampling.driver import Driver, plan_move
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource
@@ -58,8 +57,8 @@ class DriveAcquirer:
     def acquire(self, plan: Plan) -> Acquired:
         drv = self.driver
         q0 = plan.q_start
-        for q in plan.via:  # a detour's legs: no dwell on the way
-            self._leg("via", q0, q, joints_to_counts(drv.robot, q), 0)
+        for q, counts in plan.via:  # a detour's legs: no dwell on the way
+            self._leg("via", q0, q, counts, 0)
             q0 = q
         self._leg("sample", q0, plan.q, plan.qe_goal, self.dwell)
         lr = drv.read_laser(self.laser)

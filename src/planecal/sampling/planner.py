@@ -23,9 +23,9 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from planecal.encoder import counts_in_range, counts_to_joints, joints_to_counts
+from planecal.encoder import counts_in_range, counts_to_joints
 from planecal.robot import fk, ik_all
-from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
+from planecal.sampling.poses import CommandModel, PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.steps import COUNT_LIMIT
 from planecal.scene import Scene
 
@@ -61,7 +61,7 @@ class Plan:
     pose: SensorPose | None = None
     check_time_s: float = 0.0
     reason: str | None = None
-    via: list = field(default_factory=list)  # joint configurations passed on the way
+    via: list = field(default_factory=list)  # (joint angles, counts) passed on the way
 
 
 class PlanSource(Protocol):
@@ -111,34 +111,34 @@ def check_move(checker: Checker, q_start: np.ndarray, q: np.ndarray) -> str | No
 class Detour:
     """Via-points around a blocked straight path (module docstring): the sensor backed out
     by ``RETRACT_M`` along its beam at both ends, each by the IK solution nearest to its
-    end (same wrist branch), so the legs are: back out, move, approach."""
+    end (same wrist branch), so the legs are: back out, move, approach. Aimed with the
+    pose generator's model."""
 
-    def __init__(self, scene: Scene, checker: Checker):
-        self.robot, self.checker = scene.robot, checker
-        self.weights = np.abs(self.robot.gains)
-        T = np.eye(4)
-        from planecal.cell import sensor_rotation
-        T[:3, :3] = sensor_rotation(scene.phi_y, scene.phi_z)
-        T[:3, 3] = scene.sensor_origin
-        self.T_fs, self.T_sf = T, np.linalg.inv(T)
+    def __init__(self, poses: PoseGenerator, checker: Checker):
+        self.robot, self.poses, self.checker = poses.robot, poses, checker
+        self.T_sf = poses.T_sf
+        self.T_fs = np.linalg.inv(poses.T_sf)
 
-    def _retract(self, q: np.ndarray, d: float) -> np.ndarray | None:
-        T = fk(self.robot, q) @ self.T_fs
+    def _retract(self, q: np.ndarray, d: float):
+        """(joint angles, counts) of the sensor backed out by d from where q puts it."""
+        T = fk(self.robot, q, self.poses.delta) @ self.T_fs
         T[:3, 3] -= d * T[:3, 2]
-        Q = ik_all(self.robot, T @ self.T_sf)
+        Q = ik_all(self.robot, T @ self.T_sf, self.poses.delta)
         if len(Q) == 0:
             return None
-        v = Q[np.argmin(np.max(np.abs(Q - q) * self.weights, axis=1))]
-        return v if counts_in_range(self.robot, joints_to_counts(self.robot, v)) else None
+        v = Q[np.argmin(np.max(np.abs(Q - q) * self.poses.weights, axis=1))]
+        c = self.poses.counts_target(v)
+        return (v, c) if counts_in_range(self.robot, c) else None
 
-    def find(self, q0: np.ndarray, q1: np.ndarray) -> list[np.ndarray] | None:
+    def find(self, q0: np.ndarray, q1: np.ndarray) -> list | None:
+        """[(q, counts), (q, counts)] of a clear detour from q0 to q1, or None."""
         for d in RETRACT_M:
             a, b = self._retract(q0, d), self._retract(q1, d)
             if a is None or b is None:
                 continue
-            c = self.checker
-            if (c.check_config(a).ok and c.check_config(b).ok and c.check_path(q0, a).ok
-                    and c.check_path(a, b).ok and c.check_path(b, q1).ok):
+            c, qa, qb = self.checker, a[0], b[0]
+            if (c.check_config(qa).ok and c.check_config(qb).ok and c.check_path(q0, qa).ok
+                    and c.check_path(qa, qb).ok and c.check_path(qb, q1).ok):
                 return [a, b]
         return None
 
@@ -149,13 +149,14 @@ class Planner:
     out with the plan."""
     pure = True
 
-    def __init__(self, scene: Scene, pose: PoseSettings, checker: Checker):
+    def __init__(self, scene: Scene, pose: PoseSettings, checker: Checker,
+                 model: CommandModel | None = None):
         self.robot = scene.robot
-        self.poses = PoseGenerator(scene, pose)
+        self.poses = PoseGenerator(scene, pose, model)
         self.checker = checker
         # detours turn the wrist over where a straight path cannot: for the deliberate
         # wrist branches; with the nearest solution a blocked pose is drawn again
-        self.detour = Detour(scene, checker) if pose.ik_choice == "wrist" else None
+        self.detour = Detour(self.poses, checker) if pose.ik_choice == "wrist" else None
 
     def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int) -> Plan:
         rng = np.random.default_rng()
@@ -170,7 +171,7 @@ class Planner:
                 out.rejections.append(("unreachable", None,
                                        "unreachable: no IK solution within limits"))
                 continue
-            qe = joints_to_counts(self.robot, q)
+            qe = self.poses.counts_target(q)
             if np.any(qe < 0) or np.any(qe >= COUNT_LIMIT):
                 out.rejections.append(("unreachable", q,
                                        "unreachable: counts outside the encoder range"))
@@ -203,10 +204,14 @@ class ListPlanner:
     here, the plan says so (``q`` None, ``reason``)."""
     pure = False
 
-    def __init__(self, scene: Scene, counts: np.ndarray, plates: np.ndarray, checker: Checker):
+    def __init__(self, scene: Scene, counts: np.ndarray, plates: np.ndarray, checker: Checker,
+                 model: CommandModel | None = None):
         self.robot = scene.robot
         self.checker = checker
-        self.detour = Detour(scene, checker)
+        poses = PoseGenerator(scene, PoseSettings(cone_deg=scene.cone_deg,
+                                                  distance_mm=tuple(scene.distance_mm)), model)
+        self.qe0 = poses.model.qe0
+        self.detour = Detour(poses, checker)
         self.counts = np.asarray(counts, np.int64).reshape(-1, 6)
         self.plates = np.asarray(plates, int).reshape(-1)
         self.left = list(range(len(self.counts)))
@@ -221,7 +226,7 @@ class ListPlanner:
         out = Plan(index, q_start, [], rng_state)
         blocked = []
         for j in list(self.left)[:budget]:
-            q = counts_to_joints(self.robot, self.counts[j])
+            q = counts_to_joints(self.robot, self.counts[j], self.qe0)
             why = check_move(self.checker, q_start, q)
             if why is None:
                 self._take(out, j, q)

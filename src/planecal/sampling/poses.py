@@ -14,10 +14,15 @@ face, x and y along the edges, z the facing normal, pointing to the side the sen
 - a rotation psi about the beam: U[-roll, +roll] (``roll_deg``, default 180: any roll)
   measured from the plate's x edge projected normal to the beam.
 
-The sensor pose T_base_sensor = [x y b o] is turned into a flange pose with the *nominal*
-flange->sensor transform (``cell.sensor_rotation(phi_y, phi_z)``, scene sensor origin):
-T_base_flange = T_base_sensor inv(T_flange_sensor). Only the beam of the nominal sensor
-frame matters to the distance model; the sensor's own x axis is arbitrary but fixed.
+The sensor pose T_base_sensor = [x y b o] is turned into a flange pose with the model's
+flange->sensor transform (``cell.sensor_rotation(phi_y, phi_z)``, sensor origin):
+T_base_flange = T_base_sensor inv(T_flange_sensor). Only the beam of the sensor frame
+matters to the distance model; the sensor's own x axis is arbitrary but fixed.
+
+The model the loop aims with (``CommandModel``) is the scene's nominal cell and robot.json's
+encoder zeros for a first calibration run; after a calibration (live validation, seed 8.2
+and 8.4) it is the result: its sensor pose, its planes (the plates' frames) and its joint
+offsets (in the IK, or loaded into the encoder zeros as the controller would hold them).
 
 The joint target is an IK solution within the joint limits, with the nominal (zero) joint
 offsets, chosen by ``ik_choice``:
@@ -39,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.cell import sensor_rotation
+from planecal.cell import CellParams, sensor_rotation
 from planecal.encoder import joints_to_counts
 from planecal.errors import InputError
 from planecal.formats.run import IK_CHOICES, PLATE_CHOICES  # the sidecar's allowed values
@@ -86,6 +91,19 @@ class PoseSettings:
                                  f"margin {self.margin_m * 1e3:.0f} mm")
 
 
+@dataclass(frozen=True)
+class CommandModel:
+    """What the loop aims with (module docstring): the cell's parameters (sensor pose,
+    planes, joint offsets) and the encoder zeros that turn joint angles into counts."""
+    params: CellParams
+    qe0: np.ndarray
+
+    @classmethod
+    def nominal(cls, scene: Scene) -> "CommandModel":
+        from planecal.scene import nominal_params
+        return cls(nominal_params(scene), scene.robot.qe0.copy())
+
+
 @dataclass
 class SensorPose:
     plate: int  # 0-based plate index
@@ -100,17 +118,24 @@ class SensorPose:
 class PoseGenerator:
     """Draws random sensor poses on a scene's plates; see the module docstring."""
 
-    def __init__(self, scene: Scene, settings: PoseSettings | None = None):
+    def __init__(self, scene: Scene, settings: PoseSettings | None = None,
+                 model: CommandModel | None = None):
         self.scene = scene
         self.robot = scene.robot
         self.settings = settings or PoseSettings(cone_deg=scene.cone_deg,
                                                  distance_mm=tuple(scene.distance_mm))
         self.settings.check(scene)
-        self.frames = [p.frame() for p in scene.plates]
+        self.model = model = model or CommandModel.nominal(scene)
+        p = model.params
+        if p.n_planes != len(scene.plates):
+            raise InputError(f"the commanding model has {p.n_planes} plane(s), the scene "
+                             f"{len(scene.plates)} plate(s)")
+        self.frames = [pl.frame(n) for pl, n in zip(scene.plates, p.planes)]
         T_fs = np.eye(4)
-        T_fs[:3, :3] = sensor_rotation(scene.phi_y, scene.phi_z)
-        T_fs[:3, 3] = scene.sensor_origin
+        T_fs[:3, :3] = sensor_rotation(p.phi_y, p.phi_z)
+        T_fs[:3, 3] = p.sensor_origin
         self.T_sf = np.linalg.inv(T_fs)  # sensor <- flange
+        self.delta = p.joint_offsets.copy()
         self.weights = np.abs(self.robot.gains)
 
     @property
@@ -157,7 +182,7 @@ class PoseGenerator:
         """Joint angles (6,) reaching ``pose`` within the limits (``ik_choice``, module
         docstring; ``wrist`` draws the branch from ``rng``; without one, the nearest), or
         None when unreachable."""
-        Q = ik_all(self.robot, pose.T_flange)
+        Q = ik_all(self.robot, pose.T_flange, self.delta)
         if len(Q) == 0:
             return None
         if self.settings.ik_choice == "wrist" and rng is not None:
@@ -169,4 +194,5 @@ class PoseGenerator:
         return Q[np.argmin(cost)]
 
     def counts_target(self, q: np.ndarray) -> np.ndarray:
-        return joints_to_counts(self.robot, q)
+        """The encoder counts of joint angles q, with the model's encoder zeros."""
+        return joints_to_counts(self.robot, q, self.model.qe0)

@@ -34,7 +34,6 @@ random generator, and goes on until ``samples_target`` -- from wherever the robo
 """
 from __future__ import annotations
 
-import os
 import time
 from collections import deque
 from dataclasses import asdict, dataclass, field
@@ -44,8 +43,8 @@ from typing import Callable
 
 import numpy as np
 
-from planecal.errors import InputError, RunFailed
-from planecal.formats import load_sidecar as read_sidecar
+from planecal.encoder import counts_to_joints
+from planecal.errors import InputError
 from planecal.formats.run import SIDECAR_FORMAT
 from planecal.params import save_json
 from planecal.sampling.collect import Cursor, DriveAcquirer, Tally, collect
@@ -53,7 +52,9 @@ from planecal.sampling.driver import Driver, EnableDropped
 from planecal.sampling.laserread import LaserSettings
 from planecal.sampling.planner import (BackgroundPlanner, Checker, Plan, PlanSource, Planner,
                                        can_fork)
-from planecal.sampling.poses import PoseSettings
+from planecal.sampling.poses import CommandModel, PoseSettings
+from planecal.sampling.runfiles import (RunLock, RunWriteError, count_samples, load_sidecar,
+                                        sidecar_path)
 from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP
 from planecal.scene import Scene
 
@@ -106,57 +107,6 @@ class RunSettings:
             raise InputError(f"{where}: not a planecal run sidecar ({type(e).__name__}: {e})") from None
 
 
-def sidecar_path(out: str | Path) -> Path:
-    out = Path(out)
-    return out.with_name(out.name + ".json")
-
-
-class RunWriteError(RunFailed):
-    """The run could not write its sample file or sidecar (disk full, ...): it stopped; the
-    samples written are in the file, which a resumed run continues."""
-
-
-class RunLock:
-    """An exclusive advisory lock (flock) on the sample file, held for a whole session, so
-    two runs can never write the same file (one would truncate or interleave the other's
-    samples). Taken without truncating; released when closed or when the process ends."""
-
-    def __init__(self, out: str | Path):
-        import fcntl
-        self.path = Path(out)
-        try:
-            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as e:
-            raise InputError(f"{self.path}: cannot open ({e.strerror})") from None
-        try:
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(self._fd)
-            raise InputError(f"{self.path}: another run is writing this file") from None
-
-    def close(self) -> None:
-        if self._fd is not None:
-            os.close(self._fd)  # releases the lock
-            self._fd = None
-
-
-def load_sidecar(out: str | Path) -> dict:
-    """The run's sidecar, validated (``formats.run``): a plain dict."""
-    p = sidecar_path(out)
-    if not p.exists():
-        raise InputError(f"{p}: no run sidecar to resume from")
-    return read_sidecar(p)
-
-
-def count_samples(path: Path) -> int:
-    """Complete sample lines in a sample file (header and a partial last line excluded)."""
-    if not path.exists():
-        return 0
-    data = path.read_bytes()
-    lines = data.split(b"\n")[:-1]  # the part after the last newline is incomplete
-    return sum(1 for ln in lines if ln.strip() and not ln.lstrip().lower().startswith(b"q1"))
-
-
 @dataclass
 class RunStats(Tally):
     """The collection's tally plus the run's time and motion figures (all sessions)."""
@@ -194,14 +144,15 @@ class SamplingRun:
     never left without a message; the twin's robot time then includes that wait).
 
     ``planner``: where the targets come from; default ``Planner`` (random poses, seed
-    7.1.2), e.g. ``ListPlanner`` for a planned pose list."""
+    7.1.2), e.g. ``ListPlanner`` for a planned pose list. ``model``: what the run aims
+    with (``poses.CommandModel``; default the scene's nominal cell)."""
 
     def __init__(self, driver: Driver, scene: Scene, settings: RunSettings, out,
                  checker: Checker, *, resume: bool = False, background: bool = False,
                  hold_while_planning: bool = False,
                  progress: Callable[[RunStats], None] | None = None,
                  extra: dict | None = None, lock: RunLock | None = None,
-                 planner: PlanSource | None = None):
+                 planner: PlanSource | None = None, model: CommandModel | None = None):
         if checker is None:
             raise ValueError("a collision checker is required")
         if settings.samples < 1:
@@ -216,7 +167,9 @@ class SamplingRun:
         self.extra = dict(extra or {})
         self.lock = lock  # the caller's, held for its session; else taken in run()
         self.observer = driver.observer
-        self.planner = planner if planner is not None else Planner(scene, settings.pose, checker)
+        self.model = model or CommandModel.nominal(scene)
+        self.planner = planner if planner is not None else Planner(scene, settings.pose, checker,
+                                                                   self.model)
         if hold_while_planning and not can_fork():
             raise RuntimeError("holding the RT link while planning needs a forking platform")
         self.background = (background or hold_while_planning) and can_fork() and self.planner.pure
@@ -316,7 +269,7 @@ class SamplingRun:
         try:
             drv.start()
             self._save()
-            self._cursor.q = drv.commanded_q()
+            self._cursor.q = counts_to_joints(self.robot, drv.commanded_counts, self.model.qe0)
             if st.samples < s.samples:
                 res = self.checker.check_config(self._cursor.q)
                 if not res.ok:

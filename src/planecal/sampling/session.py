@@ -14,7 +14,9 @@ from planecal.sampling.driver import (Driver, EnableDropped, PathBlocked, move_h
                                       move_to_calibration)
 from planecal.sampling.observer import Observer
 from planecal.sampling.planner import PlanSource
-from planecal.sampling.run import RunLock, RunSettings, RunStats, SamplingRun, sidecar_path
+from planecal.sampling.poses import CommandModel
+from planecal.sampling.run import RunSettings, RunStats, SamplingRun
+from planecal.sampling.runfiles import RunLock, sidecar_path
 
 START_MOVES = ("here", "calibration", "home")
 END_MOVES = ("stay", "calibration", "home")
@@ -25,7 +27,8 @@ class Session:
     """What a session does around the run: ``start`` move (here: sample from where the
     robot is), ``end`` move after a complete run, ``resume`` the run in ``out``,
     ``background`` planning, ``hold_while_planning`` (the real cell), a ``planner``
-    (default: random poses), an ``observer`` and ``extra`` sidecar fields."""
+    (default: random poses), the ``model`` the run aims with (default: the scene's nominal
+    cell), an ``observer`` and ``extra`` sidecar fields."""
     out: Path
     start: str = "here"
     end: str = "stay"
@@ -33,6 +36,7 @@ class Session:
     background: bool = True
     hold_while_planning: bool = False
     planner: PlanSource | None = None
+    model: CommandModel | None = None
     observer: Observer | None = None
     extra: dict | None = None
 
@@ -116,7 +120,8 @@ def _session(ses: Session, scene, settings, link, laser, enable, checker, lock):
         raise InputError(f"--start {ses.start}: enable dropped on the way; nothing sampled") from None
     run = SamplingRun(drv, scene, settings, ses.out, checker, resume=ses.resume,
                       background=ses.background, hold_while_planning=ses.hold_while_planning,
-                      progress=progress, extra=ses.extra, lock=lock, planner=ses.planner)
+                      progress=progress, extra=ses.extra, lock=lock, planner=ses.planner,
+                      model=ses.model)
     t0 = time.perf_counter()
     ticks0 = drv.ticks
     try:
