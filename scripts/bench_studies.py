@@ -26,7 +26,7 @@ def main() -> int:
     ap.add_argument("--mode", default="twin", choices=("twin", "synthetic", "rehearse"))
     ap.add_argument("--jobs", type=int, default=None)
     args = ap.parse_args()
-    from planecal.fit import calibrate
+    from planecal.fit import Problem, solve
     from planecal.scene import nominal_params
     from planecal.studies.common import check_jobs
     from planecal.studies.montecarlo import MCSettings, _scene, run_many, truth_for, twin_samples
@@ -45,7 +45,7 @@ def main() -> int:
     n = 20
     t0 = time.perf_counter()
     for _ in range(n):
-        calibrate(scene.robot, qe, d, nominal_params(scene), plate)
+        solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
     fit_s = (time.perf_counter() - t0) / n
     print(f"calibration alone: {fit_s * 1e3:.1f} ms for {args.samples} samples "
           f"({1 / fit_s:.0f} per second per process)")

@@ -4,6 +4,7 @@ from conftest import INITIAL, SEED_DM, SEED_QE, TABLE10
 from planecal.cell import (CellParams, beam_direction, n_tilde_from_point_normal,
                            point_normal_from_n_tilde, predict, predict_with_jacobian,
                            sensor_rotation, transform_n_tilde)
+from planecal.layout import level1_layout
 
 
 def test_seed_samples_with_table10(robot):
@@ -56,7 +57,8 @@ def test_jacobian_against_central_differences(robot):
         x = np.concatenate([rng.uniform(-5e-3, 5e-3, 6), [0.03, -0.07, 0.18],
                             [rng.uniform(0.9, 1.5), rng.uniform(-1.2, -0.9)],
                             np.tile([0.0, -1.0, 3.6], k) + rng.uniform(-0.3, 0.3, 3 * k)])
-        params = CellParams.from_vector(x)
+        layout = level1_layout(k)
+        params = CellParams.from_vector(x, layout)
         qe = SEED_QE + rng.integers(-3000, 3000, (5, 6))
         pidx = rng.integers(0, k, 5)
         d, J = predict_with_jacobian(robot, qe, params, pidx)
@@ -66,10 +68,10 @@ def test_jacobian_against_central_differences(robot):
             xp, xm = x.copy(), x.copy()
             xp[j] += h
             xm[j] -= h
-            Jn[:, j] = (predict(robot, qe, CellParams.from_vector(xp), pidx)
-                        - predict(robot, qe, CellParams.from_vector(xm), pidx)) / (2 * h)
+            Jn[:, j] = (predict(robot, qe, CellParams.from_vector(xp, layout), pidx)
+                        - predict(robot, qe, CellParams.from_vector(xm, layout), pidx)) / (2 * h)
         np.testing.assert_allclose(J, Jn, rtol=1e-6, atol=1e-9 * np.abs(J).max())
         # samples on plane k have zero derivative for the other planes' n~
         for i, pk in enumerate(pidx):
-            others = [11 + 3 * m + c for m in range(k) if m != pk for c in range(3)]
+            others = [c for m in range(k) if m != pk for c in layout.columns("plane")[m]]
             assert np.all(J[i, others] == 0)

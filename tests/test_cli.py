@@ -54,6 +54,31 @@ def test_calibrate_writes_result_json(run_file, tmp_path, capsys):
     assert np.all(np.abs(err[1:5]) < 4 * std)
 
 
+def test_calibrate_result_holds_the_covariance_by_name(run_file, tmp_path, capsys):
+    # the free parameters' covariance, named; its diagonal is the std the file reports;
+    # rows and columns of what is not identifiable are null
+    path, _ = run_file
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "--out", str(out), "--free", "all"]) == 0
+    r = json.loads(out.read_text())
+    cov = r["covariance"]
+    assert cov["names"] == r["free"] == r["identifiability"]["free"]
+    assert len(cov["names"]) == 14 and all(len(row) == 14 for row in cov["matrix"])
+    bad = set(r["identifiability"]["not_identifiable"])
+    assert {"delta1", "delta6"} <= bad
+    for i, a in enumerate(cov["names"]):
+        for j, b in enumerate(cov["names"]):
+            v = cov["matrix"][i][j]
+            assert (v is None) == (a in bad or b in bad)
+            if v is not None:
+                assert v == cov["matrix"][j][i]
+    C = np.array([[np.nan if v is None else v for v in row] for row in cov["matrix"]])
+    k = cov["names"].index("delta3")
+    assert np.sqrt(C[k, k]) == pytest.approx(r["std"]["joint_offsets_rad"][2], rel=1e-12)
+    k = cov["names"].index("n1_z")
+    assert np.sqrt(C[k, k]) == pytest.approx(r["std"]["planes"][0]["n_tilde"][2], rel=1e-12)
+
+
 def test_calibrate_weighted_reports_its_variance_factor(run_file, tmp_path, capsys):
     # white 2 um noise, as the run file has, against the repeatability model (~10 um,
     # pose dependent): the weighted fit lands within 4 std of the truth and says the

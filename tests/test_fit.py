@@ -4,7 +4,8 @@ from scipy.optimize import least_squares
 
 from conftest import INITIAL, perturbed, synthetic_counts
 from planecal.cell import CellParams, predict
-from planecal.fit import FitOptions, analyze, calibrate, default_free
+from planecal.fit import FitOptions, Problem, analyze, solve
+from planecal.layout import level1_layout
 from planecal.scene import load_scene, nominal_params
 
 
@@ -18,19 +19,19 @@ def problem(robot):
 
 def test_noise_free_recovery_from_thesis_initial_values(robot, problem):
     truth, qe, d = problem
-    res = calibrate(robot, qe, d, INITIAL)
+    res = solve(Problem.from_arrays(robot, qe, d, INITIAL))
     err = res.params.to_vector() - truth.to_vector()
     assert np.abs(err[1:5]).max() < 1e-9  # delta2..delta5 [rad]
-    assert np.abs(err[default_free(1)]).max() < 1e-9
+    assert np.abs(err[level1_layout(1).default_free]).max() < 1e-9
     assert res.converged and res.iterations < 10
     assert res.rms_mm() < 1e-9 and res.rms_mm(initial=True) > 0.5
-    assert res.identifiability["not_identifiable"] == []
+    assert res.identifiability.not_identifiable == []
 
 
 def test_levenberg_marquardt_and_unscaled_reach_the_same_solution(robot, problem):
     truth, qe, d = problem
     for opts in (FitOptions(method="lm"), FitOptions(scale=False)):
-        res = calibrate(robot, qe, d, INITIAL, options=opts)
+        res = solve(Problem.from_arrays(robot, qe, d, INITIAL, options=opts))
         assert np.abs(res.params.joint_offsets - truth.joint_offsets).max() < 1e-9
 
 
@@ -38,16 +39,17 @@ def test_same_solution_as_scipy_least_squares(robot, problem):
     truth, qe, d = problem
     rng = np.random.default_rng(3)
     dn = d + rng.normal(0, 2e-6, len(d))
-    free = default_free(1)
+    layout = level1_layout(1)
+    free = layout.default_free
     x0 = INITIAL.to_vector()
 
     def f(xf):
         x = x0.copy()
         x[free] = xf
-        return predict(robot, qe, CellParams.from_vector(x)) - dn
+        return predict(robot, qe, CellParams.from_vector(x, layout)) - dn
 
     sp = least_squares(f, x0[free], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    res = calibrate(robot, qe, dn, INITIAL)
+    res = solve(Problem.from_arrays(robot, qe, dn, INITIAL))
     np.testing.assert_allclose(res.params.to_vector()[free], sp.x, atol=1e-9)
 
 
@@ -59,7 +61,7 @@ def test_offsets_within_three_sigma_over_seeds(robot):
         rng = np.random.default_rng(100 + seed)
         truth = perturbed(INITIAL, rng)
         qe, d = synthetic_counts(robot, truth, 150, rng)
-        res = calibrate(robot, qe, d + rng.normal(0, 2e-6, len(d)), INITIAL)
+        res = solve(Problem.from_arrays(robot, qe, d + rng.normal(0, 2e-6, len(d)), INITIAL))
         zs = (res.params.joint_offsets - truth.joint_offsets)[1:5] / res.std[1:5]
         assert np.all(np.abs(zs) < 3.5), zs
         assert 1.4e-6 < res.sigma_m < 2.6e-6
@@ -72,7 +74,7 @@ def test_outliers_are_dropped_and_named(robot, problem):
     rng = np.random.default_rng(4)
     dn = d + rng.normal(0, 2e-6, len(d))
     dn[[7, 42]] += 0.5e-3  # two 0.5 mm blunders
-    res = calibrate(robot, qe, dn, INITIAL, options=FitOptions(outlier_sigma=4))
+    res = solve(Problem.from_arrays(robot, qe, dn, INITIAL, options=FitOptions(outlier_sigma=4)))
     assert res.outliers == [7, 42]
     assert res.used.sum() == len(d) - 2
     assert np.abs(res.params.joint_offsets - truth.joint_offsets).max() < 1e-4
@@ -81,11 +83,11 @@ def test_outliers_are_dropped_and_named(robot, problem):
 
 def test_freed_delta1_delta6_are_named_not_numbered(robot, problem):
     truth, qe, d = problem
-    res = calibrate(robot, qe, d, INITIAL, options=FitOptions(free=np.ones(14, bool)))
-    ni = res.identifiability["not_identifiable"]
+    res = solve(Problem.from_arrays(robot, qe, d, INITIAL, free=np.ones(14, bool)))
+    ni = res.identifiability.not_identifiable
     assert "delta1" in ni and "delta6" in ni
     assert np.isnan(res.std[0]) and np.isnan(res.std[5])
-    dirs = res.identifiability["unidentifiable_directions"]
+    dirs = res.identifiability.unidentifiable_directions
     mixes = [set(d) for d in dirs]
     assert any("delta6" in m and "phi_z" in m for m in mixes)  # roll of the sensor
     assert any("delta1" in m and ({"n1_x", "n1_y"} & m) for m in mixes)  # plane about base z
@@ -103,21 +105,21 @@ def test_several_planes_share_robot_and_sensor(robot):
     qe = np.vstack([qe0, qe1])
     d = np.concatenate([d0, d1])
     pidx = np.r_[np.zeros(len(d0), int), np.ones(len(d1), int)]
-    res = calibrate(robot, qe, d, nominal, plane_index=pidx)
-    assert np.abs(res.params.to_vector() - truth.to_vector())[default_free(2)].max() < 1e-9
+    res = solve(Problem.from_arrays(robot, qe, d, nominal, pidx))
+    assert np.abs(res.params.to_vector() - truth.to_vector())[level1_layout(2).default_free].max() < 1e-9
     assert len(res.names) == 17
 
 
 def test_max_iter_reports_not_converged(robot, problem):
     truth, qe, d = problem
-    res = calibrate(robot, qe, d, INITIAL, options=FitOptions(max_iter=1))
+    res = solve(Problem.from_arrays(robot, qe, d, INITIAL, options=FitOptions(max_iter=1)))
     assert res.iterations == 1 and not res.converged and res.notes
 
 
 def test_too_few_samples(robot, problem):
     _, qe, d = problem
     with pytest.raises(ValueError, match="cannot determine 12 free parameters"):
-        calibrate(robot, qe[:12], d[:12], INITIAL)
+        solve(Problem.from_arrays(robot, qe[:12], d[:12], INITIAL))
 
 
 def test_scene_nominal_values_are_thesis_initial_values():
@@ -144,16 +146,16 @@ def test_fixed_perpendicular_orientation_cannot_see_the_beam_angles(robot):
     beam angles do not change any distance (first order); the analysis must say so."""
     scene, nominal, truth, qe, d, plate = _scene_problem("thesis_final", 60, 4, cone_deg=0.0)
     # at the nominal values every beam is exactly perpendicular to the (nominal) plate
-    ident, std = analyze(robot, qe, nominal, plate)
+    ident, cov = analyze(robot, qe, nominal, plate)
     # not exactly zero columns: whole encoder counts tilt each beam by ~1e-5 rad
-    poor = {p["parameter"]: p["std"] for p in ident["poorly_determined"]}
+    poor = {p.parameter: p.std for p in ident.poorly_determined}
     assert poor["phi_y"] > 0.05 and poor["phi_z"] > 0.05
-    assert {"phi_y", "phi_z"} <= set(ident["not_identifiable"])
-    assert np.isnan(std[9]) and np.isnan(std[10])
+    assert {"phi_y", "phi_z"} <= set(ident.not_identifiable)
+    assert np.isnan(cov.std("phi_y")) and np.isnan(cov.std("phi_z"))
     # with the default 30 deg cone they are identified
     scene, nominal, truth, qe, d, plate = _scene_problem("thesis_final", 60, 4)
-    ident, std = analyze(robot, qe, nominal, plate)
-    assert ident["not_identifiable"] == [] and np.all(std[9:11] < 1e-3)
+    ident, cov = analyze(robot, qe, nominal, plate)
+    assert ident.not_identifiable == [] and all(cov.std(n) < 1e-3 for n in ("phi_y", "phi_z"))
 
 
 def test_parallel_plate_delta1_has_no_effect(robot):
@@ -164,13 +166,13 @@ def test_parallel_plate_delta1_has_no_effect(robot):
     free = np.ones(14, bool)
     free[5] = False
     ident, _ = analyze(robot, qe, nominal, plate, free)  # at the exactly parallel nominal plate
-    assert ident["no_effect"] == ["delta1"] and "delta1" in ident["not_identifiable"]
-    assert {"delta1": 1.0} in ident["unidentifiable_directions"] or \
-        {"delta1": -1.0} in ident["unidentifiable_directions"]
+    assert ident.no_effect == ["delta1"] and "delta1" in ident.not_identifiable
+    assert {"delta1": 1.0} in ident.unidentifiable_directions or \
+        {"delta1": -1.0} in ident.unidentifiable_directions
     scene, nominal, truth, qe, d, plate = _scene_problem("thesis_final", 80, 5)
     ident, _ = analyze(robot, qe, nominal, plate, free)
-    assert "delta1" not in ident["no_effect"] and "delta1" in ident["not_identifiable"]
-    assert any("delta1" in d and "n1_x" in d for d in ident["unidentifiable_directions"])
+    assert "delta1" not in ident.no_effect and "delta1" in ident.not_identifiable
+    assert any("delta1" in d and "n1_x" in d for d in ident.unidentifiable_directions)
 
 
 # ----- weighted fit (heteroscedastic repeatability noise) ----------------------------------
@@ -206,22 +208,22 @@ def test_weighted_fit_is_the_fixed_point_of_scipy_with_its_weights(three_plate_d
     d = _measure(scene, truth, q0, plate, s, np.random.default_rng(1))
     opts = FitOptions(joint_sigma_rad=s, distance_sigma_m=1e-7)
     init = nominal_params(scene)
-    res = calibrate(scene.robot, qe, d, init, plate, opts)
+    res = solve(Problem.from_arrays(scene.robot, qe, d, init, plate, options=opts))
     _, J = predict_with_jacobian(scene.robot, qe, res.params, plate)
-    w = _weights(J, opts)
+    w = _weights(J, res.layout, opts)
     free = res.free
     x0 = init.to_vector()
 
     def f(xf):
         x = x0.copy()
         x[free] = xf
-        return (predict(scene.robot, qe, CellParams.from_vector(x), plate) - d) * w
+        return (predict(scene.robot, qe, CellParams.from_vector(x, res.layout), plate) - d) * w
     sp = least_squares(f, x0[free], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     assert np.abs(sp.x[:4] - res.params.to_vector()[1:5]).max() < 1e-10  # delta2..5 [rad]
     assert np.abs(sp.x - res.params.to_vector()[free]).max() < 1e-8
-    unweighted = calibrate(scene.robot, qe, d, init, plate)
+    unweighted = solve(Problem.from_arrays(scene.robot, qe, d, init, plate))
     assert np.abs(unweighted.params.to_vector()[1:5] - res.params.to_vector()[1:5]).max() > 1e-7
-    assert res.identifiability["weighted"] and "weighted" not in unweighted.identifiability
+    assert res.identifiability.weighted and not unweighted.identifiability.weighted
 
 
 def test_weighted_fit_reports_honest_std_where_the_unweighted_does_not(three_plate_design):
@@ -235,7 +237,7 @@ def test_weighted_fit_reports_honest_std_where_the_unweighted_does_not(three_pla
     scene, truth, qe, plate, s, q0 = three_plate_design
     rng = np.random.default_rng(7)
     init = nominal_params(scene)
-    free = default_free(3)
+    free = level1_layout(3).default_free
     want = truth.to_vector()[free][:4]  # delta2..delta5
     err = {"u": [], "w": []}
     rep = {"u": [], "w": []}
@@ -244,11 +246,11 @@ def test_weighted_fit_reports_honest_std_where_the_unweighted_does_not(three_pla
         d = _measure(scene, truth, q0, plate, s, rng)
         for key, opts in (("u", FitOptions()),
                           ("w", FitOptions(joint_sigma_rad=s, distance_sigma_m=1e-7))):
-            res = calibrate(scene.robot, qe, d, init, plate, opts)
+            res = solve(Problem.from_arrays(scene.robot, qe, d, init, plate, options=opts))
             err[key].append(res.params.to_vector()[free][:4] - want)
             rep[key].append(res.std[free][:4])
             if key == "w":
-                vf.append(res.identifiability["variance_factor"])
+                vf.append(res.identifiability.variance_factor)
     _, J = predict_with_jacobian(scene.robot, qe, truth, plate)
     Jf = J[:, free]
     crb = np.sqrt(np.diag(np.linalg.inv(Jf.T @ (Jf / noise_variance(J[:, :6], s, 1e-7)[:, None]))))[:4]
@@ -269,14 +271,133 @@ def test_sigma_counts_only_the_identifiable_directions(robot, problem):
     truth, qe, d = problem
     dn = d + np.random.default_rng(4).normal(0, 2e-6, len(d))
     everything = np.ones(len(INITIAL.to_vector()), bool)
-    res = calibrate(robot, qe, dn, INITIAL, options=FitOptions(free=everything))
-    rank = res.identifiability["rank"]
+    res = solve(Problem.from_arrays(robot, qe, dn, INITIAL, free=everything))
+    rank = res.identifiability.rank
     assert rank == everything.sum() - 2
     r = res.residuals_m
     assert res.sigma_m == pytest.approx(np.sqrt(r @ r / (len(r) - rank)), rel=1e-12)
-    ident, std = analyze(robot, qe, truth, sigma_m=2e-6)
+    ident, cov = analyze(robot, qe, truth, sigma_m=2e-6)
     _, J = predict_with_jacobian(robot, qe, truth)
-    Jf = J[:, default_free(1)]
+    Jf = J[:, level1_layout(1).default_free]
     want = 2e-6 * np.sqrt(np.diag(np.linalg.inv(Jf.T @ Jf)))
-    np.testing.assert_allclose(std[default_free(1)], want, rtol=1e-6)
-    assert ident["sigma_mm"] == pytest.approx(2e-3)
+    np.testing.assert_allclose(cov.stds, want, rtol=1e-6)
+    assert ident.sigma_mm == pytest.approx(2e-3)
+
+
+# ----- the typed problem and result ---------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def two_plane_problem(robot):
+    rng = np.random.default_rng(17)
+    nominal = CellParams(np.zeros(6), INITIAL.sensor_origin, INITIAL.phi_y, INITIAL.phi_z,
+                         [[0, -1.02511, 3.62708], [0.3, -0.9, 3.2]])
+    truth = perturbed(nominal, rng)
+    qe0, d0 = synthetic_counts(robot, truth, 70, rng, plane=0)
+    qe1, d1 = synthetic_counts(robot, truth, 70, rng, plane=1)
+    qe = np.vstack([qe0, qe1])
+    d = np.concatenate([d0, d1]) + rng.normal(0, 2e-6, len(d0) + len(d1))
+    plate = np.r_[np.zeros(len(d0), int), np.ones(len(d1), int)]
+    return Problem.from_arrays(robot, qe, d, nominal, plate,
+                               options=FitOptions(improvement_limit=1e-14))
+
+
+def test_solve_matches_scipy_least_squares_by_name(two_plane_problem):
+    # the same problem given to scipy: with the model's analytic Jacobian the same minimum
+    # to 1e-12, parameter by parameter (the solver loop, scaling and masks checked); with
+    # scipy's own finite-difference Jacobian to its resolution (~2e-10 here, and solve's
+    # gradient at its solution is the smaller); the same cost; and the covariance
+    # sigma^2 (J^T J)^-1 from scipy's numeric Jacobian at its solution
+    from planecal.cell import predict_with_jacobian
+    pb = two_plane_problem
+    L, free = pb.layout, pb.free
+    x0 = pb.initial.to_vector(L)
+
+    def params(xf):
+        x = x0.copy()
+        x[free] = xf
+        return CellParams.from_vector(x, L)
+
+    def f(xf):
+        return predict(pb.robot, pb.qe, params(xf), pb.plate) - pb.d_m
+
+    def jac(xf):
+        return predict_with_jacobian(pb.robot, pb.qe, params(xf), pb.plate, L)[1][:, free]
+
+    tight = dict(method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    sp_a = least_squares(f, x0[free], jac=jac, **tight)
+    sp = least_squares(f, x0[free], **tight)
+    res = solve(pb)
+    assert res.converged and res.outliers == [] and res.used.all()
+    got = res.params.to_vector(L)
+    for name, want_a, want in zip(L.names_of(free), sp_a.x, sp.x):
+        x = got[L.index(name)]
+        assert abs(x - want_a) < 1e-12 * max(1.0, abs(want_a)), name
+        assert abs(x - want) < 5e-10 * max(1.0, abs(want)), name
+    xf = got[free]
+    S = np.linalg.norm(jac(xf), axis=0)
+    assert np.abs(jac(xf).T @ f(xf) / S).max() <= np.abs(jac(sp.x).T @ f(sp.x) / S).max()
+    for name in L.names_of(~free):  # delta1, delta6 stay where they were
+        assert got[L.index(name)] == x0[L.index(name)]
+    assert res.initial_cost == pytest.approx(0.5 * np.sum(f(x0[free]) ** 2), rel=1e-12)
+    assert res.final_cost == pytest.approx(sp_a.cost, rel=1e-10)
+    assert res.final_cost < 1e-3 * res.initial_cost
+    m, p = len(pb), int(free.sum())
+    cov_sp = 2 * sp.cost / (m - p) * np.linalg.inv(sp.jac.T @ sp.jac)
+    assert res.covariance.names == tuple(L.names_of(free))
+    np.testing.assert_allclose(res.covariance.matrix, cov_sp, rtol=1e-4,
+                               atol=1e-6 * np.abs(cov_sp).max())
+    for j, name in enumerate(res.covariance.names):
+        assert res.covariance.std(name) == pytest.approx(np.sqrt(cov_sp[j, j]), rel=1e-4)
+        assert res.std[L.index(name)] == res.covariance.std(name)
+    assert np.isnan(res.std[L.index("delta1")]) and np.isnan(res.std[L.index("delta6")])
+
+
+def test_covariance_and_identifiability_are_typed_and_agree(two_plane_problem):
+    from dataclasses import asdict
+    res = solve(two_plane_problem)
+    cov, ident = res.covariance, res.identifiability
+    C = cov.correlation()
+    np.testing.assert_allclose(np.diag(C), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(C, C.T, rtol=1e-12)
+    pairs = cov.correlated_pairs(0.5)
+    want = {(a, b) for i, a in enumerate(cov.names) for j, b in enumerate(cov.names)
+            if i < j and abs(C[i, j]) > 0.5}
+    assert {(pr.a, pr.b) for pr in pairs} == want and want
+    for pr in pairs:
+        assert pr.rho == round(C[cov.index(pr.a), cov.index(pr.b)], 5)
+    assert ident.correlated_pairs == cov.correlated_pairs(FitOptions().correlation_limit)
+    d = asdict(ident)  # the result file's object: today's keys, in today's order
+    assert list(d) == ["free", "not_identifiable", "no_effect", "poorly_determined",
+                       "unidentifiable_directions", "weak_directions", "correlated_pairs",
+                       "singular_values", "scaled_singular_values", "condition_number_scaled",
+                       "observability", "sigma_mm", "samples", "rank",
+                       "identifiable_min_scaled_ratio", "weighted", "variance_factor"]
+    assert list(d["observability"]) == ["O1", "O2", "O3", "O4"]
+    assert d["free"] == list(cov.names) and d["samples"] == len(two_plane_problem)
+    assert d["rank"] == len(cov.names) and d["sigma_mm"] == pytest.approx(res.sigma_m * 1e3)
+    with pytest.raises(KeyError, match="not a free parameter"):
+        cov.std("delta1")
+    out = cov.to_dict()
+    assert out["names"] == list(cov.names) and len(out["matrix"]) == len(cov.names)
+    assert out["matrix"][0][0] == pytest.approx(cov.matrix[0, 0])
+
+
+def test_problem_from_samples_and_its_checks(robot, problem, tmp_path):
+    from planecal.errors import InputError
+    from planecal.samples import read_samples, write_samples
+    truth, qe, d = problem
+    f = tmp_path / "s.tsv"
+    write_samples(f, qe, d * 1e3)
+    s = read_samples(f)
+    pb = Problem.from_samples(robot, s, INITIAL, free="delta2,delta3,o_x")
+    assert pb.free_names == ["delta2", "delta3", "o_x"] and pb.qe.dtype == np.int64
+    np.testing.assert_allclose(pb.d_m, d, atol=1e-9)  # mm in the file (6 decimals), m here
+    assert len(pb.subset(np.arange(10))) == 10
+    with pytest.raises(InputError, match="--free: unknown parameter 'n2_x'"):
+        Problem.from_samples(robot, s, INITIAL, free=["n2_x"])
+    with pytest.raises(ValueError, match="refer to plate 2, parameters hold 1"):
+        Problem.from_arrays(robot, qe, d, INITIAL, np.ones(len(d), int))
+    with pytest.raises(ValueError, match="free mask"):
+        Problem.from_arrays(robot, qe, d, INITIAL, free=np.ones(17, bool))
+    with pytest.raises(ValueError, match="do not match"):
+        Problem.from_arrays(robot, qe[:-1], d, INITIAL)

@@ -20,7 +20,7 @@ from rerun.chunk import RrdReader  # noqa: E402
 from planecal import cli  # noqa: E402
 from planecal.cell import predict  # noqa: E402
 from planecal.errors import InputError  # noqa: E402
-from planecal.fit import calibrate  # noqa: E402
+from planecal.fit import Problem, solve  # noqa: E402
 from planecal.links.base import AlwaysEnabled  # noqa: E402
 from planecal.rerun_log import (HIST_BINS, SamplingObserver, log_fit_to_file,  # noqa: E402
                                 open_recording, recording_path, reject_kind, sampling_observer)
@@ -235,7 +235,7 @@ def test_real_replay_has_the_same_entity_tree(rehearsal, replayed):
 
 def test_fit_recording_histograms_match_the_optimizer(scene, rehearsal, tmp_path):
     s = read_samples(rehearsal["out"])
-    res = calibrate(scene.robot, s.qe, s.d_mm * 1e-3, nominal_params(scene))
+    res = solve(Problem.from_samples(scene.robot, s, nominal_params(scene)))
     path = log_fit_to_file(tmp_path, res, s, scene)
     assert path.parent == tmp_path and path.name.startswith("calibrate-thesis_final-")
     data = read_rrd(path)
@@ -250,11 +250,11 @@ def test_fit_recording_histograms_match_the_optimizer(scene, rehearsal, tmp_path
                                    0.5 * (edges[1:] + edges[:-1]))
         assert data[entity]["static"]
     rms = data["/fit/rms_mm"]["rows"]
-    assert [r["iteration"] for r in rms] == [h["iteration"] for h in res.history]
+    assert [r["iteration"] for r in rms] == [h.iteration for h in res.history]
     np.testing.assert_allclose([r["Scalars:scalars"][0] for r in rms],
-                               [h["rms_m"] * 1e3 for h in res.history])
+                               [h.rms_m * 1e3 for h in res.history])
     mx = [r["Scalars:scalars"][0] for r in data["/fit/max_mm"]["rows"]]
-    np.testing.assert_allclose(mx, [h["max_m"] * 1e3 for h in res.history])
+    np.testing.assert_allclose(mx, [h.max_m * 1e3 for h in res.history])
     table = data["/fit/parameters"]["rows"][-1]["TextDocument:text"][0]
     for name in res.names:
         assert f"| {name} |" in table
@@ -266,9 +266,10 @@ def test_fit_recording_histograms_match_the_optimizer(scene, rehearsal, tmp_path
     from planecal.fit import FitOptions
     from planecal.rerun_log.fit import identifiability_markdown
     from planecal.robot import repeatability_sigma
-    wres = calibrate(scene.robot, s.qe, s.d_mm * 1e-3, nominal_params(scene),
-                     options=FitOptions(joint_sigma_rad=repeatability_sigma(scene.robot)))
-    f = wres.identifiability["variance_factor"]
+    wres = solve(Problem.from_samples(
+        scene.robot, s, nominal_params(scene),
+        options=FitOptions(joint_sigma_rad=repeatability_sigma(scene.robot))))
+    f = wres.identifiability.variance_factor
     assert f"variance factor {f:.3g}" in identifiability_markdown(wres)
 
 

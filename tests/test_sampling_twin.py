@@ -6,7 +6,7 @@ import pytest
 from test_sampling_fakes import DropAfter
 
 from planecal.encoder import counts_to_joints
-from planecal.fit import calibrate
+from planecal.fit import Problem, solve
 from planecal.links.base import AlwaysEnabled
 from planecal.samples import read_samples
 from planecal.sampling import Driver, RunSettings, SamplingRun, load_sidecar
@@ -44,7 +44,7 @@ def test_rehearsal_recovers_the_true_offsets_within_3_sigma(scene, world, tmp_pa
     assert stats.max_step_counts <= 51
     s = read_samples(out)
     assert len(s) == 150
-    fit = calibrate(scene.robot, s.qe, s.d_mm * 1e-3, nominal_params(scene))
+    fit = solve(Problem.from_samples(scene.robot, s, nominal_params(scene)))
     truth = twin.truth
     err = fit.params.joint_offsets[1:5] - truth.joint_offsets[1:5]
     sd = fit.std[1:5]

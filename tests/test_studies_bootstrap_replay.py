@@ -6,7 +6,7 @@ import pytest
 from conftest import SEED_DM, SEED_QE, TABLE10
 
 from planecal.cli import main
-from planecal.fit import FitOptions
+from planecal.fit import FitOptions, Problem
 from planecal.samples import write_samples
 from planecal.scene import load_scene, nominal_params
 from planecal.studies.bootstrap import BootstrapSettings, bootstrap, overlap
@@ -31,8 +31,9 @@ def test_overlap_formula():
 
 def test_bootstrap_spread_shrinks_and_brackets_the_truth(pool):
     scene, truth, qe, d, plate = pool
-    res = bootstrap(scene.robot, qe, d, nominal_params(scene), plate,
-                    BootstrapSettings((30, 120), 8, seed=2), FitOptions(), quiet=True)
+    res = bootstrap(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate,
+                                        options=FitOptions()),
+                    BootstrapSettings((30, 120), 8, seed=2), quiet=True)
     small, big = res["sizes"]
     assert small["fits"] == big["fits"] == 8
     for k, name in enumerate(["delta2", "delta3", "delta4", "delta5"], start=1):

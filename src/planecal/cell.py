@@ -7,8 +7,10 @@ Parameters (SI):
   phi_y, phi_z   beam z_f = Rz(phi_z) Ry(phi_y) e_z = (cz sy, sz sy, cy) in the flange frame
   planes         n~ (k, 3) 1/m in the base frame, n~ . p = 1 on plane k
 
-The parameter vector orders them [delta1..6, o_x, o_y, o_z, phi_y, phi_z, n1_x, n1_y,
-n1_z, n2_x, ...]: robot and sensor shared, one n~ per plane (seed 6.3).
+The parameter vector and its names come from a ``planecal.layout.ParamLayout`` (level 1:
+[delta1..6, o_x, o_y, o_z, phi_y, phi_z, n1_x, n1_y, n1_z, n2_x, ...], robot and sensor
+shared, one n~ per plane, seed 6.3); ``CellParams.to_vector``/``from_vector`` and the
+Jacobian's columns go through it, by group, so no code here knows an offset.
 
 Jacobian (derived here, equal to the seed's 6.20-6.23): with p_m = o_b + d z_b the hit
 point and s = n~ . z_b,
@@ -24,9 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planecal.encoder import counts_to_joints
+from planecal.layout import Group, ParamLayout, level1_layout
 from planecal.robot import Robot, chain, fk
-
-N_SHARED = 11  # 6 offsets + 3 origin + 2 angles
 
 
 @dataclass
@@ -48,28 +49,52 @@ class CellParams:
     def n_planes(self) -> int:
         return len(self.planes)
 
-    def to_vector(self) -> np.ndarray:
-        return np.concatenate([self.joint_offsets, self.sensor_origin,
-                               [self.phi_y, self.phi_z], self.planes.ravel()])
+    def to_vector(self, layout: ParamLayout | None = None) -> np.ndarray:
+        """The values in ``layout``'s order (default: the level-1 layout of this many planes)."""
+        layout = layout or level1_layout(self.n_planes)
+        x = np.empty(len(layout))
+        for g in layout.groups:
+            x[layout.slice(g.name)] = self._group_values(g)
+        return x
 
     @classmethod
-    def from_vector(cls, x: np.ndarray) -> "CellParams":
+    def from_vector(cls, x: np.ndarray, layout: ParamLayout) -> "CellParams":
+        """The parameters held by a vector in ``layout``'s order."""
         x = np.asarray(x, float)
-        return cls(x[:6], x[6:9], x[9], x[10], x[N_SHARED:].reshape(-1, 3))
+        if x.shape != (len(layout),):
+            raise ValueError(f"a vector of {x.shape} for a layout of {len(layout)} parameters")
+        p = cls(planes=np.zeros((layout.n_planes, 3)))
+        for g in layout.groups:
+            p._set_group_values(g, x[layout.slice(g.name)])
+        return p
+
+    # the one place that maps layout groups to fields (both directions)
+    def _group_values(self, g: Group) -> np.ndarray:
+        if g.kind == "joint_offsets":
+            return self.joint_offsets
+        if g.kind == "sensor_origin":
+            return self.sensor_origin
+        if g.kind == "sensor_angles":
+            return np.array([self.phi_y, self.phi_z])
+        if g.kind == "plane":
+            return self.planes[g.index]
+        raise ValueError(f"the cell model has no parameters of kind {g.kind!r}")
+
+    def _set_group_values(self, g: Group, v: np.ndarray) -> None:
+        if g.kind == "joint_offsets":
+            self.joint_offsets = v.copy()
+        elif g.kind == "sensor_origin":
+            self.sensor_origin = v.copy()
+        elif g.kind == "sensor_angles":
+            self.phi_y, self.phi_z = float(v[0]), float(v[1])
+        elif g.kind == "plane":
+            self.planes[g.index] = v
+        else:
+            raise ValueError(f"the cell model has no parameters of kind {g.kind!r}")
 
     def copy(self) -> "CellParams":
-        return CellParams.from_vector(self.to_vector())
-
-
-def parameter_names(n_planes: int) -> list[str]:
-    names = [f"delta{i}" for i in range(1, 7)] + ["o_x", "o_y", "o_z", "phi_y", "phi_z"]
-    for k in range(1, n_planes + 1):
-        names += [f"n{k}_x", f"n{k}_y", f"n{k}_z"]
-    return names
-
-
-def parameter_units(n_planes: int) -> list[str]:
-    return ["rad"] * 6 + ["m"] * 3 + ["rad"] * 2 + ["1/m"] * (3 * n_planes)
+        return CellParams(self.joint_offsets.copy(), self.sensor_origin.copy(), self.phi_y,
+                          self.phi_z, self.planes.copy())
 
 
 def beam_direction(phi_y: float, phi_z: float) -> np.ndarray:
@@ -113,8 +138,11 @@ def predict(robot: Robot, qe: np.ndarray, params: CellParams,
 
 
 def predict_with_jacobian(robot: Robot, qe: np.ndarray, params: CellParams,
-                          plane_index: np.ndarray | None = None):
-    """Model distance d (N,) [m] and its Jacobian (N, 11 + 3k) w.r.t. to_vector()."""
+                          plane_index: np.ndarray | None = None,
+                          layout: ParamLayout | None = None):
+    """Model distance d (N,) [m] and its Jacobian (N, len(layout)) w.r.t. the parameters in
+    ``layout``'s order (default: the level-1 layout of ``params``' planes)."""
+    layout = layout or level1_layout(params.n_planes)
     qe = np.atleast_2d(qe)
     N = len(qe)
     pidx = np.zeros(N, int) if plane_index is None else np.asarray(plane_index, int)
@@ -128,18 +156,19 @@ def predict_with_jacobian(robot: Robot, qe: np.ndarray, params: CellParams,
     s = np.einsum("kn,kn->n", n, z_b)
     d = (1.0 - np.einsum("kn,kn->n", n, o_b)) / s
     p_m = o_b + d * z_b
-    J = np.zeros((N, N_SHARED + 3 * params.n_planes))
+    J = np.zeros((N, len(layout)))
     # joint offsets: rotation about z_{i-1} through o_{i-1}:
     # n~ . (z x (p_m - o)) = (p_m - o) . (n~ x z)
+    Jd = J[:, layout.slice("joint_offsets")]  # a view: its columns are J's
     for i in range(6):
         z, w = zs[i], p_m - ps[i]
-        J[:, i] = -(w[0] * (n[1] * z[2] - n[2] * z[1]) + w[1] * (n[2] * z[0] - n[0] * z[2])
-                    + w[2] * (n[0] * z[1] - n[1] * z[0])) / s
+        Jd[:, i] = -(w[0] * (n[1] * z[2] - n[2] * z[1]) + w[1] * (n[2] * z[0] - n[0] * z[2])
+                     + w[2] * (n[0] * z[1] - n[1] * z[0])) / s
     nf = np.stack([np.einsum("kn,kn->n", n, v) for v in (x6, y6, z6)], -1)  # R^T n~, (N, 3)
-    J[:, 6:9] = -nf / s[:, None]
-    J[:, 9:11] = -(d / s)[:, None] * (nf @ beam_direction_derivative(params.phi_y, params.phi_z))
-    cols = N_SHARED + 3 * pidx[:, None] + np.arange(3)
-    J[np.arange(N)[:, None], cols] = -(p_m / s).T
+    J[:, layout.slice("sensor_origin")] = -nf / s[:, None]
+    J[:, layout.slice("sensor_angles")] = -(d / s)[:, None] * (
+        nf @ beam_direction_derivative(params.phi_y, params.phi_z))
+    J[np.arange(N)[:, None], layout.columns("plane")[pidx]] = -(p_m / s).T
     return d, J
 
 

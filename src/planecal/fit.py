@@ -2,6 +2,12 @@
 Levenberg-Marquardt damping and column scaling, k-sigma outlier elimination, a mask of
 free parameters, and an honest account of what the data can and cannot identify.
 
+A typed problem in, a typed result out: ``Problem`` (the robot, the samples in SI, the
+initial parameters, the parameter layout, the free mask, ``FitOptions``), built once from
+arrays or from a ``Samples`` file; ``solve(problem) -> Result`` (params, residuals, history,
+``Covariance`` over the free parameters by name, ``Identifiability``). Parameters are
+addressed by name through the problem's ``planecal.layout.ParamLayout``.
+
 Residual r = d_model - d_measured [m]. One iteration: J dx = -r solved in the least-squares
 sense on the free columns. Iteration stops after ``max_iter`` corrections or when the mean
 absolute correction falls below ``improvement_limit`` (the seed's end condition, 7.2).
@@ -28,39 +34,14 @@ the scaled Jacobian.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from planecal.cell import CellParams, parameter_names, predict, predict_with_jacobian
+from planecal.cell import CellParams, predict, predict_with_jacobian
+from planecal.layout import ParamLayout, level1_layout
 from planecal.robot import Robot
-
-
-def default_free(n_planes: int) -> np.ndarray:
-    """Everything but delta1 and delta6, which no plane calibration can separate from the
-    plane's rotation about the base z axis and the sensor's roll (seed 6.2)."""
-    free = np.ones(11 + 3 * n_planes, bool)
-    free[[0, 5]] = False
-    return free
-
-
-def free_from_names(spec, n_planes: int) -> np.ndarray:
-    """Free-parameter mask from names (a comma-separated string or a list; "all" frees
-    everything); None gives ``default_free``."""
-    from planecal.errors import InputError
-    if not spec:
-        return default_free(n_planes)
-    names = parameter_names(n_planes)
-    wanted = [w.strip() for w in (spec.split(",") if isinstance(spec, str) else spec)]
-    mask = np.zeros(len(names), bool)
-    for name in filter(None, wanted):
-        if name == "all":
-            mask[:] = True
-        elif name in names:
-            mask[names.index(name)] = True
-        else:
-            raise InputError(f"--free: unknown parameter {name!r}; known: {', '.join(names)}")
-    return mask
+from planecal.samples import Samples
 
 
 @dataclass
@@ -70,16 +51,11 @@ class FitOptions:
     outlier_sigma: float | None = None
     method: str = "gn"  # "gn": Gauss-Newton (SVD pseudo-inverse); "lm": Levenberg-Marquardt
     scale: bool = True  # column scaling of the Jacobian
-    free: np.ndarray | None = None  # bool mask over CellParams.to_vector(); None: default_free
     rcond: float = 1e-7  # pseudo-inverse cut-off relative to the largest scaled singular value
     lm_lambda0: float = 1e-3
     unidentifiable_ratio: float = 1e-7
     weak_ratio: float = 1e-3
     correlation_limit: float = 0.95
-    # a standard deviation above these says "not identifiable in practice" (std not reported)
-    practical_std_rad: float = 0.01
-    practical_std_m: float = 0.01
-    practical_std_plane: float = 0.1  # 1/m, n~ components (|n~| ~ 1/distance to the plane)
     # weighted fit (module docstring): joint-angle std of the robot's repeatability [rad]
     # (``robot.repeatability_sigma``; None: unweighted) and the std of a sample's distance
     # from the sensor itself [m]
@@ -87,33 +63,258 @@ class FitOptions:
     distance_sigma_m: float = 1e-6
 
 
-@dataclass
-class FitResult:
-    params: CellParams
+# ----- the problem --------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """One calibration problem, in SI: encoder counts ``qe`` (N, 6) int64, measured
+    distances ``d_m`` (N,) [m], ``plate`` (N,) 0-based plate of each sample, the
+    ``initial`` parameters, the ``layout`` of the parameter vector, the ``free`` mask over
+    it and the ``options``. Checked when built (ValueError); use ``from_arrays`` or
+    ``from_samples``."""
+    robot: Robot
+    qe: np.ndarray
+    d_m: np.ndarray
+    plate: np.ndarray
     initial: CellParams
-    names: list[str]
+    layout: ParamLayout
     free: np.ndarray
-    std: np.ndarray  # full-vector std; NaN for fixed or unidentifiable parameters
-    cov: np.ndarray  # (p, p) over the free parameters (NaN rows for unidentifiable ones)
-    residuals_m: np.ndarray  # final model - measured, all samples
+    options: FitOptions = field(default_factory=FitOptions)
+
+    def __post_init__(self):
+        qe = np.asarray(self.qe, np.int64)
+        d = np.asarray(self.d_m, float)
+        plate = np.asarray(self.plate, int)
+        free = np.asarray(self.free, bool)
+        for name, v in (("qe", qe), ("d_m", d), ("plate", plate), ("free", free)):
+            object.__setattr__(self, name, v)
+        N = len(d)
+        if qe.shape != (N, 6) or plate.shape != (N,) or d.shape != (N,):
+            raise ValueError(f"samples: counts {qe.shape}, distances {d.shape} and plates "
+                             f"{plate.shape} do not match (N, 6), (N,), (N,)")
+        if self.layout.n_planes != self.initial.n_planes:
+            raise ValueError(f"the layout holds {self.layout.n_planes} plane(s), the initial "
+                             f"parameters {self.initial.n_planes}")
+        if plate.size and plate.min() < 0:
+            raise ValueError(f"samples refer to plate {plate.min() + 1}: no such plate")
+        if plate.size and plate.max() >= self.initial.n_planes:
+            raise ValueError(f"samples refer to plate {plate.max() + 1}, parameters hold "
+                             f"{self.initial.n_planes} plane(s)")
+        if free.shape != (len(self.layout),):
+            raise ValueError(f"free mask of {free.shape} over {len(self.layout)} parameters")
+        p = int(free.sum())
+        if N <= p:
+            raise ValueError(f"{N} samples cannot determine {p} free parameters")
+        opt = self.options
+        if opt.joint_sigma_rad is not None and not (
+                np.isfinite(opt.joint_sigma_rad) and opt.joint_sigma_rad >= 0
+                and np.isfinite(opt.distance_sigma_m) and opt.distance_sigma_m > 0):
+            raise ValueError("weighted fit: joint_sigma_rad must be finite and >= 0, "
+                             "distance_sigma_m finite and > 0")
+
+    @classmethod
+    def from_arrays(cls, robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
+                    free=None, options: FitOptions | None = None,
+                    layout: ParamLayout | None = None) -> "Problem":
+        """``free``: a bool mask over the layout, parameter names (a list or the --free
+        comma string, "all"), or None for the layout's default. ``layout``: default the
+        level-1 layout of ``initial``'s planes."""
+        layout = layout or level1_layout(initial.n_planes)
+        n = len(np.asarray(d_m))
+        plate = np.zeros(n, int) if plate is None else plate
+        return cls(robot, qe, d_m, plate, initial, layout, free_mask(layout, free),
+                   options or FitOptions())
+
+    @classmethod
+    def from_samples(cls, robot: Robot, samples: Samples, initial: CellParams, *, free=None,
+                     options: FitOptions | None = None,
+                     layout: ParamLayout | None = None) -> "Problem":
+        """From a sample file's ``Samples`` (its mm become m here)."""
+        return cls.from_arrays(robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate,
+                               free=free, options=options, layout=layout)
+
+    def __len__(self) -> int:
+        return len(self.d_m)
+
+    @property
+    def free_names(self) -> list[str]:
+        return self.layout.names_of(self.free)
+
+    def subset(self, idx) -> "Problem":
+        """The same problem on the samples ``idx``."""
+        return replace(self, qe=self.qe[idx], d_m=self.d_m[idx], plate=self.plate[idx])
+
+
+def free_mask(layout: ParamLayout, free) -> np.ndarray:
+    """A free mask from a bool mask, parameter names (list or comma string) or None."""
+    if free is None:
+        return layout.default_free
+    if isinstance(free, str):
+        return layout.free_from_names(free)
+    arr = np.asarray(free)
+    if arr.dtype == bool:
+        return arr.copy()
+    return layout.free_from_names(list(free))
+
+
+# ----- the result -----------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Iteration:
+    iteration: int
+    rms_m: float  # of the samples used
+    max_m: float
+    samples: int  # used
+    mean_abs_correction: float | None = None  # None for iteration 0
+
+
+@dataclass(frozen=True)
+class CorrelatedPair:
+    a: str
+    b: str
+    rho: float
+
+
+@dataclass(frozen=True)
+class PoorlyDetermined:
+    parameter: str
+    std: float
+    limit: float
+
+
+@dataclass(frozen=True)
+class WeakDirection:
+    scaled_singular_ratio: float
+    direction: dict  # parameter name -> component of the unit direction
+
+
+@dataclass(frozen=True)
+class Observability:
+    O1: float
+    O2: float
+    O3: float
+    O4: float
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """What the data can and cannot identify (module docstring); ``dataclasses.asdict``
+    gives the result file's ``identifiability`` object."""
+    free: list[str]
+    not_identifiable: list[str]
+    no_effect: list[str]
+    poorly_determined: list[PoorlyDetermined]
+    unidentifiable_directions: list[dict]  # each: parameter name -> component
+    weak_directions: list[WeakDirection]
+    correlated_pairs: list[CorrelatedPair]
+    singular_values: list[float]
+    scaled_singular_values: list[float]
+    condition_number_scaled: float
+    observability: Observability
+    sigma_mm: float
+    samples: int
+    rank: int
+    identifiable_min_scaled_ratio: float
+    weighted: bool = False
+    variance_factor: float | None = None  # weighted fit only
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True, eq=False)
+class Covariance:
+    """Covariance of the free parameters, by name; NaN rows and columns for a parameter
+    that is not identifiable (in theory or in practice)."""
+    names: tuple[str, ...]
+    matrix: np.ndarray  # (p, p), SI units
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"{name!r} is not a free parameter "
+                           f"(free: {', '.join(self.names)})") from None
+
+    def std(self, name: str) -> float:
+        return float(self.stds[self.index(name)])
+
+    @property
+    def stds(self) -> np.ndarray:
+        """Standard deviations in ``names`` order (NaN where not identifiable)."""
+        return np.sqrt(np.maximum(np.diag(self.matrix), 0.0))
+
+    def correlation(self) -> np.ndarray:
+        s = self.stds
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.matrix / np.outer(s, s)
+
+    def correlated_pairs(self, threshold: float) -> list[CorrelatedPair]:
+        """The pairs whose |correlation| exceeds ``threshold``, rho rounded to 5 digits."""
+        c = self.correlation()
+        p = len(self.names)
+        return [CorrelatedPair(self.names[i], self.names[j], round(float(c[i, j]), 5))
+                for i in range(p) for j in range(i + 1, p)
+                if np.isfinite(c[i, j]) and abs(c[i, j]) > threshold]
+
+    def to_dict(self) -> dict:
+        """{"names": [...], "matrix": [[...]]} with null where not identifiable."""
+        return {"names": list(self.names),
+                "matrix": [[float(v) if np.isfinite(v) else None for v in row]
+                           for row in self.matrix]}
+
+
+@dataclass(frozen=True, eq=False)
+class Result:
+    problem: Problem
+    params: CellParams
+    converged: bool
+    iterations: int
+    initial_cost: float  # 0.5 |W r|^2 over the samples used (scipy's least_squares cost)
+    final_cost: float  # at the last evaluation (within the end condition of the solution)
+    history: list[Iteration]
+    residuals_m: np.ndarray  # final model - measured, all samples (outliers included)
     initial_residuals_m: np.ndarray
     used: np.ndarray  # bool mask: samples kept (not outliers)
     outliers: list[int]
-    iterations: int
-    history: list[dict]
-    identifiability: dict
     sigma_m: float
-    converged: bool = True
+    covariance: Covariance
+    identifiability: Identifiability
     notes: list[str] = field(default_factory=list)
 
     @property
+    def layout(self) -> ParamLayout:
+        return self.problem.layout
+
+    @property
+    def free(self) -> np.ndarray:
+        return self.problem.free
+
+    @property
+    def initial(self) -> CellParams:
+        return self.problem.initial
+
+    @property
+    def names(self) -> list[str]:
+        return self.layout.names
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviations over the whole layout; NaN for fixed or unidentifiable."""
+        out = np.full(len(self.layout), np.nan)
+        out[self.free] = self.covariance.stds
+        return out
+
+    @property
     def correction(self) -> np.ndarray:
-        return self.params.to_vector() - self.initial.to_vector()
+        return self.params.to_vector(self.layout) - self.initial.to_vector(self.layout)
 
     def rms_mm(self, initial: bool = False) -> float:
         r = self.initial_residuals_m if initial else self.residuals_m
         return float(np.sqrt(np.mean(r[self.used] ** 2)) * 1e3)
 
+
+# ----- the solver ---------------------------------------------------------------------------
 
 def noise_variance(J_delta: np.ndarray, joint_sigma: float, distance_sigma_m: float) -> np.ndarray:
     """Per-sample distance noise variance [m^2]: J_delta (N, 6) the Jacobian columns of the
@@ -122,12 +323,12 @@ def noise_variance(J_delta: np.ndarray, joint_sigma: float, distance_sigma_m: fl
     return joint_sigma ** 2 * np.sum(J_delta ** 2, axis=1) + distance_sigma_m ** 2
 
 
-def _weights(J: np.ndarray, opt: "FitOptions") -> np.ndarray | None:
-    """Row weights 1/sqrt(v_i) from the full Jacobian J (its first six columns are the
-    offsets'), or None for an unweighted fit."""
+def _weights(J: np.ndarray, layout: ParamLayout, opt: FitOptions) -> np.ndarray | None:
+    """Row weights 1/sqrt(v_i) from the full Jacobian J, or None for an unweighted fit."""
     if opt.joint_sigma_rad is None:
         return None
-    return 1.0 / np.sqrt(noise_variance(J[:, :6], opt.joint_sigma_rad, opt.distance_sigma_m))
+    return 1.0 / np.sqrt(noise_variance(J[:, layout.slice("joint_offsets")],
+                                        opt.joint_sigma_rad, opt.distance_sigma_m))
 
 
 def _solve_step(A: np.ndarray, r: np.ndarray, rcond: float) -> np.ndarray:
@@ -148,46 +349,35 @@ def _scales(J: np.ndarray, on: bool) -> np.ndarray:
     return np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
 
 
-def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams,
-              plane_index: np.ndarray | None = None,
-              options: FitOptions | None = None) -> FitResult:
-    """Fit the cell parameters to samples (encoder counts qe (N,6), distances d_m (N,) [m])."""
-    opt = options or FitOptions()
-    qe = np.asarray(qe)
-    d_m = np.asarray(d_m, float)
-    N = len(d_m)
-    pidx = np.zeros(N, int) if plane_index is None else np.asarray(plane_index, int)
-    if pidx.size and pidx.max() >= initial.n_planes:
-        raise ValueError(f"samples refer to plate {pidx.max() + 1}, parameters hold "
-                         f"{initial.n_planes} plane(s)")
-    names = parameter_names(initial.n_planes)
-    free = default_free(initial.n_planes) if opt.free is None else np.asarray(opt.free, bool)
-    p = int(free.sum())
-    if N <= p:
-        raise ValueError(f"{N} samples cannot determine {p} free parameters")
-    x = initial.to_vector()
+def solve(problem: Problem) -> Result:
+    """Fit the cell parameters to the problem's samples (module docstring)."""
+    pb = problem
+    opt, layout, free = pb.options, pb.layout, pb.free
+    robot, qe, d_m, pidx = pb.robot, pb.qe, pb.d_m, pb.plate
+    N, p = len(d_m), int(free.sum())
+    x = pb.initial.to_vector(layout)
     used = np.ones(N, bool)
-    history = []
+    history: list[Iteration] = []
     outliers: list[int] = []
     lam = opt.lm_lambda0
     iterations = 0
     converged = False
 
-    if opt.joint_sigma_rad is not None and not (
-            np.isfinite(opt.joint_sigma_rad) and opt.joint_sigma_rad >= 0
-            and np.isfinite(opt.distance_sigma_m) and opt.distance_sigma_m > 0):
-        raise ValueError("weighted fit: joint_sigma_rad must be finite and >= 0, "
-                         "distance_sigma_m finite and > 0")
-
     def evaluate(xv, mask):
         """Residuals, free Jacobian columns and row weights (None: unweighted) at xv."""
-        d, J = predict_with_jacobian(robot, qe[mask], CellParams.from_vector(xv), pidx[mask])
-        return d - d_m[mask], J[:, free], _weights(J, opt)
+        d, J = predict_with_jacobian(robot, qe[mask], CellParams.from_vector(xv, layout),
+                                     pidx[mask], layout)
+        return d - d_m[mask], J[:, free], _weights(J, layout, opt)
+
+    def cost(r, w):
+        rw = r if w is None else r * w
+        return 0.5 * float(rw @ rw)
 
     r, Jf, w = evaluate(x, used)
     initial_r = r.copy()
-    history.append({"iteration": 0, "rms_m": float(np.sqrt(np.mean(r ** 2))),
-                    "max_m": float(np.max(np.abs(r))), "samples": int(used.sum())})
+    initial_cost = cost(r, w)
+    history.append(Iteration(0, float(np.sqrt(np.mean(r ** 2))), float(np.max(np.abs(r))),
+                             int(used.sum())))
     for it in range(1, opt.max_iter + 1):
         # weighted: rows scaled by w (held for this iteration, re-evaluated at the next)
         Jw, rw = (Jf, r) if w is None else (Jf * w[:, None], r * w)
@@ -196,7 +386,7 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
         if opt.method == "gn":
             dx = S * _solve_step(A, rw, opt.rcond)
         elif opt.method == "lm":
-            cost = rw @ rw
+            c0 = rw @ rw
             H = A.T @ A
             g = A.T @ rw
             for _ in range(30):
@@ -207,7 +397,7 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
                 rt = evaluate(xt, used)[0]
                 if w is not None:
                     rt = rt * w
-                if rt @ rt <= cost:
+                if rt @ rt <= c0:
                     lam = max(lam / 10, 1e-12)
                     break
                 lam *= 10
@@ -218,12 +408,11 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
             raise ValueError(f"unknown method {opt.method!r} (gn or lm)")
         x[free] += dx
         iterations = it
-        small = np.mean(np.abs(dx)) < opt.improvement_limit
-        if small and opt.outlier_sigma is None:
+        mean_dx = float(np.mean(np.abs(dx)))
+        if mean_dx < opt.improvement_limit and opt.outlier_sigma is None:
             # converged: r and J at x - dx describe x to O(|dx|), below the limit
-            history.append({"iteration": it, "rms_m": history[-1]["rms_m"],
-                            "max_m": history[-1]["max_m"], "samples": int(used.sum()),
-                            "mean_abs_correction": float(np.mean(np.abs(dx)))})
+            last = history[-1]
+            history.append(Iteration(it, last.rms_m, last.max_m, int(used.sum()), mean_dx))
             converged = True
             break
         r, Jf, w = evaluate(x, used)
@@ -236,67 +425,53 @@ def calibrate(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
                 outliers.extend(int(i) for i in idx)
                 used[idx] = False
                 r, Jf, w = evaluate(x, used)
-        history.append({"iteration": it, "rms_m": float(np.sqrt(np.mean(r ** 2))),
-                        "max_m": float(np.max(np.abs(r))), "samples": int(used.sum()),
-                        "mean_abs_correction": float(np.mean(np.abs(dx)))})
-        if np.mean(np.abs(dx)) < opt.improvement_limit:
+        history.append(Iteration(it, float(np.sqrt(np.mean(r ** 2))), float(np.max(np.abs(r))),
+                                 int(used.sum()), mean_dx))
+        if mean_dx < opt.improvement_limit:
             converged = True
             break
-    params = CellParams.from_vector(x)
+    params = CellParams.from_vector(x, layout)
     # residuals over all samples (outliers included), for reporting
     final_r = r if used.all() else predict(robot, qe, params, pidx) - d_m
-    ident, std_free, cov, sigma = uncertainty(Jf, r, free, names, opt, weights=w)
-    std = np.full(len(x), np.nan)
-    std[free] = std_free
+    ident, cov, sigma = uncertainty(Jf, r, layout, free, opt, weights=w)
     notes = []
     if not converged:
         notes.append(f"stopped after {iterations} iterations (max_iter) before the mean "
                      f"correction fell below {opt.improvement_limit:g}")
-    return FitResult(params, initial.copy(), names, free, std, cov, final_r, initial_r, used,
-                     sorted(outliers), iterations, history, ident, sigma, converged, notes)
+    return Result(pb, params, converged, iterations, initial_cost, cost(r, w), history,
+                  final_r, initial_r, used, sorted(outliers), sigma, cov, ident, notes)
 
 
 def analyze(robot: Robot, qe: np.ndarray, params: CellParams, plane_index=None,
-            free: np.ndarray | None = None, sigma_m: float = 2e-6,
-            options: FitOptions | None = None):
-    """Identifiability and predicted standard deviations of a pose set *before* fitting:
-    the Jacobian at ``params`` (e.g. the nominal values) and an assumed distance noise
-    ``sigma_m`` (white: the weighted fit's options are not used here). Returns
-    (identifiability dict, std over the full parameter vector)."""
+            free=None, sigma_m: float = 2e-6, options: FitOptions | None = None,
+            layout: ParamLayout | None = None) -> tuple[Identifiability, Covariance]:
+    """Identifiability and predicted covariance of a pose set *before* fitting: the
+    Jacobian at ``params`` (e.g. the nominal values) and an assumed distance noise
+    ``sigma_m`` (white: the weighted fit's options are not used here). ``free`` as for
+    ``Problem.from_arrays``."""
     opt = options or FitOptions()
-    free = default_free(params.n_planes) if free is None else np.asarray(free, bool)
-    _, J = predict_with_jacobian(robot, qe, params, plane_index)
+    layout = layout or level1_layout(params.n_planes)
+    free = free_mask(layout, free)
+    _, J = predict_with_jacobian(robot, qe, params, plane_index, layout)
     Jf = J[:, free]
-    m, p = Jf.shape
-    ident, std_free, _, _ = uncertainty(Jf, np.zeros(m), free, parameter_names(params.n_planes),
-                                        opt, known_sigma_m=sigma_m)
-    std = np.full(len(free), np.nan)
-    std[free] = std_free
-    return ident, std
+    ident, cov, _ = uncertainty(Jf, np.zeros(len(Jf)), layout, free, opt, known_sigma_m=sigma_m)
+    return ident, cov
 
 
-def _practical_limit(name: str, opt: FitOptions) -> float:
-    if name.startswith("n"):
-        return opt.practical_std_plane
-    if name.startswith("o_"):
-        return opt.practical_std_m
-    return opt.practical_std_rad
-
-
-def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str],
+def uncertainty(Jf: np.ndarray, r: np.ndarray, layout: ParamLayout, free: np.ndarray,
                 opt: FitOptions | None = None, weights: np.ndarray | None = None,
                 known_sigma_m: float | None = None):
-    """Covariance, standard deviations and the identifiability report at a solution;
-    ``weights`` (row weights 1/sqrt(v_i)): of the weighted fit (module docstring);
-    ``known_sigma_m``: a known white noise std instead of the residuals' estimate
-    (``analyze``). Returns (report, std, cov, sigma_m = sqrt(|r|^2 / (m - rank)) of the
-    unweighted residuals, or the known sigma)."""
+    """Covariance and the identifiability report at a solution, for the free columns Jf of
+    the Jacobian and the residuals r; ``weights`` (row weights 1/sqrt(v_i)): of the weighted
+    fit (module docstring); ``known_sigma_m``: a known white noise std instead of the
+    residuals' estimate (``analyze``). Returns (Identifiability, Covariance, sigma_m =
+    sqrt(|r|^2 / (m - rank)) of the unweighted residuals, or the known sigma)."""
     opt = opt or FitOptions()
     m, p = Jf.shape
     rr = float(r @ r)  # the unweighted residuals' (sigma_m)
     if weights is not None:
         Jf, r = Jf * weights[:, None], r * weights
-    free_names = [n for n, f in zip(names, free) if f]
+    free_names = layout.names_of(free)
     norms = np.linalg.norm(Jf, axis=0)
     no_effect = [free_names[j] for j in np.flatnonzero(norms <= 1e-10 * norms.max())]
     S = _scales(Jf, True)
@@ -316,6 +491,7 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str
         sigma2 = sigma_m = float(known_sigma_m)
         sigma2 *= sigma2
     cov_scaled = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
+    cov_scaled = 0.5 * (cov_scaled + cov_scaled.T)  # symmetric to the last bit
     cov = sigma2 * cov_scaled * np.outer(S, S)
 
     def direction(v):
@@ -324,54 +500,41 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, free: np.ndarray, names: list[str
         return {free_names[j]: round(float(v[j]), 4) for j in order if big[j]}
 
     unidentifiable = [direction(Vt[i]) for i in np.flatnonzero(null)]
-    weak_dirs = [{"scaled_singular_ratio": float(ratio[i]), "direction": direction(Vt[i])}
-                 for i in np.flatnonzero(weak)]
+    weak_dirs = [WeakDirection(float(ratio[i]), direction(Vt[i])) for i in np.flatnonzero(weak)]
     not_ident = sorted({k for d in unidentifiable for k in d}, key=free_names.index)
     bad = np.array([n in not_ident for n in free_names])
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     # identifiable in theory but not in practice: the data barely depends on it
-    poorly = []
-    for j, name in enumerate(free_names):
-        limit = _practical_limit(name, opt)
-        if not bad[j] and std[j] > limit:
-            poorly.append({"parameter": name, "std": float(std[j]), "limit": limit})
-    not_ident += [p_["parameter"] for p_ in poorly]
-    not_ident = sorted(set(not_ident), key=free_names.index)
+    limits = layout.practical_std(free_names)
+    poorly = [PoorlyDetermined(name, float(std[j]), float(limits[j]))
+              for j, name in enumerate(free_names) if not bad[j] and std[j] > limits[j]]
+    not_ident = sorted(set(not_ident) | {pd.parameter for pd in poorly}, key=free_names.index)
     bad = np.array([n in not_ident for n in free_names])
-    std[bad] = np.nan
     cov[bad, :] = np.nan
     cov[:, bad] = np.nan
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(std, std)
-    pairs = []
-    for i in range(p):
-        for j in range(i + 1, p):
-            if np.isfinite(corr[i, j]) and abs(corr[i, j]) > opt.correlation_limit:
-                pairs.append({"a": free_names[i], "b": free_names[j], "rho": round(float(corr[i, j]), 5)})
+    covariance = Covariance(tuple(free_names), cov)
     sk = s[keep]
-    ident = {
-        "free": free_names,
-        "not_identifiable": not_ident,
-        "no_effect": no_effect,
-        "poorly_determined": poorly,
-        "unidentifiable_directions": unidentifiable,
-        "weak_directions": weak_dirs,
-        "correlated_pairs": pairs,
-        "singular_values": [float(v) for v in np.linalg.svd(R / S, compute_uv=False)],
-        "scaled_singular_values": [float(v) for v in s],
-        "condition_number_scaled": float(s[0] / s[-1]) if s[-1] > 0 else float("inf"),
-        "observability": {
-            "O1": float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))) / np.sqrt(m)),
-            "O2": float(s[-1] / s[0]),
-            "O3": float(s[-1]),
-            "O4": float(s[-1] ** 2 / s[0]),
-        },
-        "sigma_mm": sigma_m * 1e3,
-        "samples": int(m),
-        "rank": int(keep.sum()),
-        "identifiable_min_scaled_ratio": float(sk[-1] / s[0]) if len(sk) else 0.0,
-    }
-    if weights is not None:
-        ident["weighted"] = True
-        ident["variance_factor"] = sigma2
-    return ident, std, cov, sigma_m
+    ident = Identifiability(
+        free=free_names,
+        not_identifiable=not_ident,
+        no_effect=no_effect,
+        poorly_determined=poorly,
+        unidentifiable_directions=unidentifiable,
+        weak_directions=weak_dirs,
+        correlated_pairs=covariance.correlated_pairs(opt.correlation_limit),
+        singular_values=[float(v) for v in np.linalg.svd(R / S, compute_uv=False)],
+        scaled_singular_values=[float(v) for v in s],
+        condition_number_scaled=float(s[0] / s[-1]) if s[-1] > 0 else float("inf"),
+        observability=Observability(
+            O1=float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))) / np.sqrt(m)),
+            O2=float(s[-1] / s[0]),
+            O3=float(s[-1]),
+            O4=float(s[-1] ** 2 / s[0])),
+        sigma_mm=sigma_m * 1e3,
+        samples=int(m),
+        rank=int(keep.sum()),
+        identifiable_min_scaled_ratio=float(sk[-1] / s[0]) if len(sk) else 0.0,
+        weighted=weights is not None,
+        variance_factor=sigma2 if weights is not None else None,
+    )
+    return ident, covariance, sigma_m

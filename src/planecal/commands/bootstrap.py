@@ -30,8 +30,8 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.commands.calibrate import load_problem
-    from planecal.fit import FitOptions, free_from_names
+    from planecal.commands.calibrate import build_problem, load_inputs
+    from planecal.fit import FitOptions
     from planecal.params import save_json
     from planecal.studies.bootstrap import BootstrapSettings, bootstrap, format_bootstrap
     from planecal.studies.common import check_jobs, parse_int_list
@@ -41,12 +41,11 @@ def run(args) -> int:
         raise InputError(f"--seed must be >= 0, got {args.seed}")
     if args.max_iter < 1:
         raise InputError("--max-iter must be at least 1")
-    samples, scene, initial = load_problem(args)
-    opts = FitOptions(max_iter=args.max_iter, free=free_from_names(args.free, initial.n_planes))
-    res = bootstrap(scene.robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate,
-                    BootstrapSettings(tuple(sizes), args.repeats, args.seed), opts,
+    samples, scene, initial = load_inputs(args)
+    problem = build_problem(samples, scene, initial, args.free, FitOptions(max_iter=args.max_iter))
+    res = bootstrap(problem, BootstrapSettings(tuple(sizes), args.repeats, args.seed),
                     jobs=check_jobs(args.jobs))
-    print(format_bootstrap(res))
+    print(format_bootstrap(res, problem.layout))
     if args.out:
         save_json(args.out, res)
         print(f"result written to {args.out}")

@@ -10,9 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.cell import parameter_units
 from planecal.errors import InputError
-from planecal.fit import FitOptions, FitResult, calibrate, free_from_names
+from planecal.fit import FitOptions, Problem, Result, solve
 from planecal.params import load_params, params_to_dict, save_json
 from planecal.samples import read_many
 from planecal.scene import DEFAULT_SCENE, load_scene, nominal_params
@@ -48,16 +47,24 @@ def add_arguments(p):
                         "for recordings/calibrate-<scene>-<time>.rrd)")
 
 
-def result_dict(res: FitResult) -> dict:
+def result_dict(res: Result) -> dict:
+    """The result file: the parameter file's keys, ``std`` in the same shape (null where
+    fixed or not identifiable), the fit's figures, ``identifiability``, ``free`` and
+    ``covariance`` (the free parameters' names and matrix, null where not identifiable)."""
     out = params_to_dict(res.params)
-    std = res.std
-    def s(i):
-        return None if not np.isfinite(std[i]) else float(std[i])
-    k = res.params.n_planes
+    layout, std = res.layout, res.std
+
+    def s(name):
+        v = std[layout.index(name)]
+        return None if not np.isfinite(v) else float(v)
+
+    def ss(group):
+        return [s(n) for n in group.names]
     out["std"] = {
-        "joint_offsets_rad": [s(i) for i in range(6)],
-        "planes": [{"n_tilde": [s(11 + 3 * j + c) for c in range(3)]} for j in range(k)],
-        "sensor": {"origin_m": [s(6), s(7), s(8)], "phi_y_rad": s(9), "phi_z_rad": s(10)},
+        "joint_offsets_rad": ss(layout.group("joint_offsets")),
+        "planes": [{"n_tilde": ss(g)} for g in layout.groups_of("plane")],
+        "sensor": {"origin_m": ss(layout.group("sensor_origin")), "phi_y_rad": s("phi_y"),
+                   "phi_z_rad": s("phi_z")},
     }
     out["residual_rms_mm"] = res.rms_mm()
     out["residual_rms_initial_mm"] = res.rms_mm(initial=True)
@@ -66,25 +73,27 @@ def result_dict(res: FitResult) -> dict:
     out["converged"] = res.converged
     out["outliers"] = [int(i) for i in res.outliers]
     out["samples_used"] = int(res.used.sum())
-    out["identifiability"] = res.identifiability
-    out["free"] = [n for n, f in zip(res.names, res.free) if f]
+    out["identifiability"] = res.identifiability.to_dict()
+    out["free"] = layout.names_of(res.free)
+    out["covariance"] = res.covariance.to_dict()
     return out
 
 
-def format_report(res: FitResult, n_zero: int = 0) -> str:
+def format_report(res: Result, n_zero: int = 0) -> str:
     lines = []
-    units = parameter_units(res.params.n_planes)
-    x0, x = res.initial.to_vector(), res.params.to_vector()
+    layout = res.layout
+    x0, x = res.initial.to_vector(layout), res.params.to_vector(layout)
+    std = res.std
     ident = res.identifiability
     lines.append(f"{'parameter':<10} {'value':>14} {'std':>11} {'correction':>13}  unit")
-    for i, name in enumerate(res.names):
+    for i, (name, unit) in enumerate(zip(layout.names, layout.units)):
         if not res.free[i]:
-            std = "fixed"
-        elif name in ident["not_identifiable"]:
-            std = "NOT IDENT."
+            sd = "fixed"
+        elif name in ident.not_identifiable:
+            sd = "NOT IDENT."
         else:
-            std = f"{res.std[i]:.3e}"
-        lines.append(f"{name:<10} {x[i]:>14.7g} {std:>11} {x[i] - x0[i]:>13.4e}  {units[i]}")
+            sd = f"{std[i]:.3e}"
+        lines.append(f"{name:<10} {x[i]:>14.7g} {sd:>11} {x[i] - x0[i]:>13.4e}  {unit}")
     lines.append("")
     lines.append(f"samples used {int(res.used.sum())} of {len(res.used)}"
                  + (f", {n_zero} laser zeros skipped" if n_zero else ""))
@@ -92,34 +101,34 @@ def format_report(res: FitResult, n_zero: int = 0) -> str:
                  f"   max after {np.max(np.abs(res.residuals_m[res.used])) * 1e3:.4f} mm")
     lines.append(f"iterations {res.iterations}" + ("" if res.converged else " (not converged)"))
     lines.append("outliers " + (", ".join(str(i) for i in res.outliers) if res.outliers else "none"))
-    if ident.get("weighted"):
+    if ident.weighted:
         lines.append(f"weighted by the repeatability noise model: variance factor "
-                     f"{ident['variance_factor']:.3g} (1: the model's noise level fits the "
+                     f"{ident.variance_factor:.3g} (1: the model's noise level fits the "
                      f"residuals; the std include it)")
-    lines.append(f"sigma {ident['sigma_mm']:.4g} mm   scaled condition number "
-                 f"{ident['condition_number_scaled']:.4g}   O1 {ident['observability']['O1']:.3g}"
-                 f"  O2 {ident['observability']['O2']:.3g}")
-    for name in ident.get("no_effect", []):
+    lines.append(f"sigma {ident.sigma_mm:.4g} mm   scaled condition number "
+                 f"{ident.condition_number_scaled:.4g}   O1 {ident.observability.O1:.3g}"
+                 f"  O2 {ident.observability.O2:.3g}")
+    for name in ident.no_effect:
         lines.append(f"WARNING no effect: {name} does not change any distance in this data")
-    for pd in ident.get("poorly_determined", []):
-        lines.append(f"WARNING not identifiable in practice: {pd['parameter']} (std "
-                     f"{pd['std']:.3g} above {pd['limit']:g}): the data barely depends on it")
-    for d in ident["unidentifiable_directions"]:
+    for pd in ident.poorly_determined:
+        lines.append(f"WARNING not identifiable in practice: {pd.parameter} (std "
+                     f"{pd.std:.3g} above {pd.limit:g}): the data barely depends on it")
+    for d in ident.unidentifiable_directions:
         mix = " ".join(f"{v:+.3f}*{k}" for k, v in d.items())
         lines.append(f"WARNING not identifiable: {', '.join(d)} move together without changing "
                      f"any distance (direction {mix})")
-    for w in ident["weak_directions"]:
-        mix = " ".join(f"{v:+.3f}*{k}" for k, v in w["direction"].items())
+    for w in ident.weak_directions:
+        mix = " ".join(f"{v:+.3f}*{k}" for k, v in w.direction.items())
         lines.append(f"WARNING weakly identifiable (scaled singular value ratio "
-                     f"{w['scaled_singular_ratio']:.2e}): {mix}")
-    for pr in ident["correlated_pairs"]:
-        lines.append(f"WARNING strongly correlated: {pr['a']} ~ {pr['b']} (rho {pr['rho']:+.4f})")
+                     f"{w.scaled_singular_ratio:.2e}): {mix}")
+    for pr in ident.correlated_pairs:
+        lines.append(f"WARNING strongly correlated: {pr.a} ~ {pr.b} (rho {pr.rho:+.4f})")
     for n in res.notes:
         lines.append(f"NOTE {n}")
     return "\n".join(lines)
 
 
-def load_problem(args):
+def load_inputs(args):
     """(samples, scene, initial parameters) from SAMPLES..., --scene and --initial."""
     samples = read_many(args.samples)
     scene = load_scene(args.scene)
@@ -153,18 +162,23 @@ def weighting(args, robot) -> dict:
             "distance_sigma_m": sd_um * 1e-6}
 
 
+def build_problem(samples, scene, initial, free, options: FitOptions) -> Problem:
+    """The fit's problem from the command's inputs; a problem that cannot be solved (too
+    few samples for the free parameters, ...) is bad input."""
+    try:
+        return Problem.from_samples(scene.robot, samples, initial, free=free, options=options)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+
+
 def run(args) -> int:
-    samples, scene, initial = load_problem(args)
+    samples, scene, initial = load_inputs(args)
     if args.max_iter < 1:
         raise InputError("--max-iter must be at least 1")
     opts = FitOptions(max_iter=args.max_iter, improvement_limit=args.improvement_limit,
                       outlier_sigma=args.outlier_sigma, method=args.method,
-                      scale=not args.no_scale, free=free_from_names(args.free, initial.n_planes),
-                      **weighting(args, scene.robot))
-    try:
-        res = calibrate(scene.robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate, opts)
-    except ValueError as e:
-        raise InputError(str(e)) from None
+                      scale=not args.no_scale, **weighting(args, scene.robot))
+    res = solve(build_problem(samples, scene, initial, args.free, opts))
     print(format_report(res, samples.n_zero))
     if args.out:
         save_json(args.out, result_dict(res))

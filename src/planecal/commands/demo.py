@@ -32,8 +32,8 @@ def add_arguments(p):
 
 def run(args) -> int:
     from planecal.commands import rehearse
-    from planecal.commands.calibrate import format_report, result_dict
-    from planecal.fit import calibrate
+    from planecal.commands.calibrate import build_problem, format_report, result_dict
+    from planecal.fit import FitOptions, solve
     from planecal.params import load_params, save_json
     from planecal.samples import read_samples
     from planecal.scene import load_scene, nominal_params
@@ -59,10 +59,7 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     nominal = nominal_params(scene)
     print(f"\n== calibration from the scene's nominal values ({len(samples)} samples)")
-    try:
-        res = calibrate(scene.robot, samples.qe, samples.d_mm * 1e-3, nominal, samples.plate)
-    except ValueError as e:
-        raise InputError(str(e)) from None
+    res = solve(build_problem(samples, scene, nominal, None, FitOptions()))
     print(format_report(res, samples.n_zero))
     save_json(out / "result.json", result_dict(res))
     if args.rrd:
@@ -73,16 +70,18 @@ def run(args) -> int:
     print(f"{'joint':<7} {'truth_mrad':>11} {'nominal_err':>12} {'identified':>11} "
           f"{'error_mrad':>11} {'std_mrad':>9} {'error/std':>9}")
     worst = 0.0
-    for i in range(6):
+    offsets = res.layout.group("joint_offsets").names
+    for i, name in enumerate(offsets):
         t, x = truth.joint_offsets[i], res.params.joint_offsets[i]
-        if not res.free[i]:
-            print(f"delta{i + 1:<2} {t * 1e3:>11.4f} {-t * 1e3:>12.4f} {'fixed':>11} "
+        j = res.layout.index(name)
+        if not res.free[j]:
+            print(f"{name:<7} {t * 1e3:>11.4f} {-t * 1e3:>12.4f} {'fixed':>11} "
                   f"{(x - t) * 1e3:>11.4f} {'-':>9} {'-':>9}")
             continue
-        s = res.std[i]
+        s = res.std[j]
         z = (x - t) / s if np.isfinite(s) else float("nan")
         worst = max(worst, abs(z))
-        print(f"delta{i + 1:<2} {t * 1e3:>11.4f} {-t * 1e3:>12.4f} {x * 1e3:>11.4f} "
+        print(f"{name:<7} {t * 1e3:>11.4f} {-t * 1e3:>12.4f} {x * 1e3:>11.4f} "
               f"{(x - t) * 1e3:>11.4f} {s * 1e3:>9.4f} {z:>9.2f}")
     verdict = "within" if worst <= 3 else "OUTSIDE"
     print(f"\nidentified offsets are {verdict} 3 reported standard deviations of the truth "

@@ -34,7 +34,8 @@ def run(args) -> int:
     from planecal.collision import CollisionWorld
     from planecal.params import save_json
     from planecal.scene import load_scene
-    from planecal.studies.common import check_jobs, display_scale, table
+    from planecal.layout import level1_layout
+    from planecal.studies.common import check_jobs, table
     from planecal.studies.planning import plan
 
     scene = load_scene(args.scene)
@@ -53,8 +54,9 @@ def run(args) -> int:
     if args.measure:
         res["measured"] = measure(scene, res, args.measure, jobs)
     rows = []
+    layout = level1_layout(len(scene.plates))
     for n in res["free"]:
-        k, unit = display_scale(n)
+        k, unit = layout.display(n)
         row = [n, unit, f"{res['predicted_std_random'][n] * k:.4g}",
                f"{res['predicted_std_planned'][n] * k:.4g}",
                f"{res['predicted_std_random'][n] / res['predicted_std_planned'][n]:.2f}"]

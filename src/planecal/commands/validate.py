@@ -53,7 +53,7 @@ def _tcp(text):
 
 def run(args) -> int:
     from planecal.collision import CollisionWorld
-    from planecal.fit import calibrate
+    from planecal.fit import Problem, solve
     from planecal.params import load_params, save_json
     from planecal.scene import load_scene, nominal_params
     from planecal.studies.montecarlo import MCSettings, twin_samples
@@ -75,7 +75,7 @@ def run(args) -> int:
         calibrated = load_params(args.calibrated)
         truth = load_truth(scene, args.truth)
         qe = read_samples(args.run).qe
-        fit_free = fit_cov = None
+        fit = None
     else:
         if args.samples < 20:
             raise InputError(f"--samples must be at least 20, got {args.samples}")
@@ -93,15 +93,14 @@ def run(args) -> int:
             qe, d, plate, rejected = pose_list_samples(scene, truth, mc, args.seed)
         else:
             qe, d, plate, rejected = twin_samples(scene, truth, mc, args.seed)
-        fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate)
+        fit = solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
         calibrated = fit.params
-        fit_free, fit_cov = fit.free, fit.cov
         info = {"samples": len(d), "rejected": rejected, "fit_rms_mm": fit.rms_mm(),
-                "offsets_std_rad": fit.std[:6]}
+                "offsets_std_rad": fit.std[fit.layout.slice("joint_offsets")]}
         print(f"calibrated: rms {fit.rms_mm() * 1e3:.1f} um; validating...", file=sys.stderr,
               flush=True)
     checker = CollisionWorld(scene, clearance_m=st.clearance_m)
-    v = validate(scene, truth, calibrated, qe, st, checker, fit_free, fit_cov)
+    v = validate(scene, truth, calibrated, qe, st, checker, fit)
     v["scene"] = scene.name
     v["calibration"] = info
     v["truth_offsets_rad"] = truth.joint_offsets

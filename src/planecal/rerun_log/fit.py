@@ -4,9 +4,11 @@ standard deviations and the identifiability warnings; plus the cell on the ident
 planes and the sample hit points coloured by their final model error."""
 from __future__ import annotations
 
+from dataclasses import asdict
+
 import numpy as np
 
-from planecal.cell import parameter_units, sensor_in_base
+from planecal.cell import sensor_in_base
 from planecal.encoder import counts_to_joints
 from planecal.rerun_log.common import (_rr, close_recording, diverging_colors, eye_controls,
                                        log_cell, open_recording, recording_path)
@@ -58,20 +60,21 @@ def _fmt(v: float) -> str:
 def parameter_markdown(res) -> str:
     """The parameter table: initial value, identified value, std, correction, unit."""
     ident = res.identifiability
-    units = parameter_units(res.params.n_planes)
-    x0, x = res.initial.to_vector(), res.params.to_vector()
+    layout = res.layout
+    x0, x = res.initial.to_vector(layout), res.params.to_vector(layout)
+    sd = res.std
     lines = ["# Identified parameters", "",
              "| parameter | initial | identified | std | correction | unit |",
              "|---|---:|---:|---:|---:|---|"]
-    for i, name in enumerate(res.names):
+    for i, (name, unit) in enumerate(zip(layout.names, layout.units)):
         if not res.free[i]:
             std = "fixed"
-        elif name in ident.get("not_identifiable", []):
+        elif name in ident.not_identifiable:
             std = "NOT IDENT."
         else:
-            std = f"{res.std[i]:.3e}"
+            std = f"{sd[i]:.3e}"
         lines.append(f"| {name} | {_fmt(x0[i])} | {_fmt(x[i])} | {std} | "
-                     f"{x[i] - x0[i]:.4e} | {units[i]} |")
+                     f"{x[i] - x0[i]:.4e} | {unit} |")
     used = res.used
     lines += ["",
               f"* samples used: {int(used.sum())} of {len(used)}; outliers: "
@@ -85,42 +88,42 @@ def parameter_markdown(res) -> str:
 def identifiability_markdown(res) -> str:
     ident = res.identifiability
     lines = ["# Identifiability", ""]
-    obs = ident.get("observability", {})
-    if "sigma_mm" in ident:
-        lines.append(f"* sigma {ident['sigma_mm']:.4g} mm, scaled condition number "
-                     f"{ident.get('condition_number_scaled', float('nan')):.4g}, "
-                     + ", ".join(f"{k} {v:.3g}" for k, v in obs.items()))
-    if ident.get("weighted"):
+    obs = asdict(ident.observability)
+    lines.append(f"* sigma {ident.sigma_mm:.4g} mm, scaled condition number "
+                 f"{ident.condition_number_scaled:.4g}, "
+                 + ", ".join(f"{k} {v:.3g}" for k, v in obs.items()))
+    if ident.weighted:
         lines.append(f"* weighted by the repeatability noise model, variance factor "
-                     f"{ident['variance_factor']:.3g}")
+                     f"{ident.variance_factor:.3g}")
     warnings = []
-    for d in ident.get("unidentifiable_directions", []):
+    for d in ident.unidentifiable_directions:
         mix = " ".join(f"{v:+.3f}*{k}" for k, v in d.items())
         warnings.append(f"**not identifiable**: {', '.join(d)} move together without "
                         f"changing any distance (direction {mix})")
-    for w in ident.get("weak_directions", []):
-        mix = " ".join(f"{v:+.3f}*{k}" for k, v in w["direction"].items())
+    for w in ident.weak_directions:
+        mix = " ".join(f"{v:+.3f}*{k}" for k, v in w.direction.items())
         warnings.append(f"**weakly identifiable** (scaled singular value ratio "
-                        f"{w['scaled_singular_ratio']:.2e}): {mix}")
-    for pr in ident.get("correlated_pairs", []):
-        warnings.append(f"**strongly correlated**: {pr['a']} ~ {pr['b']} (rho {pr['rho']:+.4f})")
-    warnings += [f"note: {n}" for n in getattr(res, "notes", [])]
+                        f"{w.scaled_singular_ratio:.2e}): {mix}")
+    for pr in ident.correlated_pairs:
+        warnings.append(f"**strongly correlated**: {pr.a} ~ {pr.b} (rho {pr.rho:+.4f})")
+    warnings += [f"note: {n}" for n in res.notes]
     lines += [""] + ([f"* WARNING {w}" for w in warnings] if warnings else ["No warnings."])
     return "\n".join(lines) + "\n"
 
 
 def log_fit(rec, res, samples, scene) -> None:
-    """Log a ``FitResult`` and its data set (``Samples``: qe, d_mm, plate) to ``rec``."""
+    """Log a ``fit.Result`` and its data set (``Samples``: qe, d_mm, plate) to ``rec``."""
     rr = _rr()
     robot = scene.robot
     # convergence (timeline "iteration"): RMS and max |model error| of the samples used
-    it = np.array([h["iteration"] for h in res.history], np.int64)
+    it = np.array([h.iteration for h in res.history], np.int64)
     idx = [rr.TimeColumn("iteration", sequence=it)]
-    for key, path in (("rms_m", "/fit/rms_mm"), ("max_m", "/fit/max_mm")):
+    for path, vals in (("/fit/rms_mm", [h.rms_m for h in res.history]),
+                       ("/fit/max_mm", [h.max_m for h in res.history])):
         rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(
-            scalars=np.array([h[key] for h in res.history], float) * 1e3))
+            scalars=np.array(vals, float) * 1e3))
     rec.send_columns("/fit/samples_used", indexes=idx, columns=rr.Scalars.columns(
-        scalars=np.array([h.get("samples", len(res.used)) for h in res.history], float)))
+        scalars=np.array([h.samples for h in res.history], float)))
     # histograms (static): all samples, outliers included
     data = {"error_before": np.asarray(res.initial_residuals_m) * 1e3,
             "error_after": np.asarray(res.residuals_m) * 1e3,

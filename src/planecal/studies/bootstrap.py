@@ -19,11 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.cell import CellParams, parameter_names
 from planecal.errors import InputError
-from planecal.fit import FitOptions, calibrate, default_free
-from planecal.robot import Robot
-from planecal.studies.common import Progress, display_scale, parallel_map, table
+from planecal.fit import Problem, solve
+from planecal.layout import ParamLayout
+from planecal.studies.common import Progress, parallel_map, table
 
 OVERLAP_WARN = 0.3
 
@@ -36,15 +35,14 @@ class BootstrapSettings:
     overlap_warn: float = OVERLAP_WARN
 
 
-def _fit_one(job):
-    robot, qe, d_m, plate, initial, options = job
+def _fit_one(problem: Problem):
     try:
-        res = calibrate(robot, qe, d_m, initial, plate, options)
+        res = solve(problem)
     except (ValueError, np.linalg.LinAlgError) as e:
         return {"ok": False, "error": str(e)}
-    return {"ok": True, "x": res.params.to_vector(), "std": res.std,
+    return {"ok": True, "x": res.params.to_vector(problem.layout), "std": res.std,
             "converged": res.converged, "rms_mm": res.rms_mm(),
-            "not_identifiable": res.identifiability["not_identifiable"]}
+            "not_identifiable": res.identifiability.not_identifiable}
 
 
 def overlap(s: int, n: int) -> dict:
@@ -55,21 +53,16 @@ def overlap(s: int, n: int) -> dict:
             "finite_population_factor": float(fpc)}
 
 
-def bootstrap(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams,
-              plate: np.ndarray | None = None, settings: BootstrapSettings | None = None,
-              options: FitOptions | None = None, jobs: int = 1, quiet: bool = False) -> dict:
-    """The study (module docstring); a pure function of its inputs. Returns a dict with
+def bootstrap(problem: Problem, settings: BootstrapSettings | None = None, jobs: int = 1,
+              quiet: bool = False) -> dict:
+    """The study (module docstring) on ``problem``'s samples (the pool), its initial
+    parameters, free set and options; a pure function of its inputs. Returns a dict with
     ``pool``, ``names``, ``free``, ``sizes``: one entry per size with per-parameter
     ``mean``, ``std``, ``std_independent``, ``min``, ``max``, ``reported_std``,
     ``overlap`` and ``warning``."""
     st = settings or BootstrapSettings()
-    opts = options or FitOptions()
-    qe = np.asarray(qe)
-    d_m = np.asarray(d_m, float)
-    n = len(d_m)
-    plate = np.zeros(n, int) if plate is None else np.asarray(plate, int)
-    names = parameter_names(initial.n_planes)
-    free = default_free(initial.n_planes) if opts.free is None else np.asarray(opts.free, bool)
+    n = len(problem)
+    names, free = problem.layout.names, problem.free
     p = int(free.sum())
     if st.repeats < 2:
         raise InputError(f"--repeats must be at least 2 to measure a spread, got {st.repeats}")
@@ -83,12 +76,12 @@ def bootstrap(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
     for s in st.sizes:
         for r in range(st.repeats):
             idx = np.sort(rng.choice(n, s, replace=False))
-            jobs_list.append((robot, qe[idx], d_m[idx], plate[idx], initial, opts))
+            jobs_list.append(problem.subset(idx))
             where.append(s)
     prog = Progress("bootstrap fits", len(jobs_list), quiet=quiet)
     results = parallel_map(_fit_one, jobs_list, jobs, prog)
-    full = _fit_one((robot, qe, d_m, plate, initial, opts))
-    out = {"pool": n, "names": names, "free": [nm for nm, f in zip(names, free) if f],
+    full = _fit_one(problem)
+    out = {"pool": n, "names": names, "free": problem.free_names,
            "repeats": st.repeats, "seed": st.seed,
            "pool_fit": {"x": full.get("x"), "std": full.get("std")} if full["ok"] else None,
            "sizes": []}
@@ -126,8 +119,9 @@ def bootstrap(robot: Robot, qe: np.ndarray, d_m: np.ndarray, initial: CellParams
     return out
 
 
-def format_bootstrap(res: dict) -> str:
-    """Terminal report: per size a table of the free parameters' spread (display units)."""
+def format_bootstrap(res: dict, layout: ParamLayout) -> str:
+    """Terminal report: per size a table of the free parameters' spread (display units of
+    the study's parameter ``layout``)."""
     lines = [f"pool: {res['pool']} samples; {res['repeats']} random subsets per size "
              f"(seed {res['seed']})"]
     for e in res["sizes"]:
@@ -140,7 +134,7 @@ def format_bootstrap(res: dict) -> str:
                      f"{ov['expected_common_samples']:.1f} samples on average")
         rows = []
         for nm, v in e["params"].items():
-            k, unit = display_scale(nm)
+            k, unit = layout.display(nm)
 
             def f(x):
                 return "-" if x is None or not np.isfinite(x) else f"{x * k:.4g}"

@@ -121,17 +121,6 @@ def table(headers: list[str], rows: list[list], aligns: str | None = None) -> st
     return "\n".join([fmt(headers), "  ".join("-" * x for x in w)] + [fmt(r) for r in cells])
 
 
-def display_scale(name: str) -> tuple[float, str]:
-    """Scale and unit for printing a parameter: urad, um, mrad for angles, 1e-3/m."""
-    if name.startswith("delta"):
-        return 1e6, "urad"
-    if name.startswith("o_"):
-        return 1e6, "um"
-    if name.startswith("phi"):
-        return 1e6, "urad"
-    return 1e3, "1e-3/m"
-
-
 def covariances(Jf: np.ndarray, v: np.ndarray) -> dict:
     """For the free-column Jacobian Jf (N, p) and per-sample noise variances v (N,):
     'white': mean(v) (J^T J)^-1 (the white-noise CR bound with the mean variance),
@@ -153,7 +142,3 @@ def _pinv_sym(G: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
     lam, V = np.linalg.eigh(G)
     keep = lam > rcond * lam[-1]
     return (V[:, keep] / lam[keep]) @ V[:, keep].T
-
-
-def free_names(names: list[str], free: np.ndarray) -> list[str]:
-    return [n for n, f in zip(names, free) if f]

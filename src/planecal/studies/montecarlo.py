@@ -41,9 +41,10 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from planecal.cell import parameter_names, predict_with_jacobian
+from planecal.cell import predict_with_jacobian
 from planecal.errors import InputError
 from planecal.fit import noise_variance
+from planecal.layout import ParamLayout, level1_layout
 from planecal.studies.common import (BUFFER_LEN, Progress, covariances,
                                      parallel_map, table)
 
@@ -109,9 +110,9 @@ def _world(name, clearance):
     return _CACHE[key]
 
 
-def free_mask(names: list[str], free) -> np.ndarray:
-    from planecal.fit import free_from_names
-    return free_from_names(free, (len(names) - 11) // 3)
+def layout_for(name: str) -> ParamLayout:
+    """The parameter layout of a study on scene ``name`` (one n~ per plate)."""
+    return level1_layout(len(_scene(name).plates))
 
 
 def truth_for(st: MCSettings, k: int):
@@ -224,7 +225,7 @@ def synthetic_noisy_samples(scene, truth, st: MCSettings, seed: int):
 
 def run_one(job) -> dict:
     """One Monte Carlo run: job = (settings, k). Pure function of (settings, k)."""
-    from planecal.fit import FitOptions, calibrate, uncertainty
+    from planecal.fit import FitOptions, Problem, solve, uncertainty
     from planecal.scene import nominal_params
 
     st, k = job
@@ -243,37 +244,38 @@ def run_one(job) -> dict:
             qe, d, plate, rejected = synthetic_noisy_samples(scene, truth, st, seed)
     except RuntimeError as e:  # the run gave up (e.g. 500 poses rejected in a row)
         return {"k": k, "seed": seed, "failed": str(e)}
-    names = parameter_names(len(scene.plates))
-    free = free_mask(names, st.free)
+    layout = layout_for(st.scene)
     s = joint_sigma(robot, st)
     sample_sigma = st.laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN)
     weights = {"joint_sigma_rad": s, "distance_sigma_m": max(sample_sigma, 1e-9)} \
         if st.weighted else {}
-    fit = calibrate(robot, qe, d, nominal_params(scene), plate,
-                    FitOptions(free=free, **weights))
+    fit = solve(Problem.from_arrays(robot, qe, d, nominal_params(scene), plate, free=st.free,
+                                    options=FitOptions(**weights), layout=layout))
+    free = fit.free
     # noise model and bounds at the truth, on this run's samples
-    _, J = predict_with_jacobian(robot, qe, truth, plate)
-    v = noise_variance(J[:, :6], s, sample_sigma)
+    _, J = predict_with_jacobian(robot, qe, truth, plate, layout)
+    J_delta = J[:, layout.slice("joint_offsets")]
+    v = noise_variance(J_delta, s, sample_sigma)
     if st.quantization:
-        Jx = J[:, :6] @ robot.coupling  # dd/dx (actuator angles)
+        Jx = J_delta @ robot.coupling  # dd/dx (actuator angles)
         v = v + np.sum(Jx ** 2 / (12.0 * robot.gains ** 2), axis=1)
     cov = covariances(J[:, free], v)
     # identifiability with every parameter free, at the truth
-    all_free = np.ones(len(names), bool)
-    ident_all, _, _, _ = uncertainty(J, np.sqrt(v), all_free, names)
-    err = fit.params.to_vector()[free] - truth.to_vector()[free]
+    all_free = np.ones(len(layout), bool)
+    ident_all, _, _ = uncertainty(J, np.sqrt(v), layout, all_free)
+    err = fit.params.to_vector(layout)[free] - truth.to_vector(layout)[free]
     return {
         "k": k, "seed": seed, "samples": int(len(d)), "rejected": rejected,
-        "err": err, "reported_cov": fit.cov, "reported_std": fit.std[free],
+        "err": err, "reported_cov": fit.covariance.matrix, "reported_std": fit.covariance.stds,
         "white_var": np.diag(cov["white"]), "sandwich_var": np.diag(cov["sandwich"]),
         "crb_var": np.diag(cov["crb"]), "sandwich_cov": cov["sandwich"],
         "crb_cov": cov["crb"],
         "sigma_model_mm": float(np.sqrt(np.mean(v)) * 1e3),
         "sigma_fit_mm": float(fit.sigma_m * 1e3), "rms_mm": fit.rms_mm(),
         "converged": bool(fit.converged), "iterations": int(fit.iterations),
-        "not_identifiable": fit.identifiability["not_identifiable"],
-        "not_identifiable_all_free": ident_all["not_identifiable"],
-        "truth": truth.to_vector()[free],
+        "not_identifiable": fit.identifiability.not_identifiable,
+        "not_identifiable_all_free": ident_all.not_identifiable,
+        "truth": truth.to_vector(layout)[free],
     }
 
 
@@ -310,10 +312,9 @@ def _chi2(errs, covs, idx):
 
 
 def analyze(runs: list[dict], st: MCSettings) -> dict:
-    scene = _scene(st.scene)
-    names = parameter_names(len(scene.plates))
-    free = free_mask(names, st.free)
-    fnames = [n for n, f in zip(names, free) if f]
+    layout = layout_for(st.scene)
+    names = layout.names
+    fnames = layout.names_of(layout.free_from_names(st.free))
     failed = [{"seed": r["seed"], "reason": r["failed"]} for r in runs if "failed" in r]
     runs = [r for r in runs if "failed" not in r]
     if len(runs) < 2:
@@ -345,7 +346,8 @@ def analyze(runs: list[dict], st: MCSettings) -> dict:
             "bias_over_crb": float(abs(bias[i]) / crb[i]),
             "bias_t": float(bias[i] / (emp[i] / np.sqrt(R))),
         }
-    off = [i for i, n in enumerate(fnames) if n.startswith("delta")
+    offsets = layout.group("joint_offsets").names
+    off = [i for i, n in enumerate(fnames) if n in offsets
            and all(n not in r["not_identifiable"] for r in runs)]
     errs = [r["err"] for r in runs]
     chi_rep = _chi2(errs, [r["reported_cov"] for r in runs], off)
@@ -410,13 +412,13 @@ def slope_study(st: MCSettings, sample_counts: list[int], jobs: int = 1, quiet=F
         yc = np.log([r[p]["crb_std"] for r in rows])
         slopes[p] = {"empirical": float(np.polyfit(logn, ye, 1)[0]),
                      "crb": float(np.polyfit(logn, yc, 1)[0])}
-    return {"sample_counts": list(sample_counts), "runs_per_point": st.runs, "rows": rows,
-            "slopes": slopes}
+    return {"scene": st.scene, "sample_counts": list(sample_counts), "runs_per_point": st.runs,
+            "rows": rows, "slopes": slopes}
 
 
 def format_montecarlo(res: dict) -> str:
-    from planecal.studies.common import display_scale
     st = res["settings"]
+    layout = layout_for(st["scene"])
     out = [f"Monte Carlo: scene {st['scene']}, mode {st['mode']}, {res['runs']} runs of "
            f"{res['samples_per_run']:.0f} samples; truth "
            + ("drawn per run" if st["vary_truth"] else f"fixed (seed {st['truth_seed']})")
@@ -430,7 +432,7 @@ def format_montecarlo(res: dict) -> str:
            f"+-{res['relative_standard_error_of_std']:.0%} (1 s.e.)", ""]
     rows = []
     for n, p in res["params"].items():
-        k, unit = display_scale(n)
+        k, unit = layout.display(n)
         rows.append([n, unit, f"{p['bias'] * k:+.3g}", f"{p['empirical_std'] * k:.4g}",
                      f"{p['crb_std'] * k:.4g}", f"{p['crb_white_std'] * k:.4g}",
                      f"{p['sandwich_std'] * k:.4g}", f"{p['reported_std'] * k:.4g}",
@@ -477,16 +479,17 @@ def format_montecarlo(res: dict) -> str:
 
 
 def format_slope(sl: dict) -> str:
-    from planecal.studies.common import display_scale
     offs = list(sl["slopes"])
+    layout = layout_for(sl["scene"])
+    unit = layout.display(offs[0])[1] if offs else "urad"
     rows = []
     for r in sl["rows"]:
         row = [str(r["samples"])]
         for p in offs:
-            k, _ = display_scale(p)
+            k, _ = layout.display(p)
             row.append(f"{r[p]['empirical_std'] * k:.3g} / {r[p]['crb_std'] * k:.3g}")
         rows.append(row)
     rows.append(["slope"] + [f"{sl['slopes'][p]['empirical']:+.3f} / {sl['slopes'][p]['crb']:+.3f}"
                              for p in offs])
-    return (f"spread vs samples ({sl['runs_per_point']} runs per point), empirical / CRB [urad]; "
+    return (f"spread vs samples ({sl['runs_per_point']} runs per point), empirical / CRB [{unit}]; "
             f"expected slope -0.5\n" + table(["samples"] + offs, rows))

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.cell import parameter_names, predict_with_jacobian
+from planecal.cell import predict_with_jacobian
 from planecal.encoder import counts_in_range, joints_to_counts
 from planecal.errors import InputError
 from planecal.fit import noise_variance
@@ -138,17 +138,21 @@ def d_optimal(A: np.ndarray, n: int, max_passes: int = 20, tol: float = 1e-9):
     return chosen, float(logdet), passes, swaps
 
 
-def scaled_rows(scene, qe, plate, free):
+def scaled_rows(scene, qe, plate, layout, free):
+    """The Jacobian (over ``layout``) at the scene's nominal parameters, and its free
+    columns scaled to unit RMS."""
     from planecal.scene import nominal_params
     nominal = nominal_params(scene)
-    _, J = predict_with_jacobian(scene.robot, qe, nominal, plate)
+    _, J = predict_with_jacobian(scene.robot, qe, nominal, plate, layout)
     Jf = J[:, free]
     S = 1.0 / np.sqrt(np.mean(Jf ** 2, axis=0))
     return J, Jf * S
 
 
-def predicted_std(scene, J: np.ndarray, free, joint_sigma: float, laser_sigma_m: float):
-    v = noise_variance(J[:, :6], joint_sigma, laser_sigma_m)
+def predicted_std(J: np.ndarray, layout, free, joint_sigma: float, laser_sigma_m: float):
+    """Sandwich and white-noise std of the free parameters for the Jacobian J (over
+    ``layout``) and the twin's noise model."""
+    v = noise_variance(J[:, layout.slice("joint_offsets")], joint_sigma, laser_sigma_m)
     cov = covariances(J[:, free], v)
     return np.sqrt(np.diag(cov["sandwich"])), np.sqrt(np.diag(cov["white"]))
 
@@ -181,35 +185,36 @@ def plan(scene, n: int, m: int, seed: int = 0, free_names=None, checker=None,
          repeatability_mm: float | None = None, laser_noise_mm: float = 0.001) -> dict:
     """The planning study (module docstring). Returns the planned pose list (ordered),
     the random set of equal size and both predictions."""
-    from planecal.studies.montecarlo import MCSettings, free_mask, joint_sigma
+    from planecal.layout import level1_layout
+    from planecal.studies.montecarlo import MCSettings, joint_sigma
 
     if n < 13:
         raise InputError(f"--samples must be at least 13, got {n}")
     if m < n:
         raise InputError(f"--candidates ({m}) must be at least --samples ({n})")
-    names = parameter_names(len(scene.plates))
-    free = free_mask(names, free_names)
+    layout = level1_layout(len(scene.plates))
+    free = layout.free_from_names(free_names)
     qe, q, plate = candidates(scene, m, seed, checker)
     if len(qe) < n:
         raise InputError(f"only {len(qe)} collision-free candidates for {n} samples")
-    J, A = scaled_rows(scene, qe, plate, free)
+    J, A = scaled_rows(scene, qe, plate, layout, free)
     chosen, logdet, passes, swaps = d_optimal(A, n)
     # the baseline: what the sampling run itself would sample (same seed), scaled alike
     if checker is not None:
         qe_r, plate_r = run_design(scene, n, seed, checker)
     else:
         qe_r, plate_r = qe[:n], plate[:n]
-    J_r, _ = scaled_rows(scene, qe_r, plate_r, free)
+    J_r, _ = scaled_rows(scene, qe_r, plate_r, layout, free)
     A_r = J_r[:, free] / np.sqrt(np.mean(J[:, free] ** 2, axis=0))
     _, logdet_rand = np.linalg.slogdet(A_r.T @ A_r)
     s = joint_sigma(scene.robot, MCSettings(repeatability_mm=repeatability_mm))
     sig_l = laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN)
-    std_p, white_p = predicted_std(scene, J[chosen], free, s, sig_l)
-    std_r, white_r = predicted_std(scene, J_r, free, s, sig_l)
+    std_p, white_p = predicted_std(J[chosen], layout, free, s, sig_l)
+    std_r, white_r = predicted_std(J_r, layout, free, s, sig_l)
     order, blocked = order_poses(scene, q[chosen], checker)
     chosen = chosen[order]
     p = int(free.sum())
-    fn = [nm for nm, f in zip(names, free) if f]
+    fn = layout.names_of(free)
     return {
         "format": POSES_FORMAT, "scene": scene.name, "seed": seed, "samples": n,
         "candidates": int(len(qe)), "free": fn,

@@ -267,14 +267,16 @@ def length_from(robot, meas, params: CellParams) -> float:
     return gauge_length(np.array(pts[0]), np.array(pts[1]))
 
 
-def predicted_spread(robot, meas, calibrated: CellParams, free, cov, points, R, tcp,
+def predicted_spread(robot, meas, calibrated: CellParams, layout, covariance, points, R, tcp,
                      q_ref) -> dict:
-    """What the fit's own covariance predicts (1 sigma) for the gauge-length error and for
-    the TCP position error at the ISO poses (offsets' covariance through the flange
-    Jacobian), by linear propagation."""
+    """What the fit's own covariance (``fit.Covariance``, by name, over the fit's
+    ``layout``) predicts (1 sigma) for the gauge-length error and for the TCP position
+    error at the ISO poses (offsets' covariance through the flange Jacobian), by linear
+    propagation."""
     from planecal.robot import jacobian
-    x0 = calibrated.to_vector()
-    idx = np.flatnonzero(free)
+    cov = covariance.matrix
+    x0 = calibrated.to_vector(layout)
+    idx = layout.indices(covariance.names)
     ok = np.all(np.isfinite(cov), axis=1)
     g = np.zeros(len(idx))
     L0 = length_from(robot, meas, calibrated)
@@ -284,13 +286,14 @@ def predicted_spread(robot, meas, calibrated: CellParams, free, cov, points, R, 
         h = 1e-7 * max(1.0, abs(x0[i]))
         x = x0.copy()
         x[i] += h
-        g[k] = (length_from(robot, meas, CellParams.from_vector(x)) - L0) / h
+        g[k] = (length_from(robot, meas, CellParams.from_vector(x, layout)) - L0) / h
     C = np.where(np.isfinite(cov), cov, 0.0)
     sig_len = float(np.sqrt(max(g @ C @ g, 0.0)))
     # offsets block of the covariance (free offsets only)
-    off = [k for k, i in enumerate(idx) if i < 6 and ok[k]]
+    offsets = layout.group("joint_offsets").names
+    off = [k for k, n in enumerate(covariance.names) if n in offsets and ok[k]]
     Co = C[np.ix_(off, off)]
-    cols = [int(idx[k]) for k in off]
+    cols = [offsets.index(covariance.names[k]) for k in off]  # joint of each offset
     sig_pos = []
     for p in points:
         T = np.eye(4)
@@ -308,10 +311,11 @@ def predicted_spread(robot, meas, calibrated: CellParams, free, cov, points, R, 
 # ----- whole validation ---------------------------------------------------------------------------
 
 def validate(scene, truth: CellParams, calibrated: CellParams, sample_counts: np.ndarray,
-             st: ValidationSettings | None = None, checker=None, fit_free=None,
-             fit_cov=None) -> dict:
+             st: ValidationSettings | None = None, checker=None, fit=None) -> dict:
     """ISO 9283 AP/RP and the gauge block, nominal vs calibrated, on a twin with ``truth``.
-    ``sample_counts``: the calibration samples (they place the ISO cube)."""
+    ``sample_counts``: the calibration samples (they place the ISO cube); ``fit``: the
+    calibration's ``fit.Result``, whose covariance predicts the spread (None: no
+    prediction)."""
     from planecal.scene import nominal_params
     from planecal.twin import Twin, TwinOptions
 
@@ -340,9 +344,9 @@ def validate(scene, truth: CellParams, calibrated: CellParams, sample_counts: np
     gb = gauge_block(twin, scene, truth, {"nominal": nominal, "calibrated": calibrated,
                                           "calibrated_sensor_nominal_offsets": mixed}, st, checker)
     pred = None
-    if fit_cov is not None:
-        pred = predicted_spread(robot, gb["measurements"], calibrated, np.asarray(fit_free, bool),
-                                np.asarray(fit_cov), iso["points_m"], R,
+    if fit is not None:
+        pred = predicted_spread(robot, gb["measurements"], calibrated, fit.layout,
+                                fit.covariance, iso["points_m"], R,
                                 np.asarray(st.tcp_m, float), q_cal)
     gb.pop("measurements")
     ap_b, ap_a = iso["models"]["nominal"]["ap_mm"], iso["models"]["calibrated"]["ap_mm"]
