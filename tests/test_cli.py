@@ -59,7 +59,9 @@ def test_calibrate_result_holds_the_covariance_by_name(run_file, tmp_path, capsy
     # rows and columns of what is not identifiable are null
     path, _ = run_file
     out = tmp_path / "r.json"
-    assert main(["calibrate", str(path), "--out", str(out), "--free", "all"]) == 0
+    # every parameter free: delta1 and delta6 are not identifiable (exit 1), the file is
+    # written all the same
+    assert main(["calibrate", str(path), "--out", str(out), "--free", "all"]) == 1
     r = json.loads(out.read_text())
     cov = r["covariance"]
     assert cov["names"] == r["free"] == r["identifiability"]["free"]
@@ -100,10 +102,13 @@ def test_calibrate_with_initial_file_and_free_list(run_file, tmp_path, capsys):
     path, _ = run_file
     p = tmp_path / "init.json"
     save_params(p, INITIAL)
+    # 5 iterations from afar: not converged (exit 1); the report still names delta1 and
+    # delta6 as not identifiable on one plate
     assert main(["calibrate", str(path), "--initial", str(p), "--free",
-                 "all", "--max-iter", "5"]) == 0
-    out = capsys.readouterr().out
-    assert "NOT IDENT." in out and "WARNING not identifiable" in out
+                 "all", "--max-iter", "5"]) == 1
+    cap = capsys.readouterr()
+    assert "NOT IDENT." in cap.out and "WARNING not identifiable" in cap.out
+    assert cap.err.count("\n") == 1 and "did not converge in 5 iterations" in cap.err
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -153,3 +158,35 @@ def test_demo_end_to_end(tmp_path, capsys):
     std = np.array(r["std"]["joint_offsets_rad"][1:5], float)
     assert np.all(err < 4 * std) and np.all(std < 5e-4)  # 40 samples: delta2 ~0.2 mrad
     assert r["residual_rms_mm"] < 0.03 < r["residual_rms_initial_mm"]
+
+
+def test_outputs_are_checked_before_the_fit(run_file, tmp_path, capsys):
+    path, _ = run_file
+    before = path.read_bytes()
+    # the output is an input: refused, the samples untouched
+    assert main(["calibrate", str(path), "--out", str(path)]) == 2
+    assert "that is an input of this command" in capsys.readouterr().err
+    assert path.read_bytes() == before
+    # a directory, a missing directory
+    assert main(["calibrate", str(path), "--out", str(tmp_path)]) == 2
+    assert "is a directory" in capsys.readouterr().err
+    assert main(["calibrate", str(path), "--out", str(tmp_path / "no" / "r.json")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    # an existing file planecal did not write: only with --force
+    notes = tmp_path / "notes.json"
+    notes.write_text('{"mine": true}')
+    assert main(["calibrate", str(path), "--out", str(notes)]) == 2
+    assert "use --force" in capsys.readouterr().err and "mine" in notes.read_text()
+    assert main(["calibrate", str(path), "--out", str(notes), "--force"]) == 0
+    # an earlier result is replaced by a new one
+    assert main(["calibrate", str(path), "--out", str(notes)]) == 0
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("flag,value", [("--outlier-sigma", "0"), ("--outlier-sigma", "-2"),
+                                        ("--improvement-limit", "nan"), ("--max-iter", "0")])
+def test_bad_fit_options_are_refused(run_file, flag, value, capsys):
+    path, _ = run_file
+    assert main(["calibrate", str(path), flag, value]) == 2
+    err = capsys.readouterr().err
+    assert flag in err and err.count("\n") == 1

@@ -278,7 +278,7 @@ def test_cli_rehearse_and_calibrate_write_recordings_into_a_directory(tmp_path, 
     rec_dir.mkdir()
     out = tmp_path / "run.tsv"
     code = cli.main(["rehearse", "--out", str(out), "--samples", "15", "--exact", "--seed", "4",
-                     "--foreground", "--rrd", str(rec_dir)])
+                     "--errors", "ideal", "--foreground", "--rrd", str(rec_dir)])
     assert code == 0
     files = list(rec_dir.glob("rehearse-thesis_final-*.rrd"))
     assert len(files) == 1

@@ -4,14 +4,22 @@
 
 Several sample files may be given; a file's samples are on the plate named in its 8th
 column, or on plate 1. Without --initial the default scene's nominal values (the thesis
-cell's measured initial values) are the starting point.
+cell's measured initial values) are the starting point. Readings outside the scene's laser
+window are refused. --out is checked before the fit (not an input, a writable place, not
+a file other than an earlier result unless --force) and records the inputs with their
+SHA-256 (provenance).
+
+Exit 0 when the fit converged and identified every free parameter; 1 when it did not (the
+report and --out are still written, with the reason in one line); 2 on bad input.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.errors import InputError, RunFailed
 from planecal.fit import FitOptions, Problem, Result, solve
+from planecal.formats.params import RESULT_FORMAT, provenance, result_document
+from planecal.outputs import check_output
 from planecal.params import load_params, params_to_dict, save_json
 from planecal.samples import read_many
 from planecal.scene import DEFAULT_SCENE, load_scene, nominal_params
@@ -22,7 +30,10 @@ def add_arguments(p):
     p.add_argument("--initial", help="initial parameter file (JSON); default: the scene's nominal values")
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values and robot (default %(default)s)")
     p.add_argument("--out", help="write the result (JSON) here")
-    p.add_argument("--max-iter", type=int, default=30)
+    p.add_argument("--force", action="store_true",
+                   help="replace --out even if it is not an earlier result file")
+    p.add_argument("--max-iter", type=int, default=30,
+                   help="at most this many corrections (default %(default)s)")
     p.add_argument("--improvement-limit", type=float, default=1e-12,
                    help="stop when the mean absolute correction falls below this (default %(default)g)")
     p.add_argument("--outlier-sigma", type=float, default=None,
@@ -129,9 +140,10 @@ def format_report(res: Result, n_zero: int = 0) -> str:
 
 
 def load_inputs(args):
-    """(samples, scene, initial parameters) from SAMPLES..., --scene and --initial."""
-    samples = read_many(args.samples)
+    """(samples, scene, initial parameters) from SAMPLES..., --scene and --initial; the
+    samples checked against the scene (laser window, plates)."""
     scene = load_scene(args.scene)
+    samples = read_many(args.samples, scene)
     initial = load_params(args.initial) if args.initial else nominal_params(scene)
     if samples.plate.max() >= initial.n_planes:
         raise InputError(f"samples refer to plate {samples.plate.max() + 1} but the initial "
@@ -171,20 +183,57 @@ def build_problem(samples, scene, initial, free, options: FitOptions) -> Problem
         raise InputError(str(e)) from None
 
 
-def run(args) -> int:
-    samples, scene, initial = load_inputs(args)
+def fit_options(args, robot) -> FitOptions:
+    """FitOptions from the flags, each checked."""
     if args.max_iter < 1:
-        raise InputError("--max-iter must be at least 1")
-    opts = FitOptions(max_iter=args.max_iter, improvement_limit=args.improvement_limit,
+        raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
+    if not (np.isfinite(args.improvement_limit) and args.improvement_limit >= 0):
+        raise InputError(f"--improvement-limit must be a number >= 0, got {args.improvement_limit}")
+    if args.outlier_sigma is not None and not (np.isfinite(args.outlier_sigma)
+                                               and args.outlier_sigma > 0):
+        raise InputError(f"--outlier-sigma must be a number > 0, got {args.outlier_sigma}")
+    return FitOptions(max_iter=args.max_iter, improvement_limit=args.improvement_limit,
                       outlier_sigma=args.outlier_sigma, method=args.method,
-                      scale=not args.no_scale, **weighting(args, scene.robot))
-    res = solve(build_problem(samples, scene, initial, args.free, opts))
+                      scale=not args.no_scale, **weighting(args, robot))
+
+
+def failure(res: Result) -> str | None:
+    """Why a fit did not do its job (not converged, a free parameter not identifiable),
+    or None."""
+    if not res.converged:
+        return (f"the fit did not converge in {res.iterations} iterations (--max-iter); its "
+                f"parameters are not a calibration")
+    bad = res.identifiability.not_identifiable
+    if bad:
+        return (f"the samples cannot identify {', '.join(bad)}: fix them (--free) or sample "
+                "more varied poses")
+    return None
+
+
+def save_result(path, res: Result, inputs, scene) -> None:
+    """The result file: the fit and its provenance (inputs with SHA-256, scene, robot)."""
+    doc = result_document(result_dict(res), provenance(inputs, scene.name, scene.robot.name))
+    save_json(path, doc)
+
+
+def run(args) -> int:
+    inputs = [("samples", p) for p in args.samples] + (
+        [("initial", args.initial)] if args.initial else [])
+    out = None if not args.out else check_output(args.out, [p for _, p in inputs],
+                                                 RESULT_FORMAT, args.force)
+    samples, scene, initial = load_inputs(args)
+    res = solve(build_problem(samples, scene, initial, args.free,
+                              fit_options(args, scene.robot)))
     print(format_report(res, samples.n_zero))
-    if args.out:
-        save_json(args.out, result_dict(res))
-        print(f"result written to {args.out}")
+    if out:
+        save_result(out, res, inputs + [("scene", scene.path), ("robot", scene.robot.source)],
+                    scene)
+        print(f"result written to {out}")
     if args.rrd:
         from planecal.rerun_log import log_fit_to_file
         path = log_fit_to_file(args.rrd, res, samples, scene)
         print(f"recording written to {path}")
+    why = failure(res)
+    if why:
+        raise RunFailed(why)
     return 0
