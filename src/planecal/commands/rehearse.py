@@ -68,7 +68,8 @@ def make_checker(scene, clearance_m: float):
 
 
 def run(args) -> int:
-    from planecal.commands.sampling_options import (pose_list_planner, prepare, rerun_observer,
+    from planecal.commands.sampling_options import (command_model, fixed_distance_summary,
+                                                    pose_list_planner, prepare, rerun_observer,
                                                     session_from_args)
     from planecal.links.base import AlwaysEnabled
     from planecal.sampling.session import print_summary, run_session
@@ -95,9 +96,11 @@ def run(args) -> int:
         except OSError as e:
             raise InputError(f"--truth {args.truth}: cannot write ({e.strerror})") from None
     observer = rerun_observer(args.rrd, scene, twin) if args.rrd else None
-    session = session_from_args(args, pose_list_planner(args, scene, settings, checker),
+    model = command_model(args, scene, side)
+    session = session_from_args(args, pose_list_planner(args, scene, settings, checker, model[0]),
                                 observer, extra={"twin": {"seed": twin_seed, "exact": exact,
-                                                          "errors": str(errors)}})
+                                                          "errors": str(errors)}},
+                                model=model)
     try:
         code, summary = run_session(session, scene, settings, twin, twin, AlwaysEnabled(),
                                     checker)
@@ -115,6 +118,8 @@ def run(args) -> int:
     summary["cpu_count"] = os.cpu_count()
     if args.truth:
         summary["truth"] = str(args.truth)
+    if settings.pose.fixed_distance_mm is not None:
+        summary["fixed_distance"] = fixed_distance_summary(args.out, settings, model[1])
     if args.rrd:
         summary["rrd"] = str(getattr(observer, "path", args.rrd))
     print_summary(summary)

@@ -88,15 +88,16 @@ def run(args) -> int:
     from planecal.links.zs_ld80 import ZSLD80, LaserError
     from planecal.sampling.enable import FollowingMonitor
     from planecal.sampling.run import count_samples, sidecar_path
-    from planecal.commands.sampling_options import (pose_list_planner, prepare, rerun_observer,
-                                                    session_from_args)
+    from planecal.commands.sampling_options import (command_model, pose_list_planner, prepare,
+                                                    rerun_observer, session_from_args)
     from planecal.sampling.session import print_summary, run_session
 
     if args.lag_tolerance_counts <= 0 or args.lag_ticks <= 0:
         raise InputError("--lag-tolerance-counts and --lag-ticks must be positive")
     if args.laser_error_limit < 1:
         raise InputError("--laser-error-limit must be at least 1")
-    scene, settings, _ = prepare(args)
+    scene, settings, side = prepare(args)
+    model = command_model(args, scene, side)
     checker = make_checker(scene, settings.clearance_m)
     observer = rerun_observer(args.rrd, scene) if args.rrd else None
     try:
@@ -113,8 +114,9 @@ def run(args) -> int:
         extra = {"real_cell": {"rt": args.rt, "rt_port": args.rt_port, "laser": args.laser,
                                "lag_tolerance_counts": args.lag_tolerance_counts,
                                "lag_ticks": args.lag_ticks}}
-        session = session_from_args(args, pose_list_planner(args, scene, settings, checker),
-                                    observer, extra, hold_while_planning=True)
+        session = session_from_args(args, pose_list_planner(args, scene, settings, checker,
+                                                            model[0]),
+                                    observer, extra, hold_while_planning=True, model=model)
         try:
             code, summary = run_session(session, scene, settings, monitor, laser, monitor,
                                         checker)

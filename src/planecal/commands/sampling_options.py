@@ -54,6 +54,14 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="record the run for Rerun (needs planecal.rerun_log)")
+    p.add_argument("--params", default=None, metavar="RESULT.json",
+                   help="aim with this calibration result (its sensor pose, planes and joint "
+                        "offsets) instead of the scene's nominal values: live validation "
+                        "(seed 8.2, 8.4)")
+    p.add_argument("--encoder-offsets", default=None, metavar="FD11.json",
+                   help="the encoder offsets loaded into the controller (planecal export "
+                        "--out): joint angles become counts with them; with --params its "
+                        "joint offsets are taken as realised by them, not added again")
     p.add_argument("--poses", default=None, metavar="POSES.json",
                    help="visit this planned pose list (planecal plan) instead of random poses; "
                         "--samples defaults to its length")
@@ -161,7 +169,7 @@ def rerun_observer(path, scene, twin=None):
     return make(path, scene=scene, twin=twin)
 
 
-def pose_list_planner(args, scene, settings: RunSettings, checker):
+def pose_list_planner(args, scene, settings: RunSettings, checker, model=None):
     """With --poses: a planner serving the planned list (poses already in the sample file
     of a resumed run are skipped); the run's target becomes the list's length unless
     --samples asks for fewer. None without --poses."""
@@ -193,14 +201,83 @@ def pose_list_planner(args, scene, settings: RunSettings, checker):
         settings.samples = n
     elif settings.samples > n:
         raise InputError(f"--samples {settings.samples} is more than the {n} poses in {path}")
-    return ListPlanner(scene, counts, plates, checker)
+    return ListPlanner(scene, counts, plates, checker, model)
 
 
 def session_from_args(args, planner=None, observer=None, extra=None,
-                      hold_while_planning: bool = False) -> Session:
-    """The session the flags describe (start and end moves, resume, planning)."""
+                      hold_while_planning: bool = False, model=None) -> Session:
+    """The session the flags describe (start and end moves, resume, planning, the model it
+    aims with: ``model`` = ``command_model``'s (model, record))."""
+    extra = dict(extra or {})
     if planner is not None:  # a resumed run finds its pose list in the sidecar
-        extra = {**(extra or {}), "poses": str(Path(args.poses).resolve())}
+        extra["poses"] = str(Path(args.poses).resolve())
+    cm, rec = model if model is not None else (None, None)
+    if rec:
+        extra["command"] = rec
     return Session(out=Path(args.out), start=args.start, end=args.end, resume=args.resume,
                    background=not args.foreground, hold_while_planning=hold_while_planning,
-                   planner=planner, observer=observer, extra=extra)
+                   planner=planner, observer=observer, extra=extra or None, model=cm)
+
+
+def command_model(args, scene, side=None):
+    """What the run aims with (``poses.CommandModel``): the scene's nominal cell, or
+    --params' result, with robot.json's encoder zeros or --encoder-offsets' (a resumed
+    run takes them from its sidecar). None for the nominal model. Returns (model, the
+    sidecar's record of it)."""
+    import numpy as np
+
+    from planecal.params import load_json, load_params
+    from planecal.sampling.poses import CommandModel
+    from planecal.scene import nominal_params
+
+    rec = (side or {}).get("command") or {}
+    params_path = rec.get("params") if side is not None else args.params
+    offsets_path = rec.get("encoder_offsets") if side is not None else args.encoder_offsets
+    if side is not None and (args.params or args.encoder_offsets):
+        print("note: --resume aims with the model of its sidecar; ignoring --params and "
+              "--encoder-offsets", file=sys.stderr)
+    if not params_path and not offsets_path:
+        return None, None
+    params = load_params(params_path) if params_path else nominal_params(scene)
+    qe0 = scene.robot.qe0.copy()
+    if offsets_path:
+        doc = load_json(offsets_path)
+        counts = doc.get("qe0_counts") if isinstance(doc, dict) else None
+        if (not isinstance(counts, list) or len(counts) != 6
+                or not all(isinstance(v, int) and not isinstance(v, bool) for v in counts)):
+            raise InputError(f"{offsets_path}: qe0_counts: six integer counts expected "
+                             "(planecal export --out writes them)")
+        qe0 = np.array(counts, float)
+        params = params.copy()
+        params.joint_offsets = np.zeros(6)  # realised by the encoder zeros
+    rec = {"params": str(Path(params_path).resolve()) if params_path else None,
+           "encoder_offsets": str(Path(offsets_path).resolve()) if offsets_path else None}
+    return CommandModel(params, qe0), rec
+
+
+# the seed's live validation (8.2 before, 8.4 after calibration; 30 poses at 80 mm each):
+# (mean, spread) of the readings in mm, with the sensor housing parallel to the plate
+# ("fixed": beam along the plate normal) or random orientation
+SEED_FIXED_DISTANCE = {("before", "fixed"): (72.49, 2.94), ("before", "random"): (71.14, 7.41),
+                       ("after", "fixed"): (80.48, 2.45), ("after", "random"): (80.82, 3.47)}
+
+
+def fixed_distance_summary(out, settings: RunSettings, command_record) -> dict:
+    """A fixed-distance run's readings (live validation, seed 8.2 and 8.4): what was
+    commanded, their mean, spread (max - min) and std, and the seed's own figures for the
+    same kind of run (before or after calibration, fixed or random orientation)."""
+    import numpy as np
+
+    from planecal.samples import read_samples
+    d = read_samples(out).d_mm
+    pose = settings.pose
+    orientation = "fixed" if pose.cone_deg == 0 and pose.roll_deg == 0 else "random"
+    when = "after" if command_record else "before"
+    seed_mean, seed_spread = SEED_FIXED_DISTANCE[when, orientation]
+    return {"commanded_mm": pose.fixed_distance_mm, "readings": int(len(d)),
+            "mean_mm": round(float(d.mean()), 4), "spread_mm": round(float(np.ptp(d)), 4),
+            "std_mm": round(float(d.std(ddof=1)), 4) if len(d) > 1 else None,
+            "orientation": orientation, "calibration": when,
+            "seed": {"mean_mm": seed_mean, "spread_mm": seed_spread, "poses": 30,
+                     "commanded_mm": 80.0,
+                     "where": "seed 8.2 (before) / 8.4 (after), Figures 55-56 / 60-61"}}
