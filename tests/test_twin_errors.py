@@ -218,3 +218,24 @@ def test_laser_linearity_error_is_its_two_harmonics_over_the_window():
     model = 0.7 * a * np.sin(x + p1) + 0.3 * a * np.sin(2 * x + p2)
     np.testing.assert_allclose(got[ok] - want[ok], model, atol=1e-12)
     assert np.ptp(want[ok]) > 10 and np.abs(got[ok] - want[ok]).max() <= a
+
+
+def test_thermal_growth_scales_the_links_over_robot_time():
+    # expansion 1.2e-5/K, a 3 K rise, 600 s time constant: after t seconds of moving the
+    # links' translations are (1 + g(t)) of the start's, g = k rise (1 - exp(-t/tau)), in
+    # MuJoCo and so in the readings; off, nothing grows
+    world, _ = draw_world(SCENE, 2, load_profile("realistic", ROBOT))
+    opts = replace(EXACT, thermal=(1.2e-5, 3.0, 600.0))
+    warm, cold = Twin(SCENE, truth=world, options=opts), Twin(SCENE, truth=world, options=EXACT)
+    d0 = warm.current_counts - warm.reference_counts
+    hold = np.repeat(d0[None], 30_000, axis=0)  # 300 s at rest
+    warm.run(hold, read=False)
+    cold.run(hold, read=False)
+    warm.run(hold[:1])  # the next call applies the heat of now
+    g = 1.2e-5 * 3.0 * (1 - np.exp(-300.01 / 600.0))
+    assert warm.growth() == pytest.approx(g, rel=1e-3) and cold.growth() == 0.0
+    kin = world.kinematics
+    grown = replace(kin, a=kin.a * (1 + warm._growth), d=kin.d * (1 + warm._growth))
+    np.testing.assert_allclose(warm.flange_pose(), kin_fk(grown, warm.qpos), atol=1e-12)
+    shift = np.linalg.norm(warm.flange_pose()[:3, 3] - cold.flange_pose()[:3, 3])
+    assert 0.8 * g * 1.5 < shift < g * 3.0  # ~g times the arm's reach (1.5-2.5 m)

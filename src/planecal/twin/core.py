@@ -79,6 +79,7 @@ class TwinOptions:
     quantization: bool = False
     gear: tuple = ()
     payload: tuple | None = None
+    thermal: tuple | None = None
     noise_seed: int | None = None
     check_steps: bool = True
 
@@ -224,7 +225,10 @@ class Twin:
         errors.fill(F)
         self._S, self._F = S, F
         links = [self.model.body(link_body_name(i + 1)).id for i in range(robot.n_joints)]
+        self._links = links
         self._W = (errors.harmonics(),) + gravity_model(self.model, links, self.tool_body)
+        self._link_pos0 = self.model.body_pos[links].copy()  # the links at the start's heat
+        self._growth = 0.0
         self._eps_block = np.zeros((0, 6))
         self._u_block = np.zeros((0, 6))
         self._stop = np.zeros(3, np.int64)
@@ -287,6 +291,8 @@ class Twin:
                        and deltas.ndim == 2 and deltas.shape[1] == 6
                        and deltas.flags.c_contiguous) else _as_count_rows(deltas)
         n = len(D)
+        if self.options.thermal is not None:
+            self._warm()
         S, F, t = self._S, self._F, self._t
         if len(self._ws_Q) < n + 1:
             self._ws_Q = np.empty((max(n + 1, 2 * len(self._ws_Q)), 6))
@@ -335,6 +341,34 @@ class Twin:
             raise EncoderJumpError(f"twin: delta jumped by more than "
                                    f"{self.robot.trip_step_counts} counts at row {m}")
         return self.reference_counts, cur, readings
+
+    THERMAL_STEP_M = 1e-6  # the links' growth is applied in steps of 1 um (longest chain)
+
+    def growth(self, robot_time_s: float | None = None) -> float:
+        """The links' relative growth at a robot time (default now): expansion x rise x
+        (1 - exp(-t / tau)) (0 without the thermal option)."""
+        if self.options.thermal is None:
+            return 0.0
+        k, rise, tau = self.options.thermal
+        t = self.robot_time_s if robot_time_s is None else robot_time_s
+        return float(k * rise * (1.0 - np.exp(-t / tau)))
+
+    def _warm(self) -> None:
+        """Scale the links' translations (a, d of every joint: the body positions) by the
+        growth at the start of this call, when it has moved a step (``THERMAL_STEP_M`` over
+        the arm's length) since the last update; the beam caster and the gravity model
+        follow. A call's ticks share one heat (a move lasts seconds; the rise, an hour)."""
+        g = self.growth()
+        reach = float(np.linalg.norm(self._link_pos0, axis=1).sum())
+        if abs(g - self._growth) * reach < self.THERMAL_STEP_M:
+            return
+        self._growth = g
+        self.model.body_pos[self._links] = self._link_pos0 * (1.0 + g)
+        self._beam = BeamCaster(self.model, self.laser_site, seen_mask(), self.tool_body)
+        self._W = self._W[:1] + gravity_model(self.model, self._links, self.tool_body)
+        self._t.refresh(self._S, self._F, self._W, self._ws_Q[0])
+        self._beam_stale = True
+        self._data_synced = False
 
     # ----- laser -----
     def read(self) -> float | None:

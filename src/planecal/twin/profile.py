@@ -47,6 +47,8 @@ class ErrorProfile:
         j = d.joints
         stiff = tuple(k for k in j.stiffness_nm_per_rad)
         payload = None if d.payload is None else (d.payload.mass_kg, tuple(d.payload.com_m))
+        th = d.thermal
+        thermal = (th.expansion_per_k, th.rise_k, th.time_constant_s) if th and th.enabled else None
         opts = TwinOptions(
             servo=d.servo.mode, tau_s=d.servo.tau_s, laser_noise_mm=d.laser.noise_mm,
             laser_quantum_mm=d.laser.quantum_mm, repeatability_mm=j.repeatability_mm,
@@ -57,7 +59,7 @@ class ErrorProfile:
             laser_linearity_mm=d.laser.linearity_mm,
             quantization=j.quantization,
             gear=tuple((h.joint, h.amplitude_rad, h.cycles_per_rev) for h in j.gear),
-            payload=payload)
+            payload=payload, thermal=thermal)
         return replace(opts, **kw)
 
 
