@@ -85,12 +85,14 @@ def test_a_second_run_on_the_same_file_is_refused(tmp_path, capsys):
     from planecal.sampling.runfiles import RunLock
 
     out = tmp_path / "RUN.tsv"
+    out.write_text("q1\tq2\tq3\tq4\tq5\tq6\tDm\n1\t2\t3\t4\t5\t6\t80.0\n")
+    before = out.read_bytes()
     lock = RunLock(out)  # as a run in another process holds it
     try:
         code, _, stderr = run_cli(["rehearse", "--samples", "1", "--out", str(out), "--force"],
                                   capsys)
         assert code == 2 and "another run is writing this file" in stderr
-        assert out.read_text() == ""  # nothing truncated or written
+        assert out.read_bytes() == before  # nothing truncated or written
     finally:
         lock.close()
     code, _, _ = run_cli(["rehearse", "--samples", "1", "--out", str(out), "--force"], capsys)
@@ -248,7 +250,8 @@ def test_progress_plain_lines_every_tenth():
     st.status = "complete"
     p.done(st)
     lines = buf.getvalue().splitlines()
-    assert len(lines) == 10 and lines[-1].startswith("samples 20/20")
+    assert len(lines) == 10 and lines[-1].startswith("samples 20/20  rejected 0")
+    assert lines[0].startswith("samples 2/20")
 
 
 def test_progress_bar_on_a_tty():
@@ -259,8 +262,12 @@ def test_progress_bar_on_a_tty():
             return True
 
     buf = Tty()
-    p = Progress(4, stream=buf, every_s=0.0)
+    p = Progress(4, stream=buf)
     st = RunStats()
     st.samples = 2
     p(st)
-    assert buf.getvalue().startswith("\r[############............] samples 2/4")
+    out = buf.getvalue()  # a tqdm bar, redrawn in place
+    assert out.startswith("\r") and "samples 2/4" in out and "rejected 0" in out
+    st.samples, st.status, st.reason = 3, "stopped", "interrupted"
+    p.done(st)
+    assert buf.getvalue().rstrip().endswith("run stopped: interrupted")

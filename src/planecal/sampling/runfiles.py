@@ -4,7 +4,6 @@ that keeps a second run off the same file, and the error a run that cannot write
 stops with."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from planecal.errors import InputError, RunFailed
@@ -22,27 +21,25 @@ class RunWriteError(RunFailed):
 
 
 class RunLock:
-    """An exclusive advisory lock (flock) on the sample file, held for a whole session, so
-    two runs can never write the same file (one would truncate or interleave the other's
-    samples). Taken without truncating; released when closed or when the process ends."""
+    """An exclusive lock on the sample file, held for a whole session, so two runs can
+    never write the same file (one would truncate or interleave the other's samples). It
+    is ``filelock``'s (fcntl on POSIX, msvcrt on Windows) on ``RUN.tsv.lock`` beside the
+    file; released when closed or when the process ends."""
 
     def __init__(self, out: str | Path):
-        import fcntl
+        from filelock import FileLock, Timeout
         self.path = Path(out)
+        self._lock = FileLock(str(self.path) + ".lock")
         try:
-            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as e:
-            raise InputError(f"{self.path}: cannot open ({e.strerror})") from None
-        try:
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(self._fd)
+            self._lock.acquire(timeout=0)
+        except Timeout:
             raise InputError(f"{self.path}: another run is writing this file") from None
+        except OSError as e:
+            raise InputError(f"{self.path}: cannot lock ({e.strerror})") from None
 
     def close(self) -> None:
-        if self._fd is not None:
-            os.close(self._fd)  # releases the lock
-            self._fd = None
+        if self._lock.is_locked:
+            self._lock.release()
 
 
 def load_sidecar(out: str | Path) -> dict:

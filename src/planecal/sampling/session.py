@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from planecal.errors import InputError
+from planecal.progress import Progress as ProgressBar
 from planecal.sampling.driver import (Driver, EnableDropped, PathBlocked, move_home,
                                       move_to_calibration)
 from planecal.sampling.observer import Observer
@@ -42,53 +43,28 @@ class Session:
 
 
 class Progress:
-    """Progress on stderr: a bar redrawn in place on a TTY, else a plain line every 10 %
-    of the samples (and at each stop)."""
+    """The run's progress (``planecal.progress``): samples taken, rejections and robot time;
+    at the end, why a run that did not complete stopped."""
 
-    def __init__(self, total: int, stream=None, every_s: float = 0.1):
-        self.total = total
-        self.stream = stream or sys.stderr
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.every_s = every_s
-        self._last = 0.0
-        self._last_line = -1
+    def __init__(self, total: int, stream=None, tty: bool | None = None):
+        self.bar = ProgressBar("samples", total, stream, tty)
 
     @staticmethod
     def _clock(s: float) -> str:
         s = int(round(s))
         return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
 
-    def line(self, st: RunStats) -> str:
+    def note(self, st: RunStats) -> str:
         r = st.rejected
-        return (f"samples {st.samples}/{self.total}  rejected {sum(r.values())} "
-                f"(collision {r['collision']}, laser {r['laser']}, unreachable {r['unreachable']})"
-                f"  robot time {self._clock(st.robot_time_s)}")
+        return (f"rejected {sum(r.values())} (collision {r['collision']}, laser {r['laser']}, "
+                f"unreachable {r['unreachable']})  robot time {self._clock(st.robot_time_s)}")
 
     def __call__(self, st: RunStats) -> None:
-        if self.tty:
-            now = time.monotonic()
-            if now - self._last < self.every_s and st.samples < self.total:
-                return
-            self._last = now
-            width = 24
-            k = int(width * st.samples / max(self.total, 1))
-            self.stream.write(f"\r[{'#' * k}{'.' * (width - k)}] {self.line(st)}\033[K")
-            self.stream.flush()
-        else:
-            step = max(1, self.total // 10)
-            if st.samples != self._last_line and (st.samples % step == 0 or st.samples == self.total):
-                self._last_line = st.samples
-                print(self.line(st), file=self.stream, flush=True)
+        self.bar.update(st.samples, self.note(st))
 
     def done(self, st: RunStats) -> None:
-        if self.tty:
-            self._last = 0.0
-            self(st)
-            self.stream.write("\n")
-        elif st.samples != self._last_line:
-            print(self.line(st), file=self.stream, flush=True)
-        if st.status != "complete":
-            print(f"run {st.status}: {st.stop_reason}", file=self.stream, flush=True)
+        self.bar.update(st.samples, self.note(st))
+        self.bar.close(None if st.status == "complete" else f"run {st.status}: {st.reason}")
 
 
 def run_session(session: Session, scene, settings: RunSettings, link, laser, enable,

@@ -26,6 +26,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from planecal.errors import InputError
+from planecal.progress import Progress as ProgressBar
 
 BUFFER_LEN = 100  # laser readings averaged into one sample (sampling.laserread)
 
@@ -53,29 +54,18 @@ def check_jobs(jobs: int | None) -> int:
 
 
 class Progress:
-    """``label done/total  elapsed`` on stderr, at most every ``every_s`` seconds."""
+    """A study's progress (``planecal.progress``): runs done of ``total``."""
 
-    def __init__(self, label: str, total: int, stream=None, every_s: float = 2.0,
-                 quiet: bool = False):
-        self.label, self.total = label, total
-        self.stream = stream or sys.stderr
-        self.every_s = every_s
-        self.quiet = quiet
-        self.t0 = time.monotonic()
-        self._last = -1e9
+    def __init__(self, label: str, total: int, stream=None, quiet: bool = False):
+        self.bar = None if quiet else ProgressBar(label, total, stream)
         self.done = 0
 
     def step(self, k: int = 1) -> None:
         self.done += k
-        now = time.monotonic()
-        if self.quiet:
-            return
-        if now - self._last >= self.every_s or self.done == self.total:
-            self._last = now
-            el = now - self.t0
-            eta = el / self.done * (self.total - self.done) if self.done else 0.0
-            print(f"{self.label}: {self.done}/{self.total}  {el:.0f} s elapsed, "
-                  f"~{eta:.0f} s to go", file=self.stream, flush=True)
+        if self.bar is not None:
+            self.bar.update(self.done)
+            if self.done >= self.bar.total:
+                self.bar.close()
 
 
 def _init_worker():
