@@ -1,17 +1,25 @@
-"""The `planecal` command. Each subcommand lives in planecal/commands/<name>.py with
-``add_arguments(parser)`` and ``run(args) -> int``; they are imported lazily."""
+"""Calibrate an industrial robot on plates with a flange-mounted laser distance sensor,
+and rehearse every run first on a MuJoCo digital twin of the cell.
+
+Each subcommand lives in planecal/commands/<name>.py with ``add_arguments(parser)`` and
+``run(args) -> int``; only the command that runs is imported.
+"""
 from __future__ import annotations
 
 import argparse
 import importlib
+import logging
+import os
 import sys
 
+from planecal import __version__
 from planecal.errors import InputError, RunFailed
 
 COMMANDS = {
     "demo": "rehearse on the default twin scene, calibrate, and compare with the twin's truth",
     "calibrate": "identify joint offsets, sensor pose and plane(s) from sample files",
     "predict": "print measured and predicted distance per sample",
+    "export": "encoder offsets (integer counts) to enter into the FD11 after a calibration",
     "rehearse": "run a whole sampling run on the MuJoCo twin",
     "sample": "run the sampling loop on the real cell (FD11 RT link, ZS-LD80)",
     "emulate": "serve the twin behind the real wire formats (FD11 UDP, laser pty)",
@@ -21,43 +29,152 @@ COMMANDS = {
     "plan": "choose sample poses for identifiability (D-optimal)",
     "validate": "ISO 9283 pose accuracy and gauge-block test on the twin",
     "replay": "replay a recorded file's encoder positions in the twin",
-    "export": "encoder offsets (integer counts) to enter into the FD11 after a calibration",
+    "scenes": "list the scenes (cells) planecal knows, with their plates",
+    "completion": "print a shell completion script (bash, zsh, tcsh)",
 }
+
+EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,
+gave up, link lost), the reason in one line; 2 bad input or usage; 130 interrupted.
+Every command takes --config FILE.toml (a table per command, keys = long option names,
+e.g. [rehearse] samples = 20; flags given on the command line win), -v and -q."""
+
+
+class UsageError(InputError):
+    """A command line argparse refuses; the message names the command and --help."""
+
+
+class Parser(argparse.ArgumentParser):
+    """One line for a usage error, with a pointer to --help (exit 2)."""
+
+    def error(self, message):
+        raise UsageError(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+
+class DefaultsFormatter(argparse.RawDescriptionHelpFormatter):
+    """Help that shows each option's default, unless its text already says it."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("%(default)" in text or "default" in text.lower() or action.default in
+                (None, False, argparse.SUPPRESS) or not action.option_strings):
+            return text
+        return text + " (default: %(default)s)"
 
 
 def _module(name: str):
     return importlib.import_module(f"planecal.commands.{name}")
 
 
-def build_parser(argv: list[str]) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="planecal", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", metavar="FILE.toml",
+                   help="take options from the [<command>] table of this TOML file; flags "
+                        "given on the command line win")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-v", "--verbose", action="count", default=0,
+                   help="more messages on stderr (-vv: debug)")
+    g.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress and notes on stderr; errors only")
+
+
+def build_parser(argv: list[str], full: bool = False) -> argparse.ArgumentParser:
+    """The parser; only the command in ``argv`` gets its arguments (all with ``full``)."""
+    parser = Parser(prog="planecal", description=__doc__.split("\n\n")[0].replace("\n", " "),
+                    epilog=EPILOG, formatter_class=DefaultsFormatter)
+    parser.add_argument("--version", action="version", version=f"planecal {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     wanted = next((a for a in argv if not a.startswith("-")), None)
     for name, help_text in COMMANDS.items():
-        p = sub.add_parser(name, help=help_text, description=help_text)
-        if name == wanted:  # only import the command actually run
-            try:
-                _module(name).add_arguments(p)
-            except ModuleNotFoundError as e:
-                if e.name != f"planecal.commands.{name}":
-                    raise
+        p = sub.add_parser(name, help=help_text, description=help_text, epilog=EPILOG,
+                           formatter_class=DefaultsFormatter)
+        if full or name == wanted:
+            _module(name).add_arguments(p)
+            _common(p)
     return parser
+
+
+def _config_argv(path: str, command: str) -> list[str]:
+    """The options of the ``[command]`` table of a TOML file, as command-line tokens (so
+    argparse checks them as if typed): ``key = value`` is ``--key value``, a list gives
+    several values, ``key = true`` a flag. One-line errors name the file."""
+    import tomllib
+    try:
+        with open(path, "rb") as f:
+            doc = tomllib.load(f)
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, not a TOML file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise InputError(f"{path}: invalid TOML: {e}") from None
+    table = doc.get(command, {})
+    if not isinstance(table, dict):
+        raise InputError(f"{path}: [{command}] must be a table of options")
+    out = []
+    for key, value in table.items():
+        flag = "--" + key.replace("_", "-")
+        if key in ("config", "help"):
+            raise InputError(f"{path}: [{command}].{key}: not allowed in a config file")
+        if isinstance(value, dict):
+            raise InputError(f"{path}: [{command}].{key}: a table is not an option value")
+        if value is True:
+            out.append(flag)
+        elif value is not False:
+            out += [flag, *(str(v) for v in (value if isinstance(value, list) else [value]))]
+    return out
+
+
+def _usage(command: str | None, e: UsageError, where: str = "") -> UsageError:
+    """The error as the command's own (the top-level parser reports unknown options)."""
+    if command not in COMMANDS:
+        return e
+    why = str(e).split(": error: ", 1)[-1].rsplit(" (see ", 1)[0]
+    return UsageError(f"planecal {command}: error: {where}{why} (see planecal {command} --help)")
+
+
+def parse(argv: list[str]) -> argparse.Namespace:
+    parser = build_parser(argv)
+    command = next((a for a in argv if not a.startswith("-")), None)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as e:
+        raise _usage(command, e) from None
+    cfg = getattr(args, "config", None)
+    if cfg:
+        # the file's options first, the command line's after: the last value wins
+        pos = argv.index(args.command)
+        extra = _config_argv(cfg, args.command)
+        try:
+            args = parser.parse_args(argv[:pos + 1] + extra + argv[pos + 1:])
+        except UsageError as e:
+            raise _usage(args.command, e, f"{cfg} [{args.command}]: ") from None
+    return args
+
+
+def _logging(args) -> None:
+    from planecal.progress import set_quiet
+    quiet = getattr(args, "quiet", False)
+    level = (logging.ERROR if quiet else
+             {0: logging.WARNING, 1: logging.INFO}.get(getattr(args, "verbose", 0),
+                                                      logging.DEBUG))
+    logging.basicConfig(level=level, format="planecal: %(message)s", stream=sys.stderr)
+    set_quiet(quiet)
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser(argv)
-    args = parser.parse_args(argv)
-    if not args.command:
-        parser.print_help()
-        return 2
     try:
-        module = _module(args.command)
-    except ModuleNotFoundError as e:
-        if e.name != f"planecal.commands.{args.command}":
-            raise
-        print(f"planecal {args.command}: not available in this version", file=sys.stderr)
+        args = parse(argv)
+    except UsageError as e:
+        print(e, file=sys.stderr)
         return 2
+    except InputError as e:
+        print(f"planecal: error: {e}", file=sys.stderr)
+        return 2
+    if not args.command:
+        build_parser(argv).print_help()
+        return 2
+    _logging(args)
+    module = _module(args.command)
     try:
         return int(module.run(args) or 0)
     except InputError as e:
@@ -69,7 +186,18 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"planecal {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # stdout closed early (| head): end quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
+
+
+def full_parser() -> argparse.ArgumentParser:
+    """Every command with its arguments (shell completion)."""
+    return build_parser([], full=True)
 
 
 if __name__ == "__main__":
     sys.exit(main())
+
+

@@ -1,0 +1,31 @@
+"""planecal scenes: the scenes (cells) planecal knows, one a line: name, plates, robot and
+description (scenes/*.json; any other scene is given by its path)."""
+from __future__ import annotations
+
+
+def add_arguments(p):
+    p.add_argument("--json", action="store_true", help="print them as JSON")
+
+
+def run(args) -> int:
+    import json
+
+    from planecal.paths import data_path
+    from planecal.scene import load_scene
+
+    rows = []
+    for path in sorted(data_path("scenes").glob("*.json")):
+        s = load_scene(path)
+        rows.append({"name": path.stem, "plates": len(s.plates), "robot": s.robot.name,
+                     "description": s.description or "", "path": str(path)})
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    w = max(len(r["name"]) for r in rows)
+    for r in rows:  # the description's first sentence
+        first = r["description"].split(". ")[0].rstrip(".")
+        first = first if len(first) <= 90 else first[:87] + "..."
+        print(f"{r['name']:<{w}}  {r['plates']} plate{'s' if r['plates'] != 1 else ' '}  "
+              f"{first}")
+    print("(any other scene: give its JSON path; planecal scenes --json for the details)")
+    return 0
