@@ -99,3 +99,41 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
            "--params examples/table10_params.json | head -1")
     r = subprocess.run(["bash", "-c", "set -o pipefail; " + cmd], capture_output=True, text=True)
     assert r.stdout.count("\n") == 1 and r.stderr == "" and r.returncode == 0
+
+
+def test_view_ends_its_viewer_with_itself(tmp_path):
+    # a stand-in viewer that records its pid and waits; SIGTERM to `planecal view --web`
+    # ends the viewer too
+    import os
+    import signal
+    import time
+    fake = tmp_path / "rerun"
+    pidfile = tmp_path / "pid"
+    fake.write_text(f"#!/bin/sh\necho $$ > {pidfile}\nexec sleep 600\n")
+    fake.chmod(0o755)
+    rec = tmp_path / "x.rrd"
+    import rerun as rr
+    stream = rr.RecordingStream("planecal-test")
+    stream.save(str(rec))
+    stream.log("/x", rr.Points3D([[0, 0, 0]]))
+    stream.flush()
+    env = dict(os.environ, PLANECAL_RERUN=str(fake))
+    p = subprocess.Popen([sys.executable, "-m", "planecal.cli", "view", "--web", str(rec)],
+                         env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    for _ in range(200):  # bounded wait for the viewer to start
+        if pidfile.exists() and pidfile.read_text().strip():
+            break
+        time.sleep(0.05)
+    child = int(pidfile.read_text())
+    os.kill(child, 0)  # it runs
+    p.send_signal(signal.SIGTERM)
+    assert p.wait(timeout=10) == 128 + signal.SIGTERM
+    for _ in range(100):
+        try:
+            os.kill(child, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(child, signal.SIGKILL)
+        raise AssertionError("the viewer outlived planecal view")

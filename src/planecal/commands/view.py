@@ -2,8 +2,9 @@
 
 FILE may be a directory (e.g. ``recordings/``): its newest ``.rrd`` is opened.
 
-Opens the Rerun viewer (the ``rerun`` executable that comes with rerun-sdk) on FILE and
-waits until it is closed. Where no viewer can run -- no ``rerun`` executable, or no
+Opens the Rerun viewer (the ``rerun`` executable that comes with rerun-sdk, or the one
+``$PLANECAL_RERUN`` names) on FILE and waits until it is closed; the viewer ends with this
+command (Ctrl-C, SIGTERM, SIGHUP; on Linux also when this process is killed outright). Where no viewer can run -- no ``rerun`` executable, or no
 display (Linux without $DISPLAY / $WAYLAND_DISPLAY) -- it prints one line saying how to
 open the file instead and exits 1. ``--web`` serves the recording to a browser instead
 (``rerun --serve-web FILE``; works without a display). ``--summary`` prints the entity
@@ -31,7 +32,10 @@ def add_arguments(p) -> None:
 
 
 def find_viewer() -> str | None:
-    """The ``rerun`` executable: next to this Python (a venv's bin/), else on PATH."""
+    """The ``rerun`` executable: $PLANECAL_RERUN, next to this Python (a venv's bin/), else
+    on PATH."""
+    if os.environ.get("PLANECAL_RERUN"):
+        return os.environ["PLANECAL_RERUN"]
     here = Path(sys.executable).parent / ("rerun.exe" if os.name == "nt" else "rerun")
     if here.is_file() and os.access(here, os.X_OK):
         return str(here)
@@ -77,7 +81,42 @@ def run(args) -> int:
         return 1
     cmd = [exe, str(path)] + (["--serve-web", "--bind", "127.0.0.1"] if args.web else [])
     try:
-        return subprocess.call(cmd)
+        child = subprocess.Popen(cmd, preexec_fn=_die_with_parent if sys.platform == "linux"
+                                 else None)
     except OSError as e:
         print(f"planecal view: cannot start {exe} ({e.strerror}); run: rerun {path}")
         return 1
+    return _wait_ending_with_us(child)
+
+
+def _die_with_parent() -> None:
+    """In the child, before exec (Linux): SIGTERM when planecal's process ends, however."""
+    import ctypes
+    import signal
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def _wait_ending_with_us(child: subprocess.Popen) -> int:
+    """Wait for the viewer; if we are told to stop, stop it first (no orphan serving a
+    web viewer at full CPU after we are gone). The signal handler only asks the viewer to
+    end; the waiting is done here (waiting inside the handler would deadlock on the
+    interrupted wait's lock)."""
+    import signal
+    stopping: list[int] = []
+
+    def stop(signum, frame):
+        stopping.append(signum)
+        child.terminate()
+
+    for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
+        signal.signal(sig, stop)
+    while True:
+        try:
+            rc = child.wait(timeout=5 if stopping else None)
+            break
+        except subprocess.TimeoutExpired:  # the viewer ignored SIGTERM
+            child.kill()
+    if stopping:
+        raise SystemExit(128 + stopping[0])
+    return rc
