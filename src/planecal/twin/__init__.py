@@ -8,8 +8,7 @@
 
 Modules: ``core`` (Twin), ``mjcf`` (MjSpec builders), ``truth`` (hidden truth),
 ``servo`` (servo and joint errors), ``laser`` (ray + sensor model), ``beam`` (the beams
-of many ticks in one MuJoCo call, for ``run``), ``aim`` (IK helper that points the beam
-at a plate point), ``export`` (scene MJCF for a viewer).
+of many ticks in one MuJoCo call, for ``run``), ``export`` (scene MJCF for a viewer).
 """
 from planecal.twin.core import EncoderJumpError, Hit, Twin, TwinOptions
 from planecal.twin.truth import Tolerances, draw_truth, load_truth
