@@ -180,24 +180,32 @@ class ExactOracle:
         g1, g2 = self._geoms[n]
         return mujoco.mj_geomDistance(self.model, self.data, int(g1), int(g2), distmax, None)
 
-    def distances(self, q, distmax: float = 10.0) -> np.ndarray:
-        """Signed distance [m] of every checked pair (``pairs`` order) at q, capped at
-        distmax (< 0: penetration depth as MuJoCo estimates it)."""
+    def pair_indices(self, part: str) -> np.ndarray:
+        """Indices (into ``pairs``) of the checked pairs that involve ``part``."""
+        return np.array([n for n, p in enumerate(self.pairs) if part in p], int)
+
+    def distances(self, q, distmax: float = 10.0, pairs=None) -> np.ndarray:
+        """Signed distance [m] of every checked pair (``pairs`` order; or of the pair
+        indices ``pairs``) at q, capped at distmax (< 0: penetration depth as MuJoCo
+        estimates it)."""
         self._set(_as_q(q, "q"))
-        return np.array([self._dist(n, distmax) for n in range(len(self.pairs))])
+        idx = range(len(self.pairs)) if pairs is None else pairs
+        return np.array([self._dist(int(n), distmax) for n in idx])
 
     def path_min(self, q0, q1, threshold: float, stop_below: float = -np.inf,
-                 step_m: float = 1e-3, distmax: float = 1.0) -> PathMin:
-        """Smallest distance along q0 -> q1 (s in [0, 1]) over every checked pair, sampled
-        as the module docstring says around ``threshold`` [m]: where a pair is closer
-        than the threshold its samples are at most ``step_m`` of motion apart. Stops at
-        the first sample at or below ``stop_below``."""
+                 step_m: float = 1e-3, distmax: float = 1.0, pairs=None) -> PathMin:
+        """Smallest distance along q0 -> q1 (s in [0, 1]) over every checked pair (or the
+        pair indices ``pairs``), sampled as the module docstring says around
+        ``threshold`` [m]: where a pair is closer than the threshold its samples are at
+        most ``step_m`` of motion apart. Stops at the first sample at or below
+        ``stop_below``."""
         q0, q1 = _as_q(q0, "q0"), _as_q(q1, "q1")
         dq = q1 - q0
         L = self.world.pair_rates(q0, q1)
         best = (np.inf, None, None)
         e0 = self.evaluations
-        for n in np.argsort(-L):
+        idx = np.arange(len(self.pairs)) if pairs is None else np.asarray(pairs, int)
+        for n in idx[np.argsort(-L[idx])]:
             if L[n] == 0.0:  # the pair does not move relative to itself on this path
                 self._set(q0)
                 d = self._dist(n, distmax)

@@ -9,8 +9,9 @@ Robot (``robot_spec``; written to ``models/<robot>/<robot>.xml`` by scripts/buil
   ``qpos = q + delta`` (joint angles from the encoder model plus joint offsets) the sites
   ``frame<i>`` (the fixed part of link i on body link<i>) are the DH frames of
   ``robot.fk_frames(robot, q, delta)``; site ``flange`` = frame 6.
-* geoms: ``v_<link>`` visual (group 1, contype = conaffinity = 0, massless),
-  ``c_<link>`` collision (group 3), both convex meshes from ``planecal.geometry``.
+* geoms: ``v_<piece>`` visual (group 1, contype = conaffinity = 0, massless: the model
+  of the real link), ``c_<piece>`` collision (group 3: the checker's envelope around
+  it), both convex meshes from ``planecal.geometry``, one or more pieces per body.
   Sites of the DH frames are in group 4.
 
 Scene (``scene_spec``): the robot, a ``tool`` body on the flange (adapter + ZS-LD80 head,
