@@ -8,17 +8,18 @@ usage: python scripts/bench_collision.py [--scenes S ...] [--seeds K ...] [--sam
 The draws are those of real sampling runs: the run's ``Planner`` (sampling/run.py) with
 the scene's settings (``RunSettings.for_scene``) and the product checker
 (``CollisionWorld``, default clearance), started at the scene's calibration position as
-``planecal rehearse`` starts, for N samples per scene and seed. A laser rejection moves
-the robot too, so the sequence of start configurations is the run's, without a twin.
-Each draw the checker sees (a reachable target) is the target configuration and the
-straight joint path from the previous accepted pose.
+``planecal rehearse`` starts, until N poses are accepted per scene and seed. A laser
+rejection moves the robot too, so the start configurations are the run's, without a
+twin (a run whose laser rejects some poses plans that many more). Each draw the checker
+sees (a reachable target) is the target configuration and the straight joint path from
+the previous accepted pose.
 
 The oracle (tests/mujoco_oracle.py, ``ExactOracle``) gives exact distances of the visual
 link and tool shapes (the model of the real robot) and the nominal cell with MuJoCo's
 ``mj_geomDistance``, along the path so densely that no point moves more than 1 mm between
 samples where a pair is within the clearance. Verdicts:
 * a rejection is FALSE when the visual shapes keep at least the clearance at the target
-  and everywhere along the path;
+  and everywhere along the path (to the oracle's 0.5 mm: half its 1 mm step);
 * an acceptance is COLLIDING when the visual shapes touch (distance <= 0) anywhere on it.
 ``--compare-margin-mm M`` also judges the same draws with a checker whose collision
 envelope has margin M (e.g. 10, the margin before the envelope was measured), side by side.

@@ -432,7 +432,8 @@ class CollisionWorld:
             d = fcl.distance(a.obj, b.obj, self._req_np, res)
             if d <= 0:
                 return 0.0  # GJK intersection (a wrong "contact" only costs a rejection)
-            u = res.nearest_points[1] - res.nearest_points[0]
+            pa, pb = res.nearest_points
+            u = pb - pa
             nu = np.sqrt(u @ u)
             if nu > 0:
                 u = u / nu
@@ -450,12 +451,19 @@ class CollisionWorld:
 
     @staticmethod
     def _support_gap(a: _Part, Ta, b: _Part, Tb, u: np.ndarray) -> float:
-        """min over b's vertices of u . x minus max over a's (world frame)."""
-        ua = u if Ta is None else Ta[:3, :3].T @ u
-        ub = u if Tb is None else Tb[:3, :3].T @ u
-        ta = 0.0 if Ta is None else u @ Ta[:3, 3]
-        tb = 0.0 if Tb is None else u @ Tb[:3, 3]
-        return float((b.V @ ub).min() + tb - (a.V @ ua).max() - ta)
+        """min over b's vertices of u . x minus max over a's (world frame): with x = R v + t,
+        u . x = v . (R^T u) + u . t, one product ``u @ T[:3]`` gives both."""
+        if Ta is None:
+            hi = (a.V @ u).max()
+        else:
+            w = u @ Ta[:3]
+            hi = (a.V @ w[:3]).max() + w[3]
+        if Tb is None:
+            lo = (b.V @ u).min()
+        else:
+            w = u @ Tb[:3]
+            lo = (b.V @ w[:3]).min() + w[3]
+        return float(lo - hi)
 
     def _contained(self, a: _Part, b: _Part, F: np.ndarray) -> bool:
         """One part wholly inside the other: BVHs (surfaces) report them separated, so
