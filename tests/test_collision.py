@@ -2,8 +2,6 @@
 and certified paths. MuJoCo cross-checks are in test_collision_mujoco.py."""
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 import trimesh
@@ -158,9 +156,9 @@ def test_floor_is_solid_ground_and_its_distance_is_the_lowest_vertex(world, scen
 # ----- which pairs are checked -----
 
 ADJACENT = {("base", "turret"), ("turret", "upper_arm"), ("upper_arm", "elbow"),
-            ("elbow", "forearm"), ("elbow", "wrist_fork"), ("forearm", "wrist"),
-            ("wrist_fork", "wrist"), ("wrist", "flange"), ("wrist", "flange_adapter"),
-            ("wrist", "laser_head")}
+            ("elbow", "forearm"), ("elbow", "wrist_fork_p"), ("elbow", "wrist_fork_n"),
+            ("forearm", "wrist"), ("wrist_fork_p", "wrist"), ("wrist_fork_n", "wrist"),
+            ("wrist", "flange"), ("wrist", "flange_adapter"), ("wrist", "laser_head")}
 
 
 def test_adjacent_links_are_never_checked_nor_reported(world, scene):
@@ -199,13 +197,23 @@ def test_adjacent_links_are_never_checked_nor_reported(world, scene):
 
 
 def test_folded_configuration_is_self_collision(world):
-    # elbow turned 250 deg: the forearm folds back onto the upper arm
-    r = world.check_config(np.deg2rad([0, 0, 250, 0, 0, 0]))
-    assert not r.ok and r.reason == "self" and r.pair == ("upper_arm", "forearm")
+    # elbow turned 250 deg: the forearm folds back beside the (offset) upper arm, clear of
+    # it, and its wrist runs into the turret
+    q = np.deg2rad([0, 0, 250, 0, 0, 0])
+    r = world.check_config(q)
+    assert not r.ok and r.reason == "self" and r.pair in {("turret", "wrist_fork_p"),
+                                                          ("turret", "wrist_fork_n")}
     assert r.min_distance_m == 0.0
-    # the wrist bent to its limit folds the flange into the wrist fork
-    r = world.check_config(np.deg2rad([0, 0, 0, 0, 125, 0]))
-    assert not r.ok and r.reason == "self" and r.pair == ("wrist_fork", "flange")
+    d = dict(zip([(a, b) for a, b, _ in world.pairs], world.distances(q)))
+    assert d[("upper_arm", "forearm")] > C
+    # the wrist bent to 120 deg keeps the flange clear of the forearm's end; at the
+    # datasheet's 125 deg the envelopes come closer than the clearance, without contact
+    r = world.check_config(np.deg2rad([0, 0, 0, 0, 120, 0]))
+    assert r.ok and r.min_distance_m > C
+    for q5 in (125, -125):
+        r = world.check_config(np.deg2rad([0, 0, 0, 0, q5, 0]))
+        assert not r.ok and r.reason == "self" and r.pair == ("forearm", "flange")
+        assert 0.0 < r.min_distance_m < C
     # straight out it is clear
     assert world.check_config(np.zeros(6)).ok
 
@@ -298,10 +306,11 @@ def test_grazing_path_is_rejected_not_looped(scene):
     ob = StaticMesh("ob", box_mesh([0.2, 0.2, 0.2], T @ _T(t=(0, 0, 0.02 + C + 5e-5 + 0.1))),
                     "obstacle")
     w = _world(scene, [cube], [ob])
-    t = time.perf_counter()
     r = w.check_path(q0, q1)
-    assert time.perf_counter() - t < 1.0
     assert not r.ok and r.reason in ("environment", "undecided")
+    # it ends within the refinement budget: both ends, the coarse grid and at most
+    # max_steps rounds of 3 measurements per open interval
+    assert w.counters["distance_queries"] <= 2 + 2 * w.coarse_samples + 3 * w.max_steps
 
 
 def test_bad_input_is_one_line_input_error(world, scene):
@@ -315,10 +324,11 @@ def test_bad_input_is_one_line_input_error(world, scene):
         CollisionWorld(scene, clearance_m=-0.01)
 
 
-def test_rehearsal_timing_and_counters(scene):
+def test_rehearsal_counters(scene):
     """150 samples as the sampling loop draws them (random sensor poses on the plate, IK
     nearest to the current configuration), each target's path checked from the current
-    configuration; time the checking."""
+    configuration: the counters add up (the time is printed; speed is
+    scripts/bench_collision.py's and bench_rehearse.py's to measure, not a test's)."""
     from planecal.sampling.poses import PoseGenerator
     w = CollisionWorld(scene, clearance_m=C)
     gen = PoseGenerator(scene)
@@ -339,4 +349,29 @@ def test_rehearsal_timing_and_counters(scene):
     print(f"\nrehearsal: {c['paths']} path checks, {accepted} accepted, "
           f"{c['distance_queries']} FCL distance queries, {summary['check_time_s']:.3f} s checking "
           f"({1e3 * summary['check_time_s'] / c['paths']:.2f} ms/path); {dict(c)}")
-    assert summary["check_time_s"] < 6.0  # ~0.5 s on an idle 2-core machine
+
+
+# ----- the appendix-D cell (issue 11) -----
+
+def test_appendix_d_calibration_position_is_clear():
+    """The appendix-D calibration position holds the J6 housing 17 mm above the plate's
+    edge (exact shapes); the first envelope (10 mm margin, 12-sided polygons) put it at
+    1.9 mm, inside the clearance, so every rehearsal gave up at its start."""
+    scene = load_scene("appendix_d")
+    w = CollisionWorld(scene, clearance_m=C)
+    r = w.check_config(scene.calibration_q)
+    assert r.ok and r.min_distance_m > C and r.pair == ("wrist", "plate")
+    assert w.check_path(scene.calibration_q, scene.calibration_q).ok
+
+
+@pytest.mark.parametrize("start", ["calibration", "home"])
+def test_appendix_d_rehearsal_completes(tmp_path, capsys, start):
+    import json
+
+    from planecal.cli import main
+    out = tmp_path / "D.tsv"
+    code = main(["rehearse", "--scene", "appendix_d", "--samples", "3", "--seed", "0",
+                 "--start", start, "--out", str(out)])
+    summary = json.loads(capsys.readouterr().out)
+    assert code == 0 and summary["status"] == "complete" and summary["samples"] == 3
+    assert len(out.read_text().strip().splitlines()) >= 3

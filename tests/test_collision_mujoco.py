@@ -32,8 +32,8 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco")
 
-from planecal.collision import (FLOOR_DEPTH_M, CollisionWorld, mujoco_contacts,  # noqa: E402
-                                mujoco_contacts_along_path)
+from mujoco_oracle import mujoco_contacts, mujoco_contacts_along_path  # noqa: E402
+from planecal.collision import FLOOR_DEPTH_M, CollisionWorld  # noqa: E402
 from planecal.robot import fk  # noqa: E402
 from planecal.scene import load_scene  # noqa: E402
 

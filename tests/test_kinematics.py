@@ -4,7 +4,7 @@ product of 4x4 joint transforms, with every parameter moved."""
 import numpy as np
 import pytest
 
-from planecal.kinematics import (Kinematics, chain, fk, frame_error, frames, from_robot,
+from planecal.kinematics import (Kinematics, fk, frame_error, frames, from_robot,
                                  parallel_pairs)
 from planecal.robot import fk as dh_fk
 from planecal.robot import fk_frames, load_robot

@@ -4,7 +4,6 @@ the run converts with) puts a fixed-distance run back on 80 mm."""
 import json
 
 import numpy as np
-import pytest
 
 from planecal.cli import main
 from planecal.params import save_params

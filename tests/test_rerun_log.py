@@ -369,7 +369,7 @@ def test_view_without_display_prints_how(rehearsal, monkeypatch, capsys):
     def no_spawn(*a, **k):
         raise AssertionError("a viewer was spawned")
 
-    monkeypatch.setattr(subprocess, "call", no_spawn)
+    monkeypatch.setattr(subprocess, "Popen", no_spawn)
     monkeypatch.setattr(view, "find_viewer", lambda: "/opt/rerun")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
@@ -384,7 +384,14 @@ def test_view_without_display_prints_how(rehearsal, monkeypatch, capsys):
     calls = []
     monkeypatch.setattr(view, "find_viewer", lambda: "/opt/rerun")
     monkeypatch.setenv("DISPLAY", ":0")
-    monkeypatch.setattr(subprocess, "call", lambda cmd: calls.append(cmd) or 0)
+    class FakeViewer:
+        def __init__(self, cmd, **kw):
+            calls.append(cmd)
+
+        def wait(self, timeout=None):
+            return 0
+
+    monkeypatch.setattr(subprocess, "Popen", FakeViewer)
     assert cli.main(["view", str(rehearsal["path"])]) == 0
     assert calls == [["/opt/rerun", str(rehearsal["path"])]]
     assert cli.main(["view", "--web", str(rehearsal["path"])]) == 0

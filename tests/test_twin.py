@@ -13,7 +13,7 @@ from planecal.params import save_params  # noqa: E402
 from planecal.robot import fk, fk_frames, load_robot  # noqa: E402
 from planecal.scene import load_scene, nominal_params  # noqa: E402
 from planecal.twin import EncoderJumpError, Tolerances, Twin, TwinOptions, draw_truth  # noqa: E402
-from planecal.twin.aim import beam_frame, aim_joints, random_aims  # noqa: E402
+from twin_aim import aim_joints, beam_frame, random_aims  # noqa: E402
 from planecal.twin.mjcf import plate_geom_names, robot_xml, robot_xml_path  # noqa: E402
 
 ROBOT = load_robot()

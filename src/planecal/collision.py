@@ -84,8 +84,8 @@ Counters (``counters``, ``summary()``): configurations and paths checked, clear 
 distance queries, GJK fallbacks, checking time (``check_time_s``), and rejections by
 reason ('limits', 'self', 'environment', 'undecided').
 
-Independent check: ``mujoco_contacts`` / ``mujoco_contacts_along_path`` read MuJoCo's own
-contacts (mj_kinematics + mj_collision) for a model such as the twin's scene.
+Independent checks live with the tests (tests/mujoco_oracle.py): MuJoCo's own contacts,
+and exact distances of the visual (real) link shapes along a path.
 """
 from __future__ import annotations
 
@@ -432,7 +432,8 @@ class CollisionWorld:
             d = fcl.distance(a.obj, b.obj, self._req_np, res)
             if d <= 0:
                 return 0.0  # GJK intersection (a wrong "contact" only costs a rejection)
-            u = res.nearest_points[1] - res.nearest_points[0]
+            pa, pb = res.nearest_points
+            u = pb - pa
             nu = np.sqrt(u @ u)
             if nu > 0:
                 u = u / nu
@@ -450,12 +451,19 @@ class CollisionWorld:
 
     @staticmethod
     def _support_gap(a: _Part, Ta, b: _Part, Tb, u: np.ndarray) -> float:
-        """min over b's vertices of u . x minus max over a's (world frame)."""
-        ua = u if Ta is None else Ta[:3, :3].T @ u
-        ub = u if Tb is None else Tb[:3, :3].T @ u
-        ta = 0.0 if Ta is None else u @ Ta[:3, 3]
-        tb = 0.0 if Tb is None else u @ Tb[:3, 3]
-        return float((b.V @ ub).min() + tb - (a.V @ ua).max() - ta)
+        """min over b's vertices of u . x minus max over a's (world frame): with x = R v + t,
+        u . x = v . (R^T u) + u . t, one product ``u @ T[:3]`` gives both."""
+        if Ta is None:
+            hi = (a.V @ u).max()
+        else:
+            w = u @ Ta[:3]
+            hi = (a.V @ w[:3]).max() + w[3]
+        if Tb is None:
+            lo = (b.V @ u).min()
+        else:
+            w = u @ Tb[:3]
+            lo = (b.V @ w[:3]).min() + w[3]
+        return float(lo - hi)
 
     def _contained(self, a: _Part, b: _Part, F: np.ndarray) -> bool:
         """One part wholly inside the other: BVHs (surfaces) report them separated, so
@@ -671,72 +679,3 @@ class CollisionWorld:
         out = {k: int(v) for k, v in sorted(self.counters.items())}
         out["check_time_s"] = round(self.check_time_s, 6)
         return out
-
-
-# ----- independent check with MuJoCo's own contacts -----
-
-@dataclass(frozen=True)
-class MjContact:
-    s: float  # path parameter of the sample
-    geom1: str
-    geom2: str
-    body1: str
-    body2: str
-    dist: float  # MuJoCo's signed contact distance [m] (< 0: penetration)
-
-
-def _robot_qpos_adr(model, qpos_adr):
-    import mujoco
-    if qpos_adr is None:
-        hinges = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE)[:6]
-        if len(hinges) < 6:
-            raise InputError(f"collision: the MuJoCo model has {len(hinges)} hinge joints, 6 expected")
-        qpos_adr = model.jnt_qposadr[hinges]
-    return np.asarray(qpos_adr, int)
-
-
-def mujoco_contacts(model, data, q, qpos_adr=None, s: float = 0.0) -> list[MjContact]:
-    """MuJoCo's own contacts at configuration q: sets the six robot joints (``qpos_adr``,
-    default the first six hinge joints' qpos addresses), runs ``mj_kinematics`` +
-    ``mj_collision`` and reads ``d.contact`` as arrays.
-
-    MuJoCo reports geom pairs closer than their margin (``geom_margin``; 0: touching or
-    penetrating) and collides meshes by their convex hull; its own filters (parent-child,
-    excludes, contype/conaffinity) apply, so filter the result by the pairs you care about.
-    """
-    import mujoco
-    q = _as_q(q, "q")
-    data.qpos[_robot_qpos_adr(model, qpos_adr)] = q
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_collision(model, data)
-    k = data.ncon
-    if k == 0:
-        return []
-    G = np.array(data.contact.geom[:k]).reshape(k, 2)
-    D = np.array(data.contact.dist[:k]).reshape(k)
-    out = []
-    for (g1, g2), dist in zip(G, D):
-        out.append(MjContact(float(s), _mj_name(model, mujoco.mjtObj.mjOBJ_GEOM, g1),
-                             _mj_name(model, mujoco.mjtObj.mjOBJ_GEOM, g2),
-                             _mj_name(model, mujoco.mjtObj.mjOBJ_BODY, model.geom_bodyid[g1]),
-                             _mj_name(model, mujoco.mjtObj.mjOBJ_BODY, model.geom_bodyid[g2]),
-                             float(dist)))
-    return out
-
-
-def _mj_name(model, kind, i) -> str:
-    import mujoco
-    return mujoco.mj_id2name(model, kind, int(i)) or f"{kind.name}{int(i)}"
-
-
-def mujoco_contacts_along_path(model, data, q0, q1, n: int, qpos_adr=None) -> list[MjContact]:
-    """MuJoCo's contacts (``mujoco_contacts``) at n evenly spaced configurations of the
-    straight joint motion q0 -> q1 (s = 0 .. 1): an independent check of a path."""
-    q0, q1 = _as_q(q0, "q0"), _as_q(q1, "q1")
-    if n < 2:
-        raise InputError(f"collision: need n >= 2 samples along a path, got {n}")
-    adr = _robot_qpos_adr(model, qpos_adr)
-    out = []
-    for s in np.linspace(0.0, 1.0, n):
-        out += mujoco_contacts(model, data, q0 + s * (q1 - q0), adr, float(s))
-    return out

@@ -4,7 +4,6 @@ The commands build the session from their flags (``commands.sampling_options``).
 from __future__ import annotations
 
 import json
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path

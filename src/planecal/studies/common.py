@@ -18,8 +18,6 @@ bound for this noise is (J^T V^-1 J)^-1, which the weighted fit reaches
 from __future__ import annotations
 
 import os
-import sys
-import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterable
 

@@ -12,8 +12,9 @@ the twin's true robot):
   ``dh_site(robot, i)`` = Tx(a_i) Rx(alpha_i) of robot.json's standard DH on body
   link<i>) are the standard DH frames of ``robot.fk_frames(robot, q, delta)`` for the
   nominal model; site ``flange`` is the model's flange frame.
-* geoms: ``v_<link>`` visual (group 1, contype = conaffinity = 0, massless),
-  ``c_<link>`` collision (group 3), both convex meshes from ``planecal.geometry``.
+* geoms: ``v_<piece>`` visual (group 1, contype = conaffinity = 0, massless: the model
+  of the real link), ``c_<piece>`` collision (group 3: the checker's envelope around
+  it), both convex meshes from ``planecal.geometry``, one or more pieces per body.
 * inertials: each body's mass and centre of mass are robot.json's ``masses`` of its link
   (the tool's: the payload); the geoms carry none. The twin's gravity model reads them
   back from the compiled model.

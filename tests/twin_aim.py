@@ -1,6 +1,6 @@
 """Point the beam at a plate point: sensor pose -> flange pose -> IK -> encoder counts.
 
-For tests, benchmarks and scene checks (the sampling application has its own pose
+Test helper (moved out of src/: only tests use it; the sampling application has its own pose
 generator). ``params`` says where the sensor is and what the joint offsets are: pass
 the nominal parameters to aim like the real application would, or the truth to hit
 exactly.
