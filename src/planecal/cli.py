@@ -21,6 +21,7 @@ COMMANDS = {
     "plan": "choose sample poses for identifiability (D-optimal)",
     "validate": "ISO 9283 pose accuracy and gauge-block test on the twin",
     "replay": "replay a recorded file's encoder positions in the twin",
+    "report": "write an HTML report with figures of a result file (calibration or study)",
     "urdf": "export the nominal or calibrated robot as URDF (base, flange, laser)",
 }
 
