@@ -171,7 +171,8 @@ def test_montecarlo_report(results, tmp_path, capsys):
     out = tmp_path / "rep"
     assert main(["report", str(results["montecarlo"]), "--out", str(out)]) == 0
     imgs = check_page(out / "index.html", 4)
-    for name in ("errors_joint_offsets.png", "errors_sensor_pose.png", "chi2.png", "ratios.png"):
+    for name in ("errors_joint_offsets.png", "errors_sensor_pose.png", "errors_normalized.png",
+                 "chi2.png", "ratios.png"):
         assert name in imgs
     html = (out / "index.html").read_text(encoding="utf-8")
     assert "delta2" in html and "Chi-square" in html

@@ -109,8 +109,10 @@ def log_ticks(ax, which: str = "y") -> None:
 
 
 def grid_shape(n: int, max_cols: int = 3) -> tuple[int, int]:
-    cols = min(n, max_cols)
-    return (n + cols - 1) // cols, cols
+    """(rows, cols) for n panels: as few rows as max_cols allows, filled evenly (4 -> 2 x 2,
+    not 3 + 1)."""
+    rows = -(-n // max_cols)
+    return rows, -(-n // rows)
 
 
 def hide_unused(axes, n: int) -> None:
