@@ -31,6 +31,8 @@ COMMANDS = {
     "replay": "replay a recorded file's encoder positions in the twin",
     "scenes": "list the scenes (cells) planecal knows, with their plates",
     "completion": "print a shell completion script (bash, zsh, tcsh)",
+    "report": "write an HTML report with figures of a result file (calibration or study)",
+    "urdf": "export the nominal or calibrated robot as URDF (base, flange, laser)",
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,

@@ -1,0 +1,77 @@
+"""planecal urdf [--params RESULT.json] [--scene S] --out FILE.urdf [--no-meshes]
+[--mesh-prefix PREFIX]
+
+The robot as URDF: base link ``base``, six revolute joints whose values are planecal's
+joint angles q, ``flange`` and the sensor frame ``laser`` (fixed children). Without
+--params: the nominal model (zero joint offsets, the scene's nominal sensor pose); with
+--params (a calibration result or parameter file): its joint offsets, folded into the
+joint origins, and its sensor pose. Visual and collision meshes (planecal.geometry's, as
+the twin and the collision checker use them) go as STL files into FILE_meshes/ beside
+the URDF, referenced by a relative path, or by PREFIX + file name (e.g.
+package://mc70_description/meshes/). See planecal.urdf.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from planecal.errors import InputError
+
+
+def add_arguments(p):
+    from planecal.scene import DEFAULT_SCENE
+    p.add_argument("--params", metavar="RESULT.json",
+                   help="calibration result or parameter file (default: the nominal model)")
+    p.add_argument("--scene", default=DEFAULT_SCENE,
+                   help="scene for the robot and the nominal sensor pose (default %(default)s)")
+    p.add_argument("--out", required=True, metavar="FILE.urdf", help="URDF file to write")
+    p.add_argument("--no-meshes", action="store_true",
+                   help="write the kinematic tree only (no visual or collision shapes)")
+    p.add_argument("--mesh-prefix", default=None, metavar="PREFIX",
+                   help="mesh file names in the URDF are PREFIX + name (default: the relative "
+                        "path FILE_meshes/name)")
+
+
+def write_meshes(scene, params, mesh_dir: Path, prefix: str):
+    """STL files of the link and tool shapes (planecal.geometry) and their MeshRefs."""
+    from planecal.geometry import robot_link_meshes, tool_meshes
+    from planecal.urdf import MeshRef
+    mesh_dir.mkdir(parents=True, exist_ok=True)
+    refs = []
+    for kind in ("visual", "collision"):
+        for lm in robot_link_meshes(scene.robot, kind) + tool_meshes(scene, kind, sensor=params):
+            mesh = lm.mesh.copy()
+            mesh.apply_transform(lm.T_body_mesh)
+            fname = f"{lm.name}_{kind}.stl"
+            mesh.export(mesh_dir / fname)
+            refs.append(MeshRef(lm.body, kind, prefix + fname, name=f"{lm.name}_{kind}"))
+    return refs
+
+
+def run(args) -> int:
+    from planecal.params import load_params
+    from planecal.scene import load_scene, nominal_params
+    from planecal.urdf import urdf_text
+
+    scene = load_scene(args.scene)
+    out = Path(args.out)
+    if args.params:
+        if out.exists() and out.resolve() == Path(args.params).resolve():
+            raise InputError(f"--out {out}: is the --params file; choose another name")
+        params = load_params(args.params)
+        source = f"calibrated: {args.params}"
+    else:
+        params = nominal_params(scene)
+        source = f"nominal: scene {scene.name}"
+    if out.is_dir():
+        raise InputError(f"--out {out}: is a directory; give a file name")
+    if not out.parent.exists():
+        raise InputError(f"--out {out}: directory {out.parent} does not exist")
+    refs = []
+    if not args.no_meshes:
+        mesh_dir = out.with_name(out.stem + "_meshes")
+        prefix = args.mesh_prefix if args.mesh_prefix is not None else mesh_dir.name + "/"
+        refs = write_meshes(scene, params, mesh_dir, prefix)
+    out.write_text(urdf_text(scene.robot, params, meshes=refs, source=source), encoding="utf-8")
+    print(f"URDF written to {out} ({source}"
+          + (f"; {len(refs)} meshes in {out.stem}_meshes/" if refs else "") + ")")
+    return 0
