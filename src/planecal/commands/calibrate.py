@@ -14,6 +14,8 @@ report and --out are still written, with the reason in one line); 2 on bad input
 """
 from __future__ import annotations
 
+from dataclasses import asdict
+
 import numpy as np
 
 from planecal.errors import InputError, RunFailed
@@ -87,6 +89,8 @@ def result_dict(res: Result) -> dict:
     out["identifiability"] = res.identifiability.to_dict()
     out["free"] = layout.names_of(res.free)
     out["covariance"] = res.covariance.to_dict()
+    out["history"] = [asdict(it) for it in res.history]
+    out["initial"] = params_to_dict(res.initial)
     return out
 
 
