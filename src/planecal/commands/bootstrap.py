@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from planecal.errors import InputError
 
+FORMAT = "planecal-bootstrap/1"
+
 
 def add_arguments(p):
     from planecal.scene import DEFAULT_SCENE
@@ -27,6 +29,10 @@ def add_arguments(p):
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="also write the plots as a Rerun recording (planecal view FILE)")
     p.add_argument("--out", help="write the result (JSON) here")
+    p.add_argument("--force", action="store_true",
+                   help="replace --out even if it is not an earlier bootstrap result")
+    from planecal.commands.report import add_report_argument
+    add_report_argument(p)
 
 
 def run(args) -> int:
@@ -36,6 +42,11 @@ def run(args) -> int:
     from planecal.studies.bootstrap import BootstrapSettings, bootstrap, format_bootstrap
     from planecal.studies.common import check_jobs, parse_int_list
 
+    from planecal.commands.report import write_command_report
+    from planecal.outputs import check_output
+
+    if args.out:
+        check_output(args.out, args.samples + [args.initial], FORMAT, args.force)
     sizes = parse_int_list(args.sizes, "--sizes")
     if args.seed < 0:
         raise InputError(f"--seed must be >= 0, got {args.seed}")
@@ -46,9 +57,11 @@ def run(args) -> int:
     res = bootstrap(problem, BootstrapSettings(tuple(sizes), args.repeats, args.seed),
                     jobs=check_jobs(args.jobs))
     print(format_bootstrap(res, problem.layout))
+    res = {"format": FORMAT, **res}
     if args.out:
         save_json(args.out, res)
         print(f"result written to {args.out}")
+    write_command_report(args, res, scene=str(scene.path))
     if args.rrd:
         from planecal.studies.report import log_bootstrap
         print(f"plots written to {log_bootstrap(args.rrd, res)}")

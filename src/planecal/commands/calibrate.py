@@ -18,6 +18,7 @@ from dataclasses import asdict
 
 import numpy as np
 
+from planecal.commands.report import add_report_argument, write_command_report
 from planecal.errors import InputError, RunFailed
 from planecal.fit import FitOptions, Problem, Result, solve
 from planecal.formats.params import RESULT_FORMAT, provenance, result_document
@@ -55,6 +56,7 @@ def add_arguments(p):
     p.add_argument("--distance-sigma-um", type=float, default=None,
                    help="with --weighted: std of a sample's distance from the sensor itself "
                         "(default 1 um)")
+    add_report_argument(p)
     p.add_argument("--rrd", nargs="?", const="auto", default=None,
                    help="write a Rerun recording of the fit (file name, directory, or nothing "
                         "for recordings/calibrate-<scene>-<time>.rrd)")
@@ -214,12 +216,6 @@ def failure(res: Result) -> str | None:
     return None
 
 
-def save_result(path, res: Result, inputs, scene) -> None:
-    """The result file: the fit and its provenance (inputs with SHA-256, scene, robot)."""
-    doc = result_document(result_dict(res), provenance(inputs, scene.name, scene.robot.name))
-    save_json(path, doc)
-
-
 def run(args) -> int:
     inputs = [("samples", p) for p in args.samples] + (
         [("initial", args.initial)] if args.initial else [])
@@ -229,10 +225,13 @@ def run(args) -> int:
     res = solve(build_problem(samples, scene, initial, args.free,
                               fit_options(args, scene.robot)))
     print(format_report(res, samples.n_zero))
+    doc = result_document(result_dict(res), provenance(
+        inputs + [("scene", scene.path), ("robot", scene.robot.source)], scene.name,
+        scene.robot.name))
     if out:
-        save_result(out, res, inputs + [("scene", scene.path), ("robot", scene.robot.source)],
-                    scene)
+        save_json(out, doc)
         print(f"result written to {out}")
+    write_command_report(args, out or doc, samples=args.samples, scene=str(scene.path))
     if args.rrd:
         from planecal.rerun_log import log_fit_to_file
         path = log_fit_to_file(args.rrd, res, samples, scene)

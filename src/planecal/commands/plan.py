@@ -26,6 +26,10 @@ def add_arguments(p):
     p.add_argument("--measure", type=int, default=0, metavar="R",
                    help="measure planned vs random spread on the twin over R runs each")
     p.add_argument("--jobs", type=int, default=None, help="worker processes for --measure")
+    p.add_argument("--force", action="store_true",
+                   help="replace --out even if it is not an earlier pose list")
+    from planecal.commands.report import add_report_argument
+    add_report_argument(p)
 
 
 def run(args) -> int:
@@ -38,6 +42,11 @@ def run(args) -> int:
     from planecal.studies.common import check_jobs, table
     from planecal.studies.planning import plan
 
+    from planecal.commands.report import write_command_report
+    from planecal.formats.poses import POSES_FORMAT
+    from planecal.outputs import check_output
+
+    check_output(args.out, [], POSES_FORMAT, args.force)
     scene = load_scene(args.scene)
     if args.measure and args.measure < 2:
         raise InputError(f"--measure needs at least 2 runs, got {args.measure}")
@@ -77,6 +86,7 @@ def run(args) -> int:
         print(f"measured: {args.measure} twin runs each (std of the estimates over the runs)")
     save_json(args.out, res)
     print(f"pose list written to {args.out}")
+    write_command_report(args, args.out, scene=str(scene.path))
     return 0
 
 
