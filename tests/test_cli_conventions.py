@@ -120,14 +120,19 @@ def test_view_ends_its_viewer_with_itself(tmp_path):
     env = dict(os.environ, PLANECAL_RERUN=str(fake))
     p = subprocess.Popen([sys.executable, "-m", "planecal.cli", "view", "--web", str(rec)],
                          env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    for _ in range(200):  # bounded wait for the viewer to start
-        if pidfile.exists() and pidfile.read_text().strip():
-            break
-        time.sleep(0.05)
-    child = int(pidfile.read_text())
-    os.kill(child, 0)  # it runs
-    p.send_signal(signal.SIGTERM)
-    assert p.wait(timeout=10) == 128 + signal.SIGTERM
+    try:
+        for _ in range(200):  # bounded wait for the viewer to start
+            if pidfile.exists() and pidfile.read_text().strip():
+                break
+            time.sleep(0.05)
+        child = int(pidfile.read_text())
+        os.kill(child, 0)  # it runs
+        p.send_signal(signal.SIGTERM)
+        assert p.wait(timeout=10) == 128 + signal.SIGTERM
+    finally:  # never leave planecal view behind, whatever failed
+        if p.poll() is None:
+            p.kill()
+            p.wait()
     for _ in range(100):
         try:
             os.kill(child, 0)

@@ -99,24 +99,35 @@ def _die_with_parent() -> None:
 
 def _wait_ending_with_us(child: subprocess.Popen) -> int:
     """Wait for the viewer; if we are told to stop, stop it first (no orphan serving a
-    web viewer at full CPU after we are gone). The signal handler only asks the viewer to
-    end; the waiting is done here (waiting inside the handler would deadlock on the
-    interrupted wait's lock)."""
+    web viewer at full CPU after we are gone). The signal handler only records the signal
+    and signals the viewer by pid: no Popen method runs inside it, because they take
+    Popen's wait lock, which the interrupted wait may hold (a deadlock seen in the field:
+    `timeout 20 planecal view --web` hung forever). The main loop polls and escalates."""
+    import os
     import signal
     stopping: list[int] = []
 
     def stop(signum, frame):
         stopping.append(signum)
-        child.terminate()
+        try:
+            os.kill(child.pid, signal.SIGTERM)
+        except OSError:  # already gone
+            pass
 
     for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
         signal.signal(sig, stop)
+    asked_at: float | None = None
+    import time
     while True:
         try:
-            rc = child.wait(timeout=5 if stopping else None)
+            rc = child.wait(timeout=0.2)
             break
-        except subprocess.TimeoutExpired:  # the viewer ignored SIGTERM
-            child.kill()
+        except subprocess.TimeoutExpired:
+            if stopping:
+                if asked_at is None:
+                    asked_at = time.monotonic()
+                elif time.monotonic() - asked_at > 5:  # the viewer ignored SIGTERM
+                    child.kill()
     if stopping:
         raise SystemExit(128 + stopping[0])
     return rc
