@@ -66,7 +66,10 @@ def draws(scene, seed: int, samples: int, checker):
                 out.append((q0, q, False, reason))
         if plan.q is None:
             break
-        out.append((q0, plan.q, True, None))
+        # the motion the run makes: straight, or a detour's legs through its via-points
+        qs = [q0] + [q for q, _ in plan.via] + [plan.q]
+        for a, b in zip(qs[:-1], qs[1:]):
+            out.append((a, b, True, None))
         rng_state = plan.rng_after
         q0 = plan.q
     return out, total

@@ -183,6 +183,8 @@ def test_visual_shapes_clear_where_the_checker_accepts_the_sampling_draws():
     for i in range(20):
         plan = planner.plan(q0, i, state, settings.max_attempts)
         assert plan.q is not None
-        pm = oracle.path_min(q0, plan.q, threshold=C, stop_below=C - 5e-4)
-        assert pm.distance >= C - 5e-4 and not pm.stopped
+        qs = [q0] + [q for q, _ in plan.via] + [plan.q]  # straight, or a detour's legs
+        for a, b in zip(qs[:-1], qs[1:]):
+            pm = oracle.path_min(a, b, threshold=C, stop_below=C - 5e-4)
+            assert pm.distance >= C - 5e-4 and not pm.stopped
         state, q0 = plan.rng_after, plan.q

@@ -146,7 +146,9 @@ def test_obstacle_scene_blocks_paths_and_accepted_paths_touch_nothing(obstacle):
     fin = scene.obstacles[0]
     q0 = scene.calibration_q
     assert world.check_config(q0).ok
-    gen = PoseGenerator(scene)
+    from planecal.sampling.poses import PoseSettings
+    gen = PoseGenerator(scene, PoseSettings(cone_deg=scene.cone_deg, roll_deg=180.0,
+                                            distance_mm=tuple(scene.distance_mm)))
     rng = np.random.default_rng(0)
     through = accepted = 0
     for _ in range(120):

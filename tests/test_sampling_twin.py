@@ -62,10 +62,14 @@ def test_rehearsal_recovers_the_true_offsets_within_3_sigma(scene, world, tmp_pa
 
 
 def test_interrupted_rehearsal_resumes_where_the_robot_stopped(scene, world, tmp_path):
+    # the ticks after which the 2nd and the 3rd sample are taken, from uninterrupted runs
+    t2 = rehearse(scene, world, tmp_path / "two.tsv", 2, 7)[0].ticks
+    t3 = rehearse(scene, world, tmp_path / "three.tsv", 3, 7)[0].ticks
+    drop = t2 + (t3 - t2) // 3  # on the way to the 3rd pose
     out = tmp_path / "RUN.tsv"
-    stats1, twin1 = rehearse(scene, world, out, 6, 7, enable=DropAfter(5400))
+    stats1, twin1 = rehearse(scene, world, out, 6, 7, enable=DropAfter(drop))
     assert stats1.status == "stopped" and stats1.samples == 2  # mid-path to the 3rd
-    assert twin1.ticks == 5400  # nothing was sent after the enable signal dropped
+    assert twin1.ticks == drop  # nothing was sent after the enable signal dropped
     n1 = stats1.samples
     assert len(read_samples(out)) == n1
     # a new session: the twin (same truth) starts where the robot stopped
@@ -74,4 +78,4 @@ def test_interrupted_rehearsal_resumes_where_the_robot_stopped(scene, world, tmp
     assert stats2.status == "complete" and stats2.sessions == 2
     s = read_samples(out)
     assert len(s) == 6 and len({tuple(r) for r in s.qe}) == 6
-    assert stats2.ticks == 5400 + twin2.ticks
+    assert stats2.ticks == drop + twin2.ticks

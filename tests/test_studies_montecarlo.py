@@ -1,6 +1,7 @@
 """Monte Carlo study: the twin mode reproduces a rehearsal sample for sample; on small
 instances the spread agrees with the Cramer-Rao bound and the chi-square check holds."""
 import numpy as np
+import pytest
 
 from planecal.cli import main
 from planecal.studies.common import covariances
@@ -110,3 +111,26 @@ def test_plots_go_to_a_rerun_recording(tmp_path, capsys):
     assert main(["montecarlo", "--mode", "synthetic", "--runs", "3", "--samples", "30",
                  "--jobs", "1", "--slope", "30,40", "--slope-runs", "2", "--rrd", str(rrd)]) == 0
     assert is_recording(rrd)
+
+
+def test_pose_draw_settings_reach_the_runs():
+    """--ik-choice / --roll-deg set the sampling run's pose draw: nearest IK keeps the
+    wrist in its branch (q5 sign never changes), wrist changes it; roll 0 keeps the sensor's
+    x axis on the plate's x edge, so the last joint moves far less than at any roll."""
+    from planecal.encoder import counts_to_joints
+    from planecal.errors import InputError
+    scene = _scene("thesis_final")
+
+    def q(**kw):
+        st = MCSettings(samples=40, **kw)
+        qe, _, _, _ = twin_samples(scene, truth_for(st, 0), st, 5)
+        return counts_to_joints(scene.robot, qe)
+
+    flips = {c: int(np.sum(np.diff(np.sign(q(ik_choice=c)[:, 4])) != 0))
+             for c in ("nearest", "wrist")}
+    assert flips["nearest"] == 0 and flips["wrist"] >= 1
+    spread6 = {r: np.ptp(q(roll_deg=r, ik_choice="nearest")[:, 5]) for r in (0.0, 180.0)}
+    assert spread6[0.0] < 0.7 * spread6[180.0]  # measured 1.03 vs 1.97 rad
+    for bad in (dict(roll_deg=200.0), dict(mode="synthetic", ik_choice="nearest")):
+        with pytest.raises(InputError):
+            MCSettings(**bad).check()

@@ -38,8 +38,9 @@ def test_plan_command_predicts_a_smaller_spread_than_random(tmp_path, capsys, sc
     res = json.loads(out.read_text())
     assert res["format"] == "planecal-poses/1" and len(res["counts"]) == 20
     assert res["logdet_planned"] > res["logdet_random"]
-    assert res["d_efficiency_gain"] > 1.0
-    for n in ("delta2", "delta5"):
+    # measured 1.79 on the whole determinant; delta2..5 at 0.60/0.83/0.89/0.55 of random
+    assert res["d_efficiency_gain"] > 1.5
+    for n in ("delta2", "delta3", "delta4", "delta5"):
         assert res["predicted_std_planned"][n] < res["predicted_std_random"][n]
     # every planned pose is collision-free and the run consumes the list
     from planecal.encoder import counts_to_joints

@@ -2,6 +2,7 @@
 [--mode twin|rehearse|synthetic] [--seed K] [--truth-seed T] [--vary-truth]
 [--offsets-all] [--laser-noise-mm X] [--repeatability-mm X] [--quantization]
 [--free NAMES] [--weighted] [--slope 50,100,200] [--slope-runs R]
+[--roll-deg X] [--ik-choice wrist|nearest]
 
 Repeated rehearsals on the twin with fresh poses and noise, each calibrated from the
 scene's nominal values: per parameter the bias, the empirical std, the Cramer-Rao bound
@@ -19,6 +20,7 @@ from planecal.errors import InputError
 
 def add_arguments(p):
     from planecal.scene import DEFAULT_SCENE
+    from planecal.sampling.poses import IK_CHOICES
     from planecal.studies.montecarlo import MODES
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--runs", type=int, default=50, help="Monte Carlo runs (default 50)")
@@ -43,6 +45,12 @@ def add_arguments(p):
     p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
     p.add_argument("--weighted", action="store_true",
                    help="fit by weighted least squares with the noise model (planecal.fit)")
+    p.add_argument("--roll-deg", type=float, default=None,
+                   help="twin/rehearse modes: the pose draw's roll about the beam within "
+                        "+-this (default: the sampling run's, 180)")
+    p.add_argument("--ik-choice", choices=IK_CHOICES, default=None,
+                   help="twin/rehearse modes: the pose draw's IK branch choice (default: the "
+                        "sampling run's, wrist)")
     p.add_argument("--slope", help="also measure the spread at these sample counts (e.g. 50,100,200)")
     p.add_argument("--slope-runs", type=int, default=None, help="runs per slope point (default --runs)")
 
@@ -62,7 +70,8 @@ def run(args) -> int:
                     mode=args.mode, truth_seed=args.truth_seed, vary_truth=args.vary_truth,
                     offsets_all=args.offsets_all, laser_noise_mm=args.laser_noise_mm,
                     repeatability_mm=args.repeatability_mm, quantization=args.quantization,
-                    free=free, weighted=args.weighted)
+                    free=free, weighted=args.weighted, roll_deg=args.roll_deg,
+                    ik_choice=args.ik_choice)
     st.check()
     jobs = check_jobs(args.jobs)
     slope_counts = parse_int_list(args.slope, "--slope", 20) if args.slope else None

@@ -35,9 +35,9 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
     p.add_argument("--plate-choice", choices=PLATE_CHOICES, default=None,
                    help="multi-plate scenes: plate per sample (default round_robin)")
     p.add_argument("--ik-choice", choices=IK_CHOICES, default=None,
-                   help="IK solution per pose: wrist = the wrist branch drawn at random "
-                        "(seed 7.1.2: large joint changes), nearest = the nearest to the "
-                        "current configuration (default wrist)")
+                   help="IK solution per pose: wrist = the wrist branch changes at random, "
+                        "p 0.1 per pose (seed 7.1.2: large joint changes), nearest = the "
+                        "nearest to the current configuration (default wrist)")
     p.add_argument("--clearance-mm", type=float, default=None,
                    help="collision clearance (default 10)")
     p.add_argument("--laser-max-reads", type=int, default=None,

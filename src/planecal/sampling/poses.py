@@ -29,10 +29,13 @@ offsets, chosen by ``ik_choice``:
 
 - ``wrist`` (default; seed 7.1.2: "try to achieve maximum joint change between the random
   poses, in order to get good identifiability"): the wrist branch (the sign of q5, which
-  turns the wrist over) drawn at random, then the solution of that branch nearest to the
-  current configuration; the other branch when the drawn one has no solution. Without it
-  the nearest solution keeps the wrist in one branch for a whole run, and delta5, which the
-  wrist branch is the lever of, is determined 5-10x worse (docs/STUDIES.md).
+  turns the wrist over) changes at random, with probability ``WRIST_SWITCH`` per pose,
+  then the solution of that branch nearest to the current configuration; the other branch
+  when the chosen one has no solution. A run so spends about half its samples in each
+  branch, turning the wrist over some 15 times in 150 samples (each a detour: the switch
+  probability trades identifiability for robot time). Without it the nearest solution
+  keeps the wrist in one branch for a whole run, and delta5, which the wrist branch is the
+  lever of, is determined 5-10x worse (docs/STUDIES.md).
 - ``nearest``: the solution nearest to the current configuration.
 
 Nearest means the fewest 10 ms ticks: the largest number of encoder counts any joint must
@@ -53,6 +56,9 @@ from planecal.scene import Scene
 
 
 
+WRIST_SWITCH = 0.1  # chance per pose that the wrist branch changes (ik_choice wrist)
+
+
 @dataclass
 class PoseSettings:
     cone_deg: float = 30.0
@@ -61,7 +67,7 @@ class PoseSettings:
     margin_m: float = 0.025
     roll_deg: float = 180.0
     plate_choice: str = "round_robin"
-    ik_choice: str = "nearest"
+    ik_choice: str = "wrist"
 
     def check(self, scene: Scene) -> None:
         """Raise InputError for settings the scene cannot use."""
@@ -186,12 +192,23 @@ class PoseGenerator:
         if len(Q) == 0:
             return None
         if self.settings.ik_choice == "wrist" and rng is not None:
-            up = rng.uniform() < 0.5
+            up = (q_near[4] >= 0) != (rng.uniform() < WRIST_SWITCH)
             branch = (Q[:, 4] >= 0) == up
             if branch.any():
                 Q = Q[branch]
         cost = np.max(np.abs(Q - q_near) * self.weights, axis=1)
         return Q[np.argmin(cost)]
+
+    def branch_targets(self, pose: SensorPose, q_near: np.ndarray) -> list[np.ndarray]:
+        """For each wrist branch (q5 >= 0, q5 < 0) the solution reaching ``pose`` nearest
+        to ``q_near``: the candidates a pose offers a planner that chooses among them."""
+        Q = ik_all(self.robot, pose.T_flange, self.delta)
+        out = []
+        for up in (True, False):
+            B = Q[(Q[:, 4] >= 0) == up]
+            if len(B):
+                out.append(B[np.argmin(np.max(np.abs(B - q_near) * self.weights, axis=1))])
+        return out
 
     def counts_target(self, q: np.ndarray) -> np.ndarray:
         """The encoder counts of joint angles q, with the model's encoder zeros."""

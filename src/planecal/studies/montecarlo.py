@@ -72,6 +72,8 @@ class MCSettings:
     clearance_m: float = 0.01
     poses: tuple | None = None  # fixed encoder counts (planning study): replayed in order
     weighted: bool = False  # fit by weighted least squares with the noise model (fit.py)
+    roll_deg: float | None = None  # the pose draw's roll about the beam; None: the default
+    ik_choice: str | None = None  # the pose draw's IK branch choice; None: the default
 
     def check(self) -> None:
         if self.mode not in MODES:
@@ -89,6 +91,12 @@ class MCSettings:
         if self.weighted and self.quantization:
             raise InputError("--weighted with --quantization: the weighted fit's noise model "
                              "(repeatability + sensor) has no quantisation term")
+        if self.roll_deg is not None and not 0.0 <= self.roll_deg <= 180.0:
+            raise InputError(f"--roll-deg must be in [0, 180], got {self.roll_deg}")
+        if (self.roll_deg is not None or self.ik_choice is not None) \
+                and self.mode == "synthetic":
+            raise InputError("--roll-deg and --ik-choice set the sampling run's pose draw; "
+                             "the synthetic mode draws its own poses")
         if self.quantization and self.mode != "synthetic":
             raise InputError("encoder quantisation noise exists in the synthetic mode only "
                              "(the twin's joints sit exactly on their counts)")
@@ -139,6 +147,10 @@ def _twin_and_settings(scene, truth, st: MCSettings, seed: int):
                                     repeatability_mm=st.repeatability_mm))
     rs = RunSettings.for_scene(scene, samples=st.samples, seed=seed)
     rs.clearance_m = st.clearance_m
+    if st.roll_deg is not None:
+        rs.pose.roll_deg = st.roll_deg
+    if st.ik_choice is not None:
+        rs.pose.ik_choice = st.ik_choice
     return twin, rs
 
 

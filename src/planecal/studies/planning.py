@@ -44,7 +44,9 @@ from planecal.studies.common import BUFFER_LEN, covariances
 
 
 def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = None):
-    """Up to m collision-free candidate poses: (qe (k,6) int64, q (k,6), plate (k,))."""
+    """Up to m collision-free candidate poses: (qe (k,6) int64, q (k,6), plate (k,)). Each
+    drawn sensor pose offers its solution in each wrist branch (the nearest to the
+    calibration position in that branch), so the design can mix the branches."""
     from planecal.sampling.poses import PoseGenerator, PoseSettings
 
     gen = PoseGenerator(scene, PoseSettings(cone_deg=scene.cone_deg,
@@ -58,17 +60,15 @@ def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = N
         k = gen.plate_for(len(qe), rng)
         pose = gen.draw(rng, k)
         draws += 1
-        q = gen.joint_target(pose, q_ref)
-        if q is None:
-            continue
-        c = joints_to_counts(scene.robot, q)
-        if not counts_in_range(scene.robot, c):
-            continue
-        if checker is not None and not checker.check_config(q).ok:
-            continue
-        qe.append(c)
-        qs.append(q)
-        plate.append(k)
+        for q in gen.branch_targets(pose, q_ref):
+            c = joints_to_counts(scene.robot, q)
+            if len(qe) >= m or not counts_in_range(scene.robot, c):
+                continue
+            if checker is not None and not checker.check_config(q).ok:
+                continue
+            qe.append(c)
+            qs.append(q)
+            plate.append(k)
     if len(qe) < 2:
         raise InputError(f"only {len(qe)} collision-free candidate poses in {draws} draws")
     return np.array(qe), np.array(qs), np.array(plate, int)
