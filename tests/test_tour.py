@@ -167,3 +167,50 @@ def test_order_errors():
         T.order(np.zeros((2, 6)), np.zeros(6), blocked="nope")
     with pytest.raises(ValueError, match="needs the scene"):
         T.order(np.zeros((2, 6)), np.zeros(6), checker=object())
+
+
+def test_clock_counts_the_driven_ticks_and_estimates_them_at_rest(cell, tmp_path):
+    """The noisy twin (laser noise, repeatability, the servo's lag: reads of 100 to
+    several hundred ticks). Driving the ticks (``DriveAcquirer``) under a ``Clock``: its
+    count is exactly the driver's. Setting the twin at rest instead (``RestAcquirer``, the
+    Monte Carlo's twin mode), same seed, same plans: the reads differ a little (no settling
+    after a move), here by 111 of 43486 ticks; within 1 %."""
+    from planecal.links.base import AlwaysEnabled
+    from planecal.sampling.collect import (Cursor, DriveAcquirer, MemoryRecorder,
+                                           RestAcquirer, Tally, collect)
+    from planecal.sampling.driver import Driver
+    from planecal.sampling.planner import Planner
+    from planecal.sampling.run import RunSettings
+    from planecal.twin import Twin
+    from planecal.twin.truth import draw_truth
+
+    scene, world = cell
+    truth = draw_truth(scene, 0)
+    rs = RunSettings.for_scene(scene, samples=30, seed=1000)
+
+    def run(make_acquirer):
+        twin = Twin(scene, truth=truth, seed=rs.seed)
+        start = twin.current_counts.copy()
+        clock = T.Clock(make_acquirer(twin), start)
+        tally = Tally()
+        collect(Planner(scene, rs.pose, world), clock, MemoryRecorder(), rs.samples,
+                Cursor(counts_to_joints(scene.robot, start),
+                       np.random.default_rng(rs.seed).bit_generator.state), tally,
+                rs.max_attempts)
+        assert tally.status == "complete"
+        return clock, tally, twin
+
+    drv = None
+
+    def drive(twin):
+        nonlocal drv
+        drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
+        drv.start()  # one tick: the first exchange
+        return DriveAcquirer(drv, rs.laser, rs.nominal_step_counts, rs.dwell_ticks)
+
+    driven, t_drive, twin = run(drive)
+    assert driven.ticks + 1 == drv.ticks == twin.ticks
+    assert driven.read_ticks > 100 * rs.samples  # the reads are not all the minimum
+    rest, t_rest, _ = run(lambda tw: RestAcquirer(tw, rs.laser))
+    assert t_rest.rejected == t_drive.rejected
+    assert abs(rest.ticks - driven.ticks) < 0.01 * driven.ticks

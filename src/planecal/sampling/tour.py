@@ -8,8 +8,11 @@ sample the robot
   ``NOMINAL_STEP`` (50) counts a tick -- then holds the goal for ``DWELL_TICKS`` (5);
   a detour's legs to its via-points have no dwell (``collect.DriveAcquirer``);
 * reads the laser: ``read_stable`` takes one reading a tick until its buffer of
-  ``buffer_len`` (100) readings is stable, so at least 100 ticks; on the twin with the
-  default noise a read takes 100 to 105 (``READ_TICKS`` is the typical 102).
+  ``buffer_len`` (100) readings is stable, so at least 100 ticks. On the twin with the
+  default noise (1 um a reading) the median read takes 101 ticks but the mean is ~150: the
+  spread of 100 readings often exceeds the 5 um limit and the buffer must turn over
+  (150 samples, seed 1000: 90th percentile 248, max 448). ``READ_TICKS`` (the median,
+  102) is for estimates; ``Clock`` counts the real reads of a collection.
 
 ``order`` finds the visiting order of a set of poses that minimises the travel ticks (the
 dwell and read ticks are the same for every order): an open path from the start
@@ -45,7 +48,7 @@ import numpy as np
 
 from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP, n_steps
 
-READ_TICKS = 102  # typical ticks of one laser read on the twin (100 at least: the buffer)
+READ_TICKS = 102  # median ticks of one laser read on the twin (100 at least: the buffer)
 EXACT_MAX = 12  # poses up to which ``order`` solves exactly (Held-Karp: n^2 2^n)
 BLOCKED_MODES = ("avoid", "detour")
 
@@ -97,6 +100,38 @@ def robot_time_s(sequence, start, tick_s: float, read_ticks: float = READ_TICKS,
                  nominal: int = NOMINAL_STEP, dwell: int = DWELL_TICKS) -> float:
     """Robot time [s] of ``robot_ticks`` at ``tick_s`` a tick (``robot.tick_s``)."""
     return robot_ticks(sequence, start, read_ticks, vias, nominal, dwell) * float(tick_s)
+
+
+# ----- counting a collection's ticks -----------------------------------------------------------
+
+class Clock:
+    """An acquirer (``collect.Acquirer``) that counts the robot's ticks of a collection
+    while ``inner`` acquires: each plan's legs from the last commanded counts (via-points
+    without dwell, the goal with ``dwell``) and the laser read's own ticks
+    (``LaserResult.reads``; a read that gives up counts too: the robot went there). With
+    ``RestAcquirer`` (studies) this is the robot time ``DriveAcquirer`` spends on the same
+    plans, without simulating the ticks. ``ticks`` is the running total."""
+
+    def __init__(self, inner, start_counts, nominal: int = NOMINAL_STEP,
+                 dwell: int = DWELL_TICKS):
+        self.inner, self.nominal, self.dwell = inner, nominal, dwell
+        self.idle = inner.idle
+        self.counts = np.asarray(start_counts, np.int64).copy()
+        self.ticks = 0
+        self.read_ticks = 0
+        self.moves = 0
+
+    def acquire(self, plan):
+        got = self.inner.acquire(plan)
+        for _, c in plan.via:
+            self.ticks += move_ticks(self.counts, c, self.nominal, 0)
+            self.counts = np.asarray(c, np.int64)
+        self.ticks += move_ticks(self.counts, plan.qe_goal, self.nominal, self.dwell)
+        self.counts = np.asarray(plan.qe_goal, np.int64).copy()
+        self.ticks += got.laser.reads
+        self.read_ticks += got.laser.reads
+        self.moves += 1
+        return got
 
 
 # ----- what a planner makes the run do ----------------------------------------------------------
