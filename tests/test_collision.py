@@ -110,8 +110,8 @@ def test_non_convex_part_uses_bvh_and_detects_containment(scene):
     # a non-convex static part: two disjoint 1 m boxes in one mesh. A 0.1 m cube 0.25 m
     # beside the first box is 0.2 m away; the same cube wholly inside it touches no
     # triangle, yet is a collision.
-    two = trimesh.util.concatenate([box_mesh([1, 1, 1], _T(t=(0, 0, 5))),
-                                    box_mesh([1, 1, 1], _T(t=(3, 0, 5)))])
+    two = trimesh.util.concatenate([box_mesh([1, 1, 1], _T(t=(0, 0, 5))).to_trimesh(),
+                                    box_mesh([1, 1, 1], _T(t=(3, 0, 5))).to_trimesh()])
     assert not two.is_convex and two.is_watertight
     for centre, expected in (((0.8, 0, 5), 0.25), ((0.1, 0.1, 5.1), 0.0)):
         cube = LinkMesh("cube", 0, box_mesh([0.1] * 3, _T(t=centre)))

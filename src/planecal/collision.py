@@ -105,6 +105,7 @@ import numpy as np
 from planecal.collision_joint import (HULL_SECTIONS, SafeSet, axis_coordinates,
                                       axis_distance_max, hull_of_revolution, sweep)
 from planecal.errors import InputError
+from planecal.mesh import Mesh, box, prism
 from planecal.robot import Robot, fk_frames, within_limits
 
 FLOOR_DEPTH_M = 10.0  # the floor box reaches this far below the floor's top face
@@ -142,7 +143,7 @@ class _Part:
     V: np.ndarray  # (n,3) vertices in the body frame (base frame if static)
     center: np.ndarray  # (3,) bounding-sphere centre, body frame
     radius: float
-    tri: object  # trimesh.Trimesh in the body frame (exact BVH, containment test)
+    tri: Mesh  # the part's triangles in the body frame (exact BVH, containment test)
     bvh: fcl.CollisionObject  # BVH of tri: triangle-exact distances, no GJK
     convex: bool = True
     is_identity: bool = False
@@ -166,12 +167,11 @@ def _bvh(V: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
 def _make_part(name, body, kind, mesh, T_body_mesh, box_extents=None, box_pose=None) -> _Part:
     """An exact fcl.Box where the mesh is that box, fcl.Convex where it is convex, a BVH
     otherwise; every part also gets a BVH of its triangles for exact distances."""
-    import trimesh
     V = np.asarray(mesh.vertices, float) @ T_body_mesh[:3, :3].T + T_body_mesh[:3, 3]
     faces = np.asarray(mesh.faces, np.int64)
     if np.linalg.det(T_body_mesh[:3, :3]) < 0:
         faces = faces[:, ::-1]
-    tri = trimesh.Trimesh(V, faces, process=False)
+    tri = Mesh(V, faces, bool(mesh.is_convex), bool(mesh.is_watertight))
     geom, Tg, convex = None, np.eye(4), True
     if box_extents is not None and box_pose is not None:
         ext = np.asarray(box_extents, float)
@@ -268,12 +268,11 @@ class CollisionWorld:
             ext, pose = sm.box_extents, sm.box_pose
             mesh = sm.mesh
             if sm.kind == "floor":  # solid ground: same top face and extent, deep
-                import trimesh
                 lo, hi = mesh.bounds
                 ext = np.array([hi[0] - lo[0], hi[1] - lo[1], FLOOR_DEPTH_M])
                 pose = np.eye(4)
                 pose[:3, 3] = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] - FLOOR_DEPTH_M / 2]
-                mesh = trimesh.creation.box(extents=ext, transform=pose)
+                mesh = box(ext, pose)
             self.parts.append(_make_part(sm.name, -1, sm.kind, mesh, np.eye(4), ext, pose))
         names = [p.name for p in self.parts]
         if len(set(names)) != len(names):
@@ -410,13 +409,10 @@ class CollisionWorld:
     def _hull_part(self, name: str, body: int, X: np.ndarray, T_body_mesh: np.ndarray) -> _Part:
         """The circumscribed prism of the hull of revolution about z of points X (the
         hull's own frame), on ``body`` with ``T_body_mesh`` from that frame to the body's."""
-        import trimesh
         r, z_lo, z_hi = hull_of_revolution(X)
         T = np.eye(4)
         T[2, 3] = (z_lo + z_hi) / 2
-        mesh = trimesh.creation.cylinder(radius=r / np.cos(np.pi / HULL_SECTIONS),
-                                         height=max(z_hi - z_lo, 1e-6),
-                                         sections=HULL_SECTIONS, transform=T)
+        mesh = prism(r / np.cos(np.pi / HULL_SECTIONS), max(z_hi - z_lo, 1e-6), HULL_SECTIONS, T)
         return _make_part(f"{name} (hull)", body, "hull", mesh, T_body_mesh)
 
     def _sweep_pair(self, n: int, fixed: _Part, moving: _Part, m: int, hull: str) -> SafeSet:

@@ -2,7 +2,7 @@
 
 Conventions
 -----------
-* Metres, watertight ``trimesh.Trimesh`` objects.
+* Metres, watertight convex ``mesh.Mesh`` objects (convex hulls, cached: ``planecal.mesh``).
 * ``LinkMesh.body`` is the index of the DH frame the mesh is rigidly attached to
   (0 = base, i = frame after joint i, 6 = flange; the flange adapter and laser head are
   attached to frame 6). ``mesh.vertices`` are already expressed in that DH frame:
@@ -76,10 +76,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import trimesh
 
 from planecal.cell import sensor_rotation
 from planecal.errors import InputError
+from planecal.mesh import Mesh, box, convex_hull
 
 COLLISION_MARGIN = 0.004  # m around the visual shapes (module docstring)
 TOOL_MARGIN = COLLISION_MARGIN  # the tool's envelope: the same margin
@@ -113,7 +113,7 @@ FLANGE_RADIUS, FLANGE_THICKNESS = 0.0625, 0.035
 class LinkMesh:
     name: str
     body: int
-    mesh: trimesh.Trimesh
+    mesh: Mesh
     T_body_mesh: np.ndarray = field(default_factory=lambda: np.eye(4))
     box_extents: np.ndarray | None = None
     box_pose: np.ndarray | None = None
@@ -122,7 +122,7 @@ class LinkMesh:
 @dataclass
 class StaticMesh:
     name: str
-    mesh: trimesh.Trimesh
+    mesh: Mesh
     kind: str  # 'plate' | 'stand' | 'floor' | 'obstacle'
     box_extents: np.ndarray | None = None
     box_pose: np.ndarray | None = None
@@ -217,21 +217,13 @@ def _points(prim, kind: str, m: float) -> np.ndarray:
     return np.concatenate([p0 + ring, p1 + ring])
 
 
-def _piece(prims, kind: str, m: float) -> trimesh.Trimesh:
-    return _hull(np.concatenate([_points(p, kind, m) for p in prims]))
+def _piece(prims, kind: str, m: float) -> Mesh:
+    return convex_hull(np.concatenate([_points(p, kind, m) for p in prims]))
 
 
-def _hull(points: np.ndarray) -> trimesh.Trimesh:
-    mesh = trimesh.convex.convex_hull(np.asarray(points, float))
-    if not mesh.is_watertight:  # pragma: no cover - qhull hulls are closed
-        raise RuntimeError("geometry: convex hull is not watertight")
-    return mesh
-
-
-def box_mesh(extents, pose=None) -> trimesh.Trimesh:
+def box_mesh(extents, pose=None) -> Mesh:
     """A watertight box (full extents) at pose (4x4, centre)."""
-    return trimesh.creation.box(extents=np.asarray(extents, float),
-                                transform=np.eye(4) if pose is None else np.asarray(pose, float))
+    return box(extents, pose)
 
 
 def _rpy_matrix(rpy) -> np.ndarray:

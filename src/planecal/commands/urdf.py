@@ -39,8 +39,7 @@ def write_meshes(scene, params, mesh_dir: Path, prefix: str):
     refs = []
     for kind in ("visual", "collision"):
         for lm in robot_link_meshes(scene.robot, kind) + tool_meshes(scene, kind, sensor=params):
-            mesh = lm.mesh.copy()
-            mesh.apply_transform(lm.T_body_mesh)
+            mesh = lm.mesh.transformed(lm.T_body_mesh).to_trimesh()
             fname = f"{lm.name}_{kind}.stl"
             mesh.export(mesh_dir / fname)
             refs.append(MeshRef(lm.body, kind, prefix + fname, name=f"{lm.name}_{kind}"))
