@@ -38,3 +38,26 @@ def test_pose_list_errors(tmp_path, capsys):
     bad.write_text('{"format": "nope"}')
     assert main(["rehearse", "--poses", str(bad), "--out", str(out), "--force"]) == 2
     assert "not a planecal pose list" in capsys.readouterr().err
+
+
+def test_a_pose_list_that_runs_out_completes_with_what_it_could_measure(tmp_path, capsys):
+    """A pose whose beam misses the plate is rejected by the laser; the run still ends
+    'complete' (exit 0) once every pose of the list was tried, and says how many it got."""
+    from planecal.robot import load_robot
+    poses, counts = _plan(tmp_path, n=13)
+    doc = json.loads(poses.read_text())
+    robot = load_robot()
+    away = counts[0].copy()
+    away[0] += int(round(np.deg2rad(40) * robot.gains[0]))  # J1 40 deg off: beam past the plate
+    doc["counts"] = counts.tolist() + [away.tolist()]
+    if "plates" in doc:
+        doc["plates"] = list(doc["plates"]) + [doc["plates"][0]]
+    poses.write_text(json.dumps(doc))
+    out = tmp_path / "run.tsv"
+    capsys.readouterr()
+    assert main(["rehearse", "--poses", str(poses), "--errors", "ideal", "--out", str(out)]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["status"] == "complete"
+    assert summary["samples"] == 13 and summary["rejected_laser"] >= 1
+    assert "13 of the 14 samples" in summary["stop_reason"]
+    assert len(read_samples(out)) == 13

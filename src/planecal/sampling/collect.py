@@ -107,7 +107,8 @@ class Recorder(Protocol):
 
 @dataclass
 class Tally:
-    """What a collection counted; ``status`` 'complete' or 'gave_up' (then ``reason``)."""
+    """What a collection counted; ``status`` 'complete' or 'gave_up' (then ``reason``;
+    a pose list that ran out is 'complete' with the reason and the count)."""
     samples: int = 0
     rejected: dict = field(default_factory=lambda: {k: 0 for k in REJECT_KINDS})
     laser_give_ups: dict = field(default_factory=lambda: {"out_of_range": 0, "not_stable": 0})
@@ -146,6 +147,11 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
         req = (cursor.q, tally.samples, cursor.rng_state, max_attempts - tally.in_a_row)
         plan = background.take(*req, idle=acquirer.idle) if background else planner.plan(*req)
         tally.planning_s += plan.check_time_s
+        if plan.exhausted and not plan.rejections:  # a pose list, done: what it could give
+            tally.status = "complete"
+            tally.reason = (f"{plan.reason}: {tally.samples} of the {target} samples asked "
+                            "for; the rest were rejected (see the counts)")
+            return tally
         if any(reject(kind, q, reason) for kind, q, reason in plan.rejections) or plan.q is None:
             tally.status = "gave_up"
             tally.reason = (f"{max_attempts} poses rejected in a row"

@@ -62,6 +62,7 @@ class Plan:
     check_time_s: float = 0.0
     reason: str | None = None
     via: list = field(default_factory=list)  # (joint angles, counts) passed on the way
+    exhausted: bool = False  # a pose list with nothing left: the collection is done
 
 
 class PlanSource(Protocol):
@@ -240,9 +241,12 @@ class ListPlanner:
                     break
                 out.rejections.append(("collision", q, f"{why} (planned pose {j + 1})"))
             else:
-                out.reason = ("every pose of the list is sampled" if not self.left else
-                              f"none of the {len(self.left)} poses left can be reached from "
-                              "here, straight or by a detour")
+                if not self.left:
+                    out.exhausted = True
+                    out.reason = "every pose of the list was tried"
+                else:
+                    out.reason = (f"none of the {len(self.left)} poses left can be reached "
+                                  "from here, straight or by a detour")
         out.check_time_s = time.perf_counter() - t0
         return out
 
