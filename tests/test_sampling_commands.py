@@ -23,7 +23,7 @@ def run_cli(argv, capsys):
 def test_rehearse_writes_samples_sidecar_truth_and_summary(tmp_path, capsys):
     out, truth = tmp_path / "RUN.tsv", tmp_path / "TRUTH.json"
     code, stdout, stderr = run_cli(["rehearse", "--samples", "6", "--seed", "4", "--out", str(out),
-                                    "--truth", str(truth)], capsys)
+                                    "--truth-out", str(truth)], capsys)
     assert code == 0, stderr
     summary = json.loads(stdout)
     for key in ("samples", "rejected_collision", "rejected_laser", "rejected_unreachable",
@@ -277,3 +277,18 @@ def test_progress_bar_on_a_tty():
     st.samples, st.status, st.reason = 3, "stopped", "interrupted"
     p.done(st)
     assert buf.getvalue().rstrip().endswith("run stopped: interrupted")
+
+
+def test_rehearse_truth_out_is_checked_before_the_run(tmp_path, capsys):
+    out = tmp_path / "run.tsv"
+    # the sample file itself, or a directory, as --truth-out: refused before anything runs
+    assert main(["rehearse", "--samples", "3", "--out", str(out), "--truth-out", str(out)]) == 2
+    assert "--truth-out" in capsys.readouterr().err and not out.exists()
+    assert main(["rehearse", "--samples", "3", "--out", str(out),
+                 "--truth-out", str(tmp_path)]) == 2
+    assert "is a directory" in capsys.readouterr().err and not out.exists()
+    # a file planecal did not write is not replaced without --force
+    other = tmp_path / "notes.json"
+    other.write_text('{"mine": 1}')
+    assert main(["rehearse", "--samples", "3", "--out", str(out), "--truth-out", str(other)]) == 2
+    assert other.read_text() == '{"mine": 1}' and not out.exists()

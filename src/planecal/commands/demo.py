@@ -46,7 +46,7 @@ def run(args) -> int:
     run_file, truth_file = out / "demo.tsv", out / "truth.json"
     rp = argparse.ArgumentParser(prog="planecal rehearse")
     rehearse.add_arguments(rp)
-    argv = ["--out", str(run_file), "--truth", str(truth_file), "--force",
+    argv = ["--out", str(run_file), "--truth-out", str(truth_file), "--force",
             "--scene", args.scene, "--samples", str(args.samples), "--seed", str(args.seed),
             "--errors", args.errors]
     if args.rrd:

@@ -17,7 +17,7 @@ def add_arguments(p):
     g.add_argument("--truth-seed", type=int, default=None,
                    help="place sensor and plates at the twin's truth drawn from this seed")
     g.add_argument("--truth", default=None, metavar="FILE",
-                   help="place them at this truth (parameter file, e.g. rehearse --truth)")
+                   help="place them at this truth (parameter file, e.g. rehearse --truth-out)")
     p.add_argument("--force", action="store_true",
                    help="replace an existing OUT.xml planecal did not write")
 

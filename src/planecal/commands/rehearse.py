@@ -1,13 +1,13 @@
 """`planecal rehearse`: a whole sampling run (seed 7.1) on the MuJoCo twin.
 
     planecal rehearse [--scene S] [--samples N] [--seed K] [--cone-deg A]
-                      [--fixed-distance-mm D] --out RUN.tsv [--truth TRUTH.json]
+                      [--fixed-distance-mm D] --out RUN.tsv [--truth-out TRUTH.json]
                       [--rrd FILE] [--resume]
 
 The same loop as ``planecal sample`` (``planecal.sampling.run``), with the twin as robot
 link and laser, on its virtual clock (no sleeps), and collision checking always on
 (``planecal.collision.CollisionWorld``). The twin's hidden truth is drawn from
-``--twin-seed`` (default: ``--seed``); ``--truth`` writes it in the parameter-file format
+``--twin-seed`` (default: ``--seed``); ``--truth-out`` writes it in the parameter-file format
 (``planecal.params``) for comparison with a calibration. The twin starts at the scene's
 calibration position.
 
@@ -31,7 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     add_sampling_arguments(p)
     add_errors_argument(p)
-    p.add_argument("--truth", default=None, metavar="TRUTH.json",
+    p.add_argument("--truth-out", dest="truth", default=None, metavar="TRUTH.json",
                    help="write the twin's hidden truth here (parameter-file format, with the "
                         "robot's true geometry)")
     p.add_argument("--twin-seed", type=int, default=None,
@@ -76,6 +76,12 @@ def run(args) -> int:
     from planecal.twin.profile import DEFAULT_PROFILE, save_truth
 
     scene, settings, side = prepare(args)
+    if args.truth:
+        from planecal.outputs import check_output
+        from planecal.params import PARAMS_FORMAT
+        check_output(args.truth, inputs=(args.out, args.poses, args.params,
+                                         args.encoder_offsets, args.errors),
+                     fmt=PARAMS_FORMAT, force=args.force, what="--truth-out")
     if side is not None:
         twin_info = side.get("twin") or {}
         twin_seed = int(twin_info.get("seed", settings.seed))
@@ -94,7 +100,7 @@ def run(args) -> int:
         try:
             save_truth(args.truth, twin)
         except OSError as e:
-            raise InputError(f"--truth {args.truth}: cannot write ({e.strerror})") from None
+            raise InputError(f"--truth-out {args.truth}: cannot write ({e.strerror})") from None
     observer = rerun_observer(args.rrd, scene, twin) if args.rrd else None
     model = command_model(args, scene, side)
     session = session_from_args(args, pose_list_planner(args, scene, settings, checker, model[0]),
