@@ -10,9 +10,9 @@ over wall time per run.
 and sidecar written: robot time / wall time, from the command's JSON summary);
 ``rehearse_command_s`` is the whole command's wall time, start-up (imports, twin, collision
 model, numba's cached compile) included. One warm-up run first (not counted) fills
-numba's cache, as any user's first run does. With ``--repeat`` > 1 the runs use seeds
-seed, seed+1, ... and the figures are medians. If ``planecal.rerun_log`` exists, the same
-runs are repeated with ``--rrd`` and reported on their own line.
+numba's and the shape cache, as any user's first run does. With ``--repeat`` > 1 the runs use seeds
+seed, seed+1, ... and the figures are medians. The same runs are repeated with ``--rrd`` and
+reported on their own line.
 
 Last lines, exactly: ``rehearse_command_s: X`` then ``rehearsal_speedup: X``.
 """
@@ -56,15 +56,13 @@ def main() -> int:
     ap.add_argument("--foreground", action="store_true", help="no background pose planning")
     ap.add_argument("extra", nargs="*", help="more rehearse flags (after --)")
     args = ap.parse_args()
-    import importlib.util
-    have_rrd = importlib.util.find_spec("planecal.rerun_log") is not None
     print(f"cpus {os.cpu_count()}, load average {os.getloadavg()[0]:.1f}, "
           f"background planning {'off' if args.foreground else 'on'}")
     results = {False: [], True: []}
     command_s = []
     with tempfile.TemporaryDirectory() as tmp:
         one(args.samples, args.seed, tmp, False, args.foreground, args.extra)  # warm-up
-        for rrd in ([False, True] if have_rrd else [False]):
+        for rrd in (False, True):
             for k in range(args.repeat):
                 s = one(args.samples, args.seed + k, tmp, rrd, args.foreground, args.extra)
                 speed = s["session_robot_time_s"] / s["session_wall_time_s"]
@@ -78,10 +76,7 @@ def main() -> int:
                       f"{s['session_wall_time_s']:.2f} s (set-up and all "
                       f"{s['process_wall_time_s']:.2f} s), planning {s['planning_time_s']:.2f} s "
                       f"-> robot/wall {speed:.0f}", flush=True)
-    if not have_rrd:
-        print("--rrd not measured: planecal.rerun_log is not available")
-    else:
-        print(f"rehearsal_speedup_with_rrd: {statistics.median(results[True]):.1f}")
+    print(f"rehearsal_speedup_with_rrd: {statistics.median(results[True]):.1f}")
     print(f"load average after: {os.getloadavg()[0]:.1f}")
     print(f"rehearse_command_s: {statistics.median(command_s):.2f}")
     print(f"rehearsal_speedup: {statistics.median(results[False]):.1f}")

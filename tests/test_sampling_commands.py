@@ -131,19 +131,7 @@ def test_ctrl_c_stops_cleanly(tmp_path):
     assert len(read_samples(out)) == side["samples"] >= 3
 
 
-def test_rehearse_rrd_without_rerun_log_says_so(tmp_path, capsys, monkeypatch):
-    import sys
-    monkeypatch.setitem(sys.modules, "planecal.rerun_log", None)  # as if not installed
-    code, _, stderr = run_cli(["rehearse", "--samples", "1", "--out", str(tmp_path / "R.tsv"),
-                               "--rrd", str(tmp_path / "r.rrd")], capsys)
-    assert code == 2 and "Rerun logging is not available" in stderr
-    assert not (tmp_path / "R.tsv").exists()
-
-
 def test_rehearse_with_rrd_records_the_run(tmp_path, capsys):
-    import importlib.util
-    if importlib.util.find_spec("planecal.rerun_log") is None:
-        pytest.skip("planecal.rerun_log is not available")
     rrd = tmp_path / "run.rrd"
     code, stdout, stderr = run_cli(["rehearse", "--samples", "2", "--out", str(tmp_path / "R.tsv"),
                                     "--rrd", str(rrd)], capsys)

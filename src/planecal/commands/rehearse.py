@@ -111,7 +111,7 @@ def run(args) -> int:
         code, summary = run_session(session, scene, settings, twin, twin, AlwaysEnabled(),
                                     checker)
     finally:
-        if observer is not None and hasattr(observer, "close"):
+        if observer is not None:
             observer.close()
         twin.close()
     wall = summary["session_wall_time_s"]
@@ -127,6 +127,6 @@ def run(args) -> int:
     if settings.pose.fixed_distance_mm is not None:
         summary["fixed_distance"] = fixed_distance_summary(args.out, settings, model[1])
     if args.rrd:
-        summary["rrd"] = str(getattr(observer, "path", args.rrd))
+        summary["rrd"] = str(observer.path)
     print_summary(summary)
     return code

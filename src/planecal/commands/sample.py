@@ -129,11 +129,11 @@ def run(args) -> int:
             laser.close()
     finally:
         link.close()
-        if observer is not None and hasattr(observer, "close"):
+        if observer is not None:
             observer.close()
     summary["laser_read_errors"] = laser.total
     if args.rrd:
-        summary["rrd"] = str(getattr(observer, "path", args.rrd))
+        summary["rrd"] = str(observer.path)
     summary["link"] = {k: int(v) for k, v in vars(link.counters).items()}
     print_summary(summary)
     return code

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from planecal.errors import InputError
 from planecal.sampling.laserread import LaserSettings
+from planecal.sampling.observer import RecordingObserver
 from planecal.sampling.poses import IK_CHOICES, PLATE_CHOICES
 from planecal.sampling.run import RunSettings
 from planecal.sampling.runfiles import load_sidecar, sidecar_path
@@ -153,20 +154,10 @@ def prepare(args, default_samples: int = 150):
     return scene, st, None
 
 
-def rerun_observer(path, scene, twin=None):
-    """The Rerun observer from planecal.rerun_log, or an InputError saying why not."""
-    try:
-        import planecal.rerun_log as rl
-    except ModuleNotFoundError as e:
-        if e.name == "planecal.rerun_log":
-            raise InputError("--rrd: Rerun logging is not available in this version "
-                             "(no planecal.rerun_log module)") from None
-        raise InputError(f"--rrd: Rerun logging cannot be loaded: missing module {e.name}") from None
-    make = getattr(rl, "sampling_observer", None)
-    if make is None:
-        raise InputError("--rrd: planecal.rerun_log has no sampling_observer(path, scene, twin); "
-                         "cannot record the run")
-    return make(path, scene=scene, twin=twin)
+def rerun_observer(path, scene, twin=None) -> RecordingObserver:
+    """The Rerun observer of a run (``planecal.rerun_log.sampling_observer``)."""
+    from planecal.rerun_log import sampling_observer
+    return sampling_observer(path, scene=scene, twin=twin)
 
 
 def pose_list_planner(args, scene, settings: RunSettings, checker, model=None):

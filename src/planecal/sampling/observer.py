@@ -25,6 +25,14 @@ class Observer(Protocol):
                 rows: np.ndarray) -> None: ...
 
 
+class RecordingObserver(Observer, Protocol):
+    """An observer that writes a recording: ``path`` is the file it writes, ``close()``
+    finishes it (the commands call it when the session ends, whatever happened)."""
+    path: object
+
+    def close(self) -> None: ...
+
+
 class NullObserver:
     """Does nothing; subclass it and override what you need."""
 
