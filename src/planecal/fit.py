@@ -323,7 +323,7 @@ def noise_variance(J_delta: np.ndarray, joint_sigma: float, distance_sigma_m: fl
     return joint_sigma ** 2 * np.sum(J_delta ** 2, axis=1) + distance_sigma_m ** 2
 
 
-def _weights(J: np.ndarray, layout: ParamLayout, opt: FitOptions) -> np.ndarray | None:
+def row_weights(J: np.ndarray, layout: ParamLayout, opt: FitOptions) -> np.ndarray | None:
     """Row weights 1/sqrt(v_i) from the full Jacobian J, or None for an unweighted fit."""
     if opt.joint_sigma_rad is None:
         return None
@@ -367,7 +367,7 @@ def solve(problem: Problem) -> Result:
         """Residuals, free Jacobian columns and row weights (None: unweighted) at xv."""
         d, J = predict_with_jacobian(robot, qe[mask], CellParams.from_vector(xv, layout),
                                      pidx[mask], layout)
-        return d - d_m[mask], J[:, free], _weights(J, layout, opt)
+        return d - d_m[mask], J[:, free], row_weights(J, layout, opt)
 
     def cost(r, w):
         rw = r if w is None else r * w
