@@ -19,7 +19,7 @@ each with its reason (``Calibration.excluded``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -45,6 +45,16 @@ def layout_for(robot: Robot, n_planes: int, level: str = "offsets",
         return base if not compliance else ParamLayout(list(base.groups) + [compliance_group()])
     parallel = tuple(i + 1 for i in parallel_pairs(from_robot(robot)))
     return level2_layout(n_planes, parallel, compliance)
+
+
+def geometry_prior(layout: ParamLayout, length_m: float, angle_rad: float) -> tuple:
+    """``FitOptions.prior`` for the joint geometry (alpha, a, beta, d of every joint): a
+    std of ``length_m`` for lengths and ``angle_rad`` for angles about the nominal values
+    (machining and assembly tolerances), a maximum a posteriori fit."""
+    if not (length_m > 0 and angle_rad > 0):
+        raise ValueError("a geometry prior needs a length and an angle std > 0")
+    return tuple((p.name, length_m if p.unit == "m" else angle_rad)
+                 for g in layout.groups_of("joint_geometry") for p in g.params)
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,17 +86,25 @@ class Calibration:
 
 def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
               level: str = "offsets", compliance: bool = False, free=None,
-              options: FitOptions | None = None, tol: float = DEFAULT_TOL) -> Calibration:
+              options: FitOptions | None = None, tol: float = DEFAULT_TOL,
+              prior: tuple[float, float] | None = None) -> Calibration:
     """Calibrate at ``level`` (module docstring) from encoder counts ``qe`` (N, 6), measured
     distances ``d_m`` (N,) [m] and 0-based ``plate`` (N,) (default all 0), starting at
     ``initial``. ``free``: names (list, comma string, "all") or a mask over the level's
     layout, overriding its default free set; at level full the base set is selected among
-    them. ValueError for a problem that cannot be solved (too few samples, ...)."""
+    them. ``prior`` (level full): (length std [m], angle std [rad]) of the joint geometry
+    about robot.json's (``geometry_prior``; a MAP fit: the base set's weakly determined
+    geometry stays near the nominal instead of taking up model errors the parameters do
+    not describe). ValueError for a problem that cannot be solved (too few samples, ...)."""
     options = options or FitOptions()
+    if prior is not None and level != "full":
+        raise ValueError("a geometry prior needs level full")
     if level == "offsets" and not compliance:
         pb = Problem.from_arrays(robot, qe, d_m, initial, plate, free=free, options=options)
         return Calibration(level, False, solve(pb), None)
     layout = layout_for(robot, initial.n_planes, level, compliance)
+    if prior is not None:
+        options = replace(options, prior=geometry_prior(layout, *prior))
     mask = free_mask(layout, free)
     n = len(np.asarray(d_m))
     pidx = np.zeros(n, int) if plate is None else np.asarray(plate, int)
