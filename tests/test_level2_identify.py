@@ -238,7 +238,7 @@ def test_geometry_prior_pulls_weak_geometry_towards_nominal_and_vanishes_when_wi
     d = predict(robot, qe, truth, plate) + rng.normal(0.0, 2e-5, len(qe))
     free = calibrate(robot, qe, d, nominal, plate, level="full")
     wide = calibrate(robot, qe, d, nominal, plate, level="full", prior=(1e3, 1e3))
-    tight = calibrate(robot, qe, d, nominal, plate, level="full", prior=(1e-5, 1e-5))
+    tight = calibrate(robot, qe, d, nominal, plate, level="full", prior=(1e-8, 1e-8))
     np.testing.assert_allclose(wide.params.geometry, free.params.geometry, atol=1e-9)
     assert np.abs(tight.params.geometry).max() < 0.1 * np.abs(free.params.geometry).max()
     assert tight.result.rms_mm() > free.result.rms_mm()
