@@ -212,6 +212,13 @@ def test_cli_calibrate_level_full_result_is_read_by_predict_and_export(tmp_path,
     assert main(["calibrate", str(f), "--out", str(out1)]) == 0
     doc1 = json.loads(out1.read_text())
     assert doc1["level"] == "offsets" and doc1["base_set"] is None and "kinematics" not in doc1
+    assert doc1["geometry_prior_m_rad"] is None
+    out2 = tmp_path / "prior.json"
+    assert main(["calibrate", str(f), "--level", "full", "--geometry-prior", "0.5,0.5",
+                 "--out", str(out2)]) == 0
+    assert json.loads(out2.read_text())["geometry_prior_m_rad"] == [5e-4, 5e-4]
+    assert main(["calibrate", str(f), "--geometry-prior", "0.5,0.5"]) == 2
+    assert "--geometry-prior needs --level full" in capsys.readouterr().err
 
 
 def test_planes_carry_the_base_frame_and_level2_enters_only_for_what_level1_cannot():

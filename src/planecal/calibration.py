@@ -63,6 +63,7 @@ class Calibration:
     compliance: bool
     result: Result
     base_set: BaseSet | None  # None where no selection ran (offsets without compliance)
+    prior: tuple[float, float] | None = None  # the geometry prior (m, rad), if any
 
     @property
     def params(self) -> CellParams:
@@ -81,7 +82,8 @@ class Calibration:
                 "excluded": [] if bs is None else [
                     {"parameter": e.parameter, "reason": e.reason,
                      "combination": dict(e.combination)} for e in bs.excluded],
-                "base_set_tolerance": None if bs is None else bs.tol}
+                "base_set_tolerance": None if bs is None else bs.tol,
+                "geometry_prior_m_rad": None if self.prior is None else list(self.prior)}
 
 
 def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
@@ -112,7 +114,7 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
     bs = select_base(J, layout, mask, tol, row_weights(J, layout, options))
     pb = Problem.from_arrays(robot, qe, d_m, initial, pidx, free=bs.mask(layout),
                              options=options, layout=layout)
-    return Calibration(level, compliance, solve(pb), bs)
+    return Calibration(level, compliance, solve(pb), bs, prior)
 
 
 def calibrate_samples(robot: Robot, samples: Samples, initial: CellParams, **kw) -> Calibration:

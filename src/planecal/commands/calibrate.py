@@ -1,6 +1,6 @@
 """planecal calibrate SAMPLES... [--initial P.json] [--out R.json] [--max-iter N]
 [--improvement-limit X] [--outlier-sigma K] [--method gn|lm] [--free NAMES]
-[--level offsets|full] [--compliance]
+[--level offsets|full] [--compliance] [--geometry-prior MM,MRAD]
 [--weighted [--repeatability-mm R] [--distance-sigma-um S]] [--rrd FILE]
 
 --level offsets (default) is the seed's level 1 (joint offsets, sensor, planes), as it
@@ -61,6 +61,11 @@ def add_arguments(p):
                    help="offsets: joint offsets, sensor, planes (seed level 1, default); full: "
                         "the whole kinematic model, its identifiable base set chosen from "
                         "the samples")
+    p.add_argument("--geometry-prior", metavar="MM,MRAD", default=None,
+                   help="with --level full: pull the joint geometry towards robot.json's with "
+                        "these stds (a maximum a posteriori fit; e.g. 0.5,0.5): keeps the "
+                        "weakly determined lengths from taking up unmodelled errors "
+                        "(docs/STUDIES.md, Level 2)")
     p.add_argument("--compliance", action="store_true",
                    help="also fit the joint compliance of J2 and J3 (gravity torque from "
                         "robot.json's link masses; seed 5.4)")
@@ -126,7 +131,7 @@ def result_dict(res: Result, cal: Calibration | None = None) -> dict:
     out["initial"] = params_to_dict(res.initial)
     out.update(cal.to_dict() if cal is not None else
                {"level": "offsets", "compliance": False, "base_set": None, "excluded": [],
-                "base_set_tolerance": None})
+                "base_set_tolerance": None, "geometry_prior_m_rad": None})
     return out
 
 
@@ -260,6 +265,22 @@ def failure(res: Result) -> str | None:
     return None
 
 
+def geometry_prior_arg(args):
+    """--geometry-prior MM,MRAD -> (m, rad), checked; None without it."""
+    if args.geometry_prior is None:
+        return None
+    if args.level != "full":
+        raise InputError("--geometry-prior needs --level full")
+    try:
+        mm, mrad = (float(v) for v in args.geometry_prior.split(","))
+    except ValueError:
+        raise InputError(f"--geometry-prior: expected MM,MRAD (two numbers), got "
+                         f"{args.geometry_prior!r}") from None
+    if not (np.isfinite(mm) and np.isfinite(mrad) and mm > 0 and mrad > 0):
+        raise InputError(f"--geometry-prior: both stds must be > 0, got {args.geometry_prior!r}")
+    return mm * 1e-3, mrad * 1e-3
+
+
 def run(args) -> int:
     inputs = [("samples", p) for p in args.samples] + (
         [("initial", args.initial)] if args.initial else [])
@@ -268,13 +289,14 @@ def run(args) -> int:
     samples, scene, initial = load_inputs(args)
     options = fit_options(args, scene.robot)
     cal = None
+    prior = geometry_prior_arg(args)
     if args.level == "offsets" and not args.compliance:  # level 1, as it always was
         res = solve(build_problem(samples, scene, initial, args.free, options))
     else:
         try:
             cal = calibrate_samples(scene.robot, samples, initial, level=args.level,
                                     compliance=args.compliance, free=args.free,
-                                    options=options)
+                                    options=options, prior=prior)
         except ValueError as e:
             raise InputError(str(e)) from None
         res = cal.result
