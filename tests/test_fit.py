@@ -206,7 +206,7 @@ def _measure(scene, truth, q0, plate, s, rng, laser_m=1e-7):
 def test_weighted_fit_is_the_fixed_point_of_scipy_with_its_weights(three_plate_design):
     # iteratively reweighted: at the solution, x minimises sum (w_i r_i)^2 with the w_i
     # of the solution; scipy's least_squares with those weights held finds the same x
-    from planecal.fit import _weights
+    from planecal.fit import row_weights
     from planecal.cell import predict_with_jacobian
     scene, truth, qe, plate, s, q0 = three_plate_design
     d = _measure(scene, truth, q0, plate, s, np.random.default_rng(1))
@@ -214,7 +214,7 @@ def test_weighted_fit_is_the_fixed_point_of_scipy_with_its_weights(three_plate_d
     init = nominal_params(scene)
     res = solve(Problem.from_arrays(scene.robot, qe, d, init, plate, options=opts))
     _, J = predict_with_jacobian(scene.robot, qe, res.params, plate)
-    w = _weights(J, res.layout, opts)
+    w = row_weights(J, res.layout, opts)
     free = res.free
     x0 = init.to_vector()
 

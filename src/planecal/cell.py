@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from planecal import model_full
 from planecal.encoder import counts_to_joints
 from planecal.layout import Group, ParamLayout, level1_layout
 from planecal.robot import Robot, chain, fk
@@ -37,8 +38,17 @@ class CellParams:
     phi_y: float = 0.0
     phi_z: float = 0.0
     planes: np.ndarray = field(default_factory=lambda: np.zeros((1, 3)))
+    # level 2 (issue 13; model_full.py): corrections of the nominal model, zero by default
+    geometry: np.ndarray | None = None  # (6, 4) per joint: modified-DH alpha, a, beta, d
+    base: np.ndarray | None = None  # (6,) base frame error x, y, z [m], rx, ry, rz [rad]
+    compliance: np.ndarray | None = None  # (6,) c_j = 1/k_j [rad/(N m)]
 
     def __post_init__(self):
+        self.geometry = (np.zeros((6, 4)) if self.geometry is None
+                         else np.asarray(self.geometry, float).reshape(6, 4).copy())
+        self.base = np.zeros(6) if self.base is None else np.asarray(self.base, float).reshape(6).copy()
+        self.compliance = (np.zeros(6) if self.compliance is None
+                           else np.asarray(self.compliance, float).reshape(6).copy())
         self.joint_offsets = np.asarray(self.joint_offsets, float).reshape(6)
         self.sensor_origin = np.asarray(self.sensor_origin, float).reshape(3)
         self.planes = np.asarray(self.planes, float).reshape(-1, 3)
@@ -48,6 +58,11 @@ class CellParams:
     @property
     def n_planes(self) -> int:
         return len(self.planes)
+
+    @property
+    def is_level1(self) -> bool:
+        """No geometry, base or compliance correction: robot.json's model with offsets."""
+        return not (self.geometry.any() or self.base.any() or self.compliance.any())
 
     def to_vector(self, layout: ParamLayout | None = None) -> np.ndarray:
         """The values in ``layout``'s order (default: the level-1 layout of this many planes)."""
@@ -78,6 +93,12 @@ class CellParams:
             return np.array([self.phi_y, self.phi_z])
         if g.kind == "plane":
             return self.planes[g.index]
+        if g.kind == "joint_geometry":
+            return self.geometry[g.index]
+        if g.kind == "base_frame":
+            return self.base
+        if g.kind == "compliance":
+            return self.compliance
         raise ValueError(f"the cell model has no parameters of kind {g.kind!r}")
 
     def _set_group_values(self, g: Group, v: np.ndarray) -> None:
@@ -89,12 +110,19 @@ class CellParams:
             self.phi_y, self.phi_z = float(v[0]), float(v[1])
         elif g.kind == "plane":
             self.planes[g.index] = v
+        elif g.kind == "joint_geometry":
+            self.geometry[g.index] = v
+        elif g.kind == "base_frame":
+            self.base = v.copy()
+        elif g.kind == "compliance":
+            self.compliance = v.copy()
         else:
             raise ValueError(f"the cell model has no parameters of kind {g.kind!r}")
 
     def copy(self) -> "CellParams":
         return CellParams(self.joint_offsets.copy(), self.sensor_origin.copy(), self.phi_y,
-                          self.phi_z, self.planes.copy())
+                          self.phi_z, self.planes.copy(), self.geometry.copy(),
+                          self.base.copy(), self.compliance.copy())
 
 
 def beam_direction(phi_y: float, phi_z: float) -> np.ndarray:
@@ -132,7 +160,12 @@ def predict(robot: Robot, qe: np.ndarray, params: CellParams,
             plane_index: np.ndarray | None = None) -> np.ndarray:
     """Model distance [m] for encoder counts qe (N,6) on plane_index (N,) (default 0)."""
     q = counts_to_joints(robot, qe)
-    o_b, z_b = sensor_in_base(robot, q, params)
+    if params.is_level1:
+        o_b, z_b = sensor_in_base(robot, q, params)
+    else:  # the whole kinematic model (level 2)
+        o_b, z_b = model_full.sensor_in_base(robot, np.atleast_2d(q), params)
+        if np.ndim(qe) == 1:
+            o_b, z_b = o_b[0], z_b[0]
     n = params.planes[0 if plane_index is None else np.asarray(plane_index)]
     return plane_distance(n, o_b, z_b)
 
@@ -147,6 +180,8 @@ def predict_with_jacobian(robot: Robot, qe: np.ndarray, params: CellParams,
     N = len(qe)
     pidx = np.zeros(N, int) if plane_index is None else np.asarray(plane_index, int)
     q = counts_to_joints(robot, qe)
+    if not params.is_level1 or any(g.kind in model_full.LEVEL2_KINDS for g in layout.groups):
+        return model_full.distance_with_jacobian(robot, q, params, pidx, layout)
     xs, ys, zs, ps = chain(robot, q, params.joint_offsets)  # component first: (3, N)
     x6, y6, z6, p6 = xs[-1], ys[-1], zs[-1], ps[-1]
     o, zf = params.sensor_origin, beam_direction(params.phi_y, params.phi_z)

@@ -61,6 +61,11 @@ class FitOptions:
     # from the sensor itself [m]
     joint_sigma_rad: float | None = None
     distance_sigma_m: float = 1e-6
+    # a prior (maximum a posteriori; level 2): ((name, std), ...) pulls those free
+    # parameters towards their initial values, weighed as if the distances had the std
+    # prior_sigma_m: rows (x - x0) * prior_sigma_m / std join the distance rows (gn only)
+    prior: tuple = ()
+    prior_sigma_m: float = 3e-5
 
 
 # ----- the problem --------------------------------------------------------------------------
@@ -323,7 +328,7 @@ def noise_variance(J_delta: np.ndarray, joint_sigma: float, distance_sigma_m: fl
     return joint_sigma ** 2 * np.sum(J_delta ** 2, axis=1) + distance_sigma_m ** 2
 
 
-def _weights(J: np.ndarray, layout: ParamLayout, opt: FitOptions) -> np.ndarray | None:
+def row_weights(J: np.ndarray, layout: ParamLayout, opt: FitOptions) -> np.ndarray | None:
     """Row weights 1/sqrt(v_i) from the full Jacobian J, or None for an unweighted fit."""
     if opt.joint_sigma_rad is None:
         return None
@@ -367,11 +372,26 @@ def solve(problem: Problem) -> Result:
         """Residuals, free Jacobian columns and row weights (None: unweighted) at xv."""
         d, J = predict_with_jacobian(robot, qe[mask], CellParams.from_vector(xv, layout),
                                      pidx[mask], layout)
-        return d - d_m[mask], J[:, free], _weights(J, layout, opt)
+        return d - d_m[mask], J[:, free], row_weights(J, layout, opt)
 
     def cost(r, w):
         rw = r if w is None else r * w
         return 0.5 * float(rw @ rw)
+
+    # prior rows (FitOptions.prior): positions among the free columns and their weights
+    free_names = layout.names_of(free)
+    pj = np.array([free_names.index(n) for n, _ in opt.prior if n in free_names], int)
+    pw = np.array([opt.prior_sigma_m / sd for n, sd in opt.prior if n in free_names], float)
+    if pj.size and opt.method != "gn":
+        raise ValueError("a prior needs method 'gn'")
+    x_prior = x[free][pj].copy()
+
+    def with_prior(Jw, rw, xv):
+        if not pj.size:
+            return Jw, rw
+        P = np.zeros((pj.size, Jw.shape[1]))
+        P[np.arange(pj.size), pj] = pw
+        return np.vstack([Jw, P]), np.concatenate([rw, pw * (xv[free][pj] - x_prior)])
 
     r, Jf, w = evaluate(x, used)
     initial_r = r.copy()
@@ -381,6 +401,7 @@ def solve(problem: Problem) -> Result:
     for it in range(1, opt.max_iter + 1):
         # weighted: rows scaled by w (held for this iteration, re-evaluated at the next)
         Jw, rw = (Jf, r) if w is None else (Jf * w[:, None], r * w)
+        Jw, rw = with_prior(Jw, rw, x)
         S = _scales(Jw, opt.scale)
         A = Jw * S
         if opt.method == "gn":
@@ -433,7 +454,11 @@ def solve(problem: Problem) -> Result:
     params = CellParams.from_vector(x, layout)
     # residuals over all samples (outliers included), for reporting
     final_r = r if used.all() else predict(robot, qe, params, pidx) - d_m
-    ident, cov, sigma = uncertainty(Jf, r, layout, free, opt, weights=w)
+    if pj.size:  # the posterior covariance: the prior rows join the data's
+        Jp, rp = with_prior(Jf if w is None else Jf * w[:, None], r if w is None else r * w, x)
+        ident, cov, sigma = uncertainty(Jp, rp, layout, free, opt)
+    else:
+        ident, cov, sigma = uncertainty(Jf, r, layout, free, opt, weights=w)
     notes = []
     if not converged:
         notes.append(f"stopped after {iterations} iterations (max_iter) before the mean "

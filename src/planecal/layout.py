@@ -261,3 +261,62 @@ def level1_layout(n_planes: int) -> ParamLayout:
         raise ValueError(f"a calibration needs at least one plane, got {n_planes}")
     return ParamLayout([joint_offsets_group(), sensor_origin_group(), sensor_angles_group(),
                         *(plane_group(k) for k in range(n_planes))])
+
+
+# ----- level 2: the whole kinematic model (issue 13) ---------------------------------------
+
+JOINT_GEOMETRY = ("alpha", "a", "beta", "d")  # per joint, modified DH (kinematics.py)
+BASE_FRAME = ("x", "y", "z", "rx", "ry", "rz")
+# compliance c = 1/k [rad/(N m)]: printed in urad per kN m; a std above 1e-5 rad/(N m)
+# (a joint as soft as 1e5 N m/rad) is no stiffness the data has seen
+COMPLIANCE = dict(unit="rad/(N m)", display_scale=1e9, display_unit="urad/kNm",
+                  practical_std=1e-5)
+
+
+def joint_geometry_group(j: int, parallel: tuple[int, ...]) -> Group:
+    """Corrections of joint j's (1-based) modified-DH alpha{j}, a{j}, beta{j} (Hayati's,
+    free by default only where axes j-1 and j are parallel), d{j}."""
+    name = f"joint{j}"
+    units = {"alpha": RAD, "a": METRE, "beta": RAD, "d": METRE}
+    return Group(name, "joint_geometry", j - 1, tuple(
+        Param(f"{k}{j}", group=name, free_by_default=(k != "beta" or j in parallel), **units[k])
+        for k in JOINT_GEOMETRY))
+
+
+def base_frame_group() -> Group:
+    """The robot base in the cell: base_x, base_y, base_z [m], base_rx, base_ry, base_rz
+    [rad] (kinematics.frame_error)."""
+    name = "base"
+    return Group(name, "base_frame", 0, tuple(
+        Param(f"base_{c}", group=name, **(METRE if len(c) == 1 else RAD)) for c in BASE_FRAME))
+
+
+def compliance_group(free_joints: tuple[int, ...] = (2, 3)) -> Group:
+    """c1..c6 [rad/(N m)], theta_j += c_j tau_j(q) (gravity torque); c2, c3 free by default."""
+    name = "compliance"
+    return Group(name, name, 0, tuple(
+        Param(f"c{j}", group=name, free_by_default=j in free_joints, **COMPLIANCE)
+        for j in range(1, 7)))
+
+
+@lru_cache(maxsize=None)
+def level2_layout(n_planes: int, parallel: tuple[int, ...] = (3,),
+                  compliance: bool = False) -> ParamLayout:
+    """The whole kinematic model (seed chapter 5, level 2; level 3's joint compliance with
+    ``compliance``): level 1's groups in level 1's order, then joint1..joint6 (modified-DH
+    corrections), the base frame and the compliance. Every joint offset is free by default
+    here: which parameters the data can separate is decided from the data
+    (``planecal.identify.select_base``), not assumed."""
+    lv1 = level1_layout(n_planes)
+    first = []
+    for g in lv1.groups:
+        if g.kind == "joint_offsets":
+            g = Group(g.name, g.kind, g.index, tuple(
+                Param(p.name, p.unit, p.group, p.display_scale, p.display_unit,
+                      p.practical_std, True) for p in g.params))
+        first.append(g)
+    groups = first + [joint_geometry_group(j, tuple(parallel)) for j in range(1, 7)]
+    groups.append(base_frame_group())
+    if compliance:
+        groups.append(compliance_group())
+    return ParamLayout(groups)

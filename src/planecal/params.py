@@ -24,12 +24,28 @@ from planecal.formats.params import PARAMS_FORMAT, ParamsFile
 
 
 def params_to_dict(p: CellParams) -> dict:
-    return {
+    """The file's keys; ``kinematics`` (level 2's corrections) only where one is non-zero,
+    so a level-1 file is what it always was."""
+    out = {
         "joint_offsets_rad": [float(v) for v in p.joint_offsets],
         "planes": [{"n_tilde": [float(v) for v in n]} for n in p.planes],
         "sensor": {"origin_m": [float(v) for v in p.sensor_origin],
                    "phi_y_rad": float(p.phi_y), "phi_z_rad": float(p.phi_z)},
     }
+    if not p.is_level1:
+        out["kinematics"] = kinematics_to_dict(p.geometry, p.base, p.compliance)
+    return out
+
+
+def kinematics_to_dict(geometry, base, compliance) -> dict:
+    """The ``kinematics`` object from (6, 4) geometry [alpha, a, beta, d], base (6,) and
+    compliance (6,) (values or std; None/NaN become null)."""
+    def row(v):
+        return [None if e is None or not np.isfinite(e) else float(e) for e in v]
+    g = np.asarray(geometry, float)
+    return {"alpha_rad": row(g[:, 0]), "a_m": row(g[:, 1]), "beta_rad": row(g[:, 2]),
+            "d_m": row(g[:, 3]), "base": row(np.asarray(base, float)),
+            "compliance_rad_per_nm": row(np.asarray(compliance, float))}
 
 
 def params_from_dict(d, path: str = "<params>") -> CellParams:
@@ -37,8 +53,12 @@ def params_from_dict(d, path: str = "<params>") -> CellParams:
     ``planecal.formats.params.ParamsFile``; one-line InputError otherwise."""
     pf = validate(ParamsFile, d, path, "parameter file")
     s = pf.sensor
+    k = pf.kinematics
+    extra = {} if k is None else {
+        "geometry": np.array([k.alpha_rad, k.a_m, k.beta_rad, k.d_m], float).T,
+        "base": k.base, "compliance": k.compliance_rad_per_nm}
     return CellParams(pf.joint_offsets_rad, s.origin_m, s.phi_y_rad, s.phi_z_rad,
-                      [p.n_tilde for p in pf.planes])
+                      [p.n_tilde for p in pf.planes], **extra)
 
 
 def load_json(path: str | Path, what: str = "JSON file"):

@@ -1,6 +1,14 @@
 """planecal calibrate SAMPLES... [--initial P.json] [--out R.json] [--max-iter N]
 [--improvement-limit X] [--outlier-sigma K] [--method gn|lm] [--free NAMES]
+[--level offsets|full] [--compliance] [--geometry-prior MM,MRAD]
 [--weighted [--repeatability-mm R] [--distance-sigma-um S]] [--rrd FILE]
+
+--level offsets (default) is the seed's level 1 (joint offsets, sensor, planes), as it
+always was. --level full calibrates the whole kinematic model (planecal.calibration):
+the parameters the samples can identify are chosen from their Jacobian (a pivoted QR,
+planecal.identify), the others stay at their initial values and the report and the
+result file name each with its reason. --compliance adds the joint compliance of J2 and
+J3 (gravity torque from robot.json's link masses). --free overrides the candidates.
 
 Several sample files may be given; a file's samples are on the plate named in its 8th
 column, or on plate 1. Without --initial the default scene's nominal values (the thesis
@@ -18,12 +26,13 @@ from dataclasses import asdict
 
 import numpy as np
 
+from planecal.calibration import LEVELS, Calibration, calibrate_samples
 from planecal.commands.report import add_report_argument, write_command_report
 from planecal.errors import InputError, RunFailed
 from planecal.fit import FitOptions, Problem, Result, solve
 from planecal.formats.params import RESULT_FORMAT, provenance, result_document
 from planecal.outputs import check_output
-from planecal.params import load_params, params_to_dict, save_json
+from planecal.params import kinematics_to_dict, load_params, params_to_dict, save_json
 from planecal.samples import read_many
 from planecal.scene import DEFAULT_SCENE, load_scene, nominal_params
 
@@ -45,7 +54,21 @@ def add_arguments(p):
     p.add_argument("--method", choices=["gn", "lm"], default="gn",
                    help="gn: Gauss-Newton with SVD pseudo-inverse (seed); lm: Levenberg-Marquardt")
     p.add_argument("--no-scale", action="store_true", help="no column scaling of the Jacobian")
-    p.add_argument("--free", help="comma-separated parameter names to fit (default: all but delta1, delta6)")
+    p.add_argument("--free", help="comma-separated parameter names to fit (default: all but "
+                   "delta1, delta6 at level offsets; at level full, the candidates of the "
+                   "identifiable base set)")
+    p.add_argument("--level", choices=LEVELS, default="offsets",
+                   help="offsets: joint offsets, sensor, planes (seed level 1, default); full: "
+                        "the whole kinematic model, its identifiable base set chosen from "
+                        "the samples")
+    p.add_argument("--geometry-prior", metavar="MM,MRAD", default=None,
+                   help="with --level full: pull the joint geometry towards robot.json's with "
+                        "these stds (a maximum a posteriori fit; e.g. 0.5,0.5): keeps the "
+                        "weakly determined lengths from taking up unmodelled errors "
+                        "(docs/STUDIES.md, Level 2)")
+    p.add_argument("--compliance", action="store_true",
+                   help="also fit the joint compliance of J2 and J3 (gravity torque from "
+                        "robot.json's link masses; seed 5.4)")
     p.add_argument("--weighted", action="store_true",
                    help="weighted least squares with the robot's repeatability as the noise "
                         "model (each sample's variance from its pose): honest std on several "
@@ -62,10 +85,12 @@ def add_arguments(p):
                         "for recordings/calibrate-<scene>-<time>.rrd)")
 
 
-def result_dict(res: Result) -> dict:
+def result_dict(res: Result, cal: Calibration | None = None) -> dict:
     """The result file: the parameter file's keys, ``std`` in the same shape (null where
     fixed or not identifiable), the fit's figures, ``identifiability``, ``free`` and
-    ``covariance`` (the free parameters' names and matrix, null where not identifiable)."""
+    ``covariance`` (the free parameters' names and matrix, null where not identifiable),
+    ``level``, ``compliance``, ``base_set`` and ``excluded`` (level 2's selection: each
+    parameter left out with its reason; null and [] at level offsets)."""
     out = params_to_dict(res.params)
     layout, std = res.layout, res.std
 
@@ -81,6 +106,17 @@ def result_dict(res: Result) -> dict:
         "sensor": {"origin_m": ss(layout.group("sensor_origin")), "phi_y_rad": s("phi_y"),
                    "phi_z_rad": s("phi_z")},
     }
+    if layout.groups_of("joint_geometry") or layout.groups_of("compliance"):
+        g = np.full((6, 4), np.nan)
+        for grp in layout.groups_of("joint_geometry"):
+            g[grp.index] = std[layout.slice(grp.name)]
+        base = std[layout.slice("base")] if layout.groups_of("base_frame") else np.full(6, np.nan)
+        comp = (std[layout.slice("compliance")] if layout.groups_of("compliance")
+                else np.full(6, np.nan))
+        out["std"]["kinematics"] = kinematics_to_dict(g, base, comp)
+        if "kinematics" not in out:  # every correction zero: still a level-2 result
+            out["kinematics"] = kinematics_to_dict(res.params.geometry, res.params.base,
+                                                   res.params.compliance)
     out["residual_rms_mm"] = res.rms_mm()
     out["residual_rms_initial_mm"] = res.rms_mm(initial=True)
     out["residual_max_mm"] = float(np.max(np.abs(res.residuals_m[res.used])) * 1e3)
@@ -93,18 +129,24 @@ def result_dict(res: Result) -> dict:
     out["covariance"] = res.covariance.to_dict()
     out["history"] = [asdict(it) for it in res.history]
     out["initial"] = params_to_dict(res.initial)
+    out.update(cal.to_dict() if cal is not None else
+               {"level": "offsets", "compliance": False, "base_set": None, "excluded": [],
+                "base_set_tolerance": None, "geometry_prior_m_rad": None})
     return out
 
 
-def format_report(res: Result, n_zero: int = 0) -> str:
+def format_report(res: Result, n_zero: int = 0, cal: Calibration | None = None) -> str:
     lines = []
     layout = res.layout
+    excluded = {e.parameter: e for e in (cal.excluded if cal is not None else [])}
     x0, x = res.initial.to_vector(layout), res.params.to_vector(layout)
     std = res.std
     ident = res.identifiability
     lines.append(f"{'parameter':<10} {'value':>14} {'std':>11} {'correction':>13}  unit")
     for i, (name, unit) in enumerate(zip(layout.names, layout.units)):
-        if not res.free[i]:
+        if name in excluded:
+            sd = "excluded"
+        elif not res.free[i]:
             sd = "fixed"
         elif name in ident.not_identifiable:
             sd = "NOT IDENT."
@@ -125,6 +167,13 @@ def format_report(res: Result, n_zero: int = 0) -> str:
     lines.append(f"sigma {ident.sigma_mm:.4g} mm   scaled condition number "
                  f"{ident.condition_number_scaled:.4g}   O1 {ident.observability.O1:.3g}"
                  f"  O2 {ident.observability.O2:.3g}")
+    if cal is not None and cal.base_set is not None:
+        bs = cal.base_set
+        lines.append(f"level {cal.level}{' + compliance' if cal.compliance else ''}: "
+                     f"{len(bs.base)} of {len(bs.free)} candidate parameters identifiable "
+                     f"from these samples (pivoted QR, |R_kk|/|R_00| >= {bs.tol:g})")
+        for e in bs.excluded:
+            lines.append(f"EXCLUDED {e.describe()}")
     for name in ident.no_effect:
         lines.append(f"WARNING no effect: {name} does not change any distance in this data")
     for pd in ident.poorly_determined:
@@ -216,16 +265,43 @@ def failure(res: Result) -> str | None:
     return None
 
 
+def geometry_prior_arg(args):
+    """--geometry-prior MM,MRAD -> (m, rad), checked; None without it."""
+    if args.geometry_prior is None:
+        return None
+    if args.level != "full":
+        raise InputError("--geometry-prior needs --level full")
+    try:
+        mm, mrad = (float(v) for v in args.geometry_prior.split(","))
+    except ValueError:
+        raise InputError(f"--geometry-prior: expected MM,MRAD (two numbers), got "
+                         f"{args.geometry_prior!r}") from None
+    if not (np.isfinite(mm) and np.isfinite(mrad) and mm > 0 and mrad > 0):
+        raise InputError(f"--geometry-prior: both stds must be > 0, got {args.geometry_prior!r}")
+    return mm * 1e-3, mrad * 1e-3
+
+
 def run(args) -> int:
     inputs = [("samples", p) for p in args.samples] + (
         [("initial", args.initial)] if args.initial else [])
     out = None if not args.out else check_output(args.out, [p for _, p in inputs],
                                                  RESULT_FORMAT, args.force)
     samples, scene, initial = load_inputs(args)
-    res = solve(build_problem(samples, scene, initial, args.free,
-                              fit_options(args, scene.robot)))
-    print(format_report(res, samples.n_zero))
-    doc = result_document(result_dict(res), provenance(
+    options = fit_options(args, scene.robot)
+    cal = None
+    prior = geometry_prior_arg(args)
+    if args.level == "offsets" and not args.compliance:  # level 1, as it always was
+        res = solve(build_problem(samples, scene, initial, args.free, options))
+    else:
+        try:
+            cal = calibrate_samples(scene.robot, samples, initial, level=args.level,
+                                    compliance=args.compliance, free=args.free,
+                                    options=options, prior=prior)
+        except ValueError as e:
+            raise InputError(str(e)) from None
+        res = cal.result
+    print(format_report(res, samples.n_zero, cal))
+    doc = result_document(result_dict(res, cal), provenance(
         inputs + [("scene", scene.path), ("robot", scene.robot.source)], scene.name,
         scene.robot.name))
     if out:

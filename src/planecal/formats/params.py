@@ -53,6 +53,24 @@ class SensorParams(Model):
     phi_z_rad: Angle
 
 
+TwistErr = Ranged(-0.1, 0.1, "rad", "angle correction", DEG_AS_RAD)
+LengthErr = Ranged(-0.1, 0.1, "m", "length correction")
+Compliance = Ranged(-1e-3, 1e-3, "rad/(N m)", "joint compliance")
+
+
+class KinematicCorrections(Model):
+    """Level 2 (issue 13, ``model_full``): corrections of robot.json's model per joint in
+    modified DH (alpha, a, Hayati's beta, d), the base frame (x, y, z [m], rx, ry, rz
+    [rad]: T(x,y,z) Rz Ry Rx) and the joint compliance c = 1/k (theta += c tau_gravity)."""
+    alpha_rad: Vector(TwistErr, 6, "corrections, one per joint")
+    a_m: Vector(LengthErr, 6, "corrections, one per joint")
+    beta_rad: Vector(TwistErr, 6, "corrections, one per joint")
+    d_m: Vector(LengthErr, 6, "corrections, one per joint")
+    base: Vector(Ranged(-1.0, 1.0, "m or rad", "base frame error"), 6,
+                 "values: x, y, z [m], rx, ry, rz [rad]")
+    compliance_rad_per_nm: Vector(Compliance, 6, "values, one per joint") = [0.0] * 6
+
+
 class ParamsFile(Record):
     """Unknown top-level keys are allowed: every result file is a parameter file."""
     format: ParamsTag = None
@@ -60,6 +78,7 @@ class ParamsFile(Record):
     planes: Annotated[list[Plane], AfterValidator(_some_plane),
                       Field(max_length=MAX_PLANES, json_schema_extra={"minItems": 1})]
     sensor: SensorParams
+    kinematics: KinematicCorrections | None = None
 
 
 # ----- result files --------------------------------------------------------------------------
@@ -81,10 +100,20 @@ class SensorStd(Model):
     phi_z_rad: Std
 
 
+class KinematicsStd(Model):
+    alpha_rad: Std6
+    a_m: Std6
+    beta_rad: Std6
+    d_m: Std6
+    base: Std6
+    compliance_rad_per_nm: Std6
+
+
 class StdBlock(Model):
     joint_offsets_rad: Std6
     planes: list[PlaneStd]
     sensor: SensorStd
+    kinematics: KinematicsStd | None = None
 
 
 class InputFile(Model):
