@@ -52,7 +52,7 @@ def rehearse(scene, twin_seed, pose_seed, out: Path, truth: Path):
         return
     subprocess.run([sys.executable, "-m", "planecal.cli", "rehearse", "--scene", scene,
                     "--errors", "realistic", "--samples", "150", "--twin-seed", str(twin_seed),
-                    "--seed", str(pose_seed), "--truth", str(truth), "--out", str(out), "-q"],
+                    "--seed", str(pose_seed), "--truth-out", str(truth), "--out", str(out), "-q"],
                    check=True, stdout=subprocess.DEVNULL)
 
 
