@@ -29,7 +29,7 @@ BASE_RGBA = (90, 90, 90, 255)
 TOOL_RGBA = (60, 60, 70, 255)
 BEAM_RGBA = (40, 230, 60, 255)
 BEAM_NONE_RGBA = (160, 160, 160, 180)  # no reading (out of range / no hit)
-HIT_RGBA = (255, 255, 255, 255)
+HIT_RGBA = (150, 255, 160, 255)  # the beam's end, a lighter green
 BEAM_RADIUS_M = 0.002
 HIT_RADIUS_M = 0.004
 REJECT_RGBA = {"collision": (220, 40, 40, 255), "laser": (240, 160, 0, 255),
@@ -123,11 +123,13 @@ def plate_face_normal(scene, plate: int = 0, planes_n_tilde=None) -> np.ndarray:
     return pl.frame(n)[:3, 2]
 
 
-def eye_controls(scene, tool=None, distance_m: float = 0.75):
+def eye_controls(scene, tool=None, distance_m: float = 0.8):
     """A starting camera for the 3D view that frames the first plate and the tool: it looks
     at the midpoint of the plate's centre and ``tool`` (a point, m; default: 0.15 m in front
     of the plate's face, where the sensor works) from ``distance_m`` away, from in front of
-    the measured face, outwards of the robot and above."""
+    the measured face and from the side of the robot's reach (the arm, which lies in
+    the vertical plane through the base and the tool, is seen side-on and does not hide
+    the plate)."""
     import rerun.blueprint as rrb
 
     if scene is None or not scene.plates:
@@ -139,7 +141,9 @@ def eye_controls(scene, tool=None, distance_m: float = 0.75):
     out = np.array([c[0], c[1], 0.0])
     out = out / np.linalg.norm(out) if np.linalg.norm(out) > 1e-6 else np.array([1.0, 0, 0])
     side = np.cross([0.0, 0.0, 1.0], out)
-    d = 0.8 * n + 0.6 * out + 0.4 * side
+    if side @ n < 0:  # the side the face looks to
+        side = -side
+    d = 0.65 * n + 0.7 * side + 0.15 * out
     pos = target + distance_m * d / np.linalg.norm(d)
     return rrb.EyeControls3D(position=pos, look_target=target, eye_up=[0, 0, 1])
 
@@ -258,6 +262,13 @@ def log_robot_meshes(rec, scene, sensor_params=None) -> None:
     rec.log("/robot/link_0", rr.Transform3D(translation=[0, 0, 0], mat3x3=np.eye(3)), static=True)
 
 
+def hit_columns(points) -> dict:
+    """The exact hit points as AnyValues columns (x, y, z in m; AnyValues takes 1-D
+    arrays only)."""
+    p = np.asarray(points, float).reshape(-1, 3)
+    return {"hit_x_m": p[:, 0], "hit_y_m": p[:, 1], "hit_z_m": p[:, 2]}
+
+
 def log_robot_pose(rec, scene, params, qe, d_m=None, *, with_meshes: bool = True):
     """The robot (links and tool) posed at encoder counts ``qe`` (6,) with ``params``
     (joint offsets, sensor pose), static, and the beam from the sensor along its
@@ -290,6 +301,54 @@ def log_robot_pose(rec, scene, params, qe, d_m=None, *, with_meshes: bool = True
         rec.log("/laser/hit", rr.Points3D([o_b + d * z_b], colors=[HIT_RGBA],
                                           radii=HIT_RADIUS_M), static=True)
     return o_b
+
+
+SAMPLE_RADIUS_M = 0.004
+
+
+def sample_points(scene, params, qe, d_m, plate):
+    """Hit points (N,3) of samples with ``params`` and the face normals of their plates
+    (on ``params``' planes when it has one per plate of the scene)."""
+    from planecal.cell import sensor_in_base
+    from planecal.encoder import counts_to_joints
+
+    qe = np.asarray(qe, np.int64).reshape(-1, 6)
+    o_b, z_b = sensor_in_base(scene.robot, counts_to_joints(scene.robot, qe), params)
+    p = o_b + np.asarray(d_m, float)[:, None] * z_b
+    planes = params.planes if params.n_planes == len(scene.plates) else None
+    n = np.array([plate_face_normal(scene, min(int(k), len(scene.plates) - 1), planes)
+                  for k in np.asarray(plate, int)]).reshape(-1, 3)
+    return p, n
+
+
+def log_pose_set(rec, scene, params, qe, d_m, plate, colors, *, shown: int = 0,
+                 extra=None) -> np.ndarray:
+    """The 3D part of a recording without a run (calibration, studies): the cell on
+    ``params``' planes, the robot at sample ``shown`` with its beam, and the samples'
+    hit points as spheres on the plate faces in ``colors`` (static). ``extra``: more
+    AnyValues columns for /samples/points. Returns the sensor origin of the pose shown
+    (for the camera)."""
+    rr = _rr()
+    planes = params.planes if params.n_planes == len(scene.plates) else None
+    log_cell(rec, scene, planes)
+    d_m = np.asarray(d_m, float)
+    plate = np.asarray(plate, int)
+    p, n = sample_points(scene, params, qe, d_m, plate)
+    tool = log_robot_pose(rec, scene, params, np.asarray(qe)[shown], d_m[shown])
+    rec.log("/samples/points",
+            rr.Points3D(lifted(p, n, SAMPLE_RADIUS_M), colors=colors, radii=SAMPLE_RADIUS_M),
+            rr.AnyValues(plate=plate, **hit_columns(p), **(extra or {})), static=True)
+    return tool
+
+
+def tool_point(scene, params, qe) -> np.ndarray:
+    """The sensor origin at encoder counts ``qe`` (6,) with ``params`` (the camera's
+    second target)."""
+    from planecal.cell import sensor_in_base
+    from planecal.encoder import counts_to_joints
+
+    q = counts_to_joints(scene.robot, np.asarray(qe, np.int64).reshape(1, 6))
+    return sensor_in_base(scene.robot, q, params)[0][0]
 
 
 def log_info(rec, path: str, markdown: str) -> None:

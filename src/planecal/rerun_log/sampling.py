@@ -33,7 +33,7 @@ from planecal.errors import InputError
 from planecal.robot import fk_frames
 from planecal.rerun_log.common import (BEAM_NONE_RGBA, BEAM_RADIUS_M, BEAM_RGBA, HIT_RADIUS_M,
                                        HIT_RGBA, REJECT_RGBA, _rr, close_recording,
-                                       eye_controls, hidden, lifted, log_cell,
+                                       eye_controls, hidden, hit_columns, lifted, log_cell,
                                        log_robot_meshes, open_recording, plate_face_normal,
                                        recording_path, sequential_colors, whole_axis,
                                        whole_range)
@@ -244,7 +244,7 @@ class SamplingObserver(NullObserver):
                f"* joint offsets [mrad]: {np.array2string(k.joint_offsets * 1e3, precision=4)}\n"
                f"* **sample colour** = order of acquisition: first sample dark blue, then "
                f"purple, orange, last (so far) yellow. Spheres sit on the plate face "
-               f"(exact hit points: `hit_m`)\n"
+               f"(exact hit points: `hit_x_m`, `hit_y_m`, `hit_z_m`)\n"
                f"* small dots (`/samples/all`, written at the end): every sample of the run; "
                f"big spheres (`/samples/points`): the samples taken up to the time cursor\n"
                f"* **beam** green (grey: no reading), hit point white\n"
@@ -309,7 +309,7 @@ class SamplingObserver(NullObserver):
                                          zip(self._samples_index, self._samples_e)]),
                      rr.AnyValues(error_mm=e, sample=np.array(self._samples_index),
                                   plate=np.array(self._samples_plate),
-                                  hit_m=np.array(self._samples_p)))
+                                  **hit_columns(np.array(self._samples_p))))
 
     def on_reject(self, q_target, reason):
         rr, rec = self.rr, self.rec
