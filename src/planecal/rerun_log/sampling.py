@@ -247,7 +247,7 @@ class SamplingObserver(NullObserver):
                f"(exact hit points: `hit_x_m`, `hit_y_m`, `hit_z_m`)\n"
                f"* small dots (`/samples/all`, written at the end): every sample of the run; "
                f"big spheres (`/samples/points`): the samples taken up to the time cursor\n"
-               f"* **beam** green (grey: no reading), hit point white\n"
+               f"* **beam** green (grey: no reading), hit point light green\n"
                f"* **rejections** (start hidden; tick `/rejected` on in the blueprint panel): "
                f"collision red, laser orange, unreachable purple\n"
                f"* model error (series, hover): predicted - measured distance with "
