@@ -123,13 +123,14 @@ def plate_face_normal(scene, plate: int = 0, planes_n_tilde=None) -> np.ndarray:
     return pl.frame(n)[:3, 2]
 
 
-def eye_controls(scene, tool=None, distance_m: float = 0.8):
+def eye_controls(scene, tool=None, distance_m: float = 0.8, arm=None):
     """A starting camera for the 3D view that frames the first plate and the tool: it looks
     at the midpoint of the plate's centre and ``tool`` (a point, m; default: 0.15 m in front
     of the plate's face, where the sensor works) from ``distance_m`` away, from in front of
-    the measured face and from the side of the robot's reach (the arm, which lies in
+    the measured face and from the side of the robot's reach (the arm, which lies near
     the vertical plane through the base and the tool, is seen side-on and does not hide
-    the plate)."""
+    the plate): the side away from ``arm`` (a point, e.g. the elbow of the pose shown),
+    or without it the side the face looks to."""
     import rerun.blueprint as rrb
 
     if scene is None or not scene.plates:
@@ -141,7 +142,10 @@ def eye_controls(scene, tool=None, distance_m: float = 0.8):
     out = np.array([c[0], c[1], 0.0])
     out = out / np.linalg.norm(out) if np.linalg.norm(out) > 1e-6 else np.array([1.0, 0, 0])
     side = np.cross([0.0, 0.0, 1.0], out)
-    if side @ n < 0:  # the side the face looks to
+    if arm is not None:
+        if side @ (np.asarray(arm, float) - target) > 0:
+            side = -side
+    elif side @ n < 0:  # the side the face looks to
         side = -side
     d = 0.65 * n + 0.7 * side + 0.15 * out
     pos = target + distance_m * d / np.linalg.norm(d)
@@ -349,6 +353,17 @@ def tool_point(scene, params, qe) -> np.ndarray:
 
     q = counts_to_joints(scene.robot, np.asarray(qe, np.int64).reshape(1, 6))
     return sensor_in_base(scene.robot, q, params)[0][0]
+
+
+def pose_eye(scene, params, qe):
+    """The starting camera for a recording that shows the robot at counts ``qe``: on the
+    plate and the tool, from the side away from the arm (frames 2..4)."""
+    from planecal.encoder import counts_to_joints
+    from planecal.robot import fk_frames
+
+    q = counts_to_joints(scene.robot, np.asarray(qe, np.int64).reshape(1, 6))
+    F = fk_frames(scene.robot, q, params.joint_offsets)[0]
+    return eye_controls(scene, tool_point(scene, params, qe), arm=F[2:5, :3, 3].mean(0))
 
 
 def log_info(rec, path: str, markdown: str) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 
 from planecal.rerun_log.common import (_rr, close_recording, diverging_colors, error_legend,
                                        eye_controls, log_info, log_pose_set, open_recording,
-                                       recording_path, tool_point)
+                                       pose_eye, recording_path)
 
 HIST_BINS = 20  # equal-width bins from the smallest to the largest value (numpy.histogram)
 HIST_ENTITIES = {"error_before": "/fit/hist/error_before", "error_after": "/fit/hist/error_after",
@@ -38,9 +38,9 @@ def hist_ranges(res, samples) -> dict:
     return out
 
 
-def fit_blueprint(scene=None, tool=None, ranges: dict | None = None):
+def fit_blueprint(scene=None, eye=None, ranges: dict | None = None):
     """The calibration's blueprint: the 3D view framing the first plate and the tool
-    (``tool``: the sensor origin of the pose shown) over the convergence plot (log10 of
+    (``eye``: ``common.pose_eye`` of the pose shown; default ``eye_controls(scene)``) over the convergence plot (log10 of
     the model error per iteration); the info panel (legend) over tabs with the parameter
     table and the identifiability report; the three histograms on value axes."""
     import rerun.blueprint as rrb
@@ -53,7 +53,7 @@ def fit_blueprint(scene=None, tool=None, ranges: dict | None = None):
         rrb.Horizontal(
             rrb.Vertical(
                 rrb.Spatial3DView(name="calibration: samples by final model error",
-                                  origin="/", eye_controls=eye_controls(scene, tool),
+                                  origin="/", eye_controls=eye or eye_controls(scene),
                                   contents=["/cell/**", "/robot/**", "/laser/**",
                                             "/samples/**"]),
                 rrb.TimeSeriesView(name="convergence: log10(model error / 1 mm) per iteration",
@@ -141,7 +141,6 @@ def identifiability_markdown(res) -> str:
 def log_fit(rec, res, samples, scene) -> None:
     """Log a ``fit.Result`` and its data set (``Samples``: qe, d_mm, plate) to ``rec``."""
     rr = _rr()
-    robot = scene.robot
     # convergence (timeline "iteration"): RMS and max |model error| of the samples used
     it = np.array([h.iteration for h in res.history], np.int64)
     idx = [rr.TimeColumn("iteration", sequence=it)]
@@ -206,7 +205,7 @@ def fit_info_markdown(res, scale_mm: float, shown: int) -> str:
             f"* model error RMS: before **{res.rms_mm(True):.4f} mm**, after "
             f"**{res.rms_mm():.4f} mm** in {res.iterations} iterations"
             + ("" if res.converged else " (NOT converged)") + "\n"
-            f"* convergence plot: log10 of the RMS and max |model error| in mm "
+            "* convergence plot: log10 of the RMS and max |model error| in mm "
             f"(-2 = 0.01 mm); histograms: 20 equal bins, x = value [mm], y = samples\n")
 
 
@@ -215,7 +214,7 @@ def log_fit_to_file(arg, res, samples, scene):
     Returns the path written."""
     path = recording_path(arg, "calibrate", scene.name)
     rec = open_recording(path, fit_blueprint(
-        scene, tool_point(scene, res.params, np.asarray(samples.qe)[pose_shown(res)]),
+        scene, pose_eye(scene, res.params, np.asarray(samples.qe)[pose_shown(res)]),
         hist_ranges(res, samples)),
                          name=f"calibrate {scene.name}")
     try:

@@ -14,7 +14,7 @@ import numpy as np
 
 from planecal.rerun_log.common import (_rr, close_recording, diverging_colors, error_legend,
                                        eye_controls, log_info, log_pose_set, open_recording,
-                                       recording_path, sequential_colors, tool_point)
+                                       pose_eye, recording_path, sequential_colors)
 
 Z_BINS = np.linspace(-4, 4, 17)  # normalised errors: 16 bins of 0.5 sigma
 OBSERVED_RGBA = (90, 150, 220, 255)
@@ -44,8 +44,8 @@ def order_pose_set(qe, d_m, plate, params, what: str) -> PoseSet:
                    f"then purple, orange, last yellow")
 
 
-def _space_view(rrb, scene, tool, name):
-    return rrb.Spatial3DView(name=name, origin="/", eye_controls=eye_controls(scene, tool),
+def _space_view(rrb, scene, eye, name):
+    return rrb.Spatial3DView(name=name, origin="/", eye_controls=eye or eye_controls(scene),
                              contents=["/cell/**", "/robot/**", "/laser/**", "/samples/**",
                                        "/iso/**"])
 
@@ -77,27 +77,29 @@ def _pose_part(rec, scene, poses: PoseSet | None):
 
 # ----- Monte Carlo -------------------------------------------------------------------------
 
-def montecarlo_blueprint(names, scene=None, tool=None, chi2=False, slope_names=()):
+def montecarlo_blueprint(names, scene=None, eye=None, chi2=False, slope_names=()):
     import rerun.blueprint as rrb
 
-    charts = [rrb.BarChartView(name=f"{n}: (fit - truth) / CRB std", origin=f"/normalized_error/{n}")
+    no_legend = rrb.PlotLegend(visible=False)  # the tab's title says which bars are which
+    charts = [rrb.BarChartView(name=f"{n}: (fit - truth) / CRB std", origin=f"/normalized_error/{n}",
+                               plot_legend=no_legend)
               for n in names]
-    tabs = [rrb.Grid(*charts, name="normalised errors (blue) vs N(0,1) (yellow)")]
+    tabs = [rrb.Grid(*charts, grid_columns=3, name="normalised errors (blue) vs N(0,1) (yellow)")]
     if chi2:
         tabs.append(rrb.BarChartView(name="chi-square of the offsets (blue) vs chi2(k) (yellow)",
-                                     origin="/chi2"))
+                                     origin="/chi2", plot_legend=no_legend))
     if slope_names:
         tabs.append(rrb.Grid(*[rrb.TimeSeriesView(name=f"{n}: log10 spread vs samples",
                                                   origin=f"/log10_spread/{n}")
                                for n in slope_names], name="spread vs samples (log10)"))
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(_space_view(rrb, scene, tool, "Monte Carlo: cell and run 0's samples"),
+            rrb.Vertical(_space_view(rrb, scene, eye, "Monte Carlo: cell and run 0's samples"),
                          rrb.TextDocumentView(name="Monte Carlo info and legend",
                                               origin="/info"),
                          row_shares=[3, 2]),
             rrb.Tabs(*tabs, active_tab=0),
-            column_shares=[2, 3]),
+            column_shares=[1, 2]),
         rrb.TimePanel(timeline="samples", state="collapsed"),
         collapse_panels=False)
 
@@ -117,9 +119,9 @@ def log_montecarlo(path_arg, res: dict, scene=None, poses: PoseSet | None = None
     has_chi2 = bool(c and c.get("values"))
     sl = res.get("slope")
     slope_names = list(sl["slopes"]) if sl else []
-    tool = None if poses is None or scene is None or not len(poses.d_m) else \
-        tool_point(scene, poses.params, poses.qe[poses.shown])
-    rec = open_recording(path, montecarlo_blueprint(names, scene, tool, has_chi2, slope_names),
+    eye = None if poses is None or scene is None or not len(poses.d_m) else \
+        pose_eye(scene, poses.params, poses.qe[poses.shown])
+    rec = open_recording(path, montecarlo_blueprint(names, scene, eye, has_chi2, slope_names),
                          name=f"montecarlo {scene_name}")
     try:
         E = np.asarray(res.get("run_errors", []))
@@ -166,12 +168,12 @@ def log_montecarlo(path_arg, res: dict, scene=None, poses: PoseSet | None = None
 
 # ----- bootstrap ---------------------------------------------------------------------------
 
-def bootstrap_blueprint(names, scene=None, tool=None):
+def bootstrap_blueprint(names, scene=None, eye=None):
     import rerun.blueprint as rrb
 
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(_space_view(rrb, scene, tool, "bootstrap: the pool of samples"),
+            rrb.Vertical(_space_view(rrb, scene, eye, "bootstrap: the pool of samples"),
                          rrb.TextDocumentView(name="bootstrap info and legend", origin="/info"),
                          row_shares=[3, 2]),
             rrb.Grid(*[rrb.TimeSeriesView(name=f"{n}: spread vs subset size",
@@ -203,8 +205,8 @@ def log_bootstrap(path_arg, res: dict, scene=None, problem=None):
                         diverging_colors(e, scale),
                         error_legend(scale, "model error with the parameters of a fit of "
                                             "the whole pool"))
-    tool = None if poses is None else tool_point(scene, poses.params, poses.qe[poses.shown])
-    rec = open_recording(path, bootstrap_blueprint(names, scene, tool),
+    eye = None if poses is None else pose_eye(scene, poses.params, poses.qe[poses.shown])
+    rec = open_recording(path, bootstrap_blueprint(names, scene, eye),
                          name="bootstrap" if scene is None else f"bootstrap {scene.name}")
     try:
         for n in names:  # the same colours in every chart
@@ -242,12 +244,12 @@ def log_bootstrap(path_arg, res: dict, scene=None, problem=None):
 AP_SCALE = 100.0  # AP vectors drawn 100x longer
 
 
-def validate_blueprint(scene=None, tool=None):
+def validate_blueprint(scene=None, eye=None):
     import rerun.blueprint as rrb
 
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(_space_view(rrb, scene, tool,
+            rrb.Vertical(_space_view(rrb, scene, eye,
                                      "validate: ISO poses, AP vectors x100, calibration samples"),
                          rrb.TextDocumentView(name="validation info and legend", origin="/info"),
                          row_shares=[3, 2]),
@@ -276,8 +278,8 @@ def log_validate(path_arg, v: dict, scene, calibrated, qe=None, d_m=None, plate=
     poses = None
     if qe is not None and d_m is not None and len(d_m):
         poses = order_pose_set(qe, d_m, plate, calibrated, "the calibration samples")
-    tool = None if poses is None else tool_point(scene, calibrated, poses.qe[0])
-    rec = open_recording(path, validate_blueprint(scene, tool), name=f"validate {scene.name}")
+    eye = None if poses is None else pose_eye(scene, calibrated, poses.qe[0])
+    rec = open_recording(path, validate_blueprint(scene, eye), name=f"validate {scene.name}")
     try:
         iso = v["iso"]
         P = np.asarray(iso["points_m"], float)
