@@ -198,15 +198,15 @@ def error_scale(e_mm: np.ndarray) -> float:
 def fit_info_markdown(res, scale_mm: float, shown: int) -> str:
     return (f"# Calibration\n\n"
             f"* {error_legend(scale_mm, 'model error after calibration (predicted - measured distance, identified parameters)')}; "
-            f"outliers saturate\n"
-            f"* spheres sit on the plate face (exact hit points: `hit_x_m`, `hit_y_m`, `hit_z_m`); plates on the "
-            f"identified planes\n"
+            "outliers saturate\n"
+            "* spheres sit on the plate face (exact hit points: `hit_x_m`, `hit_y_m`, "
+            "`hit_z_m`); plates on the identified planes\n"
             f"* robot and green beam: the pose of sample {shown} (identified parameters)\n"
             f"* model error RMS: before **{res.rms_mm(True):.4f} mm**, after "
             f"**{res.rms_mm():.4f} mm** in {res.iterations} iterations"
             + ("" if res.converged else " (NOT converged)") + "\n"
             "* convergence plot: log10 of the RMS and max |model error| in mm "
-            f"(-2 = 0.01 mm); histograms: 20 equal bins, x = value [mm], y = samples\n")
+            "(-2 = 0.01 mm); histograms: 20 equal bins, x = value [mm], y = samples\n")
 
 
 def log_fit_to_file(arg, res, samples, scene):
