@@ -81,10 +81,11 @@ def montecarlo_blueprint(names, scene=None, eye=None, chi2=False, slope_names=()
     import rerun.blueprint as rrb
 
     no_legend = rrb.PlotLegend(visible=False)  # the tab's title says which bars are which
-    charts = [rrb.BarChartView(name=f"{n}: (fit - truth) / CRB std", origin=f"/normalized_error/{n}",
+    charts = [rrb.BarChartView(name=f"{n}: (fit - truth) / CRB std (grid: 1 per std)",
+                               origin=f"/normalized_error/{n}",
                                plot_legend=no_legend)
               for n in names]
-    tabs = [rrb.Grid(*charts, grid_columns=3, name="normalised errors (blue) vs N(0,1) (yellow)")]
+    tabs = [rrb.Grid(*charts, grid_columns=2, name="normalised errors (blue) vs N(0,1) (yellow)")]
     if chi2:
         tabs.append(rrb.BarChartView(name="chi-square of the offsets (blue) vs chi2(k) (yellow)",
                                      origin="/chi2", plot_legend=no_legend))
@@ -100,7 +101,8 @@ def montecarlo_blueprint(names, scene=None, eye=None, chi2=False, slope_names=()
                          row_shares=[3, 2]),
             rrb.Tabs(*tabs, active_tab=0),
             column_shares=[1, 2]),
-        rrb.TimePanel(timeline="samples", state="collapsed"),
+        rrb.TimePanel(timeline="samples", state="collapsed") if slope_names else
+        rrb.TimePanel(state="collapsed"),
         collapse_panels=False)
 
 
