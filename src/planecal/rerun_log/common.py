@@ -381,8 +381,8 @@ def error_legend(scale_mm: float, what: str) -> str:
 def blueprint_views(path) -> list[dict]:
     """The views of the blueprint stored in a recording file, read back with rerun's own
     reader (``rerun.chunk.RrdReader``): [{"class": "3D", "name", "origin", "contents":
-    [queries], "hidden": [entity paths that start hidden]}]. For tests and
-    ``planecal view --summary``."""
+    [queries], "hidden": [entity paths that start hidden], "eye": {"position",
+    "look_target"} or None}]. For tests and ``planecal view --summary``."""
     from rerun.chunk import RrdReader
 
     reader = RrdReader(str(path))
@@ -390,7 +390,7 @@ def blueprint_views(path) -> list[dict]:
 
     def view(vid):
         return views.setdefault(vid, {"class": None, "name": None, "origin": None,
-                                      "contents": [], "hidden": []})
+                                      "contents": [], "hidden": [], "eye": None})
 
     for entry in reader.blueprints():
         for ch in reader.store(store=entry).stream():
@@ -407,6 +407,9 @@ def blueprint_views(path) -> list[dict]:
                     x = vals.get(f"ViewBlueprint:{col}")
                     if x:
                         v[key] = x[0]
+            elif parts[2:] == ["EyeControls3D"] and vals.get("EyeControls3D:position"):
+                v["eye"] = {"position": np.array(vals["EyeControls3D:position"][0]),
+                            "look_target": np.array(vals["EyeControls3D:look_target"][0])}
             elif parts[2:] == ["ViewContents"] and vals.get("ViewContents:query"):
                 v["contents"] = list(vals["ViewContents:query"])
             elif parts[2:4] == ["ViewContents", "overrides"] and \

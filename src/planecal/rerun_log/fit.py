@@ -12,6 +12,7 @@ from planecal.rerun_log.common import (_rr, close_recording, diverging_colors, e
                                        eye_controls, log_info, log_pose_set, open_recording,
                                        pose_eye, recording_path)
 
+LOG_FLOOR_MM = 1e-15  # log10 plot: an exact 0 is drawn at -15 (1e-18 m, far below rounding)
 HIST_BINS = 20  # equal-width bins from the smallest to the largest value (numpy.histogram)
 HIST_ENTITIES = {"error_before": "/fit/hist/error_before", "error_after": "/fit/hist/error_after",
                  "distance": "/fit/hist/distance"}
@@ -151,7 +152,7 @@ def log_fit(rec, res, samples, scene) -> None:
     for path, vals in (("/fit/log10/rms", [h.rms_m for h in res.history]),
                        ("/fit/log10/max", [h.max_m for h in res.history])):
         rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(
-            scalars=np.log10(np.maximum(np.array(vals, float) * 1e3, 1e-12))))
+            scalars=np.log10(np.maximum(np.array(vals, float) * 1e3, LOG_FLOOR_MM))))
     rec.send_columns("/fit/samples_used", indexes=idx, columns=rr.Scalars.columns(
         scalars=np.array([h.samples for h in res.history], float)))
     # histograms (static): all samples, outliers included

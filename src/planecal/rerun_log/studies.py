@@ -44,10 +44,10 @@ def order_pose_set(qe, d_m, plate, params, what: str) -> PoseSet:
                    f"then purple, orange, last yellow")
 
 
-def _space_view(rrb, scene, eye, name):
+def _space_view(rrb, scene, eye, name, extra=()):
     return rrb.Spatial3DView(name=name, origin="/", eye_controls=eye or eye_controls(scene),
                              contents=["/cell/**", "/robot/**", "/laser/**", "/samples/**",
-                                       "/iso/**"])
+                                       *extra])
 
 
 def _histogram(rec, path, values, edges, color):
@@ -252,7 +252,8 @@ def validate_blueprint(scene=None, eye=None):
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(_space_view(rrb, scene, eye,
-                                     "validate: ISO poses, AP vectors x100, calibration samples"),
+                                     "validate: ISO poses, AP vectors x100, calibration samples",
+                                     extra=["/iso/**"]),
                          rrb.TextDocumentView(name="validation info and legend", origin="/info"),
                          row_shares=[3, 2]),
             rrb.Vertical(
