@@ -30,7 +30,7 @@ TOOL_RGBA = (60, 60, 70, 255)
 BEAM_RGBA = (40, 230, 60, 255)
 BEAM_NONE_RGBA = (160, 160, 160, 180)  # no reading (out of range / no hit)
 HIT_RGBA = (150, 255, 160, 255)  # the beam's end, a lighter green
-BEAM_RADIUS_M = 0.002
+BEAM_RADIUS_M = 0.003
 HIT_RADIUS_M = 0.004
 REJECT_RGBA = {"collision": (220, 40, 40, 255), "laser": (240, 160, 0, 255),
                "unreachable": (150, 60, 200, 255)}

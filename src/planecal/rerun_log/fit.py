@@ -46,6 +46,8 @@ def fit_blueprint(scene=None, eye=None, ranges: dict | None = None):
     table and the identifiability report; the three histograms on value axes."""
     import rerun.blueprint as rrb
 
+    no_legend = rrb.PlotLegend(visible=False)  # one series per chart, named in its title
+
     def title(text, key):
         r = (ranges or {}).get(key)
         return text if r is None else f"{text}: {r[0]:.4g} to {r[1]:.4g}"
@@ -70,11 +72,11 @@ def fit_blueprint(scene=None, eye=None, ranges: dict | None = None):
                 row_shares=[1, 3]),
             rrb.Vertical(
                 rrb.BarChartView(name=title("model error before [mm]", "error_before"),
-                                 origin="/fit/hist/error_before"),
+                                 origin="/fit/hist/error_before", plot_legend=no_legend),
                 rrb.BarChartView(name=title("model error after [mm]", "error_after"),
-                                 origin="/fit/hist/error_after"),
+                                 origin="/fit/hist/error_after", plot_legend=no_legend),
                 rrb.BarChartView(name=title("measured distance [mm]", "distance"),
-                                 origin="/fit/hist/distance"),
+                                 origin="/fit/hist/distance", plot_legend=no_legend),
             ),
             column_shares=[5, 4, 3]),
         rrb.TimePanel(timeline="iteration", state="collapsed"),

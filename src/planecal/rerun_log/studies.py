@@ -261,7 +261,8 @@ def validate_blueprint(scene=None, eye=None):
                                       "calibrated (blue)", origin="/ap"),
                 rrb.BarChartView(name="RP per ISO pose P1..P5 [mm]", origin="/rp"),
                 rrb.BarChartView(name="gauge block length error [mm]: nominal, calibrated, "
-                                      "calibrated sensor + nominal offsets", origin="/gauge")),
+                                      "calibrated sensor + nominal offsets", origin="/gauge",
+                                 plot_legend=rrb.PlotLegend(visible=False))),
             column_shares=[3, 2]),
         rrb.TimePanel(state="collapsed"),
         collapse_panels=False)
