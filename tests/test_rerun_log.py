@@ -410,6 +410,9 @@ def test_view_summary_lists_the_entity_tree(rehearsal, capsys):
     lines = capsys.readouterr().out.splitlines()
     entities = {ln.split("\t")[0] for ln in lines}
     assert set(EXPECTED) <= entities
+    views = [ln.split("\t")[1:] for ln in lines if ln.startswith("view:\t")]
+    assert ["3D", "cell: rehearsal on the twin", "/"] in views
+    assert ["TextDocument", "run info and legend", "/run/info"] in views
 
 
 def test_cell_entities_follow_the_scene(tmp_path):
