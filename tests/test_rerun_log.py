@@ -189,12 +189,18 @@ def test_samples_logged_equal_the_samples_in_the_run(scene, rehearsal):
 
 
 def test_hit_points_lie_on_the_true_plate(rehearsal):
+    from planecal.rerun_log.sampling import SAMPLE_RADIUS_M
     data = rehearsal["data"]
     n_t = rehearsal["twin"].truth.planes[0]
+    exact = np.column_stack([np.ravel(last(data, "/samples/points", f"hit_{c}_m"))
+                             for c in "xyz"])
+    dist = np.abs(exact @ n_t - 1.0) / np.linalg.norm(n_t)
+    print(f"sample hit points: max distance to the true plane {dist.max():.2e} m")
+    assert exact.shape == (N_SAMPLES, 3) and dist.max() < 1e-6, dist.max()
+    # the spheres drawn sit on the face: centres one radius off it, on the sensor's side
     pts = np.array(last(data, "/samples/points", "Points3D:positions"))
-    dist = np.abs(pts @ n_t - 1.0) / np.linalg.norm(n_t)
-    print(f"sample points: max distance to the true plane {dist.max():.2e} m")
-    assert dist.max() < 1e-6, dist.max()  # float32 positions at ~1.5 m: ~1e-7
+    signed = (pts @ n_t - 1.0) / np.linalg.norm(n_t)  # + along n~ (the face looks along +n~)
+    np.testing.assert_allclose(signed, SAMPLE_RADIUS_M, atol=1e-6)  # float32 positions
     hits = np.array([p for r in data["/laser/hit"]["rows"]
                      for p in (r.get("Points3D:positions") or [])])
     assert len(hits) > N_SAMPLES  # every sample tick plus the readings on logged ticks
@@ -404,6 +410,9 @@ def test_view_summary_lists_the_entity_tree(rehearsal, capsys):
     lines = capsys.readouterr().out.splitlines()
     entities = {ln.split("\t")[0] for ln in lines}
     assert set(EXPECTED) <= entities
+    views = [ln.split("\t")[1:] for ln in lines if ln.startswith("view:\t")]
+    assert ["3D", "cell: rehearsal on the twin", "/"] in views
+    assert ["TextDocument", "run info and legend", "/run/info"] in views
 
 
 def test_cell_entities_follow_the_scene(tmp_path):

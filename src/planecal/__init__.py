@@ -9,3 +9,20 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 __version__ = "0.1.0"
+
+# The notebook API (planecal.api), loaded on first use so that `import planecal` stays
+# cheap (no numpy, scipy or MuJoCo until a call needs them).
+__all__ = ["load_samples", "rehearse", "calibrate", "validate", "SampleSet", "Rehearsal",
+           "Calibration", "Validation", "__version__"]
+_API = frozenset(__all__) - {"__version__"}
+
+
+def __getattr__(name):
+    if name in _API:
+        from planecal import api
+        return getattr(api, name)
+    raise AttributeError(f"module 'planecal' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | _API)

@@ -63,6 +63,6 @@ def run(args) -> int:
         print(f"result written to {args.out}")
     write_command_report(args, res, scene=str(scene.path))
     if args.rrd:
-        from planecal.studies.report import log_bootstrap
-        print(f"plots written to {log_bootstrap(args.rrd, res)}")
+        from planecal.rerun_log.studies import log_bootstrap
+        print(f"plots written to {log_bootstrap(args.rrd, res, scene, problem)}")
     return 0

@@ -110,6 +110,11 @@ def run(args) -> int:
         save_json(args.out, res)
         print(f"result written to {args.out}")
     if args.rrd:
-        from planecal.studies.report import log_montecarlo
-        print(f"plots written to {log_montecarlo(args.rrd, res)}")
+        from planecal.rerun_log.studies import log_montecarlo, order_pose_set
+        from planecal.studies.montecarlo import twin_samples, world_for
+        world, opts = world_for(st, 0)  # the 3D view: run 0's world, the twin mode's draw
+        qe, d, plate, _ = twin_samples(scene, world, st, st.seed, opts)
+        poses = order_pose_set(qe, d, plate, world.params,
+                               f"run 0's samples (twin mode draw, seed {st.seed})")
+        print(f"plots written to {log_montecarlo(args.rrd, res, scene, poses)}")
     return 0

@@ -39,6 +39,8 @@ def add_arguments(p):
     p.add_argument("--calibrated", help="calibration result to validate (with --truth and --run)")
     p.add_argument("--truth", help="the twin truth (parameter file) the calibration was made on")
     p.add_argument("--run", help="the calibration's sample file (places the ISO cube)")
+    p.add_argument("--rrd", default=None, metavar="FILE",
+                   help="also write a Rerun recording (planecal view FILE)")
 
 
 def _tcp(text):
@@ -74,7 +76,9 @@ def run(args) -> int:
         from planecal.samples import read_samples
         calibrated = load_params(args.calibrated)
         truth = load_truth(scene, args.truth)
-        qe = read_samples(args.run).qe
+        run_samples = read_samples(args.run)
+        qe = run_samples.qe
+        d_m, plate = run_samples.d_mm * 1e-3, run_samples.plate
         fit = None
     else:
         if args.samples < 20:
@@ -93,6 +97,7 @@ def run(args) -> int:
             qe, d, plate, rejected = pose_list_samples(scene, truth, mc, args.seed)
         else:
             qe, d, plate, rejected = twin_samples(scene, truth, mc, args.seed)
+        d_m = d
         fit = solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
         calibrated = fit.params
         info = {"samples": len(d), "rejected": rejected, "fit_rms_mm": fit.rms_mm(),
@@ -109,4 +114,7 @@ def run(args) -> int:
     if args.out:
         save_json(args.out, v)
         print(f"result written to {args.out}")
+    if args.rrd:
+        from planecal.rerun_log.studies import log_validate
+        print(f"recording written to {log_validate(args.rrd, v, scene, calibrated, qe, d_m, plate)}")
     return 0

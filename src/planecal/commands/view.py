@@ -8,7 +8,8 @@ command (Ctrl-C, SIGTERM, SIGHUP; on Linux also when this process is killed outr
 display (Linux without $DISPLAY / $WAYLAND_DISPLAY) -- it prints one line saying how to
 open the file instead and exits 1. ``--web`` serves the recording to a browser instead
 (``rerun --serve-web FILE``; works without a display). ``--summary`` prints the entity
-tree (entity, rows, static, components) read with rerun's own reader, no viewer.
+tree (entity, rows, static, components) read with rerun's own reader, then the views of
+the recording's blueprint (``view:`` class, name, origin), no viewer.
 Exit 2 when FILE is missing or not a recording.
 """
 from __future__ import annotations
@@ -28,7 +29,8 @@ def add_arguments(p) -> None:
     p.add_argument("--web", action="store_true",
                    help="serve it to a web browser (rerun --serve-web) instead of a window")
     p.add_argument("--summary", action="store_true",
-                   help="print the entity tree and row counts; open no viewer")
+                   help="print the entity tree, row counts and the blueprint's views; open no "
+                        "viewer")
 
 
 def find_viewer() -> str | None:
@@ -62,13 +64,16 @@ def run(args) -> int:
     if not is_recording(path):
         raise InputError(f"{path}: not a Rerun recording (.rrd)")
     if args.summary:
-        from planecal.rerun_log.common import summarize
+        from planecal.rerun_log.common import blueprint_views, summarize
         try:
             rows = summarize(path)
+            views = blueprint_views(path)
         except Exception as e:  # the reader's own errors (truncated file, ...)
             raise InputError(f"{path}: cannot read the recording ({e})") from None
         for entity, n, static, comps in rows:
             print(f"{entity}\t{n}\t{'static' if static else 'temporal'}\t{', '.join(comps)}")
+        for v in views:
+            print(f"view:\t{v['class']}\t{v['name']}\t{v['origin']}")
         return 0
     exe = find_viewer()
     if exe is None:

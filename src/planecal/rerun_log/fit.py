@@ -8,15 +8,14 @@ from dataclasses import asdict
 
 import numpy as np
 
-from planecal.cell import sensor_in_base
-from planecal.encoder import counts_to_joints
-from planecal.rerun_log.common import (_rr, close_recording, diverging_colors, eye_controls,
-                                       log_cell, open_recording, recording_path)
+from planecal.rerun_log.common import (_rr, close_recording, diverging_colors, error_legend,
+                                       eye_controls, log_info, log_pose_set, open_recording,
+                                       pose_eye, recording_path)
 
+LOG_FLOOR_MM = 1e-15  # log10 plot: an exact 0 is drawn at -15 (1e-18 m, far below rounding)
 HIST_BINS = 20  # equal-width bins from the smallest to the largest value (numpy.histogram)
 HIST_ENTITIES = {"error_before": "/fit/hist/error_before", "error_after": "/fit/hist/error_after",
                  "distance": "/fit/hist/distance"}
-SAMPLE_RADIUS_M = 0.003
 
 
 def histogram(values_mm: np.ndarray, bins: int = HIST_BINS):
@@ -27,29 +26,60 @@ def histogram(values_mm: np.ndarray, bins: int = HIST_BINS):
     return np.histogram(v, bins=bins)
 
 
-def fit_blueprint(scene=None):
+def hist_ranges(res, samples) -> dict:
+    """The value range of each histogram, for the view titles: {key: (lo, hi)} in mm."""
+    data = {"error_before": np.asarray(res.initial_residuals_m) * 1e3,
+            "error_after": np.asarray(res.residuals_m) * 1e3,
+            "distance": np.asarray(samples.d_mm, float)}
+    out = {}
+    for k, v in data.items():
+        v = v[np.isfinite(v)]
+        if v.size:
+            out[k] = (float(v.min()), float(v.max()))
+    return out
+
+
+def fit_blueprint(scene=None, eye=None, ranges: dict | None = None):
+    """The calibration's blueprint: the 3D view framing the first plate and the tool
+    (``eye``: ``common.pose_eye`` of the pose shown; default ``eye_controls(scene)``) over the convergence plot (log10 of
+    the model error per iteration); the info panel (legend) over tabs with the parameter
+    table and the identifiability report; the three histograms on value axes."""
     import rerun.blueprint as rrb
+
+    no_legend = rrb.PlotLegend(visible=False)  # one series per chart, named in its title
+
+    def title(text, key):
+        r = (ranges or {}).get(key)
+        return text if r is None else f"{text}: {r[0]:.4g} to {r[1]:.4g}"
 
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(name="samples (final model error)", origin="/",
-                                  eye_controls=eye_controls(scene, "plate"),
-                                  contents=["/cell/**", "/samples/**"]),
-                rrb.TimeSeriesView(name="model error per iteration [mm]", origin="/fit",
-                                   contents=["/fit/rms_mm", "/fit/max_mm"]),
-            ),
+                rrb.Spatial3DView(name="calibration: samples by final model error",
+                                  origin="/", eye_controls=eye or eye_controls(scene),
+                                  contents=["/cell/**", "/robot/**", "/laser/**",
+                                            "/samples/**"]),
+                rrb.TimeSeriesView(name="convergence: log10(model error / 1 mm) per iteration",
+                                   origin="/fit/log10",
+                                   plot_legend=rrb.PlotLegend(rrb.Corner2D.RightTop)),
+                row_shares=[3, 2]),
             rrb.Vertical(
-                rrb.BarChartView(name="distance distribution [mm]", origin="/fit/hist/distance"),
-                rrb.BarChartView(name="model error before [mm]", origin="/fit/hist/error_before"),
-                rrb.BarChartView(name="model error after [mm]", origin="/fit/hist/error_after"),
-            ),
+                rrb.TextDocumentView(name="calibration info and legend", origin="/fit/info"),
+                rrb.Tabs(
+                    rrb.TextDocumentView(name="parameters", origin="/fit/parameters"),
+                    rrb.TextDocumentView(name="identifiability", origin="/fit/identifiability"),
+                    active_tab=0),
+                row_shares=[1, 3]),
             rrb.Vertical(
-                rrb.TextDocumentView(name="parameters", origin="/fit/parameters"),
-                rrb.TextDocumentView(name="identifiability", origin="/fit/identifiability"),
+                rrb.BarChartView(name=title("model error before [mm]", "error_before"),
+                                 origin="/fit/hist/error_before", plot_legend=no_legend),
+                rrb.BarChartView(name=title("model error after [mm]", "error_after"),
+                                 origin="/fit/hist/error_after", plot_legend=no_legend),
+                rrb.BarChartView(name=title("measured distance [mm]", "distance"),
+                                 origin="/fit/hist/distance", plot_legend=no_legend),
             ),
-            column_shares=[3, 2, 2]),
-        rrb.TimePanel(timeline="iteration"),
+            column_shares=[5, 4, 3]),
+        rrb.TimePanel(timeline="iteration", state="collapsed"),
         collapse_panels=False)
 
 
@@ -114,7 +144,6 @@ def identifiability_markdown(res) -> str:
 def log_fit(rec, res, samples, scene) -> None:
     """Log a ``fit.Result`` and its data set (``Samples``: qe, d_mm, plate) to ``rec``."""
     rr = _rr()
-    robot = scene.robot
     # convergence (timeline "iteration"): RMS and max |model error| of the samples used
     it = np.array([h.iteration for h in res.history], np.int64)
     idx = [rr.TimeColumn("iteration", sequence=it)]
@@ -122,6 +151,10 @@ def log_fit(rec, res, samples, scene) -> None:
                        ("/fit/max_mm", [h.max_m for h in res.history])):
         rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(
             scalars=np.array(vals, float) * 1e3))
+    for path, vals in (("/fit/log10/rms", [h.rms_m for h in res.history]),
+                       ("/fit/log10/max", [h.max_m for h in res.history])):
+        rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(
+            scalars=np.log10(np.maximum(np.array(vals, float) * 1e3, LOG_FLOOR_MM))))
     rec.send_columns("/fit/samples_used", indexes=idx, columns=rr.Scalars.columns(
         scalars=np.array([h.samples for h in res.history], float)))
     # histograms (static): all samples, outliers included
@@ -139,25 +172,54 @@ def log_fit(rec, res, samples, scene) -> None:
             static=True)
     rec.log("/fit/identifiability", rr.TextDocument(identifiability_markdown(res),
                                                     media_type="text/markdown"), static=True)
-    # the cell on the identified planes, hit points with the identified parameters
-    planes = res.params.planes if res.params.n_planes == len(scene.plates) else None
-    log_cell(rec, scene, planes)
-    qe = np.asarray(samples.qe)
-    o_b, z_b = sensor_in_base(robot, counts_to_joints(robot, qe), res.params)
-    p = o_b + (np.asarray(samples.d_mm, float) * 1e-3)[:, None] * z_b
+    # the cell on the identified planes, hit points with the identified parameters, the
+    # robot at the first sample used, its beam to the hit
+    shown = pose_shown(res)
     e_after = data["error_after"]
-    rec.log("/samples/points",
-            rr.Points3D(p, colors=diverging_colors(e_after), radii=SAMPLE_RADIUS_M),
-            rr.AnyValues(error_mm=e_after, error_before_mm=data["error_before"],
-                         used=np.asarray(res.used, bool), plate=np.asarray(samples.plate)),
-            static=True)
+    scale = error_scale(e_after[np.asarray(res.used, bool)])
+    log_pose_set(rec, scene, res.params, samples.qe, np.asarray(samples.d_mm, float) * 1e-3,
+                 samples.plate, diverging_colors(e_after, scale), shown=shown,
+                 extra={"error_mm": e_after, "error_before_mm": data["error_before"],
+                        "used": np.asarray(res.used, bool)})
+    log_info(rec, "/fit/info", fit_info_markdown(res, scale, shown))
+
+
+def pose_shown(res) -> int:
+    """The sample whose pose the 3D view shows: the first one used."""
+    used = np.flatnonzero(np.asarray(res.used, bool))
+    return int(used[0]) if used.size else 0
+
+
+def error_scale(e_mm: np.ndarray) -> float:
+    """The colour scale of model errors: the largest |error| of the samples used
+    (outliers saturate), at least 1 um."""
+    e = np.abs(np.asarray(e_mm, float))
+    e = e[np.isfinite(e)]
+    return max(float(e.max()) if e.size else 0.0, 1e-3)
+
+
+def fit_info_markdown(res, scale_mm: float, shown: int) -> str:
+    return (f"# Calibration\n\n"
+            f"* {error_legend(scale_mm, 'model error after calibration (predicted - measured distance, identified parameters)')}; "
+            "outliers saturate\n"
+            "* spheres sit on the plate face (exact hit points: `hit_x_m`, `hit_y_m`, "
+            "`hit_z_m`); plates on the identified planes\n"
+            f"* robot and green beam: the pose of sample {shown} (identified parameters)\n"
+            f"* model error RMS: before **{res.rms_mm(True):.4f} mm**, after "
+            f"**{res.rms_mm():.4f} mm** in {res.iterations} iterations"
+            + ("" if res.converged else " (NOT converged)") + "\n"
+            "* convergence plot: log10 of the RMS and max |model error| in mm "
+            "(-2 = 0.01 mm); histograms: 20 equal bins, x = value [mm], y = samples\n")
 
 
 def log_fit_to_file(arg, res, samples, scene):
     """Write the fit's recording; ``arg`` as for ``recording_path`` (command "calibrate").
     Returns the path written."""
     path = recording_path(arg, "calibrate", scene.name)
-    rec = open_recording(path, fit_blueprint(scene), name=f"calibrate {scene.name}")
+    rec = open_recording(path, fit_blueprint(
+        scene, pose_eye(scene, res.params, np.asarray(samples.qe)[pose_shown(res)]),
+        hist_ranges(res, samples)),
+                         name=f"calibrate {scene.name}")
     try:
         log_fit(rec, res, samples, scene)
     finally:

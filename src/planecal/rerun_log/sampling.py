@@ -31,10 +31,12 @@ from planecal.cell import CellParams, beam_direction, predict, sensor_in_base
 from planecal.encoder import counts_to_joints
 from planecal.errors import InputError
 from planecal.robot import fk_frames
-from planecal.rerun_log.common import (BEAM_NONE_RGBA, BEAM_RGBA, HIT_RGBA, REJECT_RGBA, _rr,
-                                       close_recording, diverging_colors, eye_controls,
-                                       log_cell, log_robot_meshes, open_recording,
-                                       recording_path)
+from planecal.rerun_log.common import (BEAM_NONE_RGBA, BEAM_RADIUS_M, BEAM_RGBA, HIT_RADIUS_M,
+                                       HIT_RGBA, REJECT_RGBA, _rr, close_recording,
+                                       eye_controls, hidden, hit_columns, lifted, log_cell,
+                                       log_robot_meshes, open_recording, plate_face_normal,
+                                       recording_path, sequential_colors, whole_axis,
+                                       whole_range)
 from planecal.sampling.collect import REJECT_KINDS
 from planecal.sampling.observer import NullObserver
 
@@ -42,9 +44,8 @@ DEFAULT_EVERY = 5
 DEFAULT_CHUNK_TICKS = 4096  # twin: ~0.1 s of wall time
 REAL_CHUNK_TICKS = 1000  # real cell: 10 s; the recording is never far behind
 N_JOINTS = 6
-SAMPLE_RADIUS_M = 0.003
-HIT_RADIUS_M = 0.004
-BEAM_RADIUS_M = 0.0015
+SAMPLE_RADIUS_M = 0.004
+ALL_SAMPLES_RADIUS_M = 0.0025  # /samples/all: the whole run's samples, static (at close)
 REJECT_LENGTH_M = 0.08  # length of the arrow marking a rejected pose (along the beam)
 
 TICK_ENTITIES = ([f"/robot/link_{i}" for i in range(1, N_JOINTS + 1)]
@@ -95,28 +96,47 @@ def _env_int(name: str, default: int) -> int:
         raise InputError(f"{name}: must be an integer, got {v!r}") from None
 
 
-def sampling_blueprint(scene=None):
-    """3D view of the cell, robot, laser, samples and rejections; time series of step
-    counts, joint angles, laser readings and model errors; the event log."""
+def sampling_blueprint(scene=None, kind: str = "rehearsal"):
+    """The blueprint of a sampling run (``kind`` "rehearsal" on the twin or "real"): the 3D
+    view framing the first plate and the tool (rejections in /rejected start hidden)
+    over an overview of the whole run (laser readings and each sample's model error,
+    whole tick range); the run's info panel (legend) over tabs of the detail series and
+    the event log."""
     import rerun.blueprint as rrb
 
+    title = "rehearsal on the twin" if kind == "rehearsal" else "real run"
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(name="cell", origin="/", eye_controls=eye_controls(scene),
+                rrb.Spatial3DView(name=f"cell: {title}", origin="/",
+                                  eye_controls=eye_controls(scene),
                                   contents=["/cell/**", "/robot/**", "/laser/**",
-                                            "/samples/**", "/rejected/**"]),
-                rrb.TextLogView(name="events", origin="/events"),
-                row_shares=[4, 1]),
+                                            "/samples/**", "/rejected/**"],
+                                  overrides=hidden("/rejected")),
+                rrb.TimeSeriesView(name="whole run: laser [mm] and sample model error [mm]",
+                                   origin="/series",
+                                   contents=["/series/laser_mm", "/series/model_error_mm"],
+                                   time_ranges=whole_range("tick"), axis_x=whole_axis(),
+                                   plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop)),
+                row_shares=[3, 1]),
             rrb.Vertical(
-                rrb.TimeSeriesView(name="step counts per tick", origin="/series/steps"),
-                rrb.TimeSeriesView(name="joint angles [deg]", origin="/series/joint_deg"),
-                rrb.TimeSeriesView(name="laser [mm]", origin="/series/laser_mm"),
-                rrb.TimeSeriesView(name="model error [mm]", origin="/series/model_error_mm"),
-                rrb.TextDocumentView(name="run", origin="/run"),
-            ),
+                rrb.TextDocumentView(name="run info and legend", origin="/run/info"),
+                rrb.Tabs(
+                    rrb.TimeSeriesView(name="joint angles [deg]", origin="/series/joint_deg",
+                                       time_ranges=whole_range("tick")),
+                    rrb.TimeSeriesView(name="step counts per tick", origin="/series/steps",
+                                       time_ranges=whole_range("tick")),
+                    rrb.TimeSeriesView(name="laser [mm]", origin="/series/laser_mm",
+                                       time_ranges=whole_range("tick")),
+                    rrb.TimeSeriesView(name="model error per sample [mm]",
+                                       origin="/series/model_error_mm",
+                                       time_ranges=whole_range("tick")),
+                    rrb.TextLogView(name="events", origin="/events"),
+                    active_tab=0),
+                row_shares=[1, 1]),
             column_shares=[3, 2]),
-        rrb.TimePanel(timeline="tick"),
+        # "following": a finished recording opens at its end (every sample on the plate)
+        rrb.TimePanel(timeline="tick", play_state="following"),
         collapse_panels=False)
 
 
@@ -176,6 +196,7 @@ class SamplingObserver(NullObserver):
         self._beam_none_m = float(scene.laser_range_mm[1]) * 1e-3
         self._samples_p: list[np.ndarray] = []
         self._samples_e: list[float] = []
+        self._samples_n: list[np.ndarray] = []
         self._samples_plate: list[int] = []
         self._samples_index: list[int] = []
         self._rejected = {k: ([], [], []) for k in REJECT_KINDS}  # origins, vectors, reasons
@@ -221,9 +242,16 @@ class SamplingObserver(NullObserver):
                + ("(the twin's hidden truth: offsets, sensor pose, planes)"
                   if self.kinematics == "truth" else "(the scene's nominal values)") + "\n"
                f"* joint offsets [mrad]: {np.array2string(k.joint_offsets * 1e3, precision=4)}\n"
-               f"* sample colour: model error = predicted - measured distance with "
-               f"{'the given' if self.params_given else 'the nominal'} parameters, "
-               f"blue < 0 < red\n"
+               f"* **sample colour** = order of acquisition: first sample dark blue, then "
+               f"purple, orange, last (so far) yellow. Spheres sit on the plate face "
+               f"(exact hit points: `hit_x_m`, `hit_y_m`, `hit_z_m`)\n"
+               f"* small dots (`/samples/all`, written at the end): every sample of the run; "
+               f"big spheres (`/samples/points`): the samples taken up to the time cursor\n"
+               f"* **beam** green (grey: no reading), hit point light green\n"
+               f"* **rejections** (start hidden; tick `/rejected` on in the blueprint panel): "
+               f"collision red, laser orange, unreachable purple\n"
+               f"* model error (series, hover): predicted - measured distance with "
+               f"{'the given' if self.params_given else 'the nominal'} parameters\n"
                f"* motion logged every {self.every} ticks (+ first tick and sample ticks); "
                f"series every {self.series_every} tick(s); tick = {self.tick_s * 1e3:g} ms\n"
                + final)
@@ -256,6 +284,9 @@ class SamplingObserver(NullObserver):
         pl = min(plate, self.model.n_planes - 1)
         err_mm = float((predict(self.robot, qe, self.model, np.array([pl]))[0] - d_m) * 1e3)
         self._samples_p.append(p)
+        self._samples_n.append(plate_face_normal(
+            self.scene, min(plate, len(self.scene.plates) - 1),
+            self.kin.planes if self.kinematics == "truth" else None))
         self._samples_e.append(err_mm)
         self._samples_plate.append(plate)
         self._samples_index.append(int(index))
@@ -269,13 +300,16 @@ class SamplingObserver(NullObserver):
     def _log_samples(self) -> None:
         rr = self.rr
         e = np.array(self._samples_e)
+        k = np.arange(len(e))
         self.rec.log("/samples/points",
-                     rr.Points3D(np.array(self._samples_p), colors=diverging_colors(e),
+                     rr.Points3D(lifted(self._samples_p, self._samples_n, SAMPLE_RADIUS_M),
+                                 colors=sequential_colors(k, 0, max(len(e) - 1, 1)),
                                  radii=SAMPLE_RADIUS_M, show_labels=False,
                                  labels=[f"sample {i}: {v:+.4f} mm" for i, v in
                                          zip(self._samples_index, self._samples_e)]),
                      rr.AnyValues(error_mm=e, sample=np.array(self._samples_index),
-                                  plate=np.array(self._samples_plate)))
+                                  plate=np.array(self._samples_plate),
+                                  **hit_columns(np.array(self._samples_p))))
 
     def on_reject(self, q_target, reason):
         rr, rec = self.rr, self.rec
@@ -413,6 +447,11 @@ class SamplingObserver(NullObserver):
                 print(f"rerun logging: {type(self.error).__name__}: {self.error} "
                       f"(the recording {self.path or ''} lacks some motion)", file=sys.stderr)
             e = np.array(self._samples_e)
+            if e.size:  # the whole run at any time cursor: small dots under the big spheres
+                self.rec.log("/samples/all", self.rr.Points3D(
+                    lifted(self._samples_p, self._samples_n, ALL_SAMPLES_RADIUS_M),
+                    colors=sequential_colors(np.arange(len(e)), 0, max(len(e) - 1, 1)),
+                    radii=ALL_SAMPLES_RADIUS_M), static=True)
             rms = f"{np.sqrt(np.mean(e ** 2)):.4f} mm" if e.size else "-"
             self._info(f"* samples: **{len(e)}**, model error RMS {rms}\n"
                        f"* rejected: {', '.join(f'{k} {v}' for k, v in self.rejections.items())}\n"
@@ -431,7 +470,8 @@ def sampling_observer(path, scene, twin=None, *, command: str | None = None, **o
     p = recording_path(path, command, scene.name)
     options.setdefault("every", _env_int("PLANECAL_RERUN_EVERY", DEFAULT_EVERY))
     options.setdefault("series_every", _env_int("PLANECAL_RERUN_SERIES_EVERY", DEFAULT_EVERY))
-    rec = open_recording(p, sampling_blueprint(scene), name=f"{command} {scene.name}")
+    kind = "rehearsal" if twin is not None else "real"
+    rec = open_recording(p, sampling_blueprint(scene, kind), name=f"{command} {scene.name}")
     try:
         return SamplingObserver(rec, scene, twin=twin, path=p, **options)
     except BaseException:
