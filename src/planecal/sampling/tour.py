@@ -71,7 +71,7 @@ class Visit:
 
 
 def _as_visits(sequence, vias) -> list[Visit]:
-    if sequence and isinstance(sequence[0], Visit):
+    if len(sequence) and isinstance(sequence[0], Visit):
         return list(sequence)
     seq = np.asarray(sequence, np.int64).reshape(-1, 6)
     vias = vias if vias is not None else [[]] * len(seq)
