@@ -45,6 +45,7 @@ def fig_accuracy_vs_time(out: Path, res: dict, name: str = "accuracy_vs_robot_ti
         ax.set_xlabel("robot time of a run [min]")
         ax.set_ylabel("offset error std, RMS over free offsets [µrad]")
         ax.set_title(f"{scene}, {err} world, level {level}", fontsize=10)
+        ax.margins(0.12)
         log_ticks(ax, "x")
         log_ticks(ax, "y")
         ax.grid(True, which="major", alpha=0.3)
