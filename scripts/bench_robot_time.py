@@ -11,9 +11,9 @@ backlash, compliance -- for every run k, the same robots for every design), a sw
 R >= 50 runs per design, each rehearsed in the twin, calibrated and compared with its
 truth: measured, not predicted. Prints the sweep's table, then per planned sample count
 its robot time against the random run's and whether it reaches the random run's std of
-every one of delta2..delta5 (the std over the runs of the error against the truth). The
-ratio is the robot time of the smallest planned+ordered count that does, over the random
-run's (the issue asks <= 1/3). Last line: ``robot_time_ratio: X`` (``nan`` if none does).
+every one of delta2..delta5 (the std over the runs of the error against the truth); the
+plot goes to DIR/accuracy_vs_robot_time.png. The ratio is the robot time of the smallest
+planned+ordered count that does, over the random run's (the issue asks <= 1/3). Last line: ``robot_time_ratio: X`` (``nan`` if none does).
 
     python scripts/bench_robot_time.py [--runs 50] [--samples 40,60,80,100,150]
                                        [--jobs J] [--out DIR] [--resume]
@@ -77,6 +77,8 @@ def main(argv=None) -> int:
     res = {"cells": cells_all}
     wall = time.perf_counter() - t0
     print(format_sweep(res))
+    from planecal.report.sweep import fig_accuracy_vs_time
+    print(f"plot: {out / fig_accuracy_vs_time(out, res).file}")
     cells = {(c["design"], c["samples"]): c for c in res["cells"] if c.get("runs", 0) > 1}
     rnd = cells[("random", a.random_samples)]
     names = rnd["names"]
