@@ -147,3 +147,22 @@ def test_a_killed_sweep_resumes_to_the_same_table(tmp_path, capsys):
     png = (part / "accuracy_vs_robot_time.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
 
+
+
+def test_report_of_a_sweep(tmp_path):
+    """planecal report draws a sweep.json: the figure and one table row per cell."""
+    from planecal.report import detect_kind, write_report
+    cell = {"scene": "thesis_final", "errors": "ideal", "level": "offsets", "runs": 3,
+            "failed": 0, "names": ["delta2", "delta3"], "samples_taken": 20.0,
+            "travel_per_sample_s": 10.0, "std_rad": {"delta2": 1e-4, "delta3": 2e-4}}
+    cells = [{**cell, "design": d, "samples": n, "cell": f"{d}/{n}",
+              "robot_time_min": t, "offset_std_rad": s}
+             for d, n, t, s in (("random", 20, 8.0, 3e-4), ("random", 40, 15.0, 2e-4),
+                                ("planned+ordered", 20, 3.0, 2e-4),
+                                ("planned+ordered", 40, 5.0, 1.5e-4))]
+    doc = {"format": "planecal-sweep/1", "spec": {"runs": 3, "seed": 5}, "cells": cells}
+    assert detect_kind(doc) == "sweep"
+    index = write_report(doc, tmp_path / "rep")
+    html = index.read_text()
+    assert "accuracy_vs_robot_time.png" in html and html.count("<tr>") >= 5
+    assert (tmp_path / "rep" / "accuracy_vs_robot_time.png").stat().st_size > 10_000

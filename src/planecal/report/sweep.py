@@ -56,3 +56,36 @@ def fig_accuracy_vs_time(out: Path, res: dict, name: str = "accuracy_vs_robot_ti
                 f"Std over the runs (up to {runs} per point) of the joint offsets' error "
                 "against the truth, RMS over the free offsets, against the mean robot time "
                 "of a run; one curve per pose design, its points the sample counts.")
+
+
+def build(ctx) -> "Page":
+    """The report page of a sweep (``planecal sweep``'s sweep.json): the figure and the
+    table of every cell."""
+    from planecal.report.page import Page
+    res = ctx.doc
+    spec = res.get("spec", {})
+    page = Page("Sweep: accuracy against robot time",
+                f"{len(res['cells'])} cells, {spec.get('runs', '?')} runs each, seed "
+                f"{spec.get('seed', '?')}; offsets' errors against the truth of each run.")
+    sec = page.section("Accuracy against robot time")
+    sec.figure(fig_accuracy_vs_time(ctx.out_dir, res))
+    names = next((c["names"] for c in res["cells"] if c.get("names")), [])
+    rows = []
+    for c in res["cells"]:
+        err = Path(c["errors"]).stem if "/" in c["errors"] else c["errors"]
+        row = [c["scene"], err, c["design"], c["level"], str(c["samples"]), str(c["runs"])]
+        if c.get("runs"):
+            row += [f"{c['samples_taken']:.1f}", f"{c['robot_time_min']:.2f}",
+                    f"{c['travel_per_sample_s']:.2f}"]
+            row += [f"{c['std_rad'][n] * 1e6:.3g}" for n in names]
+            row += [f"{c['offset_std_rad'] * 1e6:.3g}"]
+        else:
+            row += ["-"] * (4 + len(names))
+        rows.append(row)
+        if c.get("failed"):
+            sec.finding(f"{c['cell']}: {c['failed']} runs failed")
+    sec = page.section("Per cell")
+    sec.table(["scene", "errors", "design", "level", "N", "runs", "taken", "robot min",
+               "travel s/sample"] + [f"std {n} [µrad]" for n in names] + ["offset std [µrad]"],
+              rows, left=4)
+    return page
