@@ -41,7 +41,7 @@ def _spec(tmp_path, text):
     ('errors = "nowhere.json"', "grid.errors: 'nowhere.json' is neither a profile"),
     ('colour = ["red"]', "grid.colour: unknown axis"),
     ('samples = [20, 20]', "grid.samples: a value appears twice"),
-    ('samples = ["20"]', "grid.samples: '20' is not a int"),
+    ('samples = ["20"]', "grid.samples: '20' is not an integer"),
 ])
 def test_spec_checks_name_the_field(tmp_path, change, message):
     key = change.split(" =")[0]
@@ -68,7 +68,7 @@ def test_spec_errors_file_is_relative_to_the_spec(tmp_path):
     with pytest.raises(InputError, match=r"unknown table \[extra\]"):
         S.load_spec(p)
     p = _spec(tmp_path, TINY.replace("runs = 2", "runs = 1"))
-    with pytest.raises(InputError, match="sweep.runs: expected a int >= 2, got 1"):
+    with pytest.raises(InputError, match="sweep.runs: expected an integer >= 2, got 1"):
         S.load_spec(p)
 
 

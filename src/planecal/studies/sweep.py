@@ -79,6 +79,9 @@ class SweepSpec:
                                      for k, v in asdict(self).items()}}
 
 
+_KIND = {int: "an integer", str: "a string", float: "a number"}
+
+
 def _list(v, where: str, kind, allow_scalar: bool = True) -> tuple:
     if allow_scalar and isinstance(v, kind) and not isinstance(v, bool):
         v = [v]
@@ -86,7 +89,7 @@ def _list(v, where: str, kind, allow_scalar: bool = True) -> tuple:
         raise InputError(f"{where}: expected a non-empty list, got {v!r}")
     for x in v:
         if not isinstance(x, kind) or isinstance(x, bool):
-            raise InputError(f"{where}: {x!r} is not a {kind.__name__}")
+            raise InputError(f"{where}: {x!r} is not {_KIND[kind]}")
     if len(set(v)) != len(v):
         raise InputError(f"{where}: a value appears twice")
     return tuple(v)
@@ -154,7 +157,7 @@ def spec_from_dict(doc: dict, path: Path | None = None) -> SweepSpec:
             if kind is float and isinstance(v, int) and not isinstance(v, bool):
                 v = float(v)
             if not isinstance(v, kind) or isinstance(v, bool) or v < lo:
-                raise InputError(f"{where}: sweep.{k}: expected a {kind.__name__} >= {lo}, "
+                raise InputError(f"{where}: sweep.{k}: expected {_KIND[kind]} >= {lo}, "
                                  f"got {sw[k]!r}")
             kw[k] = v
     spec = SweepSpec(**kw)
