@@ -66,11 +66,10 @@ def test_robot_ticks_match_the_twins_own_clock(cell, tmp_path, planned):
     start = twin.current_counts.copy()
     q0 = counts_to_joints(scene.robot, start)
     if planned:
-        res = plan(scene, 14, 80, 0, None, world)
+        res = plan(scene, 14, 80, 3, None, world, ordered=False)  # the design's order
         counts, plates = np.array(res["counts"]), np.array(res["plates"])
-        # in the plan's own order ListPlanner gives up after 7 of these 14 poses (every
-        # pose left blocked from the 7th); in the tour's order it visits all 14, one of
-        # the moves by a detour (unavoidable)
+        # in the tour's order ListPlanner visits all 14, one of the moves by a detour
+        # (unavoidable)
         tr = T.order(counts, start, world, scene)
         assert tr.detours == 1 and tr.excluded == 0
         counts, plates = counts[tr.order], plates[tr.order]
@@ -87,6 +86,12 @@ def test_robot_ticks_match_the_twins_own_clock(cell, tmp_path, planned):
     assert stats.rejected["laser"] == 0
     # +1: the driver's first exchange (a zero delta) is the run's
     assert stats.ticks == 1 + T.robot_ticks(visits, start, read_ticks=100)
+    # the run's own account (tour.Clock in SamplingRun): travel + dwell + reads
+    assert stats.read_ticks == 100 * rs.samples
+    assert stats.ticks == 1 + stats.travel_ticks + rs.dwell_ticks * rs.samples + stats.read_ticks
+    per = stats.per_sample()
+    assert per["travel_per_sample_s"] == round(stats.travel_ticks * 0.01 / rs.samples, 3)
+    assert per["robot_time_per_sample_s"] == round(stats.ticks * 0.01 / rs.samples, 3)
     assert any(v.via for v in visits)  # the check covered detour legs
 
 
@@ -134,14 +139,14 @@ def test_order_keeps_a_good_input_order():
 
 def test_checked_order_is_driven_as_planned_and_saves_robot_time(cell):
     """On a D-optimal plan: every move of the checked tour is clear, so ListPlanner visits
-    the list exactly in that order, and it costs less robot time than the plan's own
-    greedy order and much less than a random order."""
+    the list exactly in that order, and it costs less than half the robot time of the
+    design's own order or a random one."""
     from planecal.encoder import joints_to_counts
     from planecal.sampling.planner import ListPlanner
     from planecal.studies.planning import plan
 
     scene, world = cell
-    res = plan(scene, 30, 200, 1, None, world)
+    res = plan(scene, 30, 200, 1, None, world, ordered=False)  # the design's order
     counts, plates = np.array(res["counts"]), np.array(res["plates"])
     q0 = scene.calibration_q
     start = joints_to_counts(scene.robot, q0)
@@ -159,7 +164,15 @@ def test_checked_order_is_driven_as_planned_and_saves_robot_time(cell):
     assert t_tour == tr.travel_ticks + len(counts) * (5 + T.READ_TICKS)
     t_plan, _, _ = ticks(np.arange(len(counts)))
     t_rand, _, _ = ticks(np.random.default_rng(0).permutation(len(counts)))
-    assert t_tour < t_plan < t_rand
+    # the design's order is the D-optimal selection's, as arbitrary as a random one
+    assert t_tour < 0.5 * min(t_plan, t_rand), (t_tour, t_plan, t_rand)
+    # plan orders its poses the same way and reports both robot times (ticks x 10 ms)
+    ordered = plan(scene, 30, 200, 1, None, world)
+    assert np.array_equal(np.array(ordered["counts"]), counts[tr.order])
+    rt = ordered["robot_time_s"]
+    assert rt["planned"] == pytest.approx(t_tour * 0.01)
+    assert rt["planned_unordered"] == pytest.approx(t_plan * 0.01)
+    assert rt == {**res["robot_time_s"], "planned": rt["planned"]}
 
 
 def test_order_errors():

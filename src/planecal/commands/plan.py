@@ -1,9 +1,14 @@
 """planecal plan [--scene S] [--samples N] [--candidates M] [--seed K] --out POSES.json
-[--measure R] [--jobs J] [--free NAMES]
+[--target-std-urad X | --target-ap-mm X] [--no-order] [--measure R] [--jobs J] [--free NAMES]
 
 D-optimal sample poses: N of M collision-free candidates (the sampling run's pose
 distribution) maximising det(J^T J) at the nominal parameters (greedy + Fedorov exchange),
-ordered into a collision-checked tour. Prints the predicted std (twin noise model) for the
+ordered into the collision-checked tour that minimises robot time under the step limit
+(``sampling.tour.order``; ``--no-order`` keeps the design's order). With a target the
+sample count is the smallest (up to --samples) whose predicted offsets' std (the largest
+of the free offsets, urad) or predicted flange position error (mm, 1 sigma RMS over the
+candidates) meets it. Prints the robot time of the run before and after ordering (and of
+the random run), its travel per sample,  the predicted std (twin noise model) for the
 planned set and for the poses the sampling run itself would visit with the same seed
 ("random"); with --measure R also the measured spread on the twin over R runs each
 (planned poses replayed with fresh noise vs fresh random rehearsals, same truth). POSES.json holds the counts and plates
@@ -18,7 +23,18 @@ from planecal.errors import InputError
 def add_arguments(p):
     from planecal.scene import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
-    p.add_argument("--samples", type=int, default=150, help="poses to choose (default 150)")
+    p.add_argument("--samples", type=int, default=150,
+                   help="poses to choose (default 150; with a target: the most it may choose)")
+    t = p.add_mutually_exclusive_group()
+    t.add_argument("--target-std-urad", type=float, default=None, metavar="X",
+                   help="choose the sample count: the fewest samples whose predicted std of "
+                        "every free joint offset (delta2..delta5) is <= X urad")
+    t.add_argument("--target-ap-mm", type=float, default=None, metavar="X",
+                   help="choose the sample count: the fewest samples whose predicted flange "
+                        "position error (1 sigma, RMS over the candidate poses, from the "
+                        "offsets' covariance) is <= X mm")
+    p.add_argument("--no-order", action="store_true",
+                   help="keep the design's order (do not order the poses for robot time)")
     p.add_argument("--candidates", type=int, default=1500, help="candidate poses (default 1500)")
     p.add_argument("--seed", type=int, default=0, help="seed of the candidates")
     p.add_argument("--out", required=True, help="pose list to write (JSON)")
@@ -33,8 +49,6 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    import sys
-
     from planecal.collision import CollisionWorld
     from planecal.params import save_json
     from planecal.scene import load_scene
@@ -56,10 +70,16 @@ def run(args) -> int:
         raise InputError(f"--candidates ({args.candidates}) must be at least --samples ({args.samples})")
     jobs = check_jobs(args.jobs)
     free = None if not args.free else tuple(s.strip() for s in args.free.split(",") if s.strip())
-    print(f"drawing {args.candidates} candidate poses and choosing {args.samples}...",
-          file=sys.stderr, flush=True)
-    res = plan(scene, args.samples, args.candidates, args.seed, free,
-               CollisionWorld(scene, clearance_m=0.01))
+    from planecal.progress import Progress
+    from planecal.studies.planning import PLAN_STAGES
+    bar = Progress("plan", PLAN_STAGES, unit=" stages")
+    bar.update(done=0, note="collision model")
+    try:
+        res = plan(scene, args.samples, args.candidates, args.seed, free,
+                   CollisionWorld(scene, clearance_m=0.01), target_std_urad=args.target_std_urad,
+                   target_ap_mm=args.target_ap_mm, ordered=not args.no_order, progress=bar)
+    finally:
+        bar.close()
     if args.measure:
         res["measured"] = measure(scene, res, args.measure, jobs)
     rows = []
@@ -82,12 +102,36 @@ def run(args) -> int:
           f"(D-efficiency x{res['d_efficiency_gain']:.2f}); {res['exchange_swaps']} exchanges "
           f"in {res['exchange_passes']} passes")
     print(table(heads, rows))
+    print(format_robot_time(res))
     if args.measure:
         print(f"measured: {args.measure} twin runs each (std of the estimates over the runs)")
     save_json(args.out, res)
     print(f"pose list written to {args.out}")
     write_command_report(args, args.out, scene=str(scene.path))
     return 0
+
+
+def format_robot_time(res: dict) -> str:
+    """The plan's robot-time lines (and the target, if it chose the sample count)."""
+    t = res["robot_time_s"]
+    n = res["samples"]
+    tp, tr = res["travel_per_sample_s"], res["robot_time_per_sample_s"]
+    out = []
+    if res.get("target"):
+        g = res["target"]
+        what = "largest free offset std" if g["kind"] == "std" else "flange position error"
+        out.append(f"target: predicted {what} <= {g['value']:g} {g['unit']}: {n} samples")
+    ap = res["predicted_position_mm"]
+    out.append(f"predicted flange position error (1 sigma, RMS over the candidates): random "
+               f"{ap['random']:.4g} mm, planned {ap['planned']:.4g} mm")
+    out.append(f"robot time (laser reads at {t['read_ticks_per_sample']} ticks): random "
+               f"{t['random']:.0f} s, planned {t['planned_unordered']:.0f} s in the design's "
+               f"order, {t['planned']:.0f} s "
+               + ("ordered" if res.get("ordered") else "(not ordered)")
+               + f" = {t['planned'] / 60:.1f} min; per sample {tr['planned']:.2f} s, of which "
+               f"travel {tp['planned']:.2f} s (random: {tr['random']:.2f} s, travel "
+               f"{tp['random']:.2f} s)")
+    return "\n".join(out)
 
 
 def measure(scene, res: dict, runs: int, jobs: int) -> dict:

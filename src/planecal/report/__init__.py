@@ -9,6 +9,7 @@ montecarlo     ``montecarlo --out``                          ``report.montecarlo
 bootstrap      ``bootstrap --out``                           ``report.bootstrap``
 validation     ``validate --out``                            ``report.validation``
 plan           ``plan --out`` (a pose list)                  ``report.planning``
+sweep          ``sweep --out DIR`` (DIR/sweep.json)          ``report.sweep``
 =============  ============================================  ==========================
 
 The kind comes from the file's ``format`` field (``"<name>/<version>"``) when it has one,
@@ -28,12 +29,14 @@ from planecal.report.inputs import Context, sha256
 from planecal.report.page import Page
 
 KINDS = {"calibration": "calibration", "montecarlo": "montecarlo", "bootstrap": "bootstrap",
-         "validation": "validation", "plan": "planning"}  # kind -> module in this package
+         "validation": "validation", "plan": "planning",
+         "sweep": "sweep"}  # kind -> module in this package
 
 # format names (the part before "/") and the kind they hold
 FORMATS = {"planecal-result": "calibration", "planecal-montecarlo": "montecarlo",
            "planecal-bootstrap": "bootstrap", "planecal-validation": "validation",
-           "planecal-validate": "validation", "planecal-poses": "plan", "planecal-plan": "plan"}
+           "planecal-validate": "validation", "planecal-poses": "plan", "planecal-plan": "plan",
+           "planecal-sweep": "sweep"}
 READ_VERSIONS = {1}
 
 

@@ -23,6 +23,8 @@ sample and when the run ends; the commands add ``"twin"`` or ``"real_cell"``)::
      "laser_give_ups": {"out_of_range": n, "not_stable": n},
      "recent_rejections": the last 50 as {"sample": index, "kind", "reason"},
      "ticks", "robot_time_s", "wall_time_s", "max_step_counts",   (over all sessions)
+     "travel_ticks", "read_ticks": of "ticks", moving (legs without dwell) and reading the
+       laser (``tour.Clock``); "robot_time_per_sample_s", "travel_per_sample_s",
      "sessions": number of sessions (1 + resumes),
      "rng_state": numpy PCG64 bit-generator state after the last sample,
      "sample_file": file name, "plates": number of plates (plate column written if > 1),
@@ -56,6 +58,7 @@ from planecal.sampling.poses import CommandModel, PoseSettings
 from planecal.sampling.runfiles import (RunLock, RunWriteError, count_samples, load_sidecar,
                                         sidecar_path)
 from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP
+from planecal.sampling.tour import Clock
 from planecal.scene import Scene
 
 RECENT_REJECTIONS = 50  # kept in the sidecar with their reasons
@@ -112,6 +115,9 @@ class RunStats(Tally):
     """The collection's tally plus the run's time and motion figures (all sessions)."""
     ticks: int = 0
     robot_time_s: float = 0.0
+    travel_ticks: int = 0  # of ticks: moving (tour.Clock: the legs without their dwell)
+    read_ticks: int = 0  # of ticks: reading the laser
+    tick_s: float = 0.01
     wall_time_s: float = 0.0
     max_step_counts: int = 0
     sessions: int = 1
@@ -119,6 +125,14 @@ class RunStats(Tally):
     @property
     def stop_reason(self) -> str | None:
         return self.reason
+
+    def per_sample(self) -> dict:
+        """Robot time and travel: totals and per sample taken (None before the first)."""
+        n = self.samples
+        return {"travel_ticks": self.travel_ticks, "read_ticks": self.read_ticks,
+                "robot_time_per_sample_s": round(self.robot_time_s / n, 3) if n else None,
+                "travel_per_sample_s": round(self.travel_ticks * self.tick_s / n, 3)
+                if n else None}
 
     def summary(self) -> dict:
         return {"samples": self.samples, "rejected_collision": self.rejected["collision"],
@@ -128,6 +142,7 @@ class RunStats(Tally):
                 "laser_not_stable": self.laser_give_ups["not_stable"],
                 "max_step_counts": self.max_step_counts, "ticks": self.ticks,
                 "robot_time_s": round(self.robot_time_s, 3),
+                **self.per_sample(),
                 "wall_time_s": round(self.wall_time_s, 3),
                 "status": self.status, "stop_reason": self.reason,
                 "sessions": self.sessions}
@@ -175,7 +190,7 @@ class SamplingRun:
         self.background = (background or hold_while_planning) and can_fork() and self.planner.pure
         self.acquirer = DriveAcquirer(driver, settings.laser, settings.nominal_step_counts,
                                       settings.dwell_ticks, hold_while_planning)
-        self.stats = RunStats()
+        self.stats = RunStats(tick_s=scene.robot.tick_s)
         self._cursor = Cursor(np.zeros(6), np.random.default_rng(settings.seed).bit_generator.state)
         self.recent_rejections: deque = deque(maxlen=RECENT_REJECTIONS)
         self.resume = resume
@@ -187,6 +202,8 @@ class SamplingRun:
         st.rejected.update(side.get("rejected", {}))
         st.laser_give_ups.update(side.get("laser_give_ups", {}))
         st.ticks = int(side.get("ticks", 0))
+        st.travel_ticks = int(side.get("travel_ticks", 0))
+        st.read_ticks = int(side.get("read_ticks", 0))
         st.wall_time_s = float(side.get("wall_time_s", 0.0))
         st.max_step_counts = int(side.get("max_step_counts", 0))
         st.sessions = int(side.get("sessions", 1)) + 1
@@ -211,7 +228,7 @@ class SamplingRun:
             "settings": self.settings.to_dict(),
             "rejected": dict(st.rejected), "laser_give_ups": dict(st.laser_give_ups),
             "recent_rejections": list(self.recent_rejections),
-            "ticks": st.ticks, "robot_time_s": round(st.robot_time_s, 3),
+            "ticks": st.ticks, "robot_time_s": round(st.robot_time_s, 3), **st.per_sample(),
             "wall_time_s": round(st.wall_time_s, 3), "max_step_counts": st.max_step_counts,
             "sessions": st.sessions, "rng_state": self._cursor.rng_state,
             "sample_file": self.out.name, "plates": len(self.scene.plates),
@@ -230,6 +247,8 @@ class SamplingRun:
         st.robot_time_s = st.ticks * self.robot.tick_s
         st.wall_time_s = self._wall0 + time.perf_counter() - self._t_wall
         st.max_step_counts = max(self._step0, drv.max_step_counts)
+        st.travel_ticks = self._travel0 + self._clock.travel_ticks
+        st.read_ticks = self._read0 + self._clock.read_ticks
 
     # -- Recorder (the collect core's)
     def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan) -> None:
@@ -255,6 +274,8 @@ class SamplingRun:
         self._t_wall = time.perf_counter()
         self._wall0, self._ticks0, self._step0 = st.wall_time_s, st.ticks, st.max_step_counts
         self._drv_ticks0 = drv.ticks
+        self._travel0, self._read0 = st.travel_ticks, st.read_ticks
+        self._clock = Clock(self.acquirer, np.zeros(6, np.int64))  # counts set at the start
         drv.max_step_counts = 0
         own_lock = RunLock(self.out) if self.lock is None else None
         try:
@@ -280,7 +301,8 @@ class SamplingRun:
                     return st
                 if self.background:
                     bg = BackgroundPlanner(self.planner)
-            collect(self.planner, self.acquirer, self, s.samples, self._cursor, st,
+            self._clock.counts = np.asarray(drv.commanded_counts, np.int64).copy()
+            collect(self.planner, self._clock, self, s.samples, self._cursor, st,
                     s.max_attempts, background=bg, on_progress=self.progress)
         except EnableDropped:
             st.status = "stopped"

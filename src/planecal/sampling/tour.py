@@ -71,7 +71,7 @@ class Visit:
 
 
 def _as_visits(sequence, vias) -> list[Visit]:
-    if sequence and isinstance(sequence[0], Visit):
+    if len(sequence) and isinstance(sequence[0], Visit):
         return list(sequence)
     seq = np.asarray(sequence, np.int64).reshape(-1, 6)
     vias = vias if vias is not None else [[]] * len(seq)
@@ -110,7 +110,8 @@ class Clock:
     without dwell, the goal with ``dwell``) and the laser read's own ticks
     (``LaserResult.reads``; a read that gives up counts too: the robot went there). With
     ``RestAcquirer`` (studies) this is the robot time ``DriveAcquirer`` spends on the same
-    plans, without simulating the ticks. ``ticks`` is the running total."""
+    plans, without simulating the ticks. ``ticks`` is the running total, ``travel_ticks``
+    the part spent moving (the legs without their dwell), ``read_ticks`` the laser's."""
 
     def __init__(self, inner, start_counts, nominal: int = NOMINAL_STEP,
                  dwell: int = DWELL_TICKS):
@@ -118,20 +119,26 @@ class Clock:
         self.idle = inner.idle
         self.counts = np.asarray(start_counts, np.int64).copy()
         self.ticks = 0
+        self.travel_ticks = 0
         self.read_ticks = 0
         self.moves = 0
 
     def acquire(self, plan):
         got = self.inner.acquire(plan)
         for _, c in plan.via:
-            self.ticks += move_ticks(self.counts, c, self.nominal, 0)
+            self._travel(move_ticks(self.counts, c, self.nominal, 0))
             self.counts = np.asarray(c, np.int64)
-        self.ticks += move_ticks(self.counts, plan.qe_goal, self.nominal, self.dwell)
+        self._travel(move_ticks(self.counts, plan.qe_goal, self.nominal, 0))
+        self.ticks += self.dwell
         self.counts = np.asarray(plan.qe_goal, np.int64).copy()
         self.ticks += got.laser.reads
         self.read_ticks += got.laser.reads
         self.moves += 1
         return got
+
+    def _travel(self, ticks: int) -> None:
+        self.ticks += ticks
+        self.travel_ticks += ticks
 
 
 # ----- what a planner makes the run do ----------------------------------------------------------

@@ -1,10 +1,11 @@
 """Pose planning for identifiability: choose N sample poses among M collision-free
 candidates to maximise det(J^T J) (D-optimal) before the robot moves.
 
-Candidates: the sampling run's own pose distribution (``PoseGenerator``: spot on the plate,
-beam in the cone, distance, roll; round robin over plates), IK nearest to the scene's
-calibration position within the limits, counts in range, target configuration
-collision-free (``CollisionWorld.check_config``). Rows: the distance Jacobian at the
+Candidates (``candidate_pool``): the sampling run's own pose distribution
+(``PoseGenerator``: spot on the plate, beam in the cone, distance, roll; round robin over
+plates), half with IK nearest to the scene's calibration position within the limits, counts
+in range, target configuration collision-free (``CollisionWorld.check_config``), half the
+poses the run's own planner visits. Rows: the distance Jacobian at the
 scene's *nominal* parameters (all we know before calibrating) over the free parameters,
 columns scaled to unit RMS over the candidates (so units do not matter; D-optimality is
 invariant to column scaling anyway, the scaling only conditions the arithmetic).
@@ -21,9 +22,22 @@ the planned set and for the set the sampling run itself would visit with the sam
 (its ``Planner``: IK nearest to the *previous* pose, target and path checked; without a
 checker: the first N candidates), of equal size. That baseline matters: on thesis_final
 the run's path checks keep the wrist in one branch (q5 > 0 in 99 % of the samples), which
-leaves delta5 ~10x less determined than poses mixing both wrist branches. ``order_poses`` sorts the planned poses into a tour from
-the calibration position (nearest in the largest count difference, straight joint paths
-collision-checked; a pose whose path is blocked is tried later).
+leaves delta5 ~10x less determined than poses mixing both wrist branches.
+
+Sample count from a target (``choose_count``): the smallest n whose D-optimal design's
+predicted std meets it -- ``target_std_urad``: the largest predicted (sandwich) std of the
+free joint offsets (delta2..delta5 by default); ``target_ap_mm``: the predicted flange
+position error (1 sigma, RMS over the candidate poses) that the offsets' covariance
+propagates to (``predicted_position_mm``; the offsets only, as validation's TCP spread).
+Bisection over n (the prediction falls with n; the result is checked, never assumed).
+
+Robot time (``sampling.tour``): the planned poses are ordered into the tour from the
+calibration position that minimises the robot's ticks under the step limit (``tour.order``:
+each move costs the ticks of the joint that needs the most, collision-checked moves, a
+blocked one by its detour), and the plan reports the robot time of the run that visits
+them (``tour.visit`` with the run's own ``ListPlanner``, then ``tour.robot_time_s``; laser
+reads at ``tour.READ_TICKS``, the twin's median) before ordering (the design's order), after
+it, and for the random run of equal size.
 
 The sampling run takes the list through ``SamplingRun(..., planner=ListPlanner(...))``
 (foreground planning only: the list planner keeps state); ``rehearse_planned`` does that
@@ -35,7 +49,7 @@ from __future__ import annotations
 import numpy as np
 
 from planecal.cell import predict_with_jacobian
-from planecal.encoder import counts_in_range, joints_to_counts
+from planecal.encoder import counts_in_range, counts_to_joints, joints_to_counts
 from planecal.errors import InputError
 from planecal.fit import noise_variance
 from planecal.formats.base import read_json, validate
@@ -74,23 +88,42 @@ def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = N
     return np.array(qe), np.array(qs), np.array(plate, int)
 
 
-def run_design(scene, n: int, seed: int, checker, clearance_m: float = 0.01):
+RUN_POOL_SEED = 7_919  # added to the seed: the run-planner half of the candidate pool
+
+
+def candidate_pool(scene, m: int, seed: int, checker=None):
+    """The candidates of a plan: (qe, q, plate). Half from ``candidates`` (each drawn pose
+    in both wrist branches, IK nearest to the calibration position), half the poses the
+    sampling run's own planner visits (``run_design``, seed + ``RUN_POOL_SEED``: IK
+    nearest to the previous pose, so the joints wander over their range). On thesis_final
+    the second half is far richer (log det of 150 chosen of 1500: 22.8 from the first
+    kind alone, 31.5 from both); without a checker, ``candidates`` only."""
+    if checker is None:
+        return candidates(scene, m, seed, checker)
+    qe, q, plate = candidates(scene, m - m // 2, seed, checker)
+    qe2, pl2 = run_design(scene, m // 2, seed + RUN_POOL_SEED, checker)
+    return (np.vstack([qe, qe2]), np.vstack([q, counts_to_joints(scene.robot, qe2)]),
+            np.concatenate([plate, pl2]))
+
+
+def run_design(scene, n: int, seed: int, checker, clearance_m: float = 0.01,
+               with_visits: bool = False):
     """The poses the sampling run itself would visit (its ``Planner``: IK from the
     previous pose, target and path collision-checked) for ``seed``, if every laser read
-    succeeded: (qe, plate)."""
-    from planecal.sampling.collect import Cursor, MemoryRecorder, PlansOnly, Tally, collect
+    succeeded: (qe, plate), and with ``with_visits`` its moves (``tour.Visit``s, for the
+    robot time)."""
+    from planecal.sampling import tour
     from planecal.sampling.planner import Planner
     from planecal.sampling.run import RunSettings
     rs = RunSettings.for_scene(scene, samples=n, seed=seed)
-    rec, tally = MemoryRecorder(), Tally()
     q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    collect(Planner(scene, rs.pose, checker), PlansOnly(), rec, n,
-            Cursor(q0, np.random.default_rng(seed).bit_generator.state), tally,
-            rs.max_attempts)
-    if tally.status != "complete":
-        raise InputError(f"the sampling run's planner gave up: {tally.reason}")
-    qe, _, plate = rec.arrays()
-    return qe, plate
+    try:
+        visits = tour.visit(Planner(scene, rs.pose, checker), q0, n, seed, rs.max_attempts)
+    except RuntimeError as e:
+        raise InputError(f"the sampling run's planner gave up: {e}") from None
+    qe = np.array([v.goal for v in visits], np.int64).reshape(-1, 6)
+    plate = np.array([v.plate for v in visits], int)
+    return (qe, plate, visits) if with_visits else (qe, plate)
 
 
 def d_optimal(A: np.ndarray, n: int, max_passes: int = 20, tol: float = 1e-9):
@@ -157,78 +190,202 @@ def predicted_std(J: np.ndarray, layout, free, joint_sigma: float, laser_sigma_m
     return np.sqrt(np.diag(cov["sandwich"])), np.sqrt(np.diag(cov["white"]))
 
 
-def order_poses(scene, q: np.ndarray, checker=None) -> tuple[list[int], int]:
-    """A tour through the poses from the calibration position: each step goes to the
-    nearest remaining pose (largest count difference) whose straight path is clear.
-    Returns (order, paths that were blocked and skipped)."""
-    robot = scene.robot
-    w = np.abs(robot.gains)
-    cur = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    left = list(range(len(q)))
-    order, blocked = [], 0
-    while left:
-        cost = np.max(np.abs(q[left] - cur) * w, axis=1)
-        for idx in np.argsort(cost):
-            j = left[idx]
-            if checker is None or checker.check_path(cur, q[j]).ok:
-                break
-            blocked += 1
+def position_rows(scene, q: np.ndarray, layout, free) -> np.ndarray:
+    """The flange position's sensitivity to each free joint offset at the joint angles q:
+    (k, 3, free offsets) [m/rad] (the geometric Jacobian's translation rows)."""
+    from planecal.robot import jacobian
+    offsets = layout.group("joint_offsets").names
+    fn = layout.names_of(free)
+    cols = [offsets.index(nm) for nm in fn if nm in offsets]
+    return jacobian(scene.robot, q)[..., :3, :][..., cols]
+
+
+def predicted_position_mm(Jpos: np.ndarray, cov_offsets: np.ndarray) -> float:
+    """RMS over the poses of the flange position error's std (1 sigma, 3D) [mm] that the
+    offsets' covariance propagates to: sqrt(mean_i trace(J_i C J_i^T))."""
+    var = np.einsum("kij,jl,kil->k", Jpos, cov_offsets, Jpos)
+    return float(np.sqrt(max(np.mean(var), 0.0)) * 1e3)
+
+
+class Predictor:
+    """The predicted offsets' std (sandwich, the twin's noise model) and flange position
+    error of any subset of the candidates (rows of J)."""
+
+    def __init__(self, scene, J, layout, free, joint_sigma_rad, laser_sigma_m, Jpos):
+        self.J, self.layout, self.free = J, layout, free
+        self.s, self.sig_l, self.Jpos = joint_sigma_rad, laser_sigma_m, Jpos
+        fn = layout.names_of(free)
+        offsets = layout.group("joint_offsets").names
+        self.offsets = [i for i, nm in enumerate(fn) if nm in offsets]
+
+    def __call__(self, rows) -> tuple[np.ndarray, float]:
+        """(sandwich std of the free parameters, predicted position error [mm])."""
+        J = self.J[rows]
+        v = noise_variance(J[:, self.layout.slice("joint_offsets")], self.s, self.sig_l)
+        cov = covariances(J[:, self.free], v)["sandwich"]
+        o = self.offsets
+        return np.sqrt(np.diag(cov)), predicted_position_mm(self.Jpos, cov[np.ix_(o, o)])
+
+    def figure(self, rows, target: str) -> float:
+        """The figure a target is about: the largest free offset std [urad] (``std``) or
+        the position error [mm] (``ap``)."""
+        std, ap = self(rows)
+        return float(np.max(std[self.offsets]) * 1e6) if target == "std" else ap
+
+
+def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
+                 n_min: int, n_max: int, progress=None):
+    """The smallest n in [n_min, n_max] whose D-optimal design (``d_optimal``) has the
+    ``predictor.figure(target)`` <= value (module docstring): (n, d_optimal's result).
+    InputError when even n_max misses it."""
+    cache: dict = {}
+
+    def fig(n):
+        if n not in cache:
+            res = d_optimal(A, n)
+            cache[n] = (predictor.figure(res[0], target), res)
+            if progress:
+                progress.update(step=0, note=f"n={n}: predicted {cache[n][0]:.4g}")
+        return cache[n][0]
+
+    unit = "urad" if target == "std" else "mm"
+    if fig(n_max) > value:
+        raise InputError(f"--target-{target}-{unit} {value:g}: not reached with {n_max} "
+                         f"samples (predicted {fig(n_max):.4g} {unit}); allow more samples "
+                         f"(--samples is the most a target may choose) or candidates")
+    lo, hi = n_min, n_max  # fig(hi) <= value
+    if fig(lo) <= value:
+        return lo, cache[lo][1]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if fig(mid) <= value:
+            hi = mid
         else:
-            j = left[int(np.argmin(cost))]  # nothing clear from here: take the nearest anyway
-        order.append(j)
-        left.remove(j)
-        cur = q[j]
-    return order, blocked
+            lo = mid
+    return hi, cache[hi][1]
+
+
+PLAN_STAGES = 6  # progress steps of ``plan``
 
 
 def plan(scene, n: int, m: int, seed: int = 0, free_names=None, checker=None,
-         repeatability_mm: float | None = None, laser_noise_mm: float = 0.001) -> dict:
-    """The planning study (module docstring). Returns the planned pose list (ordered),
-    the random set of equal size and both predictions."""
+         repeatability_mm: float | None = None, laser_noise_mm: float = 0.001,
+         target_std_urad: float | None = None, target_ap_mm: float | None = None,
+         ordered: bool = True, progress=None) -> dict:
+    """The planning study (module docstring). Returns the planned pose list (ordered for
+    robot time unless ``ordered=False``), the random set of equal size, both predictions
+    and the robot times. With a target (``target_std_urad`` or ``target_ap_mm``) ``n`` is
+    the most samples it may choose. ``progress``: a ``planecal.progress.Progress`` of
+    ``PLAN_STAGES`` steps, updated at each stage."""
+    from planecal.encoder import joints_to_counts
     from planecal.layout import level1_layout
+    from planecal.sampling import tour
+    from planecal.sampling.planner import ListPlanner
     from planecal.studies.montecarlo import MCSettings, joint_sigma
 
+    def say(note):
+        if progress is not None:
+            progress.update(note=note)
     if n < 13:
         raise InputError(f"--samples must be at least 13, got {n}")
     if m < n:
         raise InputError(f"--candidates ({m}) must be at least --samples ({n})")
+    if target_std_urad is not None and target_ap_mm is not None:
+        raise InputError("--target-std-urad and --target-ap-mm exclude each other")
+    for name, t in (("--target-std-urad", target_std_urad), ("--target-ap-mm", target_ap_mm)):
+        if t is not None and not t > 0:
+            raise InputError(f"{name} must be > 0, got {t}")
     layout = level1_layout(len(scene.plates))
     free = layout.free_from_names(free_names)
-    qe, q, plate = candidates(scene, m, seed, checker)
+    say(f"drawing {m} candidate poses")
+    qe, q, plate = candidate_pool(scene, m, seed, checker)
     if len(qe) < n:
         raise InputError(f"only {len(qe)} collision-free candidates for {n} samples")
     J, A = scaled_rows(scene, qe, plate, layout, free)
-    chosen, logdet, passes, swaps = d_optimal(A, n)
-    # the baseline: what the sampling run itself would sample (same seed), scaled alike
-    if checker is not None:
-        qe_r, plate_r = run_design(scene, n, seed, checker)
+    s = joint_sigma(scene.robot, MCSettings(repeatability_mm=repeatability_mm))
+    sig_l = laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN)
+    predictor = Predictor(scene, J, layout, free, s, sig_l, position_rows(scene, q, layout, free))
+    p = int(free.sum())
+    target = None
+    if target_std_urad is not None or target_ap_mm is not None:
+        target = ("std", target_std_urad) if target_std_urad is not None else ("ap", target_ap_mm)
+        say(f"choosing the sample count for the target ({target[0]} <= {target[1]:g})")
+        n, (chosen, logdet, passes, swaps) = choose_count(A, predictor, *target,
+                                                          max(13, p + 1), n, progress)
     else:
-        qe_r, plate_r = qe[:n], plate[:n]
+        say(f"choosing {n} D-optimal poses")
+        chosen, logdet, passes, swaps = d_optimal(A, n)
+    # the baseline: what the sampling run itself would sample (same seed), scaled alike
+    q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
+    start = joints_to_counts(scene.robot, q0)
+    tick_s = scene.robot.tick_s
+    say(f"the random run's {n} poses")
+    if checker is not None:
+        qe_r, plate_r, visits_r = run_design(scene, n, seed, checker, with_visits=True)
+        time_r = tour.robot_time_s(visits_r, start, tick_s)
+    else:
+        qe_r, plate_r, time_r = qe[:n], plate[:n], tour.robot_time_s(qe[:n], start, tick_s)
     J_r, _ = scaled_rows(scene, qe_r, plate_r, layout, free)
     A_r = J_r[:, free] / np.sqrt(np.mean(J[:, free] ** 2, axis=0))
     _, logdet_rand = np.linalg.slogdet(A_r.T @ A_r)
-    s = joint_sigma(scene.robot, MCSettings(repeatability_mm=repeatability_mm))
-    sig_l = laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN)
     std_p, white_p = predicted_std(J[chosen], layout, free, s, sig_l)
     std_r, white_r = predicted_std(J_r, layout, free, s, sig_l)
-    order, blocked = order_poses(scene, q[chosen], checker)
-    chosen = chosen[order]
-    p = int(free.sum())
+    ap_p = predictor(chosen)[1]
+    v = noise_variance(J_r[:, layout.slice("joint_offsets")], s, sig_l)
+    cov_r = covariances(J_r[:, free], v)["sandwich"]
+    o = predictor.offsets
+    ap_r = predicted_position_mm(predictor.Jpos, cov_r[np.ix_(o, o)])
+
+    def run_time(idx):
+        """The run's robot time through the list; if its planner cannot serve the list
+        (a pose it cannot reach from where it is), the straight moves' (unchecked)."""
+        if checker is not None:
+            try:
+                vs = tour.visit(ListPlanner(scene, qe[idx], plate[idx], checker), q0, len(idx))
+                return tour.robot_time_s(vs, start, tick_s)
+            except RuntimeError:
+                pass
+        return tour.robot_time_s(qe[idx], start, tick_s)
+
+    say("robot time of the design's order")
+    time_before = run_time(chosen)
+    tr = None
+    say("ordering the poses for robot time" if ordered else "keeping the design's order")
+    if ordered:
+        tr = tour.order(qe[chosen], start, checker, scene if checker is not None else None)
+        chosen = chosen[np.array(tr.order, int)]
+    say("robot time of the tour" if ordered else "not ordered")
+    time_after = run_time(chosen) if ordered else time_before
     fn = layout.names_of(free)
-    return {
+    res = {
         "format": POSES_FORMAT, "scene": scene.name, "seed": seed, "samples": n,
         "candidates": int(len(qe)), "free": fn,
         "counts": qe[chosen].tolist(), "plates": plate[chosen].tolist(),
         "random_counts": qe_r.tolist(), "random_plates": plate_r.tolist(),
         "logdet_planned": logdet, "logdet_random": float(logdet_rand),
         "d_efficiency_gain": float(np.exp((logdet - logdet_rand) / p)),
-        "exchange_passes": passes, "exchange_swaps": swaps, "paths_blocked_in_ordering": blocked,
+        "exchange_passes": passes, "exchange_swaps": swaps,
+        "ordered": bool(ordered),
+        "tour": None if tr is None else {"travel_ticks": tr.travel_ticks, "detours": tr.detours,
+                                         "excluded": tr.excluded,
+                                         "paths_checked": tr.paths_checked},
+        "robot_time_s": {"random": time_r, "planned_unordered": time_before,
+                         "planned": time_after, "read_ticks_per_sample": tour.READ_TICKS},
+        "robot_time_per_sample_s": {"random": time_r / n, "planned": time_after / n},
+        "travel_per_sample_s": {
+            "random": time_r / n - (tour.READ_TICKS + tour.DWELL_TICKS) * tick_s,
+            "planned": time_after / n - (tour.READ_TICKS + tour.DWELL_TICKS) * tick_s},
         "predicted_std_planned": dict(zip(fn, std_p.tolist())),
         "predicted_std_random": dict(zip(fn, std_r.tolist())),
         "predicted_white_std_planned": dict(zip(fn, white_p.tolist())),
         "predicted_white_std_random": dict(zip(fn, white_r.tolist())),
+        "predicted_position_mm": {"planned": ap_p, "random": ap_r},
         "noise": {"joint_sigma_rad": s, "laser_sample_sigma_m": sig_l},
     }
+    if target is not None:
+        res["target"] = {"kind": target[0], "value": target[1],
+                         "unit": "urad" if target[0] == "std" else "mm"}
+    return res
 
 
 def load_poses(path) -> tuple[np.ndarray, np.ndarray, dict]:

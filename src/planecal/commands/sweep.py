@@ -1,0 +1,66 @@
+"""planecal sweep SPEC.toml --out DIR [--resume] [--jobs J | --scheduler tcp://HOST:8786]
+
+A grid of scene x error profile x pose design (random, planned, planned+ordered) x sample
+count x calibration level, R runs per cell; each run rehearses in the twin, calibrates and
+measures the offsets' error against the truth and the robot time (planecal.studies.sweep;
+the spec: docs/SWEEP.md). The runs go through the distributed engine
+(planecal.studies.distributed): --jobs 1 in this process, by default a local Dask cluster,
+--scheduler a cluster you run. Each result is appended to DIR/results.jsonl as it
+completes; after a kill, the same command with --resume runs only what is missing and
+ends with the same table. Writes DIR/sweep.json (the table's figures, format
+planecal-sweep/1), DIR/sweep.txt (the table) and DIR/accuracy_vs_robot_time.png.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from planecal.errors import InputError
+
+RESULTS = "results.jsonl"
+
+
+def add_arguments(p):
+    p.add_argument("spec", metavar="SPEC.toml", help="the sweep (docs/SWEEP.md)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for results.jsonl, sweep.json, sweep.txt and the plots")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the sweep in DIR (its results file): only missing runs")
+    p.add_argument("--jobs", type=int, default=None,
+                   help="worker processes of the local Dask cluster (default: all cores; 1: "
+                        "in this process)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
+                   help="run on a Dask cluster you already run")
+
+
+def run(args) -> int:
+    from planecal.params import save_json
+    from planecal.progress import Progress as Bar
+    from planecal.report.sweep import fig_accuracy_vs_time
+    from planecal.studies.common import Progress
+    from planecal.studies.distributed import Engine, warm_twin
+    from planecal.studies.sweep import format_sweep, load_spec, plans_needed, run_sweep
+
+    spec = load_spec(args.spec)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a folder")
+    results = out / RESULTS
+    if results.exists() and results.stat().st_size > 0 and not args.resume:
+        raise InputError(f"--out {out}: holds a sweep's {RESULTS}; continue it with --resume "
+                         "or give another folder")
+    out.mkdir(parents=True, exist_ok=True)
+    n_runs = len(spec.cells()) * spec.runs
+    bar = Bar("planning", len(plans_needed(spec)), unit=" plans")
+    with Engine(jobs=args.jobs, scheduler=args.scheduler,
+                warmup=lambda: warm_twin(spec.scene[0])) as eng:
+        res = run_sweep(spec, results, eng, resume=args.resume,
+                        progress=Progress(f"sweep: {n_runs} runs, {eng.describe()}", n_runs),
+                        plan_progress=bar)
+    text = format_sweep(res)
+    print(text)
+    save_json(out / "sweep.json", res)
+    (out / "sweep.txt").write_text(text + "\n")
+    plot = fig_accuracy_vs_time(out, res)
+    print(f"results: {results}; table: {out / 'sweep.txt'}, {out / 'sweep.json'}; "
+          f"plot: {out / plot.file}")
+    return 0
