@@ -167,7 +167,16 @@ def build(ctx: Context) -> Page:
                          f"beam-spot figure")
     for n in notes:
         sec.note(n)
-    sec.text(f"{res.get('exchange_swaps', '?')} exchanges in {res.get('exchange_passes', '?')} "
-             f"passes; {res.get('paths_blocked_in_ordering', '?')} blocked paths skipped while "
-             f"ordering the tour.")
+    text = (f"{res.get('exchange_swaps', '?')} exchanges in "
+            f"{res.get('exchange_passes', '?')} passes.")
+    rt = res.get("robot_time_s")
+    if rt:
+        text += (f" Robot time: random run {rt['random'] / 60:.1f} min, planned in the "
+                 f"design's order {rt['planned_unordered'] / 60:.1f} min, ordered "
+                 f"{rt['planned'] / 60:.1f} min.")
+    tr = res.get("tour")
+    if tr:
+        text += (f" The tour took {tr['detours']} detours and has {tr['excluded']} blocked moves"
+                 f" without one.")
+    sec.text(text)
     return page
