@@ -186,7 +186,7 @@ def distance_with_jacobian(robot: Robot, q: np.ndarray, params: "CellParams",
             J[:, cols[j, 2]] = _rotation_column(n, yb, c, p_m, s)
             J[:, cols[j, 3]] = -_dot(n, z) / s
     if "base_frame" in kinds:
-        t, (rx, ry, rz) = params.base[:3], params.base[3:]
+        t, (ry, rz) = params.base[:3], params.base[4:]
         cols = layout.columns("base_frame")[0]
         for k in range(3):
             J[:, cols[k]] = -n[k] / s

@@ -58,17 +58,23 @@ LengthErr = Ranged(-0.1, 0.1, "m", "length correction")
 Compliance = Ranged(-1e-3, 1e-3, "rad/(N m)", "joint compliance")
 
 
+TwistCorrections = Vector(TwistErr, 6, "corrections, one per joint")
+LengthCorrections = Vector(LengthErr, 6, "corrections, one per joint")
+BaseCorrection = Vector(Ranged(-1.0, 1.0, "m or rad", "base frame error"), 6,
+                        "values: x, y, z [m], rx, ry, rz [rad]")
+Compliances = Vector(Compliance, 6, "values, one per joint")
+
+
 class KinematicCorrections(Model):
     """Level 2 (issue 13, ``model_full``): corrections of robot.json's model per joint in
     modified DH (alpha, a, Hayati's beta, d), the base frame (x, y, z [m], rx, ry, rz
     [rad]: T(x,y,z) Rz Ry Rx) and the joint compliance c = 1/k (theta += c tau_gravity)."""
-    alpha_rad: Vector(TwistErr, 6, "corrections, one per joint")
-    a_m: Vector(LengthErr, 6, "corrections, one per joint")
-    beta_rad: Vector(TwistErr, 6, "corrections, one per joint")
-    d_m: Vector(LengthErr, 6, "corrections, one per joint")
-    base: Vector(Ranged(-1.0, 1.0, "m or rad", "base frame error"), 6,
-                 "values: x, y, z [m], rx, ry, rz [rad]")
-    compliance_rad_per_nm: Vector(Compliance, 6, "values, one per joint") = [0.0] * 6
+    alpha_rad: TwistCorrections
+    a_m: LengthCorrections
+    beta_rad: TwistCorrections
+    d_m: LengthCorrections
+    base: BaseCorrection
+    compliance_rad_per_nm: Compliances = [0.0] * 6
 
 
 class ParamsFile(Record):

@@ -8,6 +8,7 @@ import numpy as np
 
 from planecal.report.figures import (COLORS, Plot, grid_shape, hide_unused, log_ticks,
                                      new_figure, save)
+from planecal.report.page import Page
 
 MARKERS = {"random": "o", "planned": "s", "planned+ordered": "^"}
 
@@ -58,7 +59,7 @@ def fig_accuracy_vs_time(out: Path, res: dict, name: str = "accuracy_vs_robot_ti
                 "of a run; one curve per pose design, its points the sample counts.")
 
 
-def build(ctx) -> "Page":
+def build(ctx) -> Page:
     """The report page of a sweep (``planecal sweep``'s sweep.json): the figure and the
     table of every cell."""
     from planecal.report.page import Page
