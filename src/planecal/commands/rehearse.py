@@ -75,7 +75,7 @@ def run(args) -> int:
     from planecal.sampling.session import print_summary, run_session
     from planecal.twin.profile import DEFAULT_PROFILE, save_truth
 
-    scene, settings, side = prepare(args)
+    scene, settings, side = prepare(args, also_out={"--truth": args.truth})
     if side is not None:
         twin_info = side.get("twin") or {}
         twin_seed = int(twin_info.get("seed", settings.seed))

@@ -1,0 +1,216 @@
+"""The malformed-input corpus (tests/corpus/cases.py) through the CLI.
+
+Each case runs in-process (``planecal.cli.main``), except a pipe (``| head -1``) and the
+unbounded inputs (/dev/zero), which run in a subprocess so that the pipe is real and the
+peak RSS is the command's own. Every case checks:
+* the exit status (2 bad input or usage, 1 a failed fit, 0 valid);
+* on failure, exactly one line on stderr, holding the case's fragment (the file or field
+  and the problem), and no traceback;
+* no input touched: every file in the case's directory and in tests/corpus/base has the
+  same SHA-256 afterwards, and a failed case leaves no new file behind.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import logging
+import os
+import random
+import resource
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from corpus.cases import CASES, Bytes, Case, Dir, Json, Mut, Nest, Rows, Text  # noqa: E402
+
+from planecal.cli import main  # noqa: E402
+
+BASE = Path(__file__).parent / "corpus" / "base"
+RSS_LIMIT_KB = 500 * 1024
+CASE_TIMEOUT_S = 60  # a case that runs away fails instead of hanging the suite
+
+
+def _set(doc, path, value):
+    *head, last = path
+    for k in head:
+        doc = doc[k]
+    doc[last] = value
+
+
+def _drop(doc, path):
+    *head, last = path
+    for k in head:
+        doc = doc[k]
+    del doc[last]
+
+
+def _mutated(m: Mut) -> str:
+    doc = json.loads((BASE / m.base).read_text())
+    for path, value in m.set:
+        _set(doc, path, value)
+    for path in m.drop:
+        _drop(doc, path)
+    marks = {}
+    for i, (path, literal) in enumerate(m.raw):
+        marks[f'"@@RAW{i}@@"'] = literal
+        _set(doc, path, f"@@RAW{i}@@")
+    text = json.dumps(doc, indent=1)
+    for mark, literal in marks.items():
+        text = text.replace(mark, literal)
+    return text
+
+
+def _rows(r: Rows) -> str:
+    lines = (BASE / r.base).read_text().splitlines()
+    header, rows = lines[0], [line.split("\t") for line in lines[1:]]
+    for i, col, text in r.edit:
+        if col == "header":
+            rows.insert(i, header.split("\t"))
+        elif text == "":
+            del rows[i][col]
+        else:
+            rows[i][-1 if col is None and len(rows[i]) == 7 else (6 if col is None else col)] = text
+    for i in r.drop_plate:
+        rows[i] = rows[i][:7]
+    if r.head:
+        rows = rows[:r.head]
+    if r.repeat:
+        rows = [rows[0]] * r.repeat
+    out = "\n".join([header] + ["\t".join(row) for row in rows]) + "\n"
+    return out.replace(".", ",") if r.comma else out
+
+
+def build(d: Path, files: dict) -> None:
+    for name, spec in files.items():
+        p = d / name
+        if isinstance(spec, Text):
+            p.write_bytes(spec.text.encode("utf-8", "surrogateescape"))
+        elif isinstance(spec, Json):
+            p.write_text(json.dumps(spec.value))
+        elif isinstance(spec, Mut):
+            p.write_text(_mutated(spec))
+        elif isinstance(spec, Nest):
+            p.write_text("[" * spec.depth + "]" * spec.depth)
+        elif isinstance(spec, Bytes):
+            p.write_bytes(random.Random(spec.seed).randbytes(spec.n))
+        elif isinstance(spec, Dir):
+            p.mkdir()
+        elif isinstance(spec, Rows):
+            p.write_text(_rows(spec))
+        else:
+            raise TypeError(spec)
+
+
+def hashes(*dirs: Path) -> dict[str, str]:
+    out = {}
+    for d in dirs:
+        for p in sorted(d.rglob("*")):
+            if p.is_file():
+                out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+def argv_of(c: Case, d: Path) -> list[str]:
+    return [a.format(d=d, base=BASE) for a in c.argv]
+
+
+def _alarm(signum, frame):
+    raise TimeoutError(f"case ran longer than {CASE_TIMEOUT_S} s")
+
+
+def run_inprocess(argv: list[str]) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    root = logging.getLogger()
+    for h in list(root.handlers):  # basicConfig binds sys.stderr once: rebind per case
+        root.removeHandler(h)
+    old = signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(CASE_TIMEOUT_S)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(argv)
+            except SystemExit as e:  # --help, --version
+                code = e.code if isinstance(e.code, int) else 2
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+        for h in list(root.handlers):
+            root.removeHandler(h)
+    return code, out.getvalue(), err.getvalue()
+
+
+_RSS_WRAPPER = """
+import resource, sys
+from planecal.cli import main
+try:
+    code = main(sys.argv[2:])
+finally:
+    with open(sys.argv[1], "w") as f:
+        f.write(str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+sys.exit(code)
+"""
+
+
+def run_subprocess(c: Case, argv: list[str], d: Path) -> tuple[int, str, str, int | None]:
+    rss_file = d.parent / f"{d.name}.rss"
+    cmd = [sys.executable, "-c", _RSS_WRAPPER, str(rss_file), *argv]
+    if c.pipe:
+        import shlex
+        shell = f"{shlex.join(cmd)} | {c.pipe}; exit ${{PIPESTATUS[0]}}"
+        p = subprocess.run(["bash", "-c", shell], capture_output=True, text=True,
+                           timeout=CASE_TIMEOUT_S)
+    else:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=CASE_TIMEOUT_S)
+    rss = int(rss_file.read_text()) if rss_file.exists() else None
+    return p.returncode, p.stdout, p.stderr, rss
+
+
+@pytest.fixture(scope="module")
+def base_hashes():
+    before = hashes(BASE)
+    yield
+    assert hashes(BASE) == before, "a corpus case modified a base file"
+
+
+def test_corpus_is_large_and_names_unique():
+    names = [c.name for c in CASES]
+    assert len(names) == len(set(names))
+    assert len(CASES) >= 150
+    assert {c.code for c in CASES} == {0, 1, 2}
+
+
+@pytest.mark.parametrize("c", CASES, ids=[c.name for c in CASES])
+def test_case(c: Case, tmp_path: Path, base_hashes):
+    d = tmp_path / "case"
+    d.mkdir()
+    build(d, c.files)
+    argv = argv_of(c, d)
+    before = hashes(d)
+    if c.pipe or c.rss:
+        code, out, err, rss = run_subprocess(c, argv, d)
+        if c.rss:
+            assert rss is not None and rss < RSS_LIMIT_KB, f"peak RSS {rss} kB"
+    else:
+        code, out, err = run_inprocess(argv)
+    assert "Traceback" not in err, err
+    assert code == c.code, f"exit {code}, expected {c.code}; stderr: {err!r}"
+    after = hashes(d)
+    for path, digest in before.items():
+        assert after.get(path) == digest, f"input {path} was modified"
+    if c.code == 0:
+        if c.pipe:
+            assert err == "", err
+        return
+    lines = err.splitlines()
+    assert len(lines) == 1, f"expected one line on stderr, got {len(lines)}: {err!r}"
+    assert c.fragment.lower() in lines[0].lower(), f"{c.fragment!r} not in {lines[0]!r}"
+    if c.code == 2:
+        new = {p for p in after if p not in before and not p.endswith(".lock")}
+        assert not new, f"a refused command left files behind: {sorted(new)}"
