@@ -84,6 +84,8 @@ def build_parser(argv: list[str], full: bool = False) -> argparse.ArgumentParser
     parser = Parser(prog="planecal", description=__doc__.split("\n\n")[0].replace("\n", " "),
                     epilog=EPILOG, formatter_class=DefaultsFormatter)
     parser.add_argument("--version", action="version", version=f"planecal {__version__}")
+    # the common options' values exist with no command too (``_common`` adds the flags)
+    parser.set_defaults(command=None, config=None, verbose=0, quiet=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     wanted = next((a for a in argv if not a.startswith("-")), None)
     for name, help_text in COMMANDS.items():
@@ -141,7 +143,7 @@ def parse(argv: list[str]) -> argparse.Namespace:
         args = parser.parse_args(argv)
     except UsageError as e:
         raise _usage(command, e) from None
-    cfg = getattr(args, "config", None)
+    cfg = args.config
     if cfg:
         # the file's options first, the command line's after: the last value wins
         pos = argv.index(args.command)
@@ -155,10 +157,9 @@ def parse(argv: list[str]) -> argparse.Namespace:
 
 def _logging(args) -> None:
     from planecal.progress import set_quiet
-    quiet = getattr(args, "quiet", False)
+    quiet = args.quiet
     level = (logging.ERROR if quiet else
-             {0: logging.WARNING, 1: logging.INFO}.get(getattr(args, "verbose", 0),
-                                                      logging.DEBUG))
+             {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG))
     logging.basicConfig(level=level, format="planecal: %(message)s", stream=sys.stderr)
     set_quiet(quiet)
 
@@ -173,8 +174,8 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as e:
         print(f"planecal: error: {e}", file=sys.stderr)
         return 2
-    if not args.command:
-        build_parser(argv).print_help()
+    if not args.command:  # a usage error: one line and the pointer to --help
+        print("planecal: error: a COMMAND is required (see planecal --help)", file=sys.stderr)
         return 2
     _logging(args)
     module = _module(args.command)

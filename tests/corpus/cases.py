@@ -390,6 +390,10 @@ case("opt-method-unknown", f"calibrate {RUN} --method newton", {}, 2, "--method"
 case("opt-unknown-option", f"calibrate {RUN} --frobnicate", {}, 2, "--help")
 case("opt-unknown-command", "frobnicate", {}, 2, "--help")
 case("opt-no-samples", "calibrate", {}, 2, "--help")
+case("opt-no-command", (), {}, 2, "--help")
+case("opt-only-quiet", "-q", {}, 2, "--help")
+case("opt-help", "calibrate --help", {}, 0)
+case("opt-version", "--version", {}, 0)
 case("opt-repeatability-negative", f"calibrate {RUN} --repeatability-mm -1", {}, 2,
      "--repeatability-mm")
 case("opt-distance-sigma-inf", f"calibrate {RUN} --distance-sigma-um inf", {}, 2,
