@@ -11,6 +11,7 @@ import importlib
 import logging
 import os
 import sys
+from pathlib import Path
 
 from planecal import __version__
 from planecal.errors import InputError, RunFailed
@@ -40,6 +41,9 @@ EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not i
 gave up, link lost), the reason in one line; 2 bad input or usage; 130 interrupted.
 Every command takes --config FILE.toml (a table per command, keys = long option names,
 e.g. [rehearse] samples = 20; flags given on the command line win), -v and -q."""
+
+
+MAX_CONFIG_BYTES = 2**20  # a run configuration is a few lines
 
 
 class UsageError(InputError):
@@ -102,15 +106,13 @@ def _config_argv(path: str, command: str) -> list[str]:
     argparse checks them as if typed): ``key = value`` is ``--key value``, a list gives
     several values, ``key = true`` a flag. One-line errors name the file."""
     import tomllib
+
+    from planecal.formats.base import read_bounded
+    data = read_bounded(Path(path), "TOML file", MAX_CONFIG_BYTES)  # /dev/zero, a directory
     try:
-        with open(path, "rb") as f:
-            doc = tomllib.load(f)
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, not a TOML file") from None
+        doc = tomllib.loads(data.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise InputError(f"{path}: invalid TOML: {e}") from None
+        raise InputError(f"{path}: invalid TOML: {str(e).splitlines()[0]}") from None
     table = doc.get(command, {})
     if not isinstance(table, dict):
         raise InputError(f"{path}: [{command}] must be a table of options")

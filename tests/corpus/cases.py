@@ -407,6 +407,11 @@ case("opt-bootstrap-repeats-0", f"bootstrap {RUN} --repeats 0", {}, 2, "--repeat
 case("opt-export-qe0-5", "export {base}/params.json --current-qe0 1,2,3,4,5", {}, 2,
      "--current-qe0")
 case("opt-config-missing", f"calibrate {RUN} --config {{d}}/none.toml", {}, 2, "not found")
+case("opt-config-dev-zero", f"calibrate {RUN} --config /dev/zero", {}, 2, "/dev/zero", rss=True)
+case("opt-config-directory", f"calibrate {RUN} --config {{d}}/c.toml", {"c.toml": Dir()}, 2,
+     "directory")
+case("opt-config-binary", f"calibrate {RUN} --config {{d}}/c.toml", {"c.toml": Bytes(500, 4)}, 2,
+     "c.toml")
 case("opt-config-bad-toml", f"calibrate {RUN} --config {{d}}/c.toml",
      {"c.toml": Text("[calibrate\nmax_iter = 3\n")}, 2, "TOML")
 case("opt-config-bad-value", f"calibrate {RUN} --config {{d}}/c.toml",
