@@ -214,3 +214,49 @@ def test_case(c: Case, tmp_path: Path, base_hashes):
     if c.code == 2:
         new = {p for p in after if p not in before and not p.endswith(".lock")}
         assert not new, f"a refused command left files behind: {sorted(new)}"
+
+
+# ----- every JSON file planecal writes says what it is ----------------------------------------
+
+FORMAT_TAG = r"planecal-[a-z0-9-]+/[0-9]+"
+
+
+def test_every_json_file_planecal_writes_has_a_format_and_version(tmp_path):
+    """Each writer, run small, leaves JSON whose ``format`` is ``planecal-<kind>/<version>``
+    (the sample file is TSV: its header says what it is, its sidecar carries the format).
+    Schemas for the formats planecal also reads are published in docs/schemas."""
+    import re
+
+    from planecal.formats import MODELS, schema_file_name
+    d, run = tmp_path, str(BASE / "run.tsv")
+    commands = [
+        ["calibrate", run, "--out", f"{d}/result.json"],
+        ["export", f"{d}/result.json", "--out", f"{d}/fd11.json"],
+        ["replay", str(BASE / "run3.tsv"), "--scene", "three_plates",
+         "--params", f"{d}/truth3.json", "--out", f"{d}/replay.json"],
+        ["rehearse", "--out", f"{d}/run.tsv", "--samples", "2", "--exact",
+         "--truth", f"{d}/truth.json"],
+        ["rehearse", "--out", f"{d}/run3.tsv", "--samples", "1", "--exact", "--scene",
+         "three_plates", "--truth", f"{d}/truth3.json"],
+        ["plan", "--out", f"{d}/poses.json", "--samples", "13", "--candidates", "60"],
+        ["bootstrap", run, "--sizes", "60", "--repeats", "2", "--out", f"{d}/boot.json"],
+        ["montecarlo", "--mode", "synthetic", "--runs", "2", "--samples", "40", "--jobs", "1",
+         "--out", f"{d}/mc.json"],
+    ]
+    commands.insert(2, commands.pop(4))  # the three-plate truth before replay reads it
+    for argv in commands:
+        code, out, err = run_inprocess([*argv, "-q"])
+        assert code == 0, (argv, err)
+    written = sorted(p for p in d.glob("*.json"))
+    assert len(written) == 10, [p.name for p in written]  # 6 outputs, 2 truths, 2 sidecars
+    formats = {}
+    for p in written:
+        fmt = json.loads(p.read_text()).get("format")
+        assert isinstance(fmt, str) and re.fullmatch(FORMAT_TAG, fmt), (p.name, fmt)
+        formats[p.name] = fmt
+    assert formats["result.json"] == "planecal-result/1"
+    assert formats["run.tsv.json"] == "planecal-run/1"
+    assert formats["truth.json"] == "planecal-params/1"
+    docs = Path(__file__).parent.parent / "docs" / "schemas"
+    for fmt in MODELS:
+        assert (docs / schema_file_name(fmt)).exists(), fmt
