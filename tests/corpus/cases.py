@@ -15,8 +15,8 @@ subprocess and check its peak RSS.
 
 Base files (tests/corpus/base): ``robot.json`` (models/mc70), ``scene.json``
 (thesis_final), ``three.json`` (three_plates), ``params.json`` (the seed's Table 10
-values), ``poses.json``, ``run.tsv`` + ``run.tsv.json`` (a 120-sample twin rehearsal (seed 3, realistic errors) on
-thesis_final and its sidecar), ``run3.tsv`` (30 samples on three_plates), ``errors.json``
+values), ``poses.json``, ``run.tsv`` + ``run.tsv.json`` (a 120-sample twin rehearsal on
+thesis_final, seed 3, realistic errors, and its sidecar), ``run3.tsv`` (30 samples on three_plates), ``errors.json``
 (the realistic error profile).
 """
 from __future__ import annotations
@@ -417,7 +417,7 @@ case("opt-config-bad-toml", f"calibrate {RUN} --config {{d}}/c.toml",
 case("opt-config-bad-value", f"calibrate {RUN} --config {{d}}/c.toml",
      {"c.toml": Text("[calibrate]\nmax-iter = \"lots\"\n")}, 2, "--max-iter")
 
-# ----- outputs --------------------------------------------------------------------------------------
+# ----- outputs --------------------------------------------------------------------------------
 case("out-calibrate-equals-input", "calibrate {d}/s.tsv --out {d}/s.tsv", {"s.tsv": Rows()}, 2,
      "input")
 case("out-calibrate-equals-initial", f"calibrate {RUN} --initial {{d}}/p.json --out {{d}}/p.json",
@@ -454,3 +454,16 @@ case("fit-not-identifiable", "calibrate {d}/s.tsv", {"s.tsv": Rows(head=40)}, 1,
 case("pipe-predict-head", f"predict {RUN} --params {PARAMS}", {}, 0, None, pipe="head -1")
 case("valid-calibrate", f"calibrate {RUN} --out {{d}}/r.json", {}, 0)
 case("valid-predict", f"predict {RUN} --params {PARAMS}", {}, 0)
+
+# ----- the real-cell commands refuse bad inputs before touching a link -------------------------
+case("out-sample-directory", "sample --rt 127.0.0.1 --out {d}/sub", {"sub": Dir()}, 2, "directory")
+case("out-sample-equals-poses",
+     "sample --rt 127.0.0.1 --out {d}/poses.json --poses {d}/poses.json",
+     {"poses.json": Mut("poses.json")}, 2, "input")
+case("out-rehearse-truth-is-poses", "rehearse --out {d}/o.tsv --poses {d}/poses.json "
+     "--truth {d}/poses.json", {"poses.json": Mut("poses.json")}, 2, "input")
+case("emulate-truth-ntilde-zero", "emulate --truth {d}/p.json",
+     {"p.json": Mut("params.json", set=((("planes", 0, "n_tilde"), [0, 0, 0]),))}, 2,
+     "planes[0].n_tilde")
+case("emulate-truth-directory", "emulate --truth {d}/p.json", {"p.json": Dir()}, 2, "directory")
+case("emulate-scene-binary", "emulate --scene {d}/s.json", {"s.json": Bytes(300, 5)}, 2, "s.json")
