@@ -14,10 +14,10 @@ A case is ``Case(name, argv, files, code, fragment)``:
 subprocess and check its peak RSS.
 
 Base files (tests/corpus/base): ``robot.json`` (models/mc70), ``scene.json``
-(thesis_final), ``three.json`` (three_plates), ``params.json`` (the seed's Table 10
-values), ``poses.json``, ``run.tsv`` + ``run.tsv.json`` (a 120-sample twin rehearsal on
-thesis_final, seed 3, realistic errors, and its sidecar), ``run3.tsv`` (30 samples on three_plates), ``errors.json``
-(the realistic error profile).
+(thesis_final), ``params.json`` (the seed's Table 10 values), ``poses.json``, ``run.tsv``
++ ``run.tsv.json`` (a 120-sample twin rehearsal on thesis_final, seed 3, realistic errors,
+and its sidecar), ``run3.tsv`` (30 samples on three_plates), ``errors.json`` (the
+realistic error profile).
 """
 from __future__ import annotations
 
