@@ -260,3 +260,20 @@ def test_every_json_file_planecal_writes_has_a_format_and_version(tmp_path):
     docs = Path(__file__).parent.parent / "docs" / "schemas"
     for fmt in MODELS:
         assert (docs / schema_file_name(fmt)).exists(), fmt
+
+
+def test_a_system_error_mid_run_is_one_line_and_exit_1(monkeypatch):
+    """Disk full (or a file removed under a run) after the checks: the reason in one line,
+    exit 1 (the run failed; the input was fine), no traceback."""
+    import errno
+
+    import planecal.commands.predict as predict
+
+    def full(args):
+        raise OSError(errno.ENOSPC, "No space left on device", "/data/result.json")
+
+    monkeypatch.setattr(predict, "run", full)
+    code, out, err = run_inprocess(["predict", str(BASE / "run.tsv"), "--params",
+                                    str(BASE / "params.json")])
+    assert code == 1
+    assert err == "planecal predict: failed: /data/result.json: No space left on device\n"

@@ -196,6 +196,10 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except OSError as e:  # the system refused mid-run (disk full, a file vanished): one line
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"planecal {args.command}: failed: {where}{e.strerror or e}", file=sys.stderr)
+        return 1
 
 
 def full_parser() -> argparse.ArgumentParser:
