@@ -11,6 +11,7 @@ import importlib
 import logging
 import os
 import sys
+from pathlib import Path
 
 from planecal import __version__
 from planecal.errors import InputError, RunFailed
@@ -41,6 +42,9 @@ EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not i
 gave up, link lost), the reason in one line; 2 bad input or usage; 130 interrupted.
 Every command takes --config FILE.toml (a table per command, keys = long option names,
 e.g. [rehearse] samples = 20; flags given on the command line win), -v and -q."""
+
+
+MAX_CONFIG_BYTES = 2**20  # a run configuration is a few lines
 
 
 class UsageError(InputError):
@@ -85,6 +89,8 @@ def build_parser(argv: list[str], full: bool = False) -> argparse.ArgumentParser
     parser = Parser(prog="planecal", description=__doc__.split("\n\n")[0].replace("\n", " "),
                     epilog=EPILOG, formatter_class=DefaultsFormatter)
     parser.add_argument("--version", action="version", version=f"planecal {__version__}")
+    # the common options' values exist with no command too (``_common`` adds the flags)
+    parser.set_defaults(command=None, config=None, verbose=0, quiet=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     wanted = next((a for a in argv if not a.startswith("-")), None)
     for name, help_text in COMMANDS.items():
@@ -101,15 +107,13 @@ def _config_argv(path: str, command: str) -> list[str]:
     argparse checks them as if typed): ``key = value`` is ``--key value``, a list gives
     several values, ``key = true`` a flag. One-line errors name the file."""
     import tomllib
+
+    from planecal.formats.base import read_bounded
+    data = read_bounded(Path(path), "TOML file", MAX_CONFIG_BYTES)  # /dev/zero, a directory
     try:
-        with open(path, "rb") as f:
-            doc = tomllib.load(f)
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, not a TOML file") from None
+        doc = tomllib.loads(data.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise InputError(f"{path}: invalid TOML: {e}") from None
+        raise InputError(f"{path}: invalid TOML: {str(e).splitlines()[0]}") from None
     table = doc.get(command, {})
     if not isinstance(table, dict):
         raise InputError(f"{path}: [{command}] must be a table of options")
@@ -142,7 +146,7 @@ def parse(argv: list[str]) -> argparse.Namespace:
         args = parser.parse_args(argv)
     except UsageError as e:
         raise _usage(command, e) from None
-    cfg = getattr(args, "config", None)
+    cfg = args.config
     if cfg:
         # the file's options first, the command line's after: the last value wins
         pos = argv.index(args.command)
@@ -156,10 +160,9 @@ def parse(argv: list[str]) -> argparse.Namespace:
 
 def _logging(args) -> None:
     from planecal.progress import set_quiet
-    quiet = getattr(args, "quiet", False)
+    quiet = args.quiet
     level = (logging.ERROR if quiet else
-             {0: logging.WARNING, 1: logging.INFO}.get(getattr(args, "verbose", 0),
-                                                      logging.DEBUG))
+             {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG))
     logging.basicConfig(level=level, format="planecal: %(message)s", stream=sys.stderr)
     set_quiet(quiet)
 
@@ -174,8 +177,8 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as e:
         print(f"planecal: error: {e}", file=sys.stderr)
         return 2
-    if not args.command:
-        build_parser(argv).print_help()
+    if not args.command:  # a usage error: one line and the pointer to --help
+        print("planecal: error: a COMMAND is required (see planecal --help)", file=sys.stderr)
         return 2
     _logging(args)
     module = _module(args.command)
@@ -194,6 +197,10 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except OSError as e:  # the system refused mid-run (disk full, a file vanished): one line
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"planecal {args.command}: failed: {where}{e.strerror or e}", file=sys.stderr)
+        return 1
 
 
 def full_parser() -> argparse.ArgumentParser:

@@ -77,7 +77,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planecal.cell import sensor_rotation
+from planecal.cell import CellParams, sensor_rotation
 from planecal.errors import InputError
 from planecal.mesh import Mesh, box, convex_hull
 
@@ -271,7 +271,7 @@ def tool_meshes(scene, kind: str = "collision", sensor=None,
     m = _margin(kind, TOOL_MARGIN if margin_m is None else margin_m)
     if sensor is None:
         o, py, pz = scene.sensor_origin, scene.phi_y, scene.phi_z
-    elif hasattr(sensor, "sensor_origin"):
+    elif isinstance(sensor, CellParams):
         o, py, pz = sensor.sensor_origin, sensor.phi_y, sensor.phi_z
     else:
         o, py, pz = sensor

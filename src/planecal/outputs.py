@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 from pathlib import Path
 
 from planecal.errors import InputError
@@ -38,6 +39,18 @@ def file_format(path: Path) -> str | None:
     return doc.get("format") if isinstance(doc, dict) else None
 
 
+def _probe(parent: Path, p: Path, what: str) -> None:
+    """Create and remove a temporary file beside the output: the atomic write needs one
+    there, and ``os.access`` says yes where the file system says no (root on /proc, a
+    read-only mount)."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=parent, prefix=f".{p.name[:64]}.", suffix=".probe"):
+            pass
+    except OSError as e:
+        raise InputError(f"{what} {p}: cannot write in {parent} "
+                         f"({e.strerror or type(e).__name__})") from None
+
+
 def check_output(path, inputs=(), fmt: str | tuple | None = None, force: bool = False,
                  what: str = "--out") -> Path:
     """The output ``path`` if it may be written (module docstring), else InputError."""
@@ -53,6 +66,7 @@ def check_output(path, inputs=(), fmt: str | tuple | None = None, force: bool = 
         raise InputError(f"{what} {p}: directory {parent} does not exist")
     if not os.access(parent, os.W_OK):
         raise InputError(f"{what} {p}: cannot write in {parent} (permission denied)")
+    _probe(parent, p, what)
     if p.exists():
         if not os.access(p, os.W_OK):
             raise InputError(f"{what} {p}: exists and cannot be written (permission denied)")

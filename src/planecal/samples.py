@@ -6,7 +6,9 @@ header line ``q1 q2 q3 q4 q5 q6 Dm``; both decimal comma and point are read, the
 optional, CRLF line ends are fine, blank lines are skipped. An optional 8th column
 ``plate`` (1-based plate index) is read and written for multi-plate runs.
 Dm = 0 is the ZS-LD80's out-of-range reading: such samples are skipped and counted.
-planecal writes dot decimals with 6 digits (1 nm, below any laser noise), header included.
+planecal writes 6 decimals (1 nm, below any laser noise), header included, with a decimal
+point, or a decimal comma with ``decimal_comma=True`` (``--decimal-comma`` on rehearse and
+sample). A file being continued (``append``) keeps the decimal mark its lines already use.
 
 Reading streams the file within bounds (``MAX_FILE_BYTES``, ``MAX_LINES``,
 ``MAX_LINE_CHARS``, no NUL bytes): a binary file or /dev/zero ends on its first line.
@@ -218,17 +220,32 @@ def read_many(paths, scene: SceneLike | None = None) -> Samples:
                    sum(s.n_zero for s in sets), sets[0].path if len(sets) == 1 else None)
 
 
-def format_line(qe, d_mm: float, plate: int | None = None) -> str:
-    cols = [str(int(c)) for c in qe] + [f"{d_mm:.6f}"]
+def format_line(qe, d_mm: float, plate: int | None = None, decimal_comma: bool = False) -> str:
+    dm = f"{d_mm:.6f}"
+    cols = [str(int(c)) for c in qe] + [dm.replace(".", ",") if decimal_comma else dm]
     if plate is not None:
         cols.append(str(int(plate) + 1))
     return "\t".join(cols) + "\n"
 
 
-def write_samples(path: str | Path, qe, d_mm, plate=None) -> None:
-    with SampleWriter(path, with_plate=plate is not None) as w:
+def write_samples(path: str | Path, qe, d_mm, plate=None, decimal_comma: bool = False) -> None:
+    with SampleWriter(path, with_plate=plate is not None, decimal_comma=decimal_comma) as w:
         for i in range(len(d_mm)):
             w.write(qe[i], d_mm[i], None if plate is None else plate[i])
+
+
+def _uses_decimal_comma(path: Path, default: bool) -> bool:
+    """The decimal mark of a sample file's last data line (Dm column), ``default`` when it
+    has none: a continued file keeps one style."""
+    with open(path, "rb") as f:
+        f.seek(max(0, os.fstat(f.fileno()).st_size - 4096))
+        tail = f.read().decode("utf-8", "replace").splitlines()
+    for line in reversed(tail):
+        fields = line.split("\t")
+        if len(fields) >= 7 and not _is_header(fields):
+            dm = fields[6].strip()
+            return "," in dm if ("," in dm or "." in dm) else default
+    return default
 
 
 class SampleWriter:
@@ -237,12 +254,15 @@ class SampleWriter:
     A line that cannot be written whole (disk full) is cut off again before the error is
     raised: the file always ends with a whole line."""
 
-    def __init__(self, path: str | Path, append: bool = False, with_plate: bool = False):
+    def __init__(self, path: str | Path, append: bool = False, with_plate: bool = False,
+                 decimal_comma: bool = False):
         self.path = Path(path)
         self.with_plate = with_plate
+        self.decimal_comma = decimal_comma
         exists = self.path.exists() and self.path.stat().st_size > 0
         if append and exists:
             self._repair_tail()
+            self.decimal_comma = _uses_decimal_comma(self.path, decimal_comma)
         self._f = open(self.path, "ab" if append else "wb", buffering=0)
         if not (append and exists):
             header = HEADER + (["plate"] if with_plate else [])
@@ -269,7 +289,8 @@ class SampleWriter:
             raise
 
     def write(self, qe, d_mm: float, plate: int | None = None) -> None:
-        self._append(format_line(qe, d_mm, plate if self.with_plate else None))
+        self._append(format_line(qe, d_mm, plate if self.with_plate else None,
+                                 self.decimal_comma))
 
     def close(self) -> None:
         if not self._f.closed:

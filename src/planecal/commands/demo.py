@@ -34,6 +34,7 @@ def run(args) -> int:
     from planecal.commands import rehearse
     from planecal.commands.calibrate import build_problem, format_report, result_dict
     from planecal.fit import FitOptions, solve
+    from planecal.formats.params import RESULT_FORMAT
     from planecal.params import load_params, save_json
     from planecal.samples import read_samples
     from planecal.scene import load_scene, nominal_params
@@ -61,7 +62,7 @@ def run(args) -> int:
     print(f"\n== calibration from the scene's nominal values ({len(samples)} samples)")
     res = solve(build_problem(samples, scene, nominal, None, FitOptions()))
     print(format_report(res, samples.n_zero))
-    save_json(out / "result.json", result_dict(res))
+    save_json(out / "result.json", {"format": RESULT_FORMAT, **result_dict(res)})
     if args.rrd:
         from planecal.rerun_log import log_fit_to_file
         print(f"fit recording written to {log_fit_to_file(args.rrd, res, samples, scene)}")

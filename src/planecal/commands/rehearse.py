@@ -75,13 +75,7 @@ def run(args) -> int:
     from planecal.sampling.session import print_summary, run_session
     from planecal.twin.profile import DEFAULT_PROFILE, save_truth
 
-    scene, settings, side = prepare(args)
-    if args.truth:
-        from planecal.outputs import check_output
-        from planecal.params import PARAMS_FORMAT
-        check_output(args.truth, inputs=(args.out, args.poses, args.params,
-                                         args.encoder_offsets, args.errors),
-                     fmt=PARAMS_FORMAT, force=args.force, what="--truth-out")
+    scene, settings, side = prepare(args, also_out={"--truth-out": args.truth})
     if side is not None:
         twin_info = side.get("twin") or {}
         twin_seed = int(twin_info.get("seed", settings.seed))

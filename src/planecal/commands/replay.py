@@ -8,6 +8,9 @@ Example: planecal replay examples/seed_samples.tsv --params examples/table10_par
 from __future__ import annotations
 
 
+REPLAY_FORMAT = "planecal-replay/1"
+
+
 def add_arguments(p):
     from planecal.scene import DEFAULT_SCENE
     p.add_argument("samples", help="sample file, seed format (7.1.4)")
@@ -17,15 +20,19 @@ def add_arguments(p):
 
 
 def run(args) -> int:
+    from planecal.outputs import check_output
     from planecal.params import load_params, save_json
     from planecal.samples import read_samples
     from planecal.scene import load_scene
     from planecal.studies.replay import format_replay, replay
 
+    if args.out:  # checked before any work (issue 16): never an input, never a directory
+        check_output(args.out, [args.samples, args.params], REPLAY_FORMAT)
     s = read_samples(args.samples)
     params = load_params(args.params)
     scene = load_scene(args.scene)
     res = replay(scene, params, s.qe, s.d_mm, s.plate)
+    res = {"format": REPLAY_FORMAT, **res}
     res["samples_file"] = str(args.samples)
     res["params_file"] = str(args.params)
     print(format_replay(res))

@@ -4,6 +4,7 @@ the run settings from them (or from a sidecar on ``--resume``), the planned pose
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -16,6 +17,17 @@ from planecal.sampling.runfiles import load_sidecar, sidecar_path
 from planecal.sampling.session import Session
 
 
+def finite_float(text: str) -> float:
+    """argparse type: a finite number (``nan``, ``inf`` refused with the option named)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return v
+
+
 def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 150) -> None:
     p.add_argument("--out", required=True, metavar="RUN.tsv",
                    help="sample file to write (its sidecar is RUN.tsv.json)")
@@ -23,15 +35,15 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
     p.add_argument("--samples", type=int, default=None,
                    help=f"number of samples (default {default_samples}; with --resume: a new target)")
     p.add_argument("--seed", type=int, default=None, help="random seed of the poses (default 0)")
-    p.add_argument("--cone-deg", type=float, default=None,
+    p.add_argument("--cone-deg", type=finite_float, default=None,
                    help="half-angle of the beam cone about the plate normal (default: the scene's)")
-    p.add_argument("--fixed-distance-mm", type=float, default=None,
+    p.add_argument("--fixed-distance-mm", type=finite_float, default=None,
                    help="measure at this distance instead of a random one")
-    p.add_argument("--distance-mm", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+    p.add_argument("--distance-mm", type=finite_float, nargs=2, default=None, metavar=("LO", "HI"),
                    help="range of random distances (default: the scene's)")
-    p.add_argument("--roll-deg", type=float, default=None,
+    p.add_argument("--roll-deg", type=finite_float, default=None,
                    help="random rotation about the beam within +-this (default 180: any)")
-    p.add_argument("--margin-mm", type=float, default=None,
+    p.add_argument("--margin-mm", type=finite_float, default=None,
                    help="keep the laser spot this far inside the plate edges (default 25)")
     p.add_argument("--plate-choice", choices=PLATE_CHOICES, default=None,
                    help="multi-plate scenes: plate per sample (default round_robin)")
@@ -39,7 +51,7 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
                    help="IK solution per pose: wrist = the wrist branch changes at random, "
                         "p 0.1 per pose (seed 7.1.2: large joint changes), nearest = the "
                         "nearest to the current configuration (default wrist)")
-    p.add_argument("--clearance-mm", type=float, default=None,
+    p.add_argument("--clearance-mm", type=finite_float, default=None,
                    help="collision clearance (default 10)")
     p.add_argument("--laser-max-reads", type=int, default=None,
                    help="give a pose up after this many laser reads without a stable buffer "
@@ -53,6 +65,9 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
     p.add_argument("--resume", action="store_true",
                    help="continue the run in --out with the scene and settings of its sidecar")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    p.add_argument("--decimal-comma", action="store_true",
+                   help="write distances with a decimal comma (92,520000), as the seed's "
+                        "LabVIEW tools do; readers accept both; a resumed run keeps its file's")
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="record the run for Rerun (needs planecal.rerun_log)")
     p.add_argument("--params", default=None, metavar="RESULT.json",
@@ -116,15 +131,33 @@ def settings_from_args(args, scene) -> RunSettings:
         if args.max_attempts < 1:
             raise InputError(f"--max-attempts must be at least 1, got {args.max_attempts}")
         st.max_attempts = args.max_attempts
+    st.decimal_comma = bool(args.decimal_comma)
     return st
 
 
-def prepare(args, default_samples: int = 150):
+def _inputs(args) -> list:
+    return [args.poses, args.params, args.encoder_offsets]
+
+
+def prepare(args, default_samples: int = 150, also_out: dict | None = None):
     """(scene, settings, sidecar or None) for a new run or a resumed one; refuses to
-    overwrite an existing sample file without --resume or --force."""
+    overwrite an existing sample file without --resume or --force. The outputs (``--out``,
+    its sidecar, and ``also_out``: flag -> path, e.g. rehearse's ``--truth``) are checked
+    before anything runs: none is an input, a directory, or in a place that cannot be
+    written (``planecal.outputs.check_output``)."""
+    from planecal.outputs import check_output
+    from planecal.params import PARAMS_FORMAT
     from planecal.scene import DEFAULT_SCENE, load_scene
 
     out = Path(args.out)
+    inputs = _inputs(args)
+    check_output(out, inputs, force=True)  # existing: the --resume/--force rule below
+    check_output(sidecar_path(out), inputs, fmt="planecal-run/1", force=True,
+                 what="--out's sidecar")
+    for flag, path in (also_out or {}).items():
+        if path is not None:
+            check_output(path, [out, sidecar_path(out), *inputs], fmt=PARAMS_FORMAT,
+                         force=args.force, what=flag)
     if args.resume:
         side = load_sidecar(out)
         if not out.exists():

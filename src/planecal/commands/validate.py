@@ -20,6 +20,9 @@ import numpy as np
 from planecal.errors import InputError
 
 
+VALIDATE_FORMAT = "planecal-validate/1"
+
+
 def add_arguments(p):
     from planecal.scene import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
@@ -62,6 +65,10 @@ def run(args) -> int:
     from planecal.studies.validation import ValidationSettings, format_validation, validate
     from planecal.twin.truth import Tolerances, draw_truth, load_truth
 
+    if args.out:  # checked before any work (issue 16)
+        from planecal.outputs import check_output
+        check_output(args.out, [args.calibrated, args.truth, args.run, args.poses],
+                     VALIDATE_FORMAT)
     scene = load_scene(args.scene)
     st = ValidationSettings(cycles=args.cycles,
                             cube_edge_m=None if args.cube_mm is None else args.cube_mm * 1e-3,
@@ -112,7 +119,7 @@ def run(args) -> int:
     v["calibrated_offsets_rad"] = calibrated.joint_offsets
     print(format_validation(v))
     if args.out:
-        save_json(args.out, v)
+        save_json(args.out, {"format": VALIDATE_FORMAT, **v})
         print(f"result written to {args.out}")
     if args.rrd:
         from planecal.rerun_log.studies import log_validate

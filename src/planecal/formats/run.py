@@ -6,6 +6,7 @@ takes the scene, seed, target and every setting from here, and restores the rand
 generator from ``rng_state``: all of it is checked before the run starts, so a damaged
 sidecar is refused with its field named instead of failing inside numpy or the loop.
 """
+import math
 from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, Field
@@ -90,6 +91,7 @@ class RunSettings(Model):
     max_attempts: Attempts
     clearance_m: Clearance
     collision_checking: Bool
+    decimal_comma: Bool = False
 
 
 class PCG64Words(Model):
@@ -128,8 +130,13 @@ def _distance_or_range(v):
         if len(v) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
                                   for x in v):
             raise problem("must be [low, high] in mm or one distance")
+        for i, x in enumerate(v):
+            if not math.isfinite(x):
+                raise problem(f"{x} is not a finite distance in mm", i)
         return v
     if isinstance(v, (int, float)) and not isinstance(v, bool):
+        if not math.isfinite(v):
+            raise problem(f"{v} is not a finite distance in mm")
         return v
     raise problem(f"must be [low, high] in mm or one distance, got {type(v).__name__}")
 

@@ -76,6 +76,7 @@ class RunSettings:
     max_attempts: int = 500  # poses rejected in a row before the run gives up
     clearance_m: float = 0.01
     collision_checking: bool = True
+    decimal_comma: bool = False  # sample file distances as 92,52 (the seed's tools)
 
     @classmethod
     def for_scene(cls, scene: Scene, samples: int = 150, seed: int = 0) -> "RunSettings":
@@ -105,7 +106,8 @@ class RunSettings:
                        seed=int(side["seed"]), pose=PoseSettings(**pose),
                        laser=LaserSettings(**s["laser"]),
                        **{k: s[k] for k in ("dwell_ticks", "nominal_step_counts", "max_attempts",
-                                            "clearance_m", "collision_checking")})
+                                            "clearance_m", "collision_checking")},
+                       decimal_comma=bool(s.get("decimal_comma", False)))
         except (KeyError, TypeError, ValueError) as e:
             raise InputError(f"{where}: not a planecal run sidecar ({type(e).__name__}: {e})") from None
 
@@ -280,7 +282,8 @@ class SamplingRun:
         own_lock = RunLock(self.out) if self.lock is None else None
         try:
             self._writer = SampleWriter(self.out, append=self.resume,
-                                        with_plate=len(self.scene.plates) > 1)
+                                        with_plate=len(self.scene.plates) > 1,
+                                        decimal_comma=self.settings.decimal_comma)
         except BaseException:
             if own_lock:
                 own_lock.close()
