@@ -190,6 +190,9 @@ SOURCES = {
     "laser_linearity": "laser linearity",
     "thermal": "thermal growth",
 }
+SHORT = {"geometry": "link lengths, twists and frames", "compliance": "joint compliance",
+         "gear": "gear error", "backlash": "backlash", "noise": "repeatability, quantisation",
+         "laser_linearity": "laser linearity", "thermal": "thermal growth"}
 MISMATCH = ("geometry", "compliance", "gear", "backlash", "laser_linearity", "thermal")
 
 
@@ -381,6 +384,18 @@ def synthetic_noisy_samples(scene, truth, st: MCSettings, seed: int):
 
 # ----- one run --------------------------------------------------------------------------------
 
+def sample_variance(robot, J_delta, joint_sigma_rad: float, distance_sigma_m: float,
+                    quantization: bool) -> np.ndarray:
+    """Each sample's distance noise variance (``studies.common``'s model): repeatability
+    through the offsets' Jacobian ``J_delta``, the laser's buffer mean, and with
+    ``quantization`` the motors' uniform +-1/2 count (through the wrist coupling)."""
+    v = noise_variance(J_delta, joint_sigma_rad, distance_sigma_m)
+    if quantization:
+        Jx = J_delta @ robot.coupling  # dd/dx (actuator angles)
+        v = v + np.sum(Jx ** 2 / (12.0 * robot.gains ** 2), axis=1)
+    return v
+
+
 def run_one(job) -> dict:
     """One Monte Carlo run: job = (settings, k). Pure function of (settings, k)."""
     from planecal.fit import FitOptions, Problem, solve, uncertainty
@@ -413,11 +428,8 @@ def run_one(job) -> dict:
     free = fit.free
     # noise model and bounds at the truth, on this run's samples
     _, J = predict_with_jacobian(robot, qe, truth, plate, layout)
-    J_delta = J[:, layout.slice("joint_offsets")]
-    v = noise_variance(J_delta, s, sample_sigma)
-    if st.quantization or (opts.quantization and st.mode != "synthetic"):
-        Jx = J_delta @ robot.coupling  # dd/dx (actuator angles)
-        v = v + np.sum(Jx ** 2 / (12.0 * robot.gains ** 2), axis=1)
+    v = sample_variance(robot, J[:, layout.slice("joint_offsets")], s, sample_sigma,
+                        st.quantization or (opts.quantization and st.mode != "synthetic"))
     cov = covariances(J[:, free], v)
     # identifiability with every parameter free, at the truth
     all_free = np.ones(len(layout), bool)
