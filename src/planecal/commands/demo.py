@@ -122,8 +122,8 @@ def run(args) -> int:
     world = load_world(scene, truth_file)  # the twin's world, as rehearse wrote it
     opts = profile.options()
     st = ValidationSettings(cycles=DEMO_CYCLES, seed=args.seed, gauge=False)
-    v = validate(scene, world, opts, res.params, samples.qe, st,
-                 CollisionWorld(scene, clearance_m=st.clearance_m))
+    v = validate(scene, world, res.params, samples.qe, st,
+                 CollisionWorld(scene, clearance_m=st.clearance_m), options=opts)
     iso = v["iso"]
     print(f"\n== position error in the calibrated region (ISO 9283 AP: the worst of five poses "
           f"in a {iso['edge_m'] * 1e3:.0f} mm cube over the samples, {DEMO_CYCLES} cycles, on "

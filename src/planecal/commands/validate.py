@@ -60,13 +60,18 @@ def add_arguments(p):
     p.add_argument("--gauge-repeats", type=int, default=10)
     p.add_argument("--poses", help="rehearse through this planned pose list (planecal plan) "
                                    "instead of random poses")
-    p.add_argument("--breakdown", default="off", choices=("off", "alone", "none"),
-                   help="repeat one truth with each error source switched off in turn (off), "
-                        "or on alone (alone), or not (none) (default off)")
+    p.add_argument("--breakdown", default="alone", choices=("alone", "off", "none"),
+                   help="repeat one truth with each error source of the profile on alone "
+                        "(alone), or switched off in turn (off), or not (none) "
+                        "(default alone)")
     p.add_argument("--breakdown-truth", type=int, default=None,
                    help="the truth seed of the breakdown (default: the first truth seed)")
     p.add_argument("--jobs", type=int, default=None,
-                   help="worker processes over truths and variants (default: all cores)")
+                   help="worker processes over truths and variants (studies.distributed."
+                        "Engine; 1: in this process; default: all cores)")
+    p.add_argument("--level", default="offsets", choices=("offsets",),
+                   help="what the calibration fits (offsets: the joint offsets, the sensor "
+                        "pose and the planes, as planecal calibrate; default %(default)s)")
     p.add_argument("--calibrated", help="calibration result to validate (with --truth and --run)")
     p.add_argument("--truth", help="the twin truth (rehearse --truth) the calibration was made on")
     p.add_argument("--run", help="the calibration's sample file (places the ISO cube)")
@@ -94,10 +99,11 @@ def run(args) -> int:
     from planecal.outputs import check_output
     from planecal.params import save_json
     from planecal.scene import load_scene
-    from planecal.studies.common import Progress, check_jobs, parallel_map, parse_int_list
+    from planecal.studies.common import check_jobs, parse_int_list
     from planecal.studies.validation import (ANCHORS, FORMAT, TruthJob, ValidationSettings,
                                              breakdown, cannot_remove, format_breakdown,
-                                             format_truths, summarize, validate_truth)
+                                             format_truths, run_jobs, summarize,
+                                             validate_truth)
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile
 
     given = [a for a in (args.calibrated, args.truth, args.run) if a]
@@ -134,16 +140,17 @@ def run(args) -> int:
             poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
         base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
                         samples=args.samples, seed=args.seed, offsets_all=args.offsets_all,
-                        poses=poses, settings=st)
+                        poses=poses, settings=st, level=args.level)
         what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
         print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): rehearse "
               f"{what} (seed {args.seed}), calibrate, validate...", file=sys.stderr, flush=True)
         from dataclasses import replace
-        results = parallel_map(validate_truth, [replace(base, truth_seed=t) for t in seeds],
-                               jobs, Progress("validate", len(seeds), quiet=args.quiet))
+        results = run_jobs(validate_truth, [replace(base, truth_seed=t) for t in seeds],
+                           jobs, "validate", args.quiet)
         summary, med, worst = summarize(results)
         doc = {"format": FORMAT, "scene": scene.name, "errors": profile.name,
-               "profile": str(profile.path), "truth_seeds": seeds, **summary,
+               "profile": str(profile.path), "level": args.level, "truth_seeds": seeds,
+               **summary,
                **_detail(med), "detail_truth_seed": med["truth_seed"]}
         print(format_truths(summary, profile.name))
         print()
@@ -211,7 +218,7 @@ def _validate_given(args, scene, st) -> dict:
                          f"but the {profile.name} profile ({why}) has geometric errors: "
                          "give --errors ideal, or the truth file rehearse --truth wrote")
     checker = CollisionWorld(scene, clearance_m=st.clearance_m)
-    v = validate(scene, world, opts, calibrated, qe, st, checker, None)
+    v = validate(scene, world, calibrated, qe, st, checker, None, opts)
     v["scene"] = scene.name
     v["calibration"] = {}
     v["truth_offsets_rad"] = world.params.joint_offsets

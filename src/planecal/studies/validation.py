@@ -55,9 +55,11 @@ Over truths (``validate_truth``, a pure function of a ``TruthJob``): draw the wo
 (``studies.montecarlo.world_for``), sample a calibration set on that world's twin
 (``twin_samples``: the sampling run's planner, collision checks and laser reads), calibrate
 offsets-only from the nominal values (``fit.solve``), validate on the same world.
+``calibrate_run`` is the one place the fit is called (``level`` 'offsets' today).
 ``summarize`` gives median and worst; ``breakdown`` repeats one truth with each error
-family of ``montecarlo.SOURCES`` switched off (or on alone) and reports AP after
-calibration per variant: what each source leaves.
+family of ``montecarlo.SOURCES`` on alone (or switched off in turn) and reports AP after
+calibration per variant: what each source leaves. The truths and the variants run on
+``studies.distributed.Engine`` (``run_jobs``).
 """
 from __future__ import annotations
 
@@ -69,7 +71,7 @@ from planecal.cell import CellParams, sensor_in_base, sensor_rotation
 from planecal.encoder import counts_to_joints, joints_to_counts
 from planecal.errors import InputError
 from planecal.robot import fk, ik_nearest
-from planecal.studies.common import BUFFER_LEN, parallel_map, table
+from planecal.studies.common import BUFFER_LEN, table
 from planecal.studies.montecarlo import SOURCES
 
 FORMAT = "planecal-validate/1"
@@ -435,18 +437,21 @@ def predicted_spread(robot, meas, calibrated: CellParams, layout, covariance, po
 
 # ----- whole validation ---------------------------------------------------------------------------
 
-def validate(scene, world, options, calibrated: CellParams, sample_counts: np.ndarray,
-             st: ValidationSettings | None = None, checker=None, fit=None) -> dict:
+def validate(scene, world, calibrated: CellParams, sample_counts: np.ndarray,
+             st: ValidationSettings | None = None, checker=None, fit=None,
+             options=None) -> dict:
     """ISO 9283 AP/RP and the gauge block, nominal vs calibrated, on a twin of ``world``
     (a ``twin.truth.Truth``; a ``CellParams`` is robot.json's geometry) with ``options``
-    (``TwinOptions``: the profile's joint and laser errors, noise). ``sample_counts``: the
-    calibration samples (they place the ISO cube); ``fit``: the calibration's
-    ``fit.Result``, whose covariance predicts the spread (None: no prediction)."""
+    (``TwinOptions``: the profile's joint and laser errors, noise; None: ``TwinOptions()``,
+    the ideal world's). ``sample_counts``: the calibration samples (they place the ISO
+    cube); ``fit``: the calibration's ``fit.Result``, whose covariance predicts the spread
+    (None: no prediction)."""
     from planecal.scene import nominal_params
-    from planecal.twin import Twin
+    from planecal.twin import Twin, TwinOptions
     from planecal.twin.laser import LaserNoise
     from planecal.twin.truth import Truth
 
+    options = TwinOptions() if options is None else options
     st = st or ValidationSettings()
     st.check()
     world = world if isinstance(world, Truth) else Truth(world)
@@ -483,6 +488,8 @@ def validate(scene, world, options, calibrated: CellParams, sample_counts: np.nd
         "ap_before_cell_mm": float(iso["models"]["nominal"]["ap_cell_mm"].max()),
         "ap_after_cell_mm": float(iso["models"]["calibrated"]["ap_cell_mm"].max()),
         "rp_mm": float(rp.max()),
+        "rp_before_mm": float(iso["models"]["nominal"]["rp_mm"].max()),
+        "rp_after_mm": float(iso["models"]["calibrated"]["rp_mm"].max()),
         "gauge_error_before_mm": None, "gauge_error_after_mm": None,
         "gauge_error_offsets_only_mm": None, "predicted_from_fit": None,
         "iso": iso, "gauge": None, "residual_offset_error": left,
@@ -513,6 +520,34 @@ def validate(scene, world, options, calibrated: CellParams, sample_counts: np.nd
 
 # ----- over truths, and what each error source leaves -----------------------------------------
 
+LEVELS = ("offsets",)  # what ``calibrate_run`` fits (the full model plugs in here)
+
+
+def calibrate_run(scene, qe: np.ndarray, d: np.ndarray, plate: np.ndarray,
+                  level: str = "offsets"):
+    """The calibration of one rehearsed set (``fit.Result``): from the scene's nominal
+    values, ``level`` 'offsets' as ``planecal calibrate`` does (the joint offsets, the
+    sensor pose and the planes; ``LEVELS``)."""
+    from planecal.fit import Problem, solve
+    from planecal.scene import nominal_params
+    if level not in LEVELS:
+        raise InputError(f"--level: one of {', '.join(LEVELS)}, got {level!r}")
+    return solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
+
+
+def run_jobs(fn, items: list, jobs: int = 1, label: str = "validate",
+             quiet: bool = True) -> list:
+    """``[fn(item) for item in items]`` on ``studies.distributed.Engine`` (``jobs`` 1: in
+    this process; more: a local Dask cluster of that many worker processes, the twin
+    warmed up first)."""
+    from planecal.studies.common import Progress
+    from planecal.studies.distributed import Engine, warm_twin
+    items = list(items)
+    n = 1 if len(items) <= 1 else jobs
+    with Engine(jobs=n, warmup=None if n == 1 else warm_twin) as eng:
+        return eng.map(fn, items, progress=Progress(label, len(items), quiet=quiet))
+
+
 @dataclass(frozen=True)
 class TruthJob:
     """One truth of ``validate_truth``: the world (scene, error profile, truth seed, the
@@ -527,14 +562,13 @@ class TruthJob:
     poses: tuple | None = None
     settings: ValidationSettings = field(default_factory=ValidationSettings)
     off: tuple = ()
+    level: str = "offsets"
 
 
 def validate_truth(job: TruthJob) -> dict:
     """Draw the world, sample a calibration set on its twin, calibrate offsets-only from
     the nominal values, validate on the same world (module docstring). A set the sampling
     run gives up on: ``{"truth_seed", "failed"}``."""
-    from planecal.fit import Problem, solve
-    from planecal.scene import nominal_params
     from planecal.studies.montecarlo import (MCSettings, _scene, _world, pose_list_samples,
                                              sources_on, twin_samples, without, world_for)
 
@@ -549,10 +583,11 @@ def validate_truth(job: TruthJob) -> dict:
         qe, d, plate, rejected = sample(scene, world, mc, job.seed, opts)
     except RuntimeError as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}
-    fit = solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
-    v = validate(scene, world, opts, fit.params, qe, st, _world(job.scene, st.clearance_m),
-                 fit)
+    fit = calibrate_run(scene, qe, d, plate, job.level)
+    v = validate(scene, world, fit.params, qe, st, _world(job.scene, st.clearance_m), fit,
+                 opts)
     v["truth_seed"] = job.truth_seed
+    v["level"] = job.level
     v["off"] = list(job.off)
     v["sources"] = sources_on(scene.robot, world, opts)
     v["calibration"] = {"samples": len(d), "rejected": rejected, "fit_rms_mm": fit.rms_mm(),
@@ -565,7 +600,8 @@ def validate_truth(job: TruthJob) -> dict:
 
 
 TRUTH_KEYS = ("truth_seed", "ap_before_mm", "ap_after_mm", "ap_before_cell_mm",
-              "ap_after_cell_mm", "rp_mm", "gauge_error_before_mm", "gauge_error_after_mm")
+              "ap_after_cell_mm", "rp_mm", "rp_before_mm", "rp_after_mm",
+              "gauge_error_before_mm", "gauge_error_after_mm")
 
 
 def truth_row(v: dict) -> dict:
@@ -598,7 +634,8 @@ def summarize(results: list[dict]) -> tuple[dict, dict, dict]:
            "failed_truths": [{"truth_seed": v["truth_seed"], "reason": v["failed"]}
                              for v in results if "failed" in v],
            "median_truth_seed": med["truth_seed"], "worst_truth_seed": worst["truth_seed"]}
-    for key in ("ap_before_mm", "ap_after_mm", "ap_before_cell_mm", "ap_after_cell_mm", "rp_mm"):
+    for key in ("ap_before_mm", "ap_after_mm", "ap_before_cell_mm", "ap_after_cell_mm", "rp_mm",
+                "rp_before_mm", "rp_after_mm"):
         base = key[:-3]
         out[f"{base}_median_mm"] = stat(key, np.median)
         out[f"{base}_worst_mm"] = stat(key, np.max)
@@ -609,7 +646,7 @@ def summarize(results: list[dict]) -> tuple[dict, dict, dict]:
     return out, med, worst
 
 
-def breakdown_variants(sources: list[str], mode: str = "off") -> list[tuple[str, tuple]]:
+def breakdown_variants(sources: list[str], mode: str = "alone") -> list[tuple[str, tuple]]:
     """(label, families switched off): 'off' each family switched off in turn, 'alone'
     each family alone; both with all sources and none of them."""
     if mode not in ("off", "alone"):
@@ -623,22 +660,20 @@ def breakdown_variants(sources: list[str], mode: str = "off") -> list[tuple[str,
     return rows
 
 
-def breakdown(job: TruthJob, mode: str = "off", jobs: int = 1, quiet: bool = True) -> dict:
+def breakdown(job: TruthJob, mode: str = "alone", jobs: int = 1, quiet: bool = True) -> dict:
     """``job``'s truth repeated with each error family switched off (``mode`` 'off') or on
     alone ('alone'), the gauge block skipped: AP after calibration per variant (the same
     rehearsal seed: the same pose draws)."""
     from dataclasses import replace
 
-    from planecal.studies.common import Progress
     from planecal.studies.montecarlo import MCSettings, _scene, sources_on, world_for
     mc = MCSettings(scene=job.scene, errors=job.errors, truth_seed=job.truth_seed,
                     offsets_all=job.offsets_all)
     on = sources_on(_scene(job.scene).robot, *world_for(mc, 0))
     variants = breakdown_variants(on, mode)
     st = replace(job.settings, gauge=False)
-    res = parallel_map(validate_truth, [replace(job, off=off, settings=st)
-                                        for _, off in variants], jobs,
-                       Progress("breakdown", len(variants), quiet=quiet))
+    res = run_jobs(validate_truth, [replace(job, off=off, settings=st)
+                                    for _, off in variants], jobs, "breakdown", quiet)
     rows = []
     for (label, off), v in zip(variants, res):
         row = {"variant": label, "off": list(off)}
@@ -741,7 +776,8 @@ def format_truths(summary: dict, world: str) -> str:
         t = by_seed[summary[key]]
         out.append(f"{what} truth (seed {t['truth_seed']}): AP {t['ap_before_mm']:.2f} -> "
                    f"{t['ap_after_mm']:.3f} mm (cell frame {t['ap_before_cell_mm']:.2f} -> "
-                   f"{t['ap_after_cell_mm']:.3f}), RP {t['rp_mm']:.3f} mm, gauge block "
+                   f"{t['ap_after_cell_mm']:.3f}), RP {t['rp_before_mm']:.3f} -> "
+                   f"{t['rp_after_mm']:.3f} mm, gauge block "
                    f"{_mm(t['gauge_error_before_mm'], '+.3f')} -> "
                    f"{_mm(t['gauge_error_after_mm'], '+.3f')} mm")
     out.append(f"over the truths: AP after median {summary['ap_after_median_mm']:.3f} mm, "
