@@ -60,12 +60,13 @@ def _check_outputs(out: Path, force: bool) -> tuple[Path, Path, Path]:
 
 
 WHY_OFF = (
-    "Why the offsets sit several std from the truth: this robot has errors the fit's model "
-    "lacks ({sources}). The fit explains what it can of them with the offsets it has, so "
-    "the offsets absorb them and leave the true joint zeros. A reported std measures only "
-    "what the noise (repeatability, laser) does to an offset, not the model's mismatch: here "
-    "the residuals are {ratio:.1f}x the noise. How good the calibration is, the position "
-    "error after it says (above); planecal validate breaks it down by error source.")
+    "Why the offsets can sit several std from the truth: this robot has errors the fit's "
+    "model lacks ({sources}). The fit explains what it can of them with the parameters it "
+    "has, so the offsets absorb part of them and move away from the true joint zeros. A "
+    "reported std measures only what the noise (repeatability, laser) does to an offset, "
+    "not the model's mismatch: here the residuals are {ratio:.1f}x the noise. How good the "
+    "calibration is, the position error after it says (above); planecal validate breaks "
+    "it down by error source.")
 
 
 def run(args) -> int:

@@ -805,6 +805,8 @@ def format_breakdown(bd: dict) -> str:
            table(["world", "AP before", "AP after", "AP after cell", "max model err"], rows),
            "(mm)"]
     cr = cannot_remove(bd)
+    noise = [c for c in cr if c["source"] == "noise"]
+    cr = [c for c in cr if c["source"] != "noise"]
     big = [c for c in cr if c["ap_after_share_mm"] >= 0.005]
     if big:
         what = ("AP after calibration drops by" if bd["mode"] == "off"
@@ -818,4 +820,7 @@ def format_breakdown(bd: dict) -> str:
         out.append("less than 5 um of AP here (a negative share: without it AP is larger, "
                    "the sources partly cancel in the fit): " + ", ".join(
                        f"{c['source']} {c['ap_after_share_mm'] * 1e3:+.0f} um" for c in small))
+    for c in noise:
+        out.append(f"the noise ({c['what']}) is the floor no calibration removes: alone it "
+                   f"adds {c['ap_after_share_mm'] * 1e3:.0f} um of AP (and sets RP)")
     return "\n".join(out)
