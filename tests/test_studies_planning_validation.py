@@ -121,7 +121,8 @@ def test_validation_with_a_perfect_and_a_nominal_calibration(scene, world):
 
 def test_validate_command(tmp_path, capsys):
     out = tmp_path / "V.json"
-    assert main(["validate", "--samples", "40", "--cycles", "3", "--gauge-repeats", "2",
+    assert main(["validate", "--errors", "ideal", "--truth-seeds", "0", "--breakdown", "none",
+                 "--samples", "40", "--cycles", "3", "--gauge-repeats", "2",
                  "--out", str(out)]) == 0
     v = json.loads(out.read_text())
     for k in ("ap_before_mm", "ap_after_mm", "rp_mm", "gauge_error_before_mm",
