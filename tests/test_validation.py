@@ -97,6 +97,18 @@ def test_breakdown_each_source_alone(tmp_path):
     shares = [c["ap_after_share_mm"] for c in bd["cannot_remove"]]
     assert shares == sorted(shares, reverse=True)
     assert bd["cannot_remove"][0]["source"] in ("geometry", "compliance")
+    # planecal report reads it: the breakdown's figure and table
+    assert main(["report", str(f), "--out", str(tmp_path / "rep")]) == 0
+    html = (tmp_path / "rep" / "index.html").read_text(encoding="utf-8")
+    assert "breakdown.png" in html and "What each error source leaves" in html
+
+
+def test_report_over_truths(runs, tmp_path):
+    f = tmp_path / "V.json"
+    f.write_text(json.dumps(runs["realistic"]))
+    assert main(["report", str(f), "--out", str(tmp_path / "rep")]) == 0
+    html = (tmp_path / "rep" / "index.html").read_text(encoding="utf-8")
+    assert "truths.png" in html and "realistic world, 2 truths" in html
 
 
 def test_breakdown_variants_and_shares():
