@@ -76,3 +76,18 @@ def test_a_fit_calibrate_refuses_still_shows_the_truth(tmp_path):
     before, after = _ap(out)
     assert after < before
     assert "identified joint offsets against the twin's hidden truth" in out
+
+
+def test_validate_of_the_demos_calibration_gives_its_figures(demos, tmp_path):
+    """validate --calibrated/--truth/--run on the demo's files, with the demo's seed and
+    cycles: the same world (the truth file's, the sidecar's profile), the same ISO figures."""
+    out, d = demos["realistic"]
+    before, after = _ap(out)
+    f = tmp_path / "V.json"
+    assert main(["validate", "--calibrated", str(d / "result.json"), "--truth",
+                 str(d / "truth.json"), "--run", str(d / "demo.tsv"), "--seed", "1",
+                 "--cycles", "10", "--gauge-repeats", "2", "--out", str(f)]) == 0
+    v = json.loads(f.read_text())
+    assert v["errors"] == "realistic"
+    assert round(v["ap_before_mm"], 3) == before and round(v["ap_after_mm"], 3) == after
+    assert v["truths"][0]["ap_after_mm"] == v["ap_after_median_mm"] == v["ap_after_mm"]

@@ -1,7 +1,7 @@
 """planecal validate [--scene S] [--out V.json] [--errors ideal|realistic|FILE.json]
 [--truth-seeds 0,1,2,3,4] [--samples N] [--seed K] [--offsets-all] [--cycles 30]
 [--cube-mm E] [--tcp-mm X,Y,Z] [--block-mm L] [--poses POSES.json]
-[--breakdown off|alone|none] [--breakdown-truth T] [--jobs J]
+[--breakdown alone|off|none] [--breakdown-truth T] [--jobs J] [--level offsets]
 [--calibrated R.json --truth T.json --run RUN.tsv]
 
 ISO 9283 pose accuracy AP and repeatability RP (P1..P5 in a cube over the calibrated
@@ -10,9 +10,12 @@ the calibrated model, in the world of an error profile (--errors, default realis
 
 With no calibration given: for each truth seed, draw that world, rehearse a calibration
 set on its twin (the sampling run's planner with collision checks), calibrate offsets-only
-from the nominal values, and validate on the same world. Prints the per-truth figures with
-the median and the worst truth, then (--breakdown, default off) the first truth again with
-each error source switched off in turn: what an offsets-only calibration leaves of each.
+from the nominal values (--level offsets; ``studies.validation.calibrate_run``), and
+validate on the same world; the truths run on ``studies.distributed.Engine`` (--jobs 1: in
+this process). Prints the per-truth figures with the median and the worst truth, then
+(--breakdown, default alone) the first truth again with each error source of the profile
+on alone (off: switched off in turn): what an offsets-only calibration leaves of each,
+and which sources it cannot remove (docs/ERRORS.md).
 AP is measured in the robot's frame (ISO 9283's base coordinate system, registered to the
 robot's first axis and its zero); the cell frame adds the robot's placement and delta1,
 which no plane calibration sees (both are printed).
@@ -23,7 +26,7 @@ true geometry, the gear and laser phases), the run's sidecar names its error pro
 
 --out writes JSON (format planecal-validate/1): ``truths`` (truth_seed, ap_before_mm,
 ap_after_mm, ... per truth), ``ap_after_median_mm`` and the other medians and worsts,
-``breakdown``, and the median truth's details under the single-truth keys (ap_before_mm,
+``breakdown``, ``level``, and the median truth's details under the single-truth keys (ap_before_mm,
 ap_after_mm, rp_mm, gauge_error_before_mm, gauge_error_after_mm, iso, gauge, ...).
 """
 from __future__ import annotations
