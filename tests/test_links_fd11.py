@@ -449,7 +449,7 @@ def test_planecal_emulate_serves_the_twin():
 
     env = dict(os.environ, MUJOCO_GL="disable")
     proc = subprocess.Popen([sys.executable, "-m", "planecal.cli", "emulate", "--seed", "3",
-                             "--rt-port", "0", "--reply-port", "0"],
+                             "--errors", "ideal", "--rt-port", "0", "--reply-port", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
                             preexec_fn=_default_sigint)
     guard = threading.Timer(60, proc.kill)  # never hang the suite
@@ -477,3 +477,22 @@ def test_planecal_emulate_serves_the_twin():
         out, err = proc.communicate(timeout=30)
         guard.cancel()
     assert proc.returncode == 130 and "interrupted" in err
+
+
+def test_emulate_twin_is_the_profiles_world():
+    """`emulate --errors` (default realistic) serves the twin rehearse would make."""
+    pytest.importorskip("mujoco")
+    import argparse
+    from planecal.commands import emulate
+    from planecal.commands.rehearse import make_twin
+    from planecal.scene import load_scene
+    p = argparse.ArgumentParser()
+    emulate.add_arguments(p)
+    scene = load_scene("thesis_final")
+    for argv, errors in (([], "realistic"), (["--errors", "ideal"], "ideal")):
+        got = emulate._make_twin(p.parse_args(["--seed", "3"] + argv))
+        want = make_twin(scene, 3, errors)
+        assert got.options == want.options
+        np.testing.assert_array_equal(got.truth.joint_offsets, want.truth.joint_offsets)
+        np.testing.assert_array_equal(got.true_kinematics.a, want.true_kinematics.a)
+    assert emulate._make_twin(p.parse_args(["--errors", "ideal"])).options.quantization is False

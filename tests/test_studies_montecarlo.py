@@ -134,3 +134,45 @@ def test_pose_draw_settings_reach_the_runs():
     for bad in (dict(roll_deg=200.0), dict(mode="synthetic", ik_choice="nearest")):
         with pytest.raises(InputError):
             MCSettings(**bad).check()
+
+
+def test_a_parameter_no_run_reports_is_counted_not_averaged():
+    """In the realistic world the fit's residual sigma carries the model mismatch and
+    phi_z exceeds its practical std limit in every run: its reported std is NaN in all of
+    them. ``analyze`` must say so without numpy's 'Mean of empty slice' warning."""
+    import warnings
+    st = MCSettings(mode="synthetic", samples=40, runs=4, seed=7)
+    runs = run_many(st, jobs=1, quiet=True)
+    names = analyze(runs, st)["free"]
+    k = names.index("phi_z")
+    for r in runs[:2]:
+        r["reported_std"] = np.asarray(r["reported_std"], float).copy()
+        r["reported_std"][names.index("phi_y")] = np.nan
+    for r in runs:
+        r["reported_std"] = np.asarray(r["reported_std"], float).copy()
+        r["reported_std"][k] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = analyze(runs, st)
+    p = res["params"]
+    assert p["phi_z"]["reported_in_runs"] == 0 and np.isnan(p["phi_z"]["reported_std"])
+    assert p["phi_y"]["reported_in_runs"] == 2
+    # the RMS over the two runs that report it
+    rep = [np.asarray(r["reported_std"])[names.index("phi_y")] for r in runs[2:]]
+    assert p["phi_y"]["reported_std"] == pytest.approx(np.sqrt(np.mean(np.square(rep))))
+    assert p["delta3"]["reported_in_runs"] == 4
+    assert "no std reported in any run" in format_montecarlo(res)
+    assert "phi_z" in format_montecarlo(res).split("no std reported in any run")[1]
+
+
+def test_realistic_twin_runs_analyze_without_warnings():
+    import warnings
+    st = MCSettings(runs=2, samples=30, errors="realistic", seed=3)
+    runs = run_many(st, jobs=1, quiet=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = analyze(runs, st)
+        format_montecarlo(res)
+    assert res["world"]["model_mismatch"]  # the realistic world: errors the model lacks
+    # Table 9's class of model error, not the noise's 0.03 mm
+    assert res["world"]["max_residual_mm"]["median"] > 0.08

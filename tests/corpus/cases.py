@@ -461,7 +461,7 @@ case("out-sample-equals-poses",
      "sample --rt 127.0.0.1 --out {d}/poses.json --poses {d}/poses.json",
      {"poses.json": Mut("poses.json")}, 2, "input")
 case("out-rehearse-truth-is-poses", "rehearse --out {d}/o.tsv --poses {d}/poses.json "
-     "--truth {d}/poses.json", {"poses.json": Mut("poses.json")}, 2, "input")
+     "--truth-out {d}/poses.json", {"poses.json": Mut("poses.json")}, 2, "input")
 case("emulate-truth-ntilde-zero", "emulate --truth {d}/p.json",
      {"p.json": Mut("params.json", set=((("planes", 0, "n_tilde"), [0, 0, 0]),))}, 2,
      "planes[0].n_tilde")

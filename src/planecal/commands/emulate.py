@@ -16,7 +16,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene", default=None, help="twin scene name or JSON path (twin default)")
     p.add_argument("--seed", type=int, default=None, help="random seed of the twin's truth and noise")
     p.add_argument("--truth", default=None, metavar="T.json",
-                   help="the twin's true parameters (JSON, as written by the twin)")
+                   help="the twin's true parameters (JSON, as written by the twin; with its "
+                        "world, as rehearse --truth writes it)")
+    p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
+                   help="the twin's error profile (default realistic: a robot of the MC70's "
+                        "class; ideal: the nominal robot; or a profile file)")
     p.add_argument("--host", default="127.0.0.1", help="address the FD11 emulator binds")
     p.add_argument("--rt-port", type=int, default=5555,
                    help="UDP port receiving delta packets (FD11 remote port, default 5555)")
@@ -36,9 +40,16 @@ def _make_twin(args):
     Twin = getattr(twin_mod, "Twin", None)
     if Twin is None:
         raise InputError("planecal.twin has no Twin class; cannot emulate")
-    kwargs = {k: v for k, v in (("scene", args.scene), ("seed", args.seed),
-                                ("truth", args.truth)) if v is not None}
-    return Twin(**kwargs)
+    from planecal.commands.rehearse import make_twin
+    from planecal.scene import DEFAULT_SCENE, load_scene
+    from planecal.twin.profile import DEFAULT_PROFILE, load_profile, load_world
+    scene = load_scene(args.scene or DEFAULT_SCENE)
+    seed = 0 if args.seed is None else args.seed
+    errors = args.errors or DEFAULT_PROFILE
+    if args.truth is not None:  # that world, the profile's joint and laser errors
+        return Twin(scene, truth=load_world(scene, args.truth), seed=seed,
+                    options=load_profile(errors, scene.robot).options())
+    return make_twin(scene, seed, errors)
 
 
 def run(args) -> int:

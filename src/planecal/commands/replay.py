@@ -1,8 +1,13 @@
-"""planecal replay SAMPLES --params P.json [--scene S] [--out R.json]
+"""planecal replay SAMPLES --params P.json [--scene S] [--errors ideal|realistic|FILE.json]
+[--truth-seed T] [--out R.json]
 
-Replays a recorded sample file's encoder counts in the twin (truth = P, no error
-sources): per sample the measured distance, the twin's MuJoCo ray cast, the analytic
-model and what the ray hit; summary mean, std and max |measured - twin|.
+Replays a recorded sample file's encoder counts in the twin (the cell = P): per sample the
+measured distance, the twin's MuJoCo ray cast, the analytic model and what the ray hit;
+summary mean, std and max |measured - twin|. --errors (default realistic): the twin's
+robot is a world of that profile (the geometry and gear phases drawn for --truth-seed,
+default 0; compliance and gear error at each pose; no noise), so twin - analytic shows
+what the errors the model lacks do to each distance; --errors ideal: the robot is the
+nominal model exactly (twin = analytic to ~1e-9 mm).
 Example: planecal replay examples/seed_samples.tsv --params examples/table10_params.json
 """
 from __future__ import annotations
@@ -16,6 +21,10 @@ def add_arguments(p):
     p.add_argument("samples", help="sample file, seed format (7.1.4)")
     p.add_argument("--params", required=True, help="parameter file: the twin's truth")
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
+    p.add_argument("--errors", default="realistic", metavar="ideal|realistic|FILE.json",
+                   help="the twin robot's error profile (default %(default)s)")
+    p.add_argument("--truth-seed", type=int, default=0,
+                   help="seed of the world's geometry and gear phases (default 0)")
     p.add_argument("--out", help="write the per-sample table and summary (JSON) here")
 
 
@@ -24,17 +33,31 @@ def run(args) -> int:
     from planecal.params import load_params, save_json
     from planecal.samples import read_samples
     from planecal.scene import load_scene
-    from planecal.studies.replay import format_replay, replay
+    from planecal.studies.montecarlo import sources_on
+    from planecal.studies.replay import format_replay, replay, replay_world
+    from planecal.twin.profile import load_profile
 
     if args.out:  # checked before any work (issue 16): never an input, never a directory
         check_output(args.out, [args.samples, args.params], REPLAY_FORMAT)
     s = read_samples(args.samples)
     params = load_params(args.params)
     scene = load_scene(args.scene)
-    res = replay(scene, params, s.qe, s.d_mm, s.plate)
-    res = {"format": REPLAY_FORMAT, **res}
+    profile = load_profile(args.errors, scene.robot)
+    world = opts = None
+    if profile.name != "ideal":
+        world, opts = replay_world(scene, params, profile, args.truth_seed)
+    res = {"format": REPLAY_FORMAT, **replay(scene, params, s.qe, s.d_mm, s.plate, world, opts)}
     res["samples_file"] = str(args.samples)
     res["params_file"] = str(args.params)
+    res["errors"] = profile.name
+    res["profile"] = str(profile.path)
+    res["truth_seed"] = None if world is None else args.truth_seed
+    if world is None:
+        print(f"twin: the ideal world (the nominal model exactly, truth = {args.params})")
+    else:
+        on = [f for f in sources_on(scene.robot, world, opts)]
+        print(f"twin: the {profile.name} world of truth seed {args.truth_seed} with the cell "
+              f"of {args.params} (errors at rest: {', '.join(on) or 'none'}; no noise)")
     print(format_replay(res))
     if args.out:
         save_json(args.out, res)

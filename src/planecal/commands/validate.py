@@ -1,15 +1,33 @@
-"""planecal validate [--scene S] [--out V.json] [--samples N] [--seed K] [--truth-seed T]
-[--offsets-all] [--cycles 30] [--cube-mm E] [--tcp-mm X,Y,Z] [--block-mm L]
-[--poses POSES.json] [--calibrated R.json --truth T.json --run RUN.tsv]
+"""planecal validate [--scene S] [--out V.json] [--errors ideal|realistic|FILE.json]
+[--truth-seeds 0,1,2,3,4] [--samples N] [--seed K] [--offsets-all] [--cycles 30]
+[--cube-mm E] [--tcp-mm X,Y,Z] [--block-mm L] [--poses POSES.json]
+[--breakdown alone|off|none] [--breakdown-truth T] [--jobs J] [--level offsets]
+[--calibrated R.json --truth T.json --run RUN.tsv]
 
 ISO 9283 pose accuracy AP and repeatability RP (P1..P5 in a cube over the calibrated
 region, 30 cycles) and the gauge-block test (seed 9.3) on the twin, with the nominal and
-the calibrated model. With no arguments: rehearse on the default scene (the sampling
-run's planner with collision checks, the twin at rest per sample), calibrate, validate.
-With --calibrated, --truth and --run: validate an existing calibration result against the
-twin truth it was made on (the run's samples place the ISO cube).
-Prints both and writes JSON with ap_before_mm, ap_after_mm, rp_mm, gauge_error_before_mm,
-gauge_error_after_mm (and the per-pose details).
+the calibrated model, in the world of an error profile (--errors, default realistic).
+
+With no calibration given: for each truth seed, draw that world, rehearse a calibration
+set on its twin (the sampling run's planner with collision checks), calibrate offsets-only
+from the nominal values (--level offsets; ``studies.validation.calibrate_run``), and
+validate on the same world; the truths run on ``studies.distributed.Engine`` (--jobs 1: in
+this process). Prints the per-truth figures with the median and the worst truth, then
+(--breakdown, default alone) the first truth again with each error source of the profile
+on alone (off: switched off in turn): what an offsets-only calibration leaves of each,
+and which sources it cannot remove (docs/ERRORS.md).
+AP is measured in the robot's frame (ISO 9283's base coordinate system, registered to the
+robot's first axis and its zero); the cell frame adds the robot's placement and delta1,
+which no plane calibration sees (both are printed).
+
+With --calibrated, --truth and --run: validate an existing calibration result in the
+world it was made in: the truth file of ``rehearse --truth`` holds that world (the robot's
+true geometry, the gear and laser phases), the run's sidecar names its error profile.
+
+--out writes JSON (format planecal-validate/1): ``truths`` (truth_seed, ap_before_mm,
+ap_after_mm, ... per truth), ``ap_after_median_mm`` and the other medians and worsts,
+``breakdown``, ``level``, and the median truth's details under the single-truth keys (ap_before_mm,
+ap_after_mm, rp_mm, gauge_error_before_mm, gauge_error_after_mm, iso, gauge, ...).
 """
 from __future__ import annotations
 
@@ -20,18 +38,26 @@ import numpy as np
 from planecal.errors import InputError
 
 
-VALIDATE_FORMAT = "planecal-validate/1"
-
-
 def add_arguments(p):
     from planecal.scene import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--out", help="write the result (JSON) here")
+    p.add_argument("--rrd", default=None, metavar="FILE",
+                   help="also write a Rerun recording of the validation (the median truth's)")
+    p.add_argument("--force", action="store_true",
+                   help="replace --out even if it is not an earlier validate result")
+    p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
+                   help="the twin's error profile (default: realistic; with --truth: the "
+                        "run's, else ideal for a truth file without a world)")
+    p.add_argument("--truth-seeds", default=None,
+                   help="seeds of the truths (worlds) to validate on (default 0,1,2,3,4)")
+    p.add_argument("--truth-seed", type=int, default=None,
+                   help="one truth seed (the same as --truth-seeds T)")
     p.add_argument("--samples", type=int, default=150, help="rehearsal samples (default 150)")
     p.add_argument("--seed", type=int, default=0, help="rehearsal seed (poses, noise)")
-    p.add_argument("--truth-seed", type=int, default=0, help="seed of the twin's truth (default 0)")
     p.add_argument("--offsets-all", action="store_true",
-                   help="truth with delta1 and delta6 != 0 as well")
+                   help="the ideal world with delta1 and delta6 != 0 as well (the realistic "
+                        "one has them)")
     p.add_argument("--cycles", type=int, default=30, help="ISO cycles (default 30)")
     p.add_argument("--cube-mm", type=float, default=None, help="ISO cube edge (default: from the samples)")
     p.add_argument("--tcp-mm", default="0,0,0", help="TCP in the flange frame, mm (default flange)")
@@ -39,11 +65,21 @@ def add_arguments(p):
     p.add_argument("--gauge-repeats", type=int, default=10)
     p.add_argument("--poses", help="rehearse through this planned pose list (planecal plan) "
                                    "instead of random poses")
+    p.add_argument("--breakdown", default="alone", choices=("alone", "off", "none"),
+                   help="repeat one truth with each error source of the profile on alone "
+                        "(alone), or switched off in turn (off), or not (none) "
+                        "(default alone)")
+    p.add_argument("--breakdown-truth", type=int, default=None,
+                   help="the truth seed of the breakdown (default: the first truth seed)")
+    p.add_argument("--jobs", type=int, default=None,
+                   help="worker processes over truths and variants (studies.distributed."
+                        "Engine; 1: in this process; default: all cores)")
+    p.add_argument("--level", default="offsets", choices=("offsets",),
+                   help="what the calibration fits (offsets: the joint offsets, the sensor "
+                        "pose and the planes, as planecal calibrate; default %(default)s)")
     p.add_argument("--calibrated", help="calibration result to validate (with --truth and --run)")
-    p.add_argument("--truth", help="the twin truth (parameter file) the calibration was made on")
+    p.add_argument("--truth", help="the twin truth (rehearse --truth) the calibration was made on")
     p.add_argument("--run", help="the calibration's sample file (places the ISO cube)")
-    p.add_argument("--rrd", default=None, metavar="FILE",
-                   help="also write a Rerun recording (planecal view FILE)")
 
 
 def _tcp(text):
@@ -56,72 +92,173 @@ def _tcp(text):
     return tuple(v)
 
 
-def run(args) -> int:
-    from planecal.collision import CollisionWorld
-    from planecal.fit import Problem, solve
-    from planecal.params import load_params, save_json
-    from planecal.scene import load_scene, nominal_params
-    from planecal.studies.montecarlo import MCSettings, twin_samples
-    from planecal.studies.validation import ValidationSettings, format_validation, validate
-    from planecal.twin.truth import Tolerances, draw_truth, load_truth
+CELL_FRAME_NOTE = (
+    "AP is measured as ISO 9283 does, in the robot's base coordinate system (registered to "
+    "its first axis and that axis's zero). The cell frame adds the robot's placement in the "
+    "cell and J1's zero offset delta1: a plane calibration cannot see them (the plates move "
+    "with the robot), so they stay in any position taken from a drawing of the cell, but "
+    "not in work located by the calibrated plates.")
 
-    if args.out:  # checked before any work (issue 16)
-        from planecal.outputs import check_output
-        check_output(args.out, [args.calibrated, args.truth, args.run, args.poses],
-                     VALIDATE_FORMAT)
+
+def run(args) -> int:
+    from planecal.outputs import check_output
+    from planecal.params import save_json
+    from planecal.scene import load_scene
+    from planecal.studies.common import check_jobs, parse_int_list
+    from planecal.studies.validation import (ANCHORS, FORMAT, TruthJob, ValidationSettings,
+                                             breakdown, cannot_remove, format_breakdown,
+                                             format_truths, run_jobs, summarize,
+                                             validate_truth)
+    from planecal.twin.profile import DEFAULT_PROFILE, load_profile
+
+    given = [a for a in (args.calibrated, args.truth, args.run) if a]
+    if given and len(given) != 3:
+        raise InputError("--calibrated, --truth and --run go together")
+    if args.out:
+        check_output(args.out, given, FORMAT, args.force)
     scene = load_scene(args.scene)
     st = ValidationSettings(cycles=args.cycles,
                             cube_edge_m=None if args.cube_mm is None else args.cube_mm * 1e-3,
                             tcp_m=_tcp(args.tcp_mm), block_length_m=args.block_mm * 1e-3,
                             gauge_repeats=args.gauge_repeats, seed=args.seed)
     st.check()
-    given = [a for a in (args.calibrated, args.truth, args.run) if a]
-    info = {}
+    jobs = check_jobs(args.jobs)
     if given:
-        if len(given) != 3:
-            raise InputError("--calibrated, --truth and --run go together")
-        from planecal.samples import read_samples
-        calibrated = load_params(args.calibrated)
-        truth = load_truth(scene, args.truth)
-        run_samples = read_samples(args.run)
-        qe = run_samples.qe
-        d_m, plate = run_samples.d_mm * 1e-3, run_samples.plate
-        fit = None
+        doc = _validate_given(args, scene, st)
     else:
         if args.samples < 20:
             raise InputError(f"--samples must be at least 20, got {args.samples}")
-        truth = draw_truth(scene, args.truth_seed, Tolerances(offsets_all=args.offsets_all))
-        mc = MCSettings(scene=str(scene.path), samples=args.samples, seed=args.seed)
-        what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
-        print(f"rehearsing {what} on the twin ({scene.name}, seed {args.seed}, "
-              f"truth seed {args.truth_seed})...", file=sys.stderr, flush=True)
+        if args.truth_seed is not None and args.truth_seeds is not None:
+            raise InputError("--truth-seed and --truth-seeds: give one of them")
+        if args.truth_seed is not None:
+            seeds = parse_int_list(str(args.truth_seed), "--truth-seed", 0)
+        else:
+            seeds = parse_int_list(args.truth_seeds or "0,1,2,3,4", "--truth-seeds", 0)
+        if len(set(seeds)) != len(seeds):
+            raise InputError(f"--truth-seeds: a seed twice in {seeds}")
+        errors = args.errors or DEFAULT_PROFILE
+        profile = load_profile(errors, scene.robot)
+        poses = None
         if args.poses:
-            from planecal.studies.montecarlo import pose_list_samples
             from planecal.studies.planning import load_poses
             pq, pp, _ = load_poses(args.poses)
-            mc = MCSettings(scene=str(scene.path), samples=len(pq), seed=args.seed,
-                            poses=tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp)))
-            qe, d, plate, rejected = pose_list_samples(scene, truth, mc, args.seed)
-        else:
-            qe, d, plate, rejected = twin_samples(scene, truth, mc, args.seed)
-        d_m = d
-        fit = solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
-        calibrated = fit.params
-        info = {"samples": len(d), "rejected": rejected, "fit_rms_mm": fit.rms_mm(),
-                "offsets_std_rad": fit.std[fit.layout.slice("joint_offsets")]}
-        print(f"calibrated: rms {fit.rms_mm() * 1e3:.1f} um; validating...", file=sys.stderr,
-              flush=True)
-    checker = CollisionWorld(scene, clearance_m=st.clearance_m)
-    v = validate(scene, truth, calibrated, qe, st, checker, fit)
-    v["scene"] = scene.name
-    v["calibration"] = info
-    v["truth_offsets_rad"] = truth.joint_offsets
-    v["calibrated_offsets_rad"] = calibrated.joint_offsets
-    print(format_validation(v))
+            poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
+        base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
+                        samples=args.samples, seed=args.seed, offsets_all=args.offsets_all,
+                        poses=poses, settings=st, level=args.level)
+        what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
+        print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): rehearse "
+              f"{what} (seed {args.seed}), calibrate, validate...", file=sys.stderr, flush=True)
+        from dataclasses import replace
+        results = run_jobs(validate_truth, [replace(base, truth_seed=t) for t in seeds],
+                           jobs, "validate", args.quiet)
+        summary, med, worst = summarize(results)
+        doc = {"format": FORMAT, "scene": scene.name, "errors": profile.name,
+               "profile": str(profile.path), "level": args.level, "truth_seeds": seeds,
+               **summary,
+               **_detail(med), "detail_truth_seed": med["truth_seed"]}
+        print(format_truths(summary, profile.name))
+        print()
+        print(CELL_FRAME_NOTE)
+        if args.breakdown != "none":
+            t = seeds[0] if args.breakdown_truth is None else args.breakdown_truth
+            print(f"\nbreakdown: truth {t} with each error source "
+                  + ("switched off in turn..." if args.breakdown == "off" else "alone..."),
+                  file=sys.stderr, flush=True)
+            bd = breakdown(replace(base, truth_seed=t), args.breakdown, jobs, args.quiet)
+            bd["cannot_remove"] = cannot_remove(bd)
+            doc["breakdown"] = bd
+            print()
+            print(format_breakdown(bd))
+        print()
+        print(ANCHORS)
     if args.out:
-        save_json(args.out, {"format": VALIDATE_FORMAT, **v})
+        save_json(args.out, doc)
         print(f"result written to {args.out}")
     if args.rrd:
-        from planecal.rerun_log.studies import log_validate
-        print(f"recording written to {log_validate(args.rrd, v, scene, calibrated, qe, d_m, plate)}")
+        print(f"recording written to {_record(args, scene, st, doc)}")
     return 0
+
+
+def _record(args, scene, st, doc) -> str:
+    """The Rerun recording of the validation doc's detailed truth: its calibration run
+    again (a pure function of the job) for the samples and the identified parameters."""
+    from planecal.rerun_log.studies import log_validate
+
+    if args.calibrated:
+        from planecal.params import load_params
+        from planecal.samples import read_samples
+        run = read_samples(args.run)
+        return log_validate(args.rrd, doc, scene, load_params(args.calibrated), run.qe,
+                            run.d_mm * 1e-3, run.plate)
+    from planecal.studies.validation import TruthJob, truth_run
+    poses = None
+    if args.poses:
+        from planecal.studies.planning import load_poses
+        pq, pp, _ = load_poses(args.poses)
+        poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
+    job = TruthJob(scene=str(scene.path), errors=doc["profile"], truth_seed=doc["detail_truth_seed"], samples=args.samples, seed=args.seed,
+                   offsets_all=args.offsets_all, poses=poses, settings=st, level=args.level)
+    v, fit, run = truth_run(job)
+    if fit is None:
+        raise InputError(f"--rrd: truth {job.truth_seed}'s run gave up: {v['failed']}")
+    return log_validate(args.rrd, v, scene, fit.params, *run)
+
+
+def _detail(v: dict) -> dict:
+    """A truth's full result under the single-truth keys (what report readers use)."""
+    keep = {k: v[k] for k in v if k not in ("truth_seed", "off")}
+    return keep
+
+
+def _validate_given(args, scene, st) -> dict:
+    """--calibrated/--truth/--run: one calibration in the world its truth file holds."""
+    from pathlib import Path
+
+    from planecal.collision import CollisionWorld
+    from planecal.params import load_params
+    from planecal.samples import read_samples
+    from planecal.sampling.runfiles import sidecar_path
+    from planecal.studies.montecarlo import sources_on
+    from planecal.studies.validation import FORMAT, format_validation, truth_row, validate
+    from planecal.twin.profile import DEFAULT_PROFILE, load_profile, load_world
+
+    calibrated = load_params(args.calibrated)
+    world = load_world(scene, args.truth)
+    qe = read_samples(args.run).qe
+    errors, why = args.errors, "--errors"
+    if errors is None:
+        side = sidecar_path(args.run)
+        twin = {}
+        if Path(side).exists():
+            from planecal.sampling.runfiles import load_sidecar
+            twin = load_sidecar(args.run).get("twin") or {}
+        if "errors" in twin:
+            errors, why = twin["errors"], f"the run's sidecar {side}"
+        elif world.kinematics is None and not world.gear_phases:
+            errors, why = "ideal", f"{args.truth} holds no world"
+        else:
+            errors, why = DEFAULT_PROFILE, "the default"
+    profile = load_profile(errors, scene.robot)
+    opts = profile.options()
+    if len(world.gear_phases) != len(opts.gear):
+        raise InputError(f"--truth {args.truth}: its world has {len(world.gear_phases)} gear "
+                         f"phases, the {profile.name} profile ({why}) {len(opts.gear)} gear "
+                         "harmonics: give the --errors the truth was drawn with")
+    if profile.doc.geometry is not None and world.kinematics is None:
+        raise InputError(f"--truth {args.truth}: no robot geometry in the file (no 'world'), "
+                         f"but the {profile.name} profile ({why}) has geometric errors: "
+                         "give --errors ideal, or the truth file rehearse --truth wrote")
+    checker = CollisionWorld(scene, clearance_m=st.clearance_m)
+    v = validate(scene, world, calibrated, qe, st, checker, None, opts)
+    v["scene"] = scene.name
+    v["calibration"] = {}
+    v["truth_offsets_rad"] = world.params.joint_offsets
+    v["calibrated_offsets_rad"] = calibrated.joint_offsets
+    v["sources"] = sources_on(scene.robot, world, opts)
+    print(f"{profile.name} world ({why}); error sources: {', '.join(v['sources']) or 'none'}")
+    print(format_validation(v))
+    row = {**truth_row({**v, "truth_seed": None}), "truth_file": str(args.truth)}
+    return {"format": FORMAT, "errors": profile.name, "profile": str(profile.path),
+            "truths": [row], "ap_after_median_mm": v["ap_after_mm"],
+            "ap_before_median_mm": v["ap_before_mm"], **v}

@@ -10,6 +10,15 @@ plane: where the beam misses the plate (plate too small or placed elsewhere) the
 something else or nothing and that sample is listed as such, not compared.
 Summary: mean, std and max |measured - twin| over plate hits, and max |twin - analytic|
 (the ray cast against a box geom agrees with the analytic plane to ~1e-12 m).
+
+In the world of an error profile (``replay_world``: ``--errors realistic``), the twin's
+robot is that world's -- the true geometry and gear phases drawn for a truth seed
+(``twin.profile.draw_world``), the cell (offsets, sensor pose, planes) still the given
+parameters -- and at each sample's counts its joints carry the profile's errors at rest
+(gravity compliance, gear error; backlash keeps its direction, the noise is off: the
+replay is deterministic). ``twin - analytic`` is then what the world's errors the model
+lacks do to each distance, and ``measured - twin`` compares the real robot with a robot
+of that class rather than with the ideal one.
 """
 from __future__ import annotations
 
@@ -19,8 +28,22 @@ from planecal.cell import CellParams, predict
 from planecal.errors import InputError
 
 
+def replay_world(scene, params: CellParams, profile, truth_seed: int = 0):
+    """(world, options) of a replay in ``profile``'s world (module docstring): the world
+    drawn for ``truth_seed`` with the cell of ``params``, the profile's options with the
+    noise off (repeatability, quantisation, laser noise)."""
+    from dataclasses import replace
+
+    from planecal.twin.profile import draw_world
+    world, opts = draw_world(scene, truth_seed, profile)
+    return (replace(world, params=params),
+            replace(opts, repeatability_mm=0.0, quantization=False, laser_noise_mm=0.0))
+
+
 def replay(scene, params: CellParams, qe: np.ndarray, d_mm: np.ndarray,
-           plate: np.ndarray | None = None) -> dict:
+           plate: np.ndarray | None = None, world=None, options=None) -> dict:
+    """The replay (module docstring); ``world``, ``options``: a world of an error profile
+    (``replay_world``; None: the ideal twin, truth = ``params``, every error off)."""
     from planecal.twin import Twin, TwinOptions
 
     qe = np.asarray(qe, np.int64)
@@ -32,7 +55,10 @@ def replay(scene, params: CellParams, qe: np.ndarray, d_mm: np.ndarray,
     if n and plate.max() >= params.n_planes:
         raise InputError(f"samples refer to plate {plate.max() + 1}, the parameters hold "
                          f"{params.n_planes} plane(s)")
-    twin = Twin(scene, truth=params, options=TwinOptions.exact())
+    if world is None:
+        twin = Twin(scene, truth=params, options=TwinOptions.exact())
+    else:
+        twin = Twin(scene, truth=world, options=options or TwinOptions.exact())
     analytic = predict(scene.robot, qe, params, plate) * 1e3
     margins = edge_margins(scene, params, qe, plate)
     rows = []

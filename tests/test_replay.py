@@ -1,0 +1,74 @@
+"""planecal replay --errors: the seed's real samples replayed in a world of an error
+profile; the twin's ray cast against an independent analytic model of that world."""
+import json
+
+import numpy as np
+import pytest
+from conftest import SEED_DM, SEED_QE, TABLE10
+
+from planecal.cell import beam_direction, plane_distance
+from planecal.cli import main
+from planecal.encoder import counts_to_joints
+from planecal.kinematics import fk
+from planecal.scene import load_scene
+from planecal.studies.montecarlo import without
+from planecal.studies.replay import replay, replay_world
+from planecal.twin.profile import load_profile
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("thesis_final")
+
+
+def _twin(res):
+    return np.array([r["twin_mm"] for r in res["rows"]])
+
+
+def test_ideal_profile_world_is_the_exact_twin(scene):
+    base = replay(scene, TABLE10, SEED_QE, SEED_DM)
+    w, o = replay_world(scene, TABLE10, load_profile("ideal", scene.robot), 0)
+    res = replay(scene, TABLE10, SEED_QE, SEED_DM, world=w, options=o)
+    np.testing.assert_allclose(_twin(res), _twin(base), atol=1e-9)
+    np.testing.assert_allclose(_twin(res), [89.776, 85.318, 68.221, 68.017, 71.580], atol=6e-4)
+
+
+def test_realistic_geometry_against_the_analytic_true_kinematics(scene):
+    """The world's geometry alone (compliance, gear, backlash off): MuJoCo's ray cast equals
+    the ray-plane distance of the true kinematics (an independent model), to 1e-6 mm."""
+    w, o = replay_world(scene, TABLE10, load_profile("realistic", scene.robot), 2)
+    wg, og = without(w, o, ("compliance", "gear", "backlash", "thermal"))
+    res = replay(scene, TABLE10, SEED_QE, SEED_DM, world=wg, options=og)
+    q = counts_to_joints(scene.robot, SEED_QE)
+    T = fk(wg.kinematics.with_offsets(TABLE10.joint_offsets), q)
+    R, p = T[:, :3, :3], T[:, :3, 3]
+    o_b = R @ TABLE10.sensor_origin + p
+    z_b = R @ beam_direction(TABLE10.phi_y, TABLE10.phi_z)
+    d = plane_distance(TABLE10.planes[0], o_b, z_b) * 1e3
+    np.testing.assert_allclose(_twin(res), d, atol=1e-6)
+    analytic = np.array([r["analytic_mm"] for r in res["rows"]])
+    assert np.max(np.abs(_twin(res) - analytic)) > 0.05  # a drawn robot, not the nominal
+    # all the profile's errors at rest: compliance and gear move the distances further,
+    # deterministically (no noise in a replay)
+    full = replay(scene, TABLE10, SEED_QE, SEED_DM, world=w, options=o)
+    again = replay(scene, TABLE10, SEED_QE, SEED_DM, world=w, options=o)
+    np.testing.assert_array_equal(_twin(full), _twin(again))
+    assert np.max(np.abs(_twin(full) - _twin(res))) > 1e-3
+
+
+def test_replay_command_errors(tmp_path, capsys):
+    from planecal.paths import data_path
+    ex = data_path("examples")
+    args = [str(ex / "seed_samples.tsv"), "--params", str(ex / "table10_params.json")]
+    out = tmp_path / "R.json"
+    assert main(["replay"] + args + ["--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "realistic world of truth seed 0" in text and "5 of 5 rays hit" in text
+    r = json.loads(out.read_text())
+    assert r["errors"] == "realistic" and r["truth_seed"] == 0
+    assert r["summary"]["max_abs_twin_minus_analytic_mm"] > 0.05
+    assert main(["replay"] + args + ["--errors", "ideal", "--out", str(out), ]) == 0
+    r = json.loads(out.read_text())
+    assert r["errors"] == "ideal" and r["summary"]["max_abs_twin_minus_analytic_mm"] < 1e-6
+    assert r["summary"]["mean_diff_mm"] == pytest.approx(1.2114, abs=1e-3)
+    assert main(["replay"] + args + ["--errors", "nonesuch"]) == 2
