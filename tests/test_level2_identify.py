@@ -141,7 +141,7 @@ def test_calibrate_full_recovers_a_whole_kinematic_truth_on_three_plates():
     truth.geometry[2, 2] = 4.5e-4  # beta3 only: J2 || J3
     truth.base = rng.normal(0.0, 1e-3, 6)
     d = predict(robot, qe, truth, plate)
-    cal = calibrate(robot, qe, d, nominal, plate, level="full")
+    cal = calibrate(robot, qe, d, nominal, plate, level="full", free_scale=True)
     assert cal.result.converged
     assert np.abs(cal.result.residuals_m).max() < 1e-9
     assert cal.result.identifiability.not_identifiable == []
@@ -194,10 +194,12 @@ def test_cli_calibrate_level_full_result_is_read_by_predict_and_export(tmp_path,
     out = tmp_path / "full.json"
     assert main(["calibrate", str(f), "--level", "full", "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "level full: 26 of 39 candidate parameters identifiable" in text
+    assert "level full: 24 of 37 candidate parameters identifiable" in text
     assert "EXCLUDED base_z: a combination of others (acts as " in text
+    assert "EXCLUDED a3: sets the arm's scale" in text and "EXCLUDED d4: sets the arm's scale" in text
     doc = json.loads(out.read_text())
-    assert doc["level"] == "full" and len(doc["base_set"]) == 26
+    assert doc["level"] == "full" and len(doc["base_set"]) == 24
+    assert {e["parameter"]: e["reason"] for e in doc["excluded"]}["d4"] == "scale"
     assert {e["parameter"]: e["reason"] for e in doc["excluded"]}["base_x"] in (
         "no_effect", "combination")
     assert doc["std"]["kinematics"]["base"][2] is None  # base_z excluded: no std
@@ -253,3 +255,28 @@ def test_geometry_prior_pulls_weak_geometry_towards_nominal_and_vanishes_when_wi
     assert tight.result.rms_mm() > free.result.rms_mm()
     with pytest.raises(ValueError, match="prior needs level full"):
         calibrate(robot, qe, d, nominal, plate, prior=(1e-3, 1e-3))
+
+
+def test_the_arms_scale_stays_nominal_unless_freed_a_laser_gain_error_shows_why():
+    """A laser that reads 0.1 % long (the ZS-LD80's linearity class) on noise-free data of
+    an otherwise nominal cell: the distances are those of a world 0.1 % larger, so a fit
+    with the arm's scale free makes the arm longer and misplaces the flange by ~1 mm at
+    2 m; with the scale kept at robot.json's (the default) the error stays in the sensor
+    and plane parameters and the flange is within 0.1 mm."""
+    from planecal.calibration import scale_lengths
+    from planecal.encoder import counts_to_joints
+    from planecal.model_full import flange_pose
+    scene, nominal, qe, plate = _design("three_plates", 60)
+    robot = scene.robot
+    assert scale_lengths(robot) == ["d4", "a3"]  # 0.99 m and 0.9 m
+    d = predict(robot, qe, nominal, plate) * 1.001
+    q = counts_to_joints(robot, qe)
+    true = flange_pose(robot, q, nominal)[:, :3, 3]
+    err = {}
+    for free_scale in (False, True):
+        cal = calibrate(robot, qe, d, nominal, plate, level="full", free_scale=free_scale)
+        got = flange_pose(robot, q, cal.params)[:, :3, 3]
+        err[free_scale] = float(np.sqrt(np.mean(np.sum((got - true) ** 2, axis=1))))
+        assert ("d4" in cal.base_set.base) is free_scale
+    assert err[True] > 0.5e-3
+    assert err[False] < 0.1e-3

@@ -47,6 +47,18 @@ def layout_for(robot: Robot, n_planes: int, level: str = "offsets",
     return level2_layout(n_planes, parallel, compliance)
 
 
+def scale_lengths(robot: Robot, k: int = 2) -> list[str]:
+    """The ``k`` longest link lengths of the robot's model (``a{j}``/``d{j}`` names; the
+    MC70: a3 = 0.9 m, d4 = 0.99 m). Together with the planes' distances they set the arm's
+    scale, which 65-95 mm laser readings see only through the sensor's own gain: a gain
+    error of 0.1 % (the ZS-LD80's linearity class) makes a free-scale fit put the tool up
+    to 2 mm off over a 2 m reach (docs/STUDIES.md, "Level 2")."""
+    kin = from_robot(robot)
+    lengths = [(abs(v), f"a{j + 1}") for j, v in enumerate(kin.a)]
+    lengths += [(abs(v), f"d{j + 1}") for j, v in enumerate(kin.d)]
+    return [name for _, name in sorted(lengths, reverse=True)[:k]]
+
+
 def geometry_prior(layout: ParamLayout, length_m: float, angle_rad: float) -> tuple:
     """``FitOptions.prior`` for the joint geometry (alpha, a, beta, d of every joint): a
     std of ``length_m`` for lengths and ``angle_rad`` for angles about the nominal values
@@ -89,7 +101,8 @@ class Calibration:
 def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
               level: str = "offsets", compliance: bool = False, free=None,
               options: FitOptions | None = None, tol: float = DEFAULT_TOL,
-              prior: tuple[float, float] | None = None) -> Calibration:
+              prior: tuple[float, float] | None = None,
+              free_scale: bool = False) -> Calibration:
     """Calibrate at ``level`` (module docstring) from encoder counts ``qe`` (N, 6), measured
     distances ``d_m`` (N,) [m] and 0-based ``plate`` (N,) (default all 0), starting at
     ``initial``. ``free``: names (list, comma string, "all") or a mask over the level's
@@ -97,7 +110,10 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
     them. ``prior`` (level full): (length std [m], angle std [rad]) of the joint geometry
     about robot.json's (``geometry_prior``; a MAP fit: the base set's weakly determined
     geometry stays near the nominal instead of taking up model errors the parameters do
-    not describe). ValueError for a problem that cannot be solved (too few samples, ...)."""
+    not describe). At level full the arm's scale (``scale_lengths``: its two longest link
+    lengths) stays at robot.json's unless ``free_scale`` or ``free`` names them: a plane
+    and a laser do not measure it (each is listed in ``excluded`` with reason "scale").
+    ValueError for a problem that cannot be solved (too few samples, ...)."""
     options = options or FitOptions()
     if prior is not None and level != "full":
         raise ValueError("a geometry prior needs level full")
@@ -108,10 +124,18 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
     if prior is not None:
         options = replace(options, prior=geometry_prior(layout, *prior))
     mask = free_mask(layout, free)
+    pinned = []
+    if level == "full" and free is None and not free_scale:
+        pinned = [n for n in scale_lengths(robot) if n in layout.names]
+        mask = mask & ~layout.mask(pinned)
     n = len(np.asarray(d_m))
     pidx = np.zeros(n, int) if plate is None else np.asarray(plate, int)
     _, J = predict_with_jacobian(robot, np.asarray(qe, np.int64), initial, pidx, layout)
     bs = select_base(J, layout, mask, tol, row_weights(J, layout, options))
+    if pinned:
+        bs = replace(bs, excluded=sorted(
+            list(bs.excluded) + [Excluded(n, "scale") for n in pinned],
+            key=lambda e: layout.index(e.parameter)))
     pb = Problem.from_arrays(robot, qe, d_m, initial, pidx, free=bs.mask(layout),
                              options=options, layout=layout)
     return Calibration(level, compliance, solve(pb), bs, prior)

@@ -66,6 +66,10 @@ def add_arguments(p):
                         "these stds (a maximum a posteriori fit; e.g. 0.5,0.5): keeps the "
                         "weakly determined lengths from taking up unmodelled errors "
                         "(docs/STUDIES.md, Level 2)")
+    p.add_argument("--free-scale", action="store_true",
+                   help="with --level full: also free the arm's scale (its two longest link "
+                        "lengths), which a laser on planes reads only through its own gain; "
+                        "only with a length reference in the data")
     p.add_argument("--compliance", action="store_true",
                    help="also fit the joint compliance of J2 and J3 (gravity torque from "
                         "robot.json's link masses; seed 5.4)")
@@ -290,13 +294,16 @@ def run(args) -> int:
     options = fit_options(args, scene.robot)
     cal = None
     prior = geometry_prior_arg(args)
+    if args.free_scale and args.level != "full":
+        raise InputError("--free-scale needs --level full")
     if args.level == "offsets" and not args.compliance:  # level 1, as it always was
         res = solve(build_problem(samples, scene, initial, args.free, options))
     else:
         try:
             cal = calibrate_samples(scene.robot, samples, initial, level=args.level,
                                     compliance=args.compliance, free=args.free,
-                                    options=options, prior=prior)
+                                    options=options, prior=prior,
+                                    free_scale=args.free_scale)
         except ValueError as e:
             raise InputError(str(e)) from None
         res = cal.result
