@@ -34,6 +34,7 @@ COMMANDS = {
     "report": "write an HTML report with figures of a result file (calibration or study)",
     "urdf": "export the nominal or calibrated robot as URDF (base, flange, laser)",
     "mjcf": "write a scene's MuJoCo model (robot, tool, cell) for a viewer",
+    "compensate": "correct a program's targets with a calibration (counts the controller plays)",
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,
