@@ -9,10 +9,11 @@ whose pose the nominal model gives (``robot.fk``). Its corrected target q_c solv
     calibrated_flange(q_c) = T
 
 by Newton's method on the pose error (position [m], rotation vector [rad], both in the base
-frame) with the nominal geometric Jacobian (``robot.jacobian``), started from the nominal
-solution (the closed-form IK nearest the previous target, or the joint target itself). The
-calibrated model differs from the nominal by milliradians, so each step gains ~2.5 decades;
-every target's convergence is checked (``Compensation.converged``). The corrected joints
+frame) with the calibrated model's geometric Jacobian (central differences of the seam's
+``flange``: any model), started from the nominal solution (the closed-form IK nearest the
+previous target, or the joint target itself). The calibrated model differs from the
+nominal by milliradians: 2-3 steps, 5-6 near the elbow's stretched singularity (Jacobian
+condition ~6e3). Every target's convergence is checked (``Compensation.converged``). The corrected joints
 are written as counts with robot.json's encoder model (``encoder.joints_to_counts``): the
 controller is left as it is. Rounding to whole counts leaves a residual of its own
 (``rounded_residual_m``, tens of um at the MC70's ~2.3e-5 rad per count).
@@ -43,13 +44,13 @@ from planecal.cell import CellParams
 from planecal.encoder import counts_to_joints, joints_to_counts
 from planecal.errors import InputError
 from planecal.formats.base import MAX_JSON_BYTES, read_bounded, read_json
-from planecal.robot import Robot, fk, ik_nearest, jacobian, within_limits
+from planecal.robot import Robot, fk, ik_nearest, within_limits
 
 TARGETS_FORMAT = "planecal-targets/1"
 COMPENSATED_FORMAT = "planecal-compensated/1"
 TOL_M = 1e-9  # a target is solved when the calibrated flange is within 1 nm ...
 TOL_RAD = 1e-9  # ... and 1 nrad of it
-MAX_ITER = 20
+MAX_ITER = 30
 MAX_TARGETS = 100_000
 COUNT_LIMIT = 1 << 24
 
@@ -364,11 +365,27 @@ def pose_error(T: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.hstack([dp, dw])
 
 
+def flange_jacobian(model: CalibratedKinematics, q: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """The calibrated model's geometric Jacobian (N, 6, 6), rows (v, w) in the base frame,
+    by central differences of ``model.flange`` (any model behind the seam; at the MC70's
+    scale its error is ~1e-12 relative, see the tests against ``robot.jacobian``)."""
+    q = np.atleast_2d(q)
+    n, k = q.shape
+    steps = np.concatenate([np.eye(k) * h, -np.eye(k) * h])  # (2k, k)
+    F = model.flange((q[:, None, :] + steps[None]).reshape(-1, k)).reshape(n, 2 * k, 4, 4)
+    Fp, Fm = F[:, :k], F[:, k:]
+    dp = (Fp[..., :3, 3] - Fm[..., :3, 3]) / (2 * h)  # (n, k, 3)
+    dR = (Fp[..., :3, :3] - Fm[..., :3, :3]) / (2 * h)
+    W = dR @ np.swapaxes(model.flange(q)[:, None, :3, :3], -1, -2)  # [w]x
+    dw = np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
+    return np.swapaxes(np.concatenate([dp, dw], axis=-1), -1, -2)
+
+
 def solve_poses(model: CalibratedKinematics, T: np.ndarray, q0: np.ndarray,
                 tol_m: float = TOL_M, tol_rad: float = TOL_RAD, max_iter: int = MAX_ITER):
     """Joint angles q (N, 6) with model.flange(q) = T (N, 4, 4), by Newton from q0 with the
-    nominal Jacobian: (q, iterations (N,), converged (N,), position residual [m] (N,),
-    rotation residual [rad] (N,))."""
+    model's own Jacobian (``flange_jacobian``): (q, iterations (N,), converged (N,),
+    position residual [m] (N,), rotation residual [rad] (N,))."""
     robot = model.robot
     q = np.array(q0, float, copy=True)
     n = len(q)
@@ -379,8 +396,8 @@ def solve_poses(model: CalibratedKinematics, T: np.ndarray, q0: np.ndarray,
         todo = ~((rp < tol_m) & (rw < tol_rad))
         if not todo.any() or its.max() >= max_iter:
             break
-        J = jacobian(robot, q[todo])
-        q[todo] += np.einsum("nij,nj->ni", np.linalg.pinv(J, rcond=1e-10), e[todo])
+        J = flange_jacobian(model, q[todo])
+        q[todo] += np.einsum("nij,nj->ni", np.linalg.pinv(J, rcond=1e-12), e[todo])
         its[todo] += 1
     return q, its, ~todo, rp, rw
 
