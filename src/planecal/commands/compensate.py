@@ -64,6 +64,7 @@ def run(args) -> int:
     robot = load_robot(args.robot)
     model, doc = load_calibrated(robot, args.params)
     region, sample_paths = _region(args, doc, robot)
+    check_output(out, inputs + sample_paths, COMPENSATED_FORMAT, args.force)  # recorded ones
     targets = read_targets(args.targets, robot)
     comp = compensate(model, targets, region)
     s = comp.summary()
