@@ -257,3 +257,23 @@ def test_command_needs_the_region(calibrated, tmp_path, capsys):
     assert main(["compensate", str(t), "--params", str(changed), "--out",
                  str(tmp_path / "c2.tsv")]) == 2
     assert "SHA-256 differs" in capsys.readouterr().err
+
+
+def test_targets_are_registered_in_the_robots_own_frame():
+    # a model whose delta1 is a turn of the plates no plane sees: in the robot's frame
+    # (J1's zero) the compensation ignores it; in the cell frame it turns every target
+    q, T = _poses(10, seed=4)
+    t = Targets([f"t{i}" for i in range(10)], T, np.full_like(q, np.nan), ["x"] * 10, "x")
+    d1 = DELTA + [0.02, 0, 0, 0, 0, 0]
+    m = OffsetsModel(ROBOT, d1)
+    F = m.robot_frame()
+    c, s = np.cos(0.02), np.sin(0.02)
+    assert np.allclose(F, [[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], atol=1e-12)
+    assert np.allclose(OffsetsModel(ROBOT, DELTA).robot_frame(), np.eye(4), atol=1e-12)
+    rob = compensate(m, t, _region(q, 0.1))
+    ref = compensate(OffsetsModel(ROBOT, DELTA), t, _region(q, 0.1))
+    assert np.abs(rob.q_corrected - ref.q_corrected).max() < 1e-9  # delta1 drops out
+    cell = compensate(m, t, _region(q, 0.1), frame="cell")
+    assert np.abs(cell.correction_rad[:, 0] + 0.02).max() < 1e-9  # J1 turns back by delta1
+    with pytest.raises(InputError, match="--frame"):
+        compensate(m, t, _region(q), frame="tool")

@@ -24,6 +24,14 @@ The seam (``CalibratedKinematics``): anything with ``robot`` and ``flange(q) -> 
 DH + Hayati, base frame, compliance), chosen by ``load_calibrated`` when the result file
 carries the level-2 ``kinematics`` key.
 
+Frames. A plane calibration cannot see where the robot stands among the plates nor J1's
+zero: a turn about J1 (delta1) or a shift of the base moves the plates with it. A level-1
+fit fixes delta1 at 0; a full model may carry that freedom in delta1 or its base frame
+(a 20 mrad delta1 seen on three plates). Targets are therefore registered, by default, in
+the robot's own frame: the model's frame of joint 1 at q = 0 mapped onto the nominal
+model's (``robot_frame``; ``planecal validate``'s AP frame), so ``calibrated_flange(q_c) =
+robot_frame T``. ``frame="cell"`` takes T in the calibration's base frame instead.
+
 The calibrated region (``Region``): the joint-space box of the calibration's samples (the
 range of each joint over them). A model fitted there is only known there; ``outside``
 says how far (rad per joint) a target's corrected joints lie outside it.
@@ -73,6 +81,18 @@ class CalibratedKinematics(Protocol):
 
     def flange(self, q: np.ndarray) -> np.ndarray: ...
 
+    def robot_frame(self) -> np.ndarray:
+        """4x4: the model's frame of joint 1 at q = 0 in its base frame, times the inverse
+        of the nominal model's (identity for the nominal model)."""
+        ...
+
+
+def _registered(robot: Robot, kin) -> np.ndarray:
+    """``kin``'s frame of joint 1 at q = 0 mapped onto robot.json's (``robot_frame``)."""
+    from planecal.kinematics import frames, from_robot
+    z = np.zeros(robot.n_joints)
+    return frames(kin, z)[1] @ np.linalg.inv(frames(from_robot(robot), z)[1])
+
 
 @dataclass(frozen=True)
 class OffsetsModel:
@@ -83,6 +103,10 @@ class OffsetsModel:
 
     def flange(self, q: np.ndarray) -> np.ndarray:
         return fk(self.robot, np.atleast_2d(q), self.delta)
+
+    def robot_frame(self) -> np.ndarray:
+        from planecal.kinematics import from_robot
+        return _registered(self.robot, from_robot(self.robot, self.delta))
 
 
 @dataclass(frozen=True)
@@ -96,6 +120,10 @@ class FullModel:
     def flange(self, q: np.ndarray) -> np.ndarray:
         from planecal.model_full import flange_pose
         return flange_pose(self.robot, np.atleast_2d(q), self.params)
+
+    def robot_frame(self) -> np.ndarray:
+        from planecal.model_full import kinematics_of
+        return _registered(self.robot, kinematics_of(self.robot, self.params))
 
 
 def load_calibrated(robot: Robot, path) -> tuple[CalibratedKinematics, dict]:
@@ -479,14 +507,24 @@ def nominal_solutions(robot: Robot, targets: Targets, q_start: np.ndarray):
     return q, T
 
 
+FRAMES = ("robot", "cell")
+
+
 def compensate(model: CalibratedKinematics, targets: Targets, region: Region,
-               q_start: np.ndarray | None = None) -> Compensation:
+               q_start: np.ndarray | None = None, frame: str = "robot") -> Compensation:
     """Corrected joint targets (module docstring). ``q_start``: where the first Cartesian
-    target's IK branch is chosen (default: the region's centre)."""
+    target's IK branch is chosen (default: the region's centre). ``frame``: what the
+    targets' coordinates are relative to: ``robot`` (default) the robot's own frame, joint
+    1's axis and zero (the model's ``robot_frame``: a calibration's turn about J1 or shift
+    of the base that no plate sees stays out); ``cell`` the calibration's base frame (the
+    frame its planes are in)."""
+    if frame not in FRAMES:
+        raise InputError(f"--frame must be one of {', '.join(FRAMES)}, got {frame!r}")
     robot = model.robot
     q_start = (region.lower + region.upper) / 2 if q_start is None else q_start
     q_nom, T = nominal_solutions(robot, targets, q_start)
-    q_c, its, ok, rp, rw = solve_poses(model, T, q_nom)
+    Tm = model.robot_frame() @ T if frame == "robot" else T  # in the model's base frame
+    q_c, its, ok, rp, rw = solve_poses(model, Tm, q_nom)
     bad = np.flatnonzero(ok & ~within_limits(robot, q_c))
     if len(bad):
         i = bad[0]
@@ -494,14 +532,14 @@ def compensate(model: CalibratedKinematics, targets: Targets, region: Region,
                          "joints leave the joint limits")
     c_nom = joints_to_counts(robot, q_nom)
     c_cor = joints_to_counts(robot, np.where(ok[:, None], q_c, q_nom))
-    e = pose_error(T, model.flange(counts_to_joints(robot, c_cor)))
+    e = pose_error(Tm, model.flange(counts_to_joints(robot, c_cor)))
     return Compensation(list(targets.names), list(targets.where), T, q_nom, q_c, c_nom, c_cor,
                         its, ok, rp, rw, np.linalg.norm(e[:, :3], axis=1),
                         np.linalg.norm(e[:, 3:], axis=1), region.outside(q_c))
 
 
 def compensated_document(comp: Compensation, model: CalibratedKinematics, region: Region,
-                         inputs: dict) -> dict:
+                         inputs: dict, frame: str = "robot") -> dict:
     """The JSON output (``planecal-compensated/1``, docs/COMPENSATE.md)."""
     rows = []
     for i, name in enumerate(comp.names):
@@ -520,7 +558,8 @@ def compensated_document(comp: Compensation, model: CalibratedKinematics, region
             "rounded_residual_mm": float(comp.rounded_residual_m[i] * 1e3),
             "outside_deg": np.degrees(comp.outside_rad[i]).tolist(),
         })
-    return {"format": COMPENSATED_FORMAT, "level": model.level, "inputs": inputs,
+    return {"format": COMPENSATED_FORMAT, "level": model.level, "frame": frame,
+            "robot_frame": model.robot_frame().tolist(), "inputs": inputs,
             "region": region.to_dict(), "summary": comp.summary(), "targets": rows}
 
 

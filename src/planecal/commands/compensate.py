@@ -34,6 +34,10 @@ def add_arguments(p):
     p.add_argument("--robot", default="mc70", help="robot description (default %(default)s)")
     p.add_argument("--allow-outside", action="store_true",
                    help="write targets outside the calibrated region too (and say how far)")
+    p.add_argument("--frame", choices=["robot", "cell"], default="robot",
+                   help="what the targets' coordinates are relative to: the robot's own frame "
+                        "(J1's axis and zero, as the controller's programs; default) or the "
+                        "calibration's cell frame (its planes')")
     p.add_argument("--force", action="store_true",
                    help="replace --out even if it is not an earlier compensate output")
 
@@ -66,7 +70,7 @@ def run(args) -> int:
     region, sample_paths = _region(args, doc, robot)
     check_output(out, inputs + sample_paths, COMPENSATED_FORMAT, args.force)  # recorded ones
     targets = read_targets(args.targets, robot)
-    comp = compensate(model, targets, region)
+    comp = compensate(model, targets, region, frame=args.frame)
     s = comp.summary()
     bad = [comp.names[i] for i in np.flatnonzero(~comp.converged)]
     if bad:
@@ -94,7 +98,7 @@ def run(args) -> int:
     if out.suffix.lower() == ".json":
         save_json(out, compensated_document(
             comp, model, region, {"targets": str(args.targets), "params": str(args.params),
-                                  "samples": [str(p) for p in sample_paths]}))
+                                  "samples": [str(p) for p in sample_paths]}, args.frame))
     else:
         write_counts_table(out, comp)
     print(f"corrected targets written to {out}")
