@@ -14,7 +14,8 @@ compensated counts (``compensate.compensate`` with the calibration's model):
   ``planecal validate`` commands them. For a level-1 model the compensated counts are
   exactly ``validate``'s calibrated ones (the same IK with the offsets).
 
-Each target is visited ``cycles`` times in turn; the twin settles with a fresh
+Targets whose solve does not converge (the calibrated model cannot reach them: the
+command refuses them) are counted in ``not_converged`` and left out of the AP. Each target is visited ``cycles`` times in turn; the twin settles with a fresh
 repeatability draw per visit and its *true* flange position is read. Per target, as ISO
 9283's AP: ``|barycentre of the attained positions - commanded position|``, in two frames:
 
@@ -73,12 +74,15 @@ def play(twin, counts: np.ndarray, cycles: int) -> np.ndarray:
 
 
 def accuracy(twin, comp, frame: np.ndarray, cycles: int) -> dict:
-    """AP [mm] per target of a ``Compensation``, nominal vs compensated counts, in the
-    robot's frame ``frame`` and in the cell frame."""
-    P = comp.pose[:, :3, 3]
+    """AP [mm] per target of a ``Compensation`` whose solve converged (the command refuses
+    the others), nominal vs compensated counts, in the robot's frame ``frame`` and in the
+    cell frame."""
+    ok = comp.converged
+    P = comp.pose[ok, :3, 3]
     Finv = np.linalg.inv(frame)
     out = {}
-    for name, counts in (("nominal", comp.counts_nominal), ("compensated", comp.counts_corrected)):
+    for name, counts in (("nominal", comp.counts_nominal[ok]),
+                         ("compensated", comp.counts_corrected[ok])):
         bary = play(twin, counts, cycles).mean(0)
         out[name] = np.linalg.norm(bary @ Finv[:3, :3].T + Finv[:3, 3] - P, axis=1) * 1e3
         out[name + "_cell"] = np.linalg.norm(bary - P, axis=1) * 1e3
@@ -123,6 +127,8 @@ def compensation_study(scene, world, options, model: CalibratedKinematics, sampl
     comp_iso = compensate(model, iso, region, q_start=q_cal)
     out = {"targets": n_targets, "cycles": cycles, "iso_edge_mm": edge * 1e3,
            "converged": int(comp_val.converged.sum() + comp_iso.converged.sum()),
+           "not_converged": [n for c in (comp_val, comp_iso)
+                             for n, ok in zip(c.names, c.converged) if not ok],
            "iso_outside_region": int(comp_iso.outside.sum()),
            "rounded_residual_max_mm": float(max(comp_val.rounded_residual_m.max(),
                                                 comp_iso.rounded_residual_m.max()) * 1e3),
