@@ -4,7 +4,8 @@ For 1, 2 and 3 of the scene's plates (every subset), the parameters random colli
 poses on those plates can identify (a rank test of the distance Jacobian: the base set,
 and each excluded parameter with its reason) and the predicted std of each identifiable
 one at the twin's noise (planecal.studies.layouts). In the table, n1 is the first plate
-of that layout, n2 the second. Level 1's parameters (joint offsets, sensor pose, planes).
+of that layout, n2 the second. --level offsets: level 1's parameters (joint offsets,
+sensor pose, planes); --level full: the whole kinematic model's (level 2).
 """
 from __future__ import annotations
 
@@ -19,6 +20,9 @@ def add_arguments(p):
     p.add_argument("--free", default=None,
                    help="parameters to test, comma-separated, or 'all' (default: the "
                         "calibration's default free set, delta1 and delta6 fixed)")
+    p.add_argument("--level", choices=["offsets", "full"], default="offsets",
+                   help="the model's parameters: level 1's (joint offsets, sensor, planes) or "
+                        "the whole kinematic model's (planecal.calibration, level 2)")
     p.add_argument("--tol", type=float, default=1e-6,
                    help="rank threshold on the scaled singular values (default %(default)g)")
     p.add_argument("--out", help="write the study (JSON, planecal-layouts/1) here")
@@ -40,10 +44,22 @@ def run(args) -> int:
     if not 0 < args.tol < 1:
         raise InputError(f"--tol must be in (0, 1), got {args.tol:g}")
     scene = load_scene(args.scene)
-    res = layout_study(scene, level1_layout, args.free, args.samples, args.seed,
+    layout_for = level1_layout if args.level == "offsets" else _full_layouts(scene.robot)
+    res = layout_study(scene, layout_for, args.free, args.samples, args.seed,
                        CollisionWorld(scene), tol=args.tol)
-    print(format_layouts(res, level1_layout(len(scene.plates)).display))
+    res["level"] = args.level
+    print(format_layouts(res, layout_for(len(scene.plates)).display))
     if out:
         save_json(out, res)
         print(f"study written to {out}")
     return 0
+
+
+def _full_layouts(robot):
+    """n_planes -> the whole model's layout (level 2's ``calibration.layout_for``)."""
+    try:
+        from planecal.calibration import layout_for
+    except ModuleNotFoundError:
+        raise InputError("--level full: this planecal has no whole-model calibration "
+                         "(planecal.calibration)") from None
+    return lambda n: layout_for(robot, n, "full")

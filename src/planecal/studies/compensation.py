@@ -15,8 +15,9 @@ compensated counts (``compensate.compensate`` with the calibration's model):
   exactly ``validate``'s calibrated ones (the same IK with the offsets).
 
 Targets whose solve does not converge (the calibrated model cannot reach them: the
-command refuses them) are counted in ``not_converged`` and left out of the AP. Each target is visited ``cycles`` times in turn; the twin settles with a fresh
-repeatability draw per visit and its *true* flange position is read. Per target, as ISO
+command refuses them) are counted in ``not_converged`` and left out of the AP. Each
+target is visited ``cycles`` times in turn; the twin settles with a fresh repeatability
+draw per visit and its *true* flange position is read. Per target, as ISO
 9283's AP: ``|barycentre of the attained positions - commanded position|``, in two frames:
 
 * the robot's (``robot_frame``): the true robot's frame of joint 1 at its zero mapped onto
