@@ -36,6 +36,8 @@ COMMANDS = {
     "urdf": "export the nominal or calibrated robot as URDF (base, flange, laser)",
     "mjcf": "write a scene's MuJoCo model (robot, tool, cell) for a viewer",
     "sweep": "accuracy against robot time over a grid of worlds, pose designs and sizes",
+    "compensate": "correct a program's targets with a calibration (counts the controller plays)",
+    "layouts": "identifiable parameters and predicted std for 1, 2 and 3 of a scene's plates",
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,
