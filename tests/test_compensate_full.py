@@ -1,9 +1,6 @@
-"""compensate behind the seam with level 2's whole model (``FullModel``: planecal.model_full).
-Runs once level 2 (issue 13 items 1-3) is merged; skipped where planecal has no full model."""
+"""compensate behind the seam with level 2's whole model (``FullModel``: planecal.model_full)."""
 import numpy as np
-import pytest
 
-pytest.importorskip("planecal.model_full")
 
 from planecal.cell import CellParams  # noqa: E402
 from planecal.compensate import (FullModel, OffsetsModel, Region, Targets,  # noqa: E402

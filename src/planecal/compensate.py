@@ -133,11 +133,6 @@ def load_calibrated(robot: Robot, path) -> tuple[CalibratedKinematics, dict]:
     doc = read_json(path, "calibration result")
     params = load_params(path)
     if isinstance(doc, dict) and doc.get("kinematics") is not None:
-        try:
-            import planecal.model_full  # noqa: F401  (level 2's model, issue 13 items 1-3)
-        except ModuleNotFoundError:
-            raise InputError(f"{path}: a full-model result (key 'kinematics'), and this "
-                             "planecal has no full model (planecal.model_full)") from None
         return FullModel(robot, params), doc
     return OffsetsModel(robot, params.joint_offsets.copy()), doc
 
@@ -414,7 +409,6 @@ def solve_poses(model: CalibratedKinematics, T: np.ndarray, q0: np.ndarray,
     """Joint angles q (N, 6) with model.flange(q) = T (N, 4, 4), by Newton from q0 with the
     model's own Jacobian (``flange_jacobian``): (q, iterations (N,), converged (N,),
     position residual [m] (N,), rotation residual [rad] (N,))."""
-    robot = model.robot
     q = np.array(q0, float, copy=True)
     n = len(q)
     its = np.zeros(n, int)
