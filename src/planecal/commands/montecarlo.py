@@ -122,7 +122,7 @@ def run(args) -> int:
         t0 = time.perf_counter()
         runs = run_many(st, engine, results=results, resume=args.resume)
         dt = time.perf_counter() - t0
-        print(f"runs: {st.runs} in {dt:.1f} s ({st.runs / dt:.3f} runs/s) on "
+        print(f"runs: {st.runs} in {dt:.2f} s ({st.runs / dt:.4f} runs/s), "
               f"{engine.describe()}" + (f"; each written to {results}" if results else ""),
               file=sys.stderr, flush=True)
         res = analyze(runs, st)
