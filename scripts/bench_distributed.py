@@ -1,81 +1,160 @@
 #!/usr/bin/env python
-"""Benchmark: the same Monte Carlo runs in this process (``Engine(jobs=1)``) and on the
-default in-process LocalCluster (``Engine()``: one worker process per core), side by side.
+"""Benchmark of the product command: ``planecal montecarlo`` run as a user runs it (a
+subprocess), three ways, on the same settings:
 
-    python scripts/bench_distributed.py [--runs 40] [--samples 150] [--mode twin]
-                                        [--scene thesis_final] [--jobs N]
+* ``jobs1``: ``--jobs 1`` (in the command's process);
+* ``cluster``: no engine option (the default: a LocalCluster, one worker process per core);
+* ``scheduler``: ``--scheduler tcp://127.0.0.1:PORT`` after this script starts
+  ``dask scheduler`` and ``--workers`` ``dask worker ... --nthreads 1`` processes by hand
+  (stopped at the end, whatever happens).
 
-Each run is ``studies.montecarlo.run_one`` (twin mode: the sampling run's planner with
-collision checks, the twin at rest per sample, a calibration, the bounds at the truth).
-Both engines warm up first (``warm_twin``: imports, the numba tick loaded from its cache),
-timed apart; the throughput is runs over the map's wall time. The results must be
-identical (every field, arrays bitwise), or the script fails. The machine's load average
-is printed before and after: on a shared machine the ratio means little without it.
-Last line, exactly: ``distributed_speedup: X`` (map throughput, cluster over jobs=1;
-issue 15's target: >= 1.7 on 2 cores).
+    python scripts/bench_distributed.py [--runs 200] [--samples 150] [--mode twin]
+                                        [--errors realistic] [--workers 2]
+
+Each command writes its summary JSON; the script fails unless the three ``run_errors``
+(in run order) are identical. Throughput: runs per second of the command's map (its
+``runs: R in T s`` line on stderr: from the first run submitted to the last result, after
+the engine started and warmed up), and of the whole command (wall time, start-up
+included). The machine's load average is printed before and after each way: on a shared
+machine the ratios mean little without it. Lines ``name: X``; the last one is
+``distributed_speedup: X``, the smaller of the two distributed map throughputs over the
+``--jobs 1`` one (issue 15's target: >= 1.7 on 2 cores).
 """
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import os
+import re
+import signal
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "disable")
+BIN = Path(sys.executable).parent
+RUNS_LINE = re.compile(r"^runs: (\d+) in ([0-9.]+) s \(([0-9.]+) runs/s\).*$", re.M)
 
 
-def same(a: list, b: list) -> bool:
-    import numpy as np
-    for ra, rb in zip(a, b):
-        for k in ra:
-            va, vb = ra[k], rb[k]
-            if isinstance(va, np.ndarray):
-                if va.dtype != vb.dtype or va.shape != vb.shape or va.tobytes() != vb.tobytes():
-                    return False
-            elif json.dumps(va) != json.dumps(vb):
-                return False
-    return len(a) == len(b)
+def load() -> str:
+    return "/".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def run_command(argv: list[str], log) -> tuple[float, float, str]:
+    """(map runs per second, wall seconds, stderr) of one planecal command."""
+    t0 = time.perf_counter()
+    p = subprocess.run([str(BIN / "planecal"), *argv], stdout=log, stderr=subprocess.PIPE,
+                       text=True, timeout=4 * 3600)
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        sys.exit(f"planecal {' '.join(argv)} failed ({p.returncode}):\n{p.stderr}")
+    m = RUNS_LINE.search(p.stderr)
+    if m is None:
+        sys.exit(f"no 'runs: R in T s' line in the command's stderr:\n{p.stderr}")
+    return float(m.group(3)), wall, p.stderr
+
+
+def stop(procs) -> None:
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)  # the session this script started
+            p.wait(timeout=10)
+
+
+def start_by_hand(d: Path, workers: int, log) -> tuple[str, list]:
+    """``dask scheduler`` + ``workers`` ``dask worker`` processes on 127.0.0.1, as the
+    README starts them; returns (address, processes) once every worker has joined."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
+    sfile = d / "dask-scheduler.json"
+    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
+                               "--port", "0", "--no-dashboard", "--scheduler-file", str(sfile)],
+                              stdout=log, stderr=log, env=env, start_new_session=True)]
+    try:
+        deadline = time.monotonic() + 60
+        while not sfile.exists() or not sfile.read_text().strip():
+            if time.monotonic() > deadline or procs[0].poll() is not None:
+                raise RuntimeError("the dask scheduler did not start (see its log)")
+            time.sleep(0.2)
+        addr = json.loads(sfile.read_text())["address"]
+        for _ in range(workers):
+            procs.append(subprocess.Popen(
+                [str(BIN / "dask"), "worker", addr, "--nthreads", "1", "--no-dashboard"],
+                stdout=log, stderr=log, env=env, start_new_session=True))
+        from distributed import Client
+        with Client(addr, timeout=60) as c:
+            c.wait_for_workers(workers, timeout=120)
+        return addr, procs
+    except BaseException:
+        stop(procs)
+        raise
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=40)
+    ap.add_argument("--runs", type=int, default=200)
     ap.add_argument("--samples", type=int, default=150)
     ap.add_argument("--mode", default="twin", choices=("twin", "synthetic", "rehearse"))
+    ap.add_argument("--errors", default=None, help="error profile (default: the command's)")
     ap.add_argument("--scene", default="thesis_final")
-    ap.add_argument("--jobs", type=int, default=None, help="cluster workers (default: cores)")
+    ap.add_argument("--workers", type=int, default=2, help="dask workers started by hand")
+    ap.add_argument("--only", default="jobs1,cluster,scheduler",
+                    help="comma-separated ways to run (default: all three)")
     args = ap.parse_args()
-    from planecal.studies.distributed import Engine, warm_twin
-    from planecal.studies.montecarlo import MCSettings, run_one
-
-    st = MCSettings(scene=args.scene, samples=args.samples, runs=args.runs, mode=args.mode,
-                    seed=4242)
-    items = [(st, k) for k in range(st.runs)]
-    warm = functools.partial(warm_twin, args.scene)
-    print(f"cpus {os.cpu_count()}, load average {os.getloadavg()[0]:.2f} (1 min) before; "
-          f"{args.runs} {args.mode} runs of {args.samples} samples on {args.scene}")
-    out = {}
-    for label, kw in (("jobs=1", {"jobs": 1}), ("LocalCluster", {"jobs": args.jobs})):
-        t0 = time.perf_counter()
-        with Engine(warmup=warm, **kw) as eng:
-            t1 = time.perf_counter()
-            res = eng.map(run_one, items)
-            t2 = time.perf_counter()
-            desc = eng.describe()
-        t3 = time.perf_counter()
-        out[label] = (res, t2 - t1, t3 - t0)
-        print(f"{label:>12}: {desc}; start + warm-up {t1 - t0:.2f} s, map {t2 - t1:.2f} s "
-              f"({args.runs / (t2 - t1):.3f} runs/s), close {t3 - t2:.2f} s; "
-              f"load average {os.getloadavg()[0]:.2f}")
-    (r1, m1, w1), (r2, m2, w2) = out["jobs=1"], out["LocalCluster"]
-    if not same(r1, r2):
-        print("the two engines gave different results", file=sys.stderr)
+    ways = args.only.split(",")
+    base = ["montecarlo", "--scene", args.scene, "--runs", str(args.runs), "--samples",
+            str(args.samples), "--mode", args.mode]
+    if args.errors:
+        base += ["--errors", args.errors]
+    print(f"cpus {os.cpu_count()}; planecal {' '.join(base)}")
+    docs, rate, wall = {}, {}, {}
+    with tempfile.TemporaryDirectory(prefix="bench_distributed_") as tmp:
+        d = Path(tmp)
+        log = open(d / "log.txt", "w")
+        for way in ways:
+            procs = []
+            extra = {"jobs1": ["--jobs", "1"], "cluster": []}.get(way)
+            try:
+                if way == "scheduler":
+                    addr, procs = start_by_hand(d, args.workers, log)
+                    extra = ["--scheduler", addr]
+                elif extra is None:
+                    sys.exit(f"--only: unknown way {way!r}")
+                before = load()
+                out = d / f"{way}.json"
+                r_map, t_wall, err = run_command(base + extra + ["--out", str(out)], log)
+            finally:
+                stop(procs[1:])
+                stop(procs[:1])
+            docs[way] = json.loads(out.read_text())
+            rate[way], wall[way] = r_map, t_wall
+            line = RUNS_LINE.search(err).group(0).split("; each written")[0]
+            print(f"{way}: {line}; whole command {t_wall:.1f} s; load average {before} "
+                  f"before, {load()} after", flush=True)
+        log.close()
+    for way in ways:
+        print(f"{way}_runs_per_s: {rate[way]:.4f}")
+        print(f"{way}_command_wall_s: {wall[way]:.1f}")
+    first = docs[ways[0]]["run_errors"]
+    same = all(docs[w]["run_errors"] == first for w in ways)
+    print(f"run_errors_identical: {int(same)}")
+    if not same:
+        print("the ways gave different run_errors", file=sys.stderr)
         return 1
-    print("results identical (every field, arrays bitwise)")
-    print(f"whole map incl. start, warm-up and close: x{w1 / w2:.2f}")
-    print(f"distributed_speedup: {m1 / m2:.2f}")
+    if "jobs1" not in ways:
+        return 0
+    dist = [w for w in ways if w != "jobs1"]
+    for w in dist:
+        print(f"{w}_speedup: {rate[w] / rate['jobs1']:.2f}")
+        print(f"{w}_command_speedup: {wall['jobs1'] / wall[w]:.2f}")
+    if dist:
+        print(f"distributed_speedup: {min(rate[w] for w in dist) / rate['jobs1']:.2f}")
     return 0
 
 

@@ -28,10 +28,9 @@ def main() -> int:
     args = ap.parse_args()
     from planecal.fit import Problem, solve
     from planecal.scene import nominal_params
-    from planecal.studies.common import check_jobs
     from planecal.studies.montecarlo import MCSettings, _scene, run_many, truth_for, twin_samples
 
-    jobs = check_jobs(args.jobs)
+    jobs = args.jobs or (os.cpu_count() or 1)  # run_many: an Engine of this many jobs
     print(f"cpus {os.cpu_count()}, jobs {jobs}, load average {os.getloadavg()[0]:.1f}")
     st = MCSettings(samples=args.samples, runs=args.runs, mode=args.mode, seed=4242)
     t0 = time.perf_counter()

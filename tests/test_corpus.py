@@ -16,10 +16,7 @@ import hashlib
 import io
 import json
 import logging
-import os
 import random
-import resource
-import shutil
 import signal
 import subprocess
 import sys

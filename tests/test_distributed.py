@@ -176,12 +176,15 @@ def _stop(procs):
             p.wait(timeout=10)
 
 
-def test_scheduler_and_workers_started_by_hand_give_the_same_results(tmp_path, reference):
+@pytest.fixture(scope="module")
+def by_hand(tmp_path_factory):
     """`dask scheduler` and two `dask worker` processes on 127.0.0.1, started as a user
-    would (the README's two commands)."""
-    sfile = tmp_path / "scheduler.json"
+    would (the README's two commands): the scheduler's address. Bounded waits; stopped
+    (and, past 20 s, killed) at the end of the module whatever happened."""
+    d = tmp_path_factory.mktemp("dask")
+    sfile = d / "scheduler.json"
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
-    log = open(tmp_path / "dask.log", "w")
+    log = open(d / "dask.log", "w")
     procs = [subprocess.Popen(DASK + ["scheduler", "--host", "127.0.0.1", "--port", "0",
                                       "--no-dashboard", "--dashboard-address", "127.0.0.1:0",
                                       "--scheduler-file", str(sfile)],
@@ -190,25 +193,31 @@ def test_scheduler_and_workers_started_by_hand_give_the_same_results(tmp_path, r
         deadline = time.monotonic() + 60
         while not sfile.exists() or not sfile.read_text().strip():
             assert time.monotonic() < deadline, "the scheduler did not start within 60 s"
-            assert procs[0].poll() is None, (tmp_path / "dask.log").read_text()
+            assert procs[0].poll() is None, (d / "dask.log").read_text()
             time.sleep(0.2)
         addr = json.loads(sfile.read_text())["address"]
         assert addr.startswith("tcp://127.0.0.1:")
         for _ in range(2):
             procs.append(subprocess.Popen(
                 DASK + ["worker", addr, "--nthreads", "1", "--no-dashboard", "--host",
-                        "127.0.0.1", "--dashboard-address", "127.0.0.1:0"], stdout=log, stderr=log, env=env, start_new_session=True))
+                        "127.0.0.1", "--dashboard-address", "127.0.0.1:0"], stdout=log,
+                stderr=log, env=env, start_new_session=True))
         with D.Engine(scheduler=addr, connect_timeout_s=60) as eng:
             eng.client.wait_for_workers(2, timeout=60)
-            assert eng.slots == 2
-            for e in eng.worker_env():
-                assert e["OPENBLAS_NUM_THREADS"] == "1" and e["MUJOCO_GL"] == "disable"
-            res = eng.map(run_one, ITEMS)
-        assert_same_results(res, reference)
+        yield addr
     finally:
         _stop(procs[1:])
         _stop(procs[:1])
         log.close()
+
+
+def test_scheduler_and_workers_started_by_hand_give_the_same_results(by_hand, reference):
+    with D.Engine(scheduler=by_hand, connect_timeout_s=60) as eng:
+        assert eng.slots == 2
+        for e in eng.worker_env():
+            assert e["OPENBLAS_NUM_THREADS"] == "1" and e["MUJOCO_GL"] == "disable"
+        res = eng.map(run_one, ITEMS)
+    assert_same_results(res, reference)
 
 
 def test_unreachable_scheduler_is_one_line_error():
@@ -293,3 +302,122 @@ def test_killed_map_resumes_to_the_uninterrupted_results(tmp_path, reference, si
     assert_same_results(res, reference)
     assert sorted(json.loads(ln)["key"] for ln in out.read_text().splitlines()[1:]) == \
         list(range(6))
+
+
+# ----- the studies and their commands on the engine ---------------------------------------------
+
+MC_ARGS = ["montecarlo", "--mode", "synthetic", "--runs", "6", "--samples", "30", "--seed", "77"]
+
+
+def _mc(d, name, *extra) -> dict:
+    from planecal.cli import main
+    out = d / f"{name}.json"
+    assert main(MC_ARGS + ["--out", str(out), *extra]) == 0
+    return json.loads(out.read_text())
+
+
+@pytest.fixture(scope="module")
+def mc_jobs1(tmp_path_factory):
+    """`planecal montecarlo ... --jobs 1`: the reference document."""
+    return _mc(tmp_path_factory.mktemp("mc"), "jobs1", "--jobs", "1")
+
+
+# a small realistic world leaves a parameter with no finite reported std (analyze's nanmean)
+@pytest.mark.filterwarnings("ignore:Mean of empty slice:RuntimeWarning")
+def test_montecarlo_run_errors_are_the_same_on_a_local_cluster(cluster):
+    """Twin runs in the realistic world (its ticks, backlash, thermal state and gear phases
+    in a worker process) and synthetic runs: analyze's run_errors, in run order, bit for bit
+    the same on 2 workers as in this process."""
+    from planecal.studies.montecarlo import analyze, run_many
+    for st in (MCSettings(errors="realistic", samples=30, runs=2, seed=31),
+               MCSettings(mode="synthetic", samples=30, runs=6, seed=77)):
+        here = analyze(run_many(st, 1, quiet=True), st)
+        there = analyze(run_many(st, cluster, quiet=True), st)
+        assert len(here["run_errors"]) == st.runs
+        assert json.dumps(there["run_errors"]) == json.dumps(here["run_errors"])
+        assert json.dumps(there) == json.dumps(here)  # and so every figure of the analysis
+
+
+def test_montecarlo_command_default_local_cluster_gives_the_jobs_1_document(
+        tmp_path, mc_jobs1, capsys):
+    doc = _mc(tmp_path, "default")  # no --jobs: a LocalCluster, one worker per core
+    err = capsys.readouterr().err
+    assert f"local Dask cluster: {os.cpu_count()} worker processes" in err
+    assert "N=30 6/6" in err  # the progress reached the end as the runs completed
+    assert doc["run_errors"] == mc_jobs1["run_errors"] and doc == mc_jobs1
+    lines = (tmp_path / "default.runs.jsonl").read_text().splitlines()
+    assert sorted(json.loads(ln)["key"] for ln in lines[1:]) == list(range(6))
+
+
+def test_montecarlo_command_on_scheduler_started_by_hand(by_hand, tmp_path, mc_jobs1, capsys):
+    doc = _mc(tmp_path, "sched", "--scheduler", by_hand)
+    assert f"Dask scheduler {by_hand}: 2 worker threads" in capsys.readouterr().err
+    assert doc["run_errors"] == mc_jobs1["run_errors"] and doc == mc_jobs1
+
+
+def test_montecarlo_command_resume_runs_only_the_missing_runs(tmp_path, mc_jobs1, capsys):
+    from planecal.cli import main
+    _mc(tmp_path, "m", "--jobs", "1")
+    rfile = tmp_path / "m.runs.jsonl"
+    lines = rfile.read_text().splitlines()
+    assert len(lines) == 7
+    # keep runs 0-2, and mark run 0's result: a resumed study must read it back, not rerun it
+    rec = json.loads(lines[1])
+    assert rec["key"] == 0
+    rec["result"]["err"][0] = 0.5
+    rfile.write_text("\n".join([lines[0], json.dumps(rec)] + lines[2:4]) + "\n")
+    capsys.readouterr()
+    # an existing results file is continued or replaced, never silently appended to
+    assert main(MC_ARGS + ["--jobs", "1", "--out", str(tmp_path / "m.json")]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "m.runs.jsonl: results of an earlier run exist (--resume to continue them, --force "
+        "to start afresh)")
+    doc = _mc(tmp_path, "m", "--jobs", "1", "--resume")
+    assert doc["run_errors"][0][0] == 0.5  # read back
+    assert doc["run_errors"][0][1:] == mc_jobs1["run_errors"][0][1:]
+    assert doc["run_errors"][1:] == mc_jobs1["run_errors"][1:]  # 1, 2 read, 3-5 run again
+    keys = [json.loads(ln)["key"] for ln in rfile.read_text().splitlines()[1:]]
+    assert keys == [0, 1, 2, 3, 4, 5]
+    # --force starts afresh: run 0 is run again
+    assert _mc(tmp_path, "m", "--jobs", "1", "--force")["run_errors"] == mc_jobs1["run_errors"]
+    # --results names the file; --resume without any file is refused
+    assert _mc(tmp_path, "n", "--jobs", "1", "--results", str(tmp_path / "r.jsonl")) == \
+        mc_jobs1
+    assert (tmp_path / "r.jsonl").exists() and not (tmp_path / "n.runs.jsonl").exists()
+    assert main(MC_ARGS + ["--jobs", "1", "--resume"]) == 2
+    assert "--resume needs a results file" in capsys.readouterr().err
+
+
+def test_engine_options_are_checked_before_any_run(capsys):
+    from planecal.cli import main
+    assert main(MC_ARGS + ["--jobs", "0"]) == 2
+    assert capsys.readouterr().err.strip().endswith("--jobs must be at least 1, got 0")
+    assert main(MC_ARGS + ["--jobs", "2", "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    assert "exclude each other" in capsys.readouterr().err
+
+
+def test_bootstrap_fits_are_the_same_on_a_local_cluster(cluster, tmp_path):
+    """Subset r of size s is drawn from (seed, s, r) by the run itself: the same fits on 2
+    workers as here, through a results file and resumed."""
+    from planecal.fit import FitOptions, Problem
+    from planecal.scene import load_scene, nominal_params
+    from planecal.studies.bootstrap import BootstrapSettings, bootstrap
+    from planecal.synthetic import synthetic_samples
+    from planecal.twin.truth import draw_truth
+    scene = load_scene("thesis_final")
+    qe, d, plate = synthetic_samples(scene, draw_truth(scene, 3), 120,
+                                     np.random.default_rng(1), noise_m=20e-6)
+    problem = Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate,
+                                  options=FitOptions())
+    st = BootstrapSettings((30, 60), 4, seed=5)
+    here = bootstrap(problem, st, 1, quiet=True)
+    out = tmp_path / "b.jsonl"
+    there = bootstrap(problem, st, cluster, quiet=True, results=out)
+    assert json.dumps(D.encode(there)) == json.dumps(D.encode(here))
+    header, fits = D.read_results(out)
+    assert sorted(k for k, _ in fits) == [[s, r] for s in (30, 60) for r in range(4)]
+    assert header["study"] == "bootstrap" and header["seed"] == 5
+    more = bootstrap(problem, BootstrapSettings((30, 60), 6, seed=5), cluster, quiet=True,
+                     results=out, resume=True)  # two more subsets per size: 4 fits run
+    assert len(D.read_results(out)[1]) == 12
+    assert more["sizes"][0]["fits"] == 6

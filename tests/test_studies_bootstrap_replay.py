@@ -47,12 +47,30 @@ def test_bootstrap_spread_shrinks_and_brackets_the_truth(pool):
     assert big["warning"] is not None and "50%" in big["warning"]  # 120 of 240
 
 
+def test_subset_r_of_size_s_is_fixed_by_seed_size_and_r(pool):
+    """Issue 15: a run's seed is fixed by its cell and its index: subset r of size s is the
+    same whatever other sizes the study has (and whoever fits it: test_distributed)."""
+    from planecal.studies.bootstrap import subset_indices
+    scene, truth, qe, d, plate = pool
+    problem = Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate)
+    both = bootstrap(problem, BootstrapSettings((30, 60), 3, seed=4), quiet=True)
+    alone = bootstrap(problem, BootstrapSettings((60,), 3, seed=4), quiet=True)
+    assert both["sizes"][1] == alone["sizes"][0]
+    other = bootstrap(problem, BootstrapSettings((60,), 3, seed=5), quiet=True)
+    assert other["sizes"][0]["params"]["delta3"] != alone["sizes"][0]["params"]["delta3"]
+    idx = subset_indices(240, 60, 2, 4)
+    assert len(set(idx.tolist())) == 60 and np.all(np.diff(idx) > 0) and idx[-1] < 240
+    np.testing.assert_array_equal(idx, np.sort(
+        np.random.default_rng([4, 60, 2]).choice(240, 60, replace=False)))
+    assert not np.array_equal(idx, subset_indices(240, 60, 1, 4))
+
+
 def test_bootstrap_command(pool, tmp_path, capsys):
     scene, truth, qe, d, plate = pool
     f = tmp_path / "pool.tsv"
     write_samples(f, qe, d * 1e3)
     out = tmp_path / "B.json"
-    assert main(["bootstrap", str(f), "--sizes", "40,100", "--repeats", "3",
+    assert main(["bootstrap", str(f), "--sizes", "40,100", "--repeats", "3", "--jobs", "1",
                  "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "subset size 40" in text and "WARNING" in text  # 100 of 240 > 30 %

@@ -35,7 +35,7 @@ def test_twin_mode_reproduces_the_rehearsal_sample_for_sample():
 
 def test_synthetic_monte_carlo_meets_the_bound():
     st = MCSettings(mode="synthetic", samples=60, runs=24, seed=5)
-    res = analyze(run_many(st, jobs=2, quiet=True), st)
+    res = analyze(run_many(st, 2, quiet=True), st)
     for n in ("delta3", "delta4", "delta5"):
         p = res["params"][n]
         # 24 runs: a std is known to +-15 %; allow 3 standard errors
@@ -77,7 +77,7 @@ def test_weighted_monte_carlo_reports_the_weighted_fit():
     # (~1 +- 11 % in std at 60 samples), so the same ratio for every offset; the
     # unweighted fit reports the white-noise form, off by different ratios
     base = dict(scene="three_plates", mode="synthetic", samples=60, runs=2, seed=3)
-    runs = {w: run_many(MCSettings(weighted=w, **base), jobs=1, quiet=True) for w in (False, True)}
+    runs = {w: run_many(MCSettings(weighted=w, **base), 1, quiet=True) for w in (False, True)}
     res = {w: analyze(runs[w], MCSettings(weighted=w, **base)) for w in (False, True)}
     offsets = ("delta2", "delta3", "delta4", "delta5")
     idx = [res[True]["free"].index(n) for n in offsets]
@@ -97,7 +97,7 @@ def test_weighted_monte_carlo_reports_the_weighted_fit():
 
 def test_three_planes_do_not_free_delta1_delta6():
     st = MCSettings(scene="three_plates", mode="synthetic", samples=60, runs=2, seed=3)
-    runs = run_many(st, jobs=1, quiet=True)
+    runs = run_many(st, 1, quiet=True)
     res = analyze(runs, st)
     bad = res["not_identifiable_all_free"]
     assert "delta1" in bad and "delta6" in bad

@@ -1,11 +1,18 @@
 """planecal bootstrap SAMPLES... [--sizes 30,50,100,150] [--repeats 10] [--seed K]
-[--initial P.json] [--scene S] [--free NAMES] [--jobs J] [--out B.json]
+[--initial P.json] [--scene S] [--free NAMES] [--out B.json]
+[--jobs J | --scheduler tcp://HOST:PORT] [--results FILE.jsonl] [--resume]
 
 Seed 9.3's result analysis: random subsets of each size drawn from the pool of samples,
 each calibrated from the same initial parameters; per size the spread (std, min, max) of
 every free parameter, next to the std the fits report. Subsets that are a large share of
 the pool (> 30 %) are flagged with their expected overlap, and every size also shows the
 spread corrected to independent sets (see planecal.studies.bootstrap).
+
+The fits go through planecal.studies.distributed (--jobs 1: in this process; default: a
+local Dask cluster, one worker process per core; --scheduler: a cluster you run), the
+same numbers every way: subset r of size s comes from the seed, s and r alone. Each fit
+is written as it completes to --results FILE.jsonl (default with --out B.json:
+B.runs.jsonl next to it); --resume fits only the subsets not in it yet.
 """
 from __future__ import annotations
 
@@ -25,12 +32,14 @@ def add_arguments(p):
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values (default %(default)s)")
     p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
     p.add_argument("--max-iter", type=int, default=30)
-    p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="also write the plots as a Rerun recording (planecal view FILE)")
     p.add_argument("--out", help="write the result (JSON) here")
     p.add_argument("--force", action="store_true",
                    help="replace --out even if it is not an earlier bootstrap result")
+    from planecal.commands.engine_options import add_engine_arguments, add_results_arguments
+    add_engine_arguments(p)
+    add_results_arguments(p)
     from planecal.commands.report import add_report_argument
     add_report_argument(p)
 
@@ -39,8 +48,12 @@ def run(args) -> int:
     from planecal.commands.calibrate import build_problem, load_inputs
     from planecal.fit import FitOptions
     from planecal.params import save_json
-    from planecal.studies.bootstrap import BootstrapSettings, bootstrap, format_bootstrap
-    from planecal.studies.common import check_jobs, parse_int_list
+    from planecal.studies.bootstrap import (BootstrapSettings, bootstrap, check_settings,
+                                            format_bootstrap)
+    from planecal.studies.common import parse_int_list
+
+    from planecal.commands.engine_options import (check_results_path, engine_from_args,
+                                                  results_path)
 
     from planecal.commands.report import write_command_report
     from planecal.outputs import check_output
@@ -54,8 +67,12 @@ def run(args) -> int:
         raise InputError("--max-iter must be at least 1")
     samples, scene, initial = load_inputs(args)
     problem = build_problem(samples, scene, initial, args.free, FitOptions(max_iter=args.max_iter))
-    res = bootstrap(problem, BootstrapSettings(tuple(sizes), args.repeats, args.seed),
-                    jobs=check_jobs(args.jobs))
+    settings = BootstrapSettings(tuple(sizes), args.repeats, args.seed)
+    check_settings(problem, settings)  # before an engine starts
+    results = results_path(args)
+    check_results_path(results, args)
+    with engine_from_args(args) as engine:
+        res = bootstrap(problem, settings, engine, results=results, resume=args.resume)
     print(format_bootstrap(res, problem.layout))
     res = {"format": FORMAT, **res}
     if args.out:

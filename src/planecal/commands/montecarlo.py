@@ -1,4 +1,5 @@
-"""planecal montecarlo [--scene S] [--runs R] [--samples N] [--jobs J] [--out M.json]
+"""planecal montecarlo [--scene S] [--runs R] [--samples N] [--out M.json]
+[--jobs J | --scheduler tcp://HOST:PORT] [--results FILE.jsonl] [--resume]
 [--mode twin|rehearse|synthetic] [--seed K] [--truth-seed T] [--vary-truth]
 [--offsets-all] [--laser-noise-mm X] [--repeatability-mm X] [--quantization]
 [--free NAMES] [--weighted] [--slope 50,100,200] [--slope-runs R]
@@ -10,8 +11,14 @@ scene's nominal values: per parameter the bias, the empirical std, the Cramer-Ra
 sandwich covariance of the unweighted fit and the std the fit reports (unweighted, or
 with --weighted the weighted fit of planecal.fit, which should reach the CRB); the chi-square
 consistency of the reported covariance; with --slope the spread vs the number of samples
-and its log-log slope. Runs go to --jobs worker processes (default: all cores).
-See planecal.studies.montecarlo for the modes and the noise model.
+and its log-log slope. See planecal.studies.montecarlo for the modes and the noise model.
+
+The runs go through planecal.studies.distributed: --jobs 1 in this process, by default a
+local Dask cluster (one worker process per core), or --scheduler tcp://HOST:PORT a Dask
+cluster you run; every way gives the same numbers (run k's seed is --seed + k, whoever
+runs it). Each run is written as it completes to --results FILE.jsonl (default with
+--out M.json: M.runs.jsonl next to it; --slope points: M.slope-N.runs.jsonl); --resume
+runs only the runs not in it yet, so a killed study continues where it stopped.
 
 The runs sample in the world of an error profile (--errors, default realistic; the
 synthetic mode models the ideal world only and defaults to it). The noise options default
@@ -31,7 +38,6 @@ def add_arguments(p):
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--runs", type=int, default=50, help="Monte Carlo runs (default 50)")
     p.add_argument("--samples", type=int, default=150, help="samples per run (default 150)")
-    p.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="also write the plots as a Rerun recording (planecal view FILE)")
     p.add_argument("--out", help="write the summary (JSON) here")
@@ -66,15 +72,24 @@ def add_arguments(p):
                         "sampling run's, wrist)")
     p.add_argument("--slope", help="also measure the spread at these sample counts (e.g. 50,100,200)")
     p.add_argument("--slope-runs", type=int, default=None, help="runs per slope point (default --runs)")
+    from planecal.commands.engine_options import add_engine_arguments, add_results_arguments
+    add_engine_arguments(p)
+    add_results_arguments(p)
 
 
 def run(args) -> int:
+    import functools
+    import sys
+    import time
     from dataclasses import replace
 
+    from planecal.commands.engine_options import (check_results_path, engine_from_args,
+                                                  results_path)
     from planecal.outputs import check_output
     from planecal.params import save_json
     from planecal.scene import load_scene
-    from planecal.studies.common import check_jobs, parse_int_list
+    from planecal.studies.common import parse_int_list
+    from planecal.studies.distributed import warm_twin
     from planecal.studies.montecarlo import (FORMAT, MCSettings, analyze, format_montecarlo,
                                              format_slope, run_many, slope_study)
     from planecal.twin.profile import DEFAULT_PROFILE
@@ -92,20 +107,36 @@ def run(args) -> int:
                     free=free, weighted=args.weighted, roll_deg=args.roll_deg,
                     ik_choice=args.ik_choice)
     st.check()
-    jobs = check_jobs(args.jobs)
     slope_counts = parse_int_list(args.slope, "--slope", 20) if args.slope else None
     if slope_counts is not None and len(slope_counts) < 2:
         raise InputError("--slope needs at least two sample counts")
-    res = analyze(run_many(st, jobs), st)
-    res["settings"]["scene"] = scene.name
-    print(format_montecarlo(res))
-    if slope_counts:
-        s2 = replace(st, runs=args.slope_runs or st.runs)
-        s2.check()
-        sl = slope_study(s2, slope_counts, jobs)
-        res["slope"] = sl
-        print()
-        print(format_slope(sl))
+    results = results_path(args)
+
+    def slope_results(n: int):
+        return results_path(args, f"slope-{n}")
+    for path in [results] + [slope_results(n) for n in slope_counts or []]:
+        check_results_path(path, args)
+    # the twin's numba tick: compiled (or loaded from its cache) once before the runs
+    warm = None if st.mode == "synthetic" else functools.partial(warm_twin, st.scene)
+    with engine_from_args(args, warmup=warm) as engine:
+        t0 = time.perf_counter()
+        runs = run_many(st, engine, results=results, resume=args.resume)
+        dt = time.perf_counter() - t0
+        print(f"runs: {st.runs} in {dt:.2f} s ({st.runs / dt:.4f} runs/s), "
+              f"{engine.describe()}" + (f"; each written to {results}" if results else ""),
+              file=sys.stderr, flush=True)
+        res = analyze(runs, st)
+        res["settings"]["scene"] = scene.name
+        print(format_montecarlo(res))
+        if slope_counts:
+            s2 = replace(st, runs=args.slope_runs or st.runs)
+            s2.check()
+            sl = slope_study(s2, slope_counts, engine,
+                             results=slope_results if results is not None else None,
+                             resume=args.resume)
+            res["slope"] = sl
+            print()
+            print(format_slope(sl))
     if args.out:
         save_json(args.out, res)
         print(f"result written to {args.out}")

@@ -1,5 +1,6 @@
 """planecal plan [--scene S] [--samples N] [--candidates M] [--seed K] --out POSES.json
-[--target-std-urad X | --target-ap-mm X] [--no-order] [--measure R] [--jobs J] [--free NAMES]
+[--target-std-urad X | --target-ap-mm X] [--no-order]
+[--measure R [--jobs J | --scheduler tcp://HOST:PORT]] [--free NAMES]
 
 D-optimal sample poses: N of M collision-free candidates (the sampling run's pose
 distribution) maximising det(J^T J) at the nominal parameters (greedy + Fedorov exchange),
@@ -13,7 +14,8 @@ planned set and for the poses the sampling run itself would visit with the same 
 ("random"); with --measure R also the measured spread on the twin over R runs each
 (planned poses replayed with fresh noise vs fresh random rehearsals, same truth). POSES.json holds the counts and plates
 (format planecal-poses/1); planecal.studies.planning.rehearse_planned runs them through
-the sampling loop.
+the sampling loop. The --measure runs go through planecal.studies.distributed (--jobs 1:
+in this process; default: a local Dask cluster; --scheduler: a cluster you run).
 """
 from __future__ import annotations
 
@@ -41,9 +43,10 @@ def add_arguments(p):
     p.add_argument("--free", help="comma-separated parameters (default: all but delta1, delta6)")
     p.add_argument("--measure", type=int, default=0, metavar="R",
                    help="measure planned vs random spread on the twin over R runs each")
-    p.add_argument("--jobs", type=int, default=None, help="worker processes for --measure")
     p.add_argument("--force", action="store_true",
                    help="replace --out even if it is not an earlier pose list")
+    from planecal.commands.engine_options import add_engine_arguments
+    add_engine_arguments(p)
     from planecal.commands.report import add_report_argument
     add_report_argument(p)
 
@@ -53,7 +56,7 @@ def run(args) -> int:
     from planecal.params import save_json
     from planecal.scene import load_scene
     from planecal.layout import level1_layout
-    from planecal.studies.common import check_jobs, table
+    from planecal.studies.common import table
     from planecal.studies.planning import plan
 
     from planecal.commands.report import write_command_report
@@ -68,7 +71,6 @@ def run(args) -> int:
         raise InputError(f"--samples must be at least 13, got {args.samples}")
     if args.candidates < args.samples:
         raise InputError(f"--candidates ({args.candidates}) must be at least --samples ({args.samples})")
-    jobs = check_jobs(args.jobs)
     free = None if not args.free else tuple(s.strip() for s in args.free.split(",") if s.strip())
     from planecal.progress import Progress
     from planecal.studies.planning import PLAN_STAGES
@@ -81,7 +83,13 @@ def run(args) -> int:
     finally:
         bar.close()
     if args.measure:
-        res["measured"] = measure(scene, res, args.measure, jobs)
+        import functools
+
+        from planecal.commands.engine_options import engine_from_args
+        from planecal.studies.distributed import warm_twin
+        with engine_from_args(args, warmup=functools.partial(warm_twin, str(scene.path))) \
+                as engine:
+            res["measured"] = measure(scene, res, args.measure, engine)
     rows = []
     layout = level1_layout(len(scene.plates))
     for n in res["free"]:
@@ -134,14 +142,14 @@ def format_robot_time(res: dict) -> str:
     return "\n".join(out)
 
 
-def measure(scene, res: dict, runs: int, jobs: int) -> dict:
+def measure(scene, res: dict, runs: int, engine) -> dict:
     from planecal.studies.montecarlo import MCSettings, analyze, run_many
     free = tuple(res["free"])
     base = MCSettings(scene=str(scene.path), samples=res["samples"], runs=runs, free=free)
     poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(res["counts"], res["plates"]))
-    planned = analyze(run_many(MCSettings(**{**base.__dict__, "poses": poses}), jobs,
+    planned = analyze(run_many(MCSettings(**{**base.__dict__, "poses": poses}), engine,
                                label="planned poses"), base)
-    rand = analyze(run_many(base, jobs, label="random poses"), base)
+    rand = analyze(run_many(base, engine, label="random poses"), base)
     out = {"runs": runs}
     for name, a in (("planned", planned), ("random", rand)):
         out[name] = {n: a["params"][n]["empirical_std"] for n in a["params"]}

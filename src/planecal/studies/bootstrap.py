@@ -12,9 +12,16 @@ independent sets times sqrt((n - s)/(n - 1)) (finite-population correction, exac
 linear estimator): it shrinks to zero as s -> n however good or bad the calibration is.
 Each size reports the observed std and the std corrected by that factor (what
 independent sets of size s would show); above ``overlap_warn`` (0.3) the size is flagged.
+
+Reproducible wherever it runs: subset r of size s is drawn, by the run itself, from the
+random stream ``default_rng([seed, s, r])``: fixed by its cell (the size) and r, whatever
+worker fits it and whatever other sizes the study has. The fits go through
+``studies.distributed.Engine`` (``studies.common.parallel_map``), each one a pure function
+of its item; with a results file each fit is written as it completes (key ``[s, r]``).
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +42,36 @@ class BootstrapSettings:
     overlap_warn: float = OVERLAP_WARN
 
 
+def subset_indices(n: int, size: int, r: int, seed: int) -> np.ndarray:
+    """Subset r of ``size`` out of a pool of n (sorted sample indices), from its own stream
+    ``default_rng([seed, size, r])``."""
+    return np.sort(np.random.default_rng([seed, size, r]).choice(n, size, replace=False))
+
+
+def fit_subset(item) -> dict:
+    """One run of the study: item = (pool problem, size, r, seed)."""
+    problem, size, r, seed = item
+    return _fit_one(problem.subset(subset_indices(len(problem), size, r, seed)))
+
+
+def _item_key(item) -> list:
+    return [item[1], item[2]]
+
+
+def pool_digest(problem: Problem) -> str:
+    """sha256 of what the fits depend on (samples, initial parameters, free set, options):
+    a results file written for another pool is refused."""
+    h = hashlib.sha256()
+    for a in (problem.qe, problem.d_m, problem.plate, problem.free,
+              problem.initial.to_vector(problem.layout)):
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    h.update(repr(problem.options).encode())
+    h.update(",".join(problem.layout.names).encode())
+    return h.hexdigest()
+
+
 def _fit_one(problem: Problem):
     try:
         res = solve(problem)
@@ -53,17 +90,10 @@ def overlap(s: int, n: int) -> dict:
             "finite_population_factor": float(fpc)}
 
 
-def bootstrap(problem: Problem, settings: BootstrapSettings | None = None, jobs: int = 1,
-              quiet: bool = False) -> dict:
-    """The study (module docstring) on ``problem``'s samples (the pool), its initial
-    parameters, free set and options; a pure function of its inputs. Returns a dict with
-    ``pool``, ``names``, ``free``, ``sizes``: one entry per size with per-parameter
-    ``mean``, ``std``, ``std_independent``, ``min``, ``max``, ``reported_std``,
-    ``overlap`` and ``warning``."""
-    st = settings or BootstrapSettings()
+def check_settings(problem: Problem, st: BootstrapSettings) -> None:
+    """InputError for settings the pool cannot serve (before any fit)."""
     n = len(problem)
-    names, free = problem.layout.names, problem.free
-    p = int(free.sum())
+    p = int(problem.free.sum())
     if st.repeats < 2:
         raise InputError(f"--repeats must be at least 2 to measure a spread, got {st.repeats}")
     for s in st.sizes:
@@ -71,22 +101,37 @@ def bootstrap(problem: Problem, settings: BootstrapSettings | None = None, jobs:
             raise InputError(f"--sizes: subset size {s} exceeds the pool of {n} samples")
         if s <= p:
             raise InputError(f"--sizes: subset size {s} cannot determine {p} free parameters")
-    rng = np.random.default_rng(st.seed)
-    jobs_list, where = [], []
-    for s in st.sizes:
-        for r in range(st.repeats):
-            idx = np.sort(rng.choice(n, s, replace=False))
-            jobs_list.append(problem.subset(idx))
-            where.append(s)
-    prog = Progress("bootstrap fits", len(jobs_list), quiet=quiet)
-    results = parallel_map(_fit_one, jobs_list, jobs, prog)
+    if len(set(st.sizes)) != len(st.sizes):
+        raise InputError(f"--sizes: a size given twice ({', '.join(map(str, st.sizes))})")
+
+
+def bootstrap(problem: Problem, settings: BootstrapSettings | None = None, engine=1,
+              quiet: bool = False, results=None, resume: bool = False) -> dict:
+    """The study (module docstring) on ``problem``'s samples (the pool), its initial
+    parameters, free set and options; a pure function of its inputs. ``engine``: an open
+    ``Engine`` or a job count (``studies.common.engine_for``); ``results``/``resume``: the
+    JSON-lines file of the fits (``parallel_map``). Returns a dict with
+    ``pool``, ``names``, ``free``, ``sizes``: one entry per size with per-parameter
+    ``mean``, ``std``, ``std_independent``, ``min``, ``max``, ``reported_std``,
+    ``overlap`` and ``warning``."""
+    st = settings or BootstrapSettings()
+    check_settings(problem, st)
+    n = len(problem)
+    names, free = problem.layout.names, problem.free
+    items = [(problem, s, r, st.seed) for s in st.sizes for r in range(st.repeats)]
+    where = [s for _, s, _, _ in items]
+    prog = Progress("bootstrap fits", len(items), quiet=quiet)
+    header = {"study": "bootstrap", "seed": st.seed, "pool": n,
+              "pool_sha256": pool_digest(problem)}
+    fits = parallel_map(fit_subset, items, engine, prog, key=_item_key, results=results,
+                        resume=resume, header=header)
     full = _fit_one(problem)
     out = {"pool": n, "names": names, "free": problem.free_names,
            "repeats": st.repeats, "seed": st.seed,
            "pool_fit": {"x": full.get("x"), "std": full.get("std")} if full["ok"] else None,
            "sizes": []}
     for s in st.sizes:
-        rs = [r for r, w in zip(results, where) if w == s]
+        rs = [r for r, w in zip(fits, where) if w == s]
         ok = [r for r in rs if r["ok"]]
         ov = overlap(s, n)
         entry = {"size": s, "fits": len(ok), "failed": len(rs) - len(ok),

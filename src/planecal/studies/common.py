@@ -1,4 +1,5 @@
-"""What the studies share: parallel map over pure run functions, progress on stderr,
+"""What the studies share: the map of a pure run function over run descriptions (through
+``studies.distributed.Engine``), progress on stderr,
 terminal tables, the per-sample noise model of the twin and the covariance formulas
 (Cramer-Rao bound, OLS sandwich) the studies compare with.
 
@@ -17,14 +18,14 @@ bound for this noise is (J^T V^-1 J)^-1, which the weighted fit reaches
 """
 from __future__ import annotations
 
-import os
-from concurrent.futures import ProcessPoolExecutor
-from typing import Callable, Iterable
+from contextlib import contextmanager
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
 from planecal.errors import InputError
 from planecal.progress import Progress as ProgressBar
+from planecal.studies.distributed import Engine
 
 BUFFER_LEN = 100  # laser readings averaged into one sample (sampling.laserread)
 
@@ -43,14 +44,6 @@ def parse_int_list(text: str, what: str, minimum: int = 1) -> list[int]:
     return vals
 
 
-def check_jobs(jobs: int | None) -> int:
-    if jobs is None:
-        return max(1, os.cpu_count() or 1)
-    if jobs < 1:
-        raise InputError(f"--jobs must be at least 1, got {jobs}")
-    return jobs
-
-
 class Progress:
     """A study's progress (``planecal.progress``): runs done of ``total``."""
 
@@ -66,34 +59,29 @@ class Progress:
                 self.bar.close()
 
 
-def _init_worker():
-    os.environ.setdefault("MUJOCO_GL", "disable")
-    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[k] = "1"
+@contextmanager
+def engine_for(engine: Engine | int | None) -> Iterator[Engine]:
+    """``engine`` if it is an ``Engine`` (the caller opened it and closes it); otherwise an
+    engine of that many jobs (None: ``Engine()``, a LocalCluster on every core; 1: this
+    process), opened here and closed after."""
+    if isinstance(engine, Engine):
+        yield engine
+        return
+    with Engine(jobs=engine) as eng:
+        yield eng
 
 
-def parallel_map(fn: Callable, items: Iterable, jobs: int = 1,
-                 progress: Progress | None = None) -> list:
-    """[fn(item) for item in items], in order, in ``jobs`` processes (fn and the items must
-    be picklable; fn a pure function of its item). jobs == 1 runs in this process."""
-    items = list(items)
-    out = []
-    if jobs <= 1 or len(items) <= 1:
-        for it in items:
-            out.append(fn(it))
-            if progress:
-                progress.step()
-        return out
-    import multiprocessing as mp
-    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-    with ProcessPoolExecutor(max_workers=min(jobs, len(items)), mp_context=ctx,
-                             initializer=_init_worker) as ex:
-        futs = [ex.submit(fn, it) for it in items]
-        for f in futs:
-            out.append(f.result())
-            if progress:
-                progress.step()
-    return out
+def parallel_map(fn: Callable, items: Iterable, engine: Engine | int | None = 1,
+                 progress: Progress | None = None, key: Callable | None = None,
+                 results=None, resume: bool = False, header: dict | None = None) -> list:
+    """[fn(item) for item in items], in order, through ``engine`` (``engine_for``; fn and
+    the items picklable, fn a pure function of its item: the item carries its own seed).
+    ``progress`` steps as each run completes; with ``results`` (a JSON-lines file) each
+    result is written as it completes and ``resume`` reruns only the items whose ``key`` is
+    not in it yet (``Engine.map``)."""
+    with engine_for(engine) as eng:
+        return eng.map(fn, items, key=key, out=results, resume=resume, header=header,
+                       progress=progress)
 
 
 def table(headers: list[str], rows: list[list], aligns: str | None = None) -> str:

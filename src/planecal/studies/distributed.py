@@ -20,8 +20,9 @@ descriptions (an item carries its own seed), submitted here.
 Quiet: no dashboard, dask's own log lines at ERROR only while the engine is open; an
 unreachable scheduler (or one with no workers) is a one-line ``InputError`` after
 ``connect_timeout_s``. Workers run with one BLAS thread (``OPENBLAS``/``OMP``/``MKL``
-``_NUM_THREADS=1``, set before the worker process starts) and ``MUJOCO_GL=disable``, as
-``studies.common.parallel_map``'s workers do.
+``_NUM_THREADS=1``, set before the worker process starts) and ``MUJOCO_GL=disable``.
+The studies reach it through ``studies.common.parallel_map``; the commands make it from
+their ``--jobs`` / ``--scheduler`` options (``commands.engine_options``).
 
 ``Engine.map(fn, items, key=..., out=..., resume=...)`` submits every item and returns the
 results in item order; ``Engine.as_completed`` yields ``(index, result)`` as the runs

@@ -451,10 +451,21 @@ def run_one(job) -> dict:
     }
 
 
-def run_many(st: MCSettings, jobs: int = 1, quiet: bool = False, label: str | None = None):
+def run_many(st: MCSettings, engine=1, quiet: bool = False, label: str | None = None,
+             results=None, resume: bool = False):
+    """The runs of ``st`` in run order, through ``engine`` (``studies.common.engine_for``:
+    an open ``Engine``, or a job count); run k is ``run_one((st, k))`` on whichever worker,
+    its seed ``st.seed + k``. ``results``: the JSON-lines file each run is written to as it
+    completes (key k, header the settings); ``resume`` runs only the k not in it yet."""
     st.check()
     prog = Progress(label or f"montecarlo {st.scene} N={st.samples}", st.runs, quiet=quiet)
-    return parallel_map(run_one, [(st, k) for k in range(st.runs)], jobs, prog)
+    return parallel_map(run_one, [(st, k) for k in range(st.runs)], engine, prog,
+                        key=_run_key, results=results, resume=resume,
+                        header={"format": FORMAT, "settings": asdict(st)})
+
+
+def _run_key(item) -> int:
+    return item[1]
 
 
 # ----- analysis ---------------------------------------------------------------------------------
@@ -599,13 +610,17 @@ def _settings_dict(st: MCSettings) -> dict:
     return d
 
 
-def slope_study(st: MCSettings, sample_counts: list[int], jobs: int = 1, quiet=False) -> dict:
+def slope_study(st: MCSettings, sample_counts: list[int], engine=1, quiet=False,
+                results=None, resume: bool = False) -> dict:
     """Empirical and CR spread of the offsets vs the number of samples, and the log-log
-    slope (N^-1/2 expected) fitted over ``sample_counts``."""
+    slope (N^-1/2 expected) fitted over ``sample_counts``. ``results(n)``: the results
+    file of the point with n samples (``run_many``)."""
     rows = []
     for n in sample_counts:
         s = replace(st, samples=n)
-        res = analyze(run_many(s, jobs, quiet, label=f"slope N={n}"), s)
+        res = analyze(run_many(s, engine, quiet, label=f"slope N={n}",
+                               results=None if results is None else results(n),
+                               resume=resume), s)
         rows.append({"samples": n, **{p: {"empirical_std": res["params"][p]["empirical_std"],
                                           "crb_std": res["params"][p]["crb_std"]}
                                       for p in res["offsets"]}})
