@@ -1,7 +1,8 @@
 """Compensation on the twin over truths (docs/COMPENSATE.md): python scripts/study_compensate.py ideal|realistic SCENE SEEDS
 (e.g. realistic thesis_final 0,1,2,3,4). One line per truth: AP medians/max [mm] in the
 robot frame (cell frame in brackets), nominal vs compensated, unseen targets and ISO P1..P5."""
-import sys, time, numpy as np
+import sys
+import time
 from planecal.scene import load_scene, nominal_params
 from planecal.studies.montecarlo import MCSettings, twin_samples, world_for
 from planecal.fit import Problem, solve

@@ -71,12 +71,11 @@ def add_arguments(p):
                         "(default alone)")
     p.add_argument("--breakdown-truth", type=int, default=None,
                    help="the truth seed of the breakdown (default: the first truth seed)")
-    p.add_argument("--jobs", type=int, default=None,
-                   help="worker processes over truths and variants (studies.distributed."
-                        "Engine; 1: in this process; default: all cores)")
     p.add_argument("--level", default="offsets", choices=("offsets",),
                    help="what the calibration fits (offsets: the joint offsets, the sensor "
                         "pose and the planes, as planecal calibrate; default %(default)s)")
+    from planecal.commands.engine_options import add_engine_arguments
+    add_engine_arguments(p)
     p.add_argument("--calibrated", help="calibration result to validate (with --truth and --run)")
     p.add_argument("--truth", help="the twin truth (rehearse --truth) the calibration was made on")
     p.add_argument("--run", help="the calibration's sample file (places the ISO cube)")
@@ -104,11 +103,8 @@ def run(args) -> int:
     from planecal.outputs import check_output
     from planecal.params import save_json
     from planecal.scene import load_scene
-    from planecal.studies.common import check_jobs, parse_int_list
-    from planecal.studies.validation import (ANCHORS, FORMAT, TruthJob, ValidationSettings,
-                                             breakdown, cannot_remove, format_breakdown,
-                                             format_truths, run_jobs, summarize,
-                                             validate_truth)
+    from planecal.studies.common import parse_int_list
+    from planecal.studies.validation import FORMAT, TruthJob, ValidationSettings
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile
 
     given = [a for a in (args.calibrated, args.truth, args.run) if a]
@@ -122,7 +118,6 @@ def run(args) -> int:
                             tcp_m=_tcp(args.tcp_mm), block_length_m=args.block_mm * 1e-3,
                             gauge_repeats=args.gauge_repeats, seed=args.seed)
     st.check()
-    jobs = check_jobs(args.jobs)
     if given:
         doc = _validate_given(args, scene, st)
     else:
@@ -149,35 +144,47 @@ def run(args) -> int:
         what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
         print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): rehearse "
               f"{what} (seed {args.seed}), calibrate, validate...", file=sys.stderr, flush=True)
-        from dataclasses import replace
-        results = run_jobs(validate_truth, [replace(base, truth_seed=t) for t in seeds],
-                           jobs, "validate", args.quiet)
-        summary, med, worst = summarize(results)
-        doc = {"format": FORMAT, "scene": scene.name, "errors": profile.name,
-               "profile": str(profile.path), "level": args.level, "truth_seeds": seeds,
-               **summary,
-               **_detail(med), "detail_truth_seed": med["truth_seed"]}
-        print(format_truths(summary, profile.name))
-        print()
-        print(CELL_FRAME_NOTE)
-        if args.breakdown != "none":
-            t = seeds[0] if args.breakdown_truth is None else args.breakdown_truth
-            print(f"\nbreakdown: truth {t} with each error source "
-                  + ("switched off in turn..." if args.breakdown == "off" else "alone..."),
-                  file=sys.stderr, flush=True)
-            bd = breakdown(replace(base, truth_seed=t), args.breakdown, jobs, args.quiet)
-            bd["cannot_remove"] = cannot_remove(bd)
-            doc["breakdown"] = bd
-            print()
-            print(format_breakdown(bd))
-        print()
-        print(ANCHORS)
+        from planecal.commands.engine_options import engine_from_args
+        from planecal.studies.distributed import warm_twin
+        with engine_from_args(args, warmup=warm_twin) as engine:
+            doc = _truths(args, seeds, base, profile, scene, engine)
     if args.out:
         save_json(args.out, doc)
         print(f"result written to {args.out}")
     if args.rrd:
         print(f"recording written to {_record(args, scene, st, doc)}")
     return 0
+
+
+def _truths(args, seeds, base, profile, scene, engine) -> dict:
+    """Validation over the truth seeds (and the breakdown) on ``engine``: the document."""
+    from dataclasses import replace
+
+    from planecal.studies.validation import (ANCHORS, FORMAT, breakdown, cannot_remove,
+                                             format_breakdown, format_truths, run_jobs,
+                                             summarize, validate_truth)
+    results = run_jobs(validate_truth, [replace(base, truth_seed=t) for t in seeds],
+                       engine, "validate", args.quiet)
+    summary, med, worst = summarize(results)
+    doc = {"format": FORMAT, "scene": scene.name, "errors": profile.name,
+           "profile": str(profile.path), "level": args.level, "truth_seeds": seeds,
+           **summary, **_detail(med), "detail_truth_seed": med["truth_seed"]}
+    print(format_truths(summary, profile.name))
+    print()
+    print(CELL_FRAME_NOTE)
+    if args.breakdown != "none":
+        t = seeds[0] if args.breakdown_truth is None else args.breakdown_truth
+        print(f"\nbreakdown: truth {t} with each error source "
+              + ("switched off in turn..." if args.breakdown == "off" else "alone..."),
+              file=sys.stderr, flush=True)
+        bd = breakdown(replace(base, truth_seed=t), args.breakdown, engine, args.quiet)
+        bd["cannot_remove"] = cannot_remove(bd)
+        doc["breakdown"] = bd
+        print()
+        print(format_breakdown(bd))
+    print()
+    print(ANCHORS)
+    return doc
 
 
 def _record(args, scene, st, doc) -> str:

@@ -535,17 +535,12 @@ def calibrate_run(scene, qe: np.ndarray, d: np.ndarray, plate: np.ndarray,
     return solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
 
 
-def run_jobs(fn, items: list, jobs: int = 1, label: str = "validate",
-             quiet: bool = True) -> list:
-    """``[fn(item) for item in items]`` on ``studies.distributed.Engine`` (``jobs`` 1: in
-    this process; more: a local Dask cluster of that many worker processes, the twin
-    warmed up first)."""
-    from planecal.studies.common import Progress
-    from planecal.studies.distributed import Engine, warm_twin
+def run_jobs(fn, items: list, engine=1, label: str = "validate", quiet: bool = True) -> list:
+    """``[fn(item) for item in items]`` on ``engine`` (an open ``studies.distributed.Engine``
+    or a job count: ``studies.common.parallel_map``)."""
+    from planecal.studies.common import Progress, parallel_map
     items = list(items)
-    n = 1 if len(items) <= 1 else jobs
-    with Engine(jobs=n, warmup=None if n == 1 else warm_twin) as eng:
-        return eng.map(fn, items, progress=Progress(label, len(items), quiet=quiet))
+    return parallel_map(fn, items, engine, Progress(label, len(items), quiet=quiet))
 
 
 @dataclass(frozen=True)
@@ -666,7 +661,7 @@ def breakdown_variants(sources: list[str], mode: str = "alone") -> list[tuple[st
     return rows
 
 
-def breakdown(job: TruthJob, mode: str = "alone", jobs: int = 1, quiet: bool = True) -> dict:
+def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) -> dict:
     """``job``'s truth repeated with each error family switched off (``mode`` 'off') or on
     alone ('alone'), the gauge block skipped: AP after calibration per variant (the same
     rehearsal seed: the same pose draws)."""
@@ -679,7 +674,7 @@ def breakdown(job: TruthJob, mode: str = "alone", jobs: int = 1, quiet: bool = T
     variants = breakdown_variants(on, mode)
     st = replace(job.settings, gauge=False)
     res = run_jobs(validate_truth, [replace(job, off=off, settings=st)
-                                    for _, off in variants], jobs, "breakdown", quiet)
+                                    for _, off in variants], engine, "breakdown", quiet)
     rows = []
     for (label, off), v in zip(variants, res):
         row = {"variant": label, "off": list(off)}
