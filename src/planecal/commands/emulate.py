@@ -4,6 +4,19 @@ Starts the FD11 RT emulator (UDP) and the ZS-LD80 emulator (a pseudo-terminal), 
 backed by one MuJoCo twin, prints where they listen and runs until Ctrl-C. Point
 `planecal sample` at them (``--host``/ports and the printed serial device) to rehearse
 the real-cell code path end to end. Formats: `planecal.links.fd11`, `planecal.links.zs_ld80`.
+
+It serves any number of client sessions in a row (``sample``, ``sample --resume``, ...).
+``--reference`` chooses what the emulated controller does with its reference between
+them (`planecal.links.fd11`, "Sessions": the seed reads both ways): ``session``
+(default) latches it where the robot stands at each session's first packet; ``boot``
+keeps the one it started with, so a client must carry on from the last delta it sent
+(``planecal sample`` does, from its ``--rt-state`` file).
+
+Faults, all deterministic (`planecal.links.emulators`): ``--drop-replies P`` loses each
+reply with probability P (``--fault-seed``), ``--boot-silence-s S`` ignores every request
+for S seconds after start, ``--laser-silent-every K`` leaves every K-th laser request
+unanswered, ``--release-after-ticks N`` releases the dead-man switch after N ticks (held
+again when the next session starts).
 """
 from __future__ import annotations
 
@@ -23,6 +36,41 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reply-port", type=int, default=5556,
                    help="UDP port replies are sent to on the sender's host (default 5556; "
                         "0 = the sender's own port)")
+    p.add_argument("--reference", choices=("session", "boot"), default="session",
+                   help="the controller's reference: latched at each client session "
+                        "(default) or kept from its start")
+    p.add_argument("--session-gap-s", type=float, default=2.0,
+                   help="silence after which the same client address begins a new session "
+                        "(default 2)")
+    p.add_argument("--drop-replies", type=float, default=0.0, metavar="P",
+                   help="fault: lose each FD11 reply with probability P (default 0)")
+    p.add_argument("--fault-seed", type=int, default=0, help="seed of the random faults")
+    p.add_argument("--boot-silence-s", type=float, default=0.0,
+                   help="fault: the RT system answers nothing for this long after start")
+    p.add_argument("--laser-silent-every", type=int, default=0, metavar="K",
+                   help="fault: every K-th laser request goes unanswered")
+    p.add_argument("--release-after-ticks", type=int, default=0, metavar="N",
+                   help="fault: the dead-man switch is released after N ticks")
+
+
+def _faults(args):
+    import math
+
+    from planecal.links.emulators import FD11Faults, LaserFaults
+
+    if not 0.0 <= args.drop_replies < 1.0:
+        raise InputError(f"--drop-replies must be in [0, 1), got {args.drop_replies}")
+    if not (math.isfinite(args.session_gap_s) and args.session_gap_s > 0):
+        raise InputError(f"--session-gap-s must be a positive number, got {args.session_gap_s}")
+    if not (math.isfinite(args.boot_silence_s) and args.boot_silence_s >= 0):
+        raise InputError(f"--boot-silence-s must be a number >= 0, got {args.boot_silence_s}")
+    for flag in ("laser_silent_every", "release_after_ticks"):
+        if getattr(args, flag) < 0:
+            raise InputError(f"--{flag.replace('_', '-')} must be >= 0")
+    return (FD11Faults(drop_probability=args.drop_replies, seed=args.fault_seed,
+                       boot_s=args.boot_silence_s,
+                       release_after_ticks=args.release_after_ticks),
+            LaserFaults(silent_every=args.laser_silent_every))
 
 
 def _make_twin(args):
@@ -33,17 +81,15 @@ def _make_twin(args):
             raise InputError("the MuJoCo twin (planecal.twin) is not available in this "
                              "version; cannot emulate") from None
         raise InputError(f"the MuJoCo twin cannot be loaded: missing module {e.name}") from None
-    Twin = getattr(twin_mod, "Twin", None)
-    if Twin is None:
-        raise InputError("planecal.twin has no Twin class; cannot emulate")
     kwargs = {k: v for k, v in (("scene", args.scene), ("seed", args.seed),
                                 ("truth", args.truth)) if v is not None}
-    return Twin(**kwargs)
+    return twin_mod.Twin(**kwargs)
 
 
 def run(args) -> int:
     from planecal.links.emulators import serve
 
+    fd11_faults, laser_faults = _faults(args)
     twin = _make_twin(args)
     reply_port = None if args.reply_port == 0 else args.reply_port
 
@@ -54,11 +100,10 @@ def run(args) -> int:
 
     try:
         serve(twin, twin, host=args.host, rt_port=args.rt_port, reply_port=reply_port,
-              on_ready=ready)
+              on_ready=ready, fd11_faults=fd11_faults, laser_faults=laser_faults,
+              reference_mode=args.reference, session_gap_s=args.session_gap_s)
     except OSError as e:
         raise InputError(str(e)) from None
     finally:
-        close = getattr(twin, "close", None)
-        if close is not None:
-            close()
+        twin.close()
     return 0

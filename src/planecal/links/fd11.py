@@ -56,8 +56,8 @@ the controller received ("boot" reference): a first packet of delta 0 then comma
 jump back to where the RT system booted, and the FD11 trips. The text allows both, and a
 client cannot ask which before it sends (the RT system answers only a command). So the
 first packet is made safe under both: it repeats ``start_delta``, the last delta this cell
-sent to the controller (kept in a `DeltaRecord` file, rewritten every tick; zero for a
-controller never driven). Under a session reference it commands the robot's current
+sent to the controller and answered (kept in a `DeltaRecord` file, rewritten every
+tick; zero for a controller never driven). Under a session reference it commands the robot's current
 position; under a boot reference it commands what the controller already commands. The
 first reply is then checked before any motion: ``reference + start_delta - current``
 must be within ``contact_tolerance_counts`` (60, one trip step) on every joint, else
@@ -200,11 +200,13 @@ class DeltaRecord:
     ``fd11-last-delta/1 +0000000050 ... -0000000050 crc32=1a2b3c4d`` (fixed length:
     each delta a signed 11-character field, then the CRC-32 of the line before it).
     `write` is one ``pwrite`` of that line at offset 0, no fsync: a killed planecal leaves
-    the file current (a PC power loss may leave it seconds old). The link writes each
-    delta *before* sending it, so the file holds what the controller last received or the
-    one step after it: within a trip step either way, so repeating it is safe.
-    ``DeltaRecord(path)`` opens (creates) the file; it is written first when the link
-    sends its first packet.
+    the file current (a PC power loss may leave it seconds old). The link records each
+    delta once the controller has answered it. A delta sent but not answered (the process
+    killed meanwhile) is at most one step from the recorded one, so repeating the recorded
+    one is safe; the first packet of a session, which can be far from it (``--rt-fresh``)
+    and may be refused (the FD11 trips), is recorded only when answered.
+    ``DeltaRecord(path)`` opens (creates) the file; it is written first when the
+    controller answers the first packet.
     """
 
     def __init__(self, path: str | Path):
@@ -291,7 +293,7 @@ class FD11Link:
     ``max_step_counts``: refusal threshold, 1..60. ``start_delta``: the first packet's
     delta on the wire (the last one the controller received, `DeltaRecord.read`; default
     zero). ``contact_tolerance_counts``: the first reply's largest |commanded - current|.
-    ``record``: a `DeltaRecord` each new wire delta is written to before it is sent.
+    ``record``: a `DeltaRecord` each answered wire delta is written to.
     ``enable``: an `EnableSignal` that ends an outage when it drops.
     """
 
@@ -376,8 +378,6 @@ class FD11Link:
         self._settle()
         self._pace()
         self._drain()
-        if self.record is not None:
-            self.record.write(wire)
         t0 = time.monotonic()
         bound = self.boot_timeout_s if first else self.silence_s
         self._send(packet)
@@ -391,7 +391,10 @@ class FD11Link:
                 reply = self._freshest(reply)
                 self._owed = lost  # extra packets whose replies may still come
                 self._note_tick(first, lost, time.monotonic() - t0)
-                return self._accept(reply)
+                answer = self._accept(reply)
+                if self.record is not None:
+                    self.record.write(wire)
+                return answer
             lost += 1
             if not first:
                 self.counters.lost_replies += 1
