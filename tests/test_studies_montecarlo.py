@@ -50,7 +50,7 @@ def test_synthetic_monte_carlo_meets_the_bound():
 
 def test_twin_monte_carlo_small(capsys, tmp_path):
     out = tmp_path / "M.json"
-    assert main(["montecarlo", "--runs", "3", "--samples", "40", "--jobs", "2",
+    assert main(["montecarlo", "--errors", "ideal", "--runs", "3", "--samples", "40", "--jobs", "2",
                  "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "emp/CRB" in text and "chi-square" in text

@@ -333,15 +333,23 @@ def test_truth_file(tmp_path):
         Twin(scene, truth=tmp_path / "bad.json")
 
 
-def test_export_scene(tmp_path):
-    from planecal.twin.export import main
+def test_mjcf_command_writes_the_twin_cell(tmp_path, capsys):
+    from planecal.cli import main
     out = tmp_path / "scene.xml"
-    assert main(["three_plates", str(out), "--truth-seed", "4"]) == 0
+    assert main(["mjcf", "--scene", "three_plates", "--out", str(out), "--truth-seed", "4"]) == 0
     m = mujoco.MjModel.from_xml_path(str(out))
     twin = Twin("three_plates", seed=4, options=TwinOptions.exact())
     for name in plate_geom_names(twin.scene):
         assert np.abs(m.geom_pos[m.geom(name).id] - twin.model.geom_pos[twin.model.geom(name).id]).max() < 1e-15
-    assert main(["no_such_scene", str(out)]) == 2
+    # its own file is replaced, another file only with --force, a bad scene is one line
+    assert main(["mjcf", "--scene", "three_plates", "--out", str(out)]) == 0
+    mine = tmp_path / "mine.xml"
+    mine.write_text("<mujoco/>")
+    capsys.readouterr()
+    assert main(["mjcf", "--out", str(mine)]) == 2
+    assert "use --force" in capsys.readouterr().err and mine.read_text() == "<mujoco/>"
+    assert main(["mjcf", "--out", str(mine), "--force"]) == 0
+    assert main(["mjcf", "--scene", "no_such_scene", "--out", str(out)]) == 2
 
 
 

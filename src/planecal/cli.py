@@ -33,6 +33,7 @@ COMMANDS = {
     "completion": "print a shell completion script (bash, zsh, tcsh)",
     "report": "write an HTML report with figures of a result file (calibration or study)",
     "urdf": "export the nominal or calibrated robot as URDF (base, flange, laser)",
+    "mjcf": "write a scene's MuJoCo model (robot, tool, cell) for a viewer",
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,

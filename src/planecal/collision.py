@@ -31,6 +31,12 @@ Pairs checked
 * Environment: every moving part against every static part, except the floor against the
   base (body 0) and link 1, which are bolted to it.
 ``allowed_pairs`` adds further (name, name) pairs to skip.
+* One-joint pairs (``planecal.collision_joint``): self pairs two bodies apart whose
+  distance one joint decides once a part is replaced by its hull of revolution; their safe
+  intervals of that joint are swept once per world (``safe_sets``), and a configuration or
+  path whose angle of that joint stays inside one is clear for that pair without a query.
+  On thesis_final this halves the exact distance queries of a run's path checks (25,916 ->
+  12,146 for 150 plans) and changes no verdict.
 
 A configuration is ok when it is within the joint limits and every checked pair is
 farther apart than ``clearance_m``.
@@ -96,6 +102,8 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 
+from planecal.collision_joint import (HULL_SECTIONS, SafeSet, axis_coordinates,
+                                      axis_distance_max, hull_of_revolution, sweep)
 from planecal.errors import InputError
 from planecal.robot import Robot, fk_frames, within_limits
 
@@ -252,14 +260,12 @@ class CollisionWorld:
             for lm in group:
                 if not 0 <= int(lm.body) <= 6:
                     raise InputError(f"collision: part {lm.name!r} has body {lm.body}, expected 0..6")
-                T = getattr(lm, "T_body_mesh", None)
-                T = np.eye(4) if T is None else np.asarray(T, float)
+                T = np.eye(4) if lm.T_body_mesh is None else np.asarray(lm.T_body_mesh, float)
                 self.parts.append(_make_part(lm.name, int(lm.body), kind, lm.mesh, T,
-                                             getattr(lm, "box_extents", None),
-                                             getattr(lm, "box_pose", None)))
+                                             lm.box_extents, lm.box_pose))
         self.n_moving = len(self.parts)
         for sm in static:
-            ext, pose = getattr(sm, "box_extents", None), getattr(sm, "box_pose", None)
+            ext, pose = sm.box_extents, sm.box_pose
             mesh = sm.mesh
             if sm.kind == "floor":  # solid ground: same top face and extent, deep
                 import trimesh
@@ -327,6 +333,10 @@ class CollisionWorld:
         self._req_np = fcl.DistanceRequest(enable_nearest_points=True)
         self.counters: Counter = Counter()
         self.check_time_s = 0.0
+        # one-joint pairs (planecal.collision_joint): their safe intervals, swept once
+        self.safe_sets: list[SafeSet] = self._one_joint_safe_sets()
+        self.sweep_queries = int(self.counters["distance_queries"])
+        self.counters.clear()
 
     # ----- structure -----
 
@@ -369,6 +379,74 @@ class CollisionWorld:
                 k0 = self.parts[lo].body
                 W[n, k0:] = self._rates[hi, k0:]
         return W
+
+    def _one_joint_safe_sets(self) -> list[SafeSet]:
+        """Safe intervals of the self pairs two bodies apart (planecal.collision_joint),
+        one set per hull of revolution: the upper part's about joint i+2, the lower
+        part's about joint i+1."""
+        rb = self.robot
+        out = []
+        for n, (i, j) in enumerate(self._pairs):
+            if self._kinds[n] != "self":
+                continue
+            low, up = sorted((self.parts[i], self.parts[j]), key=lambda p: p.body)
+            bl, bu = low.body, up.body
+            if bu - bl != 2:
+                continue
+            # the upper part's hull about joint bu's axis, fixed in frame bu-1: joint bu-1
+            X = axis_coordinates(up.V, rb.alpha[bu - 1], rb.a[bu - 1], rb.d[bu - 1])
+            hull = self._hull_part(up.name, bu - 1, X, np.eye(4))
+            out.append(self._sweep_pair(n, low, hull, bu - 1, up.name))
+            # the lower part's hull about joint bl+1's axis (z of frame bl), carried into
+            # frame bl+1 (it is round about that axis): joint bu
+            ca, sa = np.cos(rb.alpha[bl]), np.sin(rb.alpha[bl])
+            B = np.eye(4)
+            B[:3, :3] = [[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]]
+            B[:3, 3] = [rb.a[bl], 0.0, rb.d[bl]]
+            hull = self._hull_part(low.name, bl + 1, low.V, np.linalg.inv(B))
+            out.append(self._sweep_pair(n, hull, up, bu, low.name))
+        return [s for s in out if len(s.lo)]
+
+    def _hull_part(self, name: str, body: int, X: np.ndarray, T_body_mesh: np.ndarray) -> _Part:
+        """The circumscribed prism of the hull of revolution about z of points X (the
+        hull's own frame), on ``body`` with ``T_body_mesh`` from that frame to the body's."""
+        import trimesh
+        r, z_lo, z_hi = hull_of_revolution(X)
+        T = np.eye(4)
+        T[2, 3] = (z_lo + z_hi) / 2
+        mesh = trimesh.creation.cylinder(radius=r / np.cos(np.pi / HULL_SECTIONS),
+                                         height=max(z_hi - z_lo, 1e-6),
+                                         sections=HULL_SECTIONS, transform=T)
+        return _make_part(f"{name} (hull)", body, "hull", mesh, T_body_mesh)
+
+    def _sweep_pair(self, n: int, fixed: _Part, moving: _Part, m: int, hull: str) -> SafeSet:
+        """Sweep joint m (1-based), which alone moves ``moving`` (body m) against
+        ``fixed`` (body m-1), over its limits."""
+        rb = self.robot
+        rho = axis_distance_max(moving.V, rb.alpha[m - 1], rb.a[m - 1], rb.d[m - 1])
+        q = np.zeros(6)
+        F = self._frames(q)  # only frame m changes with joint m: F[m] = F[m-1] Rz(t) B
+        B = np.linalg.inv(F[m - 1]) @ F[m]
+        Rz = np.eye(4)
+
+        def distance(t: float) -> float:
+            c, s_ = np.cos(t), np.sin(t)
+            Rz[:2, :2] = [[c, -s_], [s_, c]]
+            F[m] = F[m - 1] @ Rz @ B
+            return self._distance(fixed, moving, F)
+
+        lo, hi = rb.limits[m - 1]
+        starts, ends, _ = sweep(distance, float(lo), float(hi), rho, self.clearance_m,
+                                self.clearance_m + self.resolution_m)
+        return SafeSet(n, m - 1, starts, ends, hull)
+
+    def _covered(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        """Pairs a safe set clears on the straight path q0 -> q1 (q0 = q1: a configuration)."""
+        cov = np.zeros(len(self._pairs), bool)
+        for st in self.safe_sets:
+            if not cov[st.pair] and st.covers(q0[st.joint], q1[st.joint]):
+                cov[st.pair] = True
+        return cov
 
     @property
     def pairs(self) -> list[tuple[str, str, str]]:
@@ -419,7 +497,10 @@ class CollisionWorld:
         distance is used. Pairs with a non-convex part always use the BVHs, with a
         containment test (a BVH is a surface)."""
         i, j = self._pairs[n]
-        a, b = self.parts[i], self.parts[j]
+        return self._distance(self.parts[i], self.parts[j], F)
+
+    def _distance(self, a: _Part, b: _Part, F: np.ndarray) -> float:
+        """Distance of parts a and b with frames F (``_exact``)."""
         Ta = F[a.body] if a.body >= 0 else None
         Tb = F[b.body] if b.body >= 0 else None
         self.counters["distance_queries"] += 1
@@ -505,9 +586,10 @@ class CollisionWorld:
             if P == 0:
                 return CheckResult(True, float("inf"), None)
             lb, _ = self._lower_bounds(np.broadcast_to(F, (P,) + F.shape), np.arange(P))
+            lb[self._covered(q, q)] = np.inf  # certified clear by a safe set
             best, best_n = float("inf"), None
             for n in np.argsort(lb):
-                if lb[n] >= best:
+                if lb[n] >= best or not np.isfinite(lb[n]):
                     break
                 d = self._exact(int(n), F)
                 if d < best:
@@ -602,10 +684,11 @@ class CollisionWorld:
         # 1a. both ends of every pair (the target first: colliding targets are common);
         #     exact distances where the bound is within the clearance; pairs whose end
         #     bounds certify the whole path are done
-        bad = certify(np.repeat([K - 1, 0], P), np.tile(np.arange(P), 2))
+        cols = np.flatnonzero(~self._covered(q0, q1))  # the rest: certified by safe sets
+        bad = certify(np.repeat([K - 1, 0], len(cols)), np.tile(cols, 2))
         if bad is not None:
             return bad
-        R = np.flatnonzero(~(G[0] + G[K - 1] > 1.0))
+        R = cols[~(G[0, cols] + G[K - 1, cols] > 1.0)]
         # 1b. the pairs still open on the interior grid points: bounds, exact distances
         #     where a bound is within the clearance (most rejected paths end here)
         unc = np.zeros((K - 1, P), bool)

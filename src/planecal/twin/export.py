@@ -1,26 +1,22 @@
-"""Write a scene's MuJoCo model (robot + tool + cell) as MJCF for a viewer.
+"""A scene's MuJoCo model (robot + tool + cell) as MJCF for a viewer: ``planecal mjcf``.
 
-usage: python -m planecal.twin.export SCENE OUT.xml [--truth-seed N | --truth FILE]
-
-Without a truth option the model holds the scene's nominal sensor pose and plates;
-``--truth-seed``/``--truth`` place them at a twin's hidden truth instead (its joint
-offsets are in the ``calibration`` keyframe's qpos). Open it with
-``python -m mujoco.viewer --mjcf OUT.xml``.
+Without a truth the model holds the scene's nominal sensor pose and plates; with one
+(``truth``: a parameter file, or ``seed``: the twin's truth drawn from it) they are placed
+at the twin's hidden truth (its joint offsets are in the ``calibration`` keyframe's qpos).
 """
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 
-from planecal.errors import InputError
-from planecal.scene import load_scene
+from planecal.scene import Scene, load_scene
 from planecal.twin.mjcf import scene_spec, to_xml_exact
 from planecal.twin.truth import resolve_truth
 
+MARKER = "written by planecal mjcf"  # first line of every file export_scene writes
 
-def export_scene(scene_name, out: Path, truth=None, seed: int | None = None) -> Path:
-    scene = load_scene(scene_name)
+
+def export_scene(scene: Scene | str, out, truth=None, seed: int | None = None) -> Path:
+    scene = load_scene(scene) if not isinstance(scene, Scene) else scene
     world = None
     if truth is not None or seed is not None:
         world = resolve_truth(scene, truth, 0 if seed is None else seed)
@@ -30,28 +26,8 @@ def export_scene(scene_name, out: Path, truth=None, seed: int | None = None) -> 
     spec = scene_spec(scene, None if world is None else world.params, calibration_qpos=cal,
                       kin=None if world is None else world.kinematics)
     spec.compile()  # fail here, not in the viewer
+    what = ("nominal" if world is None else
+            f"truth {truth}" if truth is not None else f"truth drawn from seed {seed}")
     out = Path(out)
-    out.write_text(to_xml_exact(spec))
+    out.write_text(f"<!-- {MARKER}: scene {scene.name}, {what} -->\n" + to_xml_exact(spec))
     return out
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m planecal.twin.export",
-                                 description="Write a scene's MJCF (robot + tool + cell).")
-    ap.add_argument("scene", help="scene name under scenes/ or a path")
-    ap.add_argument("out", type=Path, help="output .xml")
-    g = ap.add_mutually_exclusive_group()
-    g.add_argument("--truth-seed", type=int, help="place sensor and plates at the truth drawn from this seed")
-    g.add_argument("--truth", help="truth parameter file")
-    args = ap.parse_args(argv)
-    try:
-        path = export_scene(args.scene, args.out, args.truth, args.truth_seed)
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    print(f"wrote {path}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

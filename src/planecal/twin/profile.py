@@ -18,7 +18,8 @@ import numpy as np
 
 from planecal.errors import InputError
 from planecal.formats import read_json, validate
-from planecal.formats.errors import ErrorProfileFile
+from planecal.formats.base import Num, Record, Vector
+from planecal.formats.errors import N_JOINTS, ErrorProfileFile
 from planecal.kinematics import Kinematics, frame_error, from_robot, parallel_pairs
 from planecal.robot import Robot
 from planecal.scene import Scene
@@ -27,6 +28,8 @@ from planecal.twin.truth import Tolerances, Truth, draw_truth
 
 PROFILES = ("ideal", "realistic")
 DEFAULT_PROFILE = "realistic"
+_Row = Vector(Num, N_JOINTS, "values, one per joint")
+_Frame = Vector(Vector(Num, 4, "numbers in a row"), 4, "rows of a 4x4 frame")
 
 
 @dataclass(frozen=True)
@@ -134,3 +137,57 @@ def save_truth(path, twin) -> None:
                                "flange": kin.flange.tolist()}
     doc["world"] = world
     save_json(path, doc)
+
+
+
+class _KinematicsDoc(Record):
+    """``world.kinematics`` of a truth file: the true robot's geometry (kinematics.py)."""
+    alpha_rad: _Row
+    a_m: _Row
+    beta_rad: _Row
+    theta_rad: _Row
+    d_m: _Row
+    base: _Frame
+    flange: _Frame
+
+
+class _WorldDoc(Record):
+    gear_phases_rad: list[Num] = []
+    laser_linearity_phases_rad: Vector(Num, 2) = [0.0, 0.0]
+    kinematics: _KinematicsDoc | None = None
+
+
+class _TruthWorld(Record):
+    world: _WorldDoc
+
+
+def load_world(scene: Scene, path) -> Truth:
+    """The world a truth file holds (``save_truth``'s): its ``params`` (what the twin's cell
+    is) and, under ``world``, the robot's true geometry and the gear and laser phases. A
+    parameter file without ``world`` (written before error profiles, or by hand) is a
+    world with robot.json's geometry and no phases: the ideal world's. One-line InputError
+    naming the file and the field."""
+    from planecal.twin.truth import load_truth
+
+    params = load_truth(scene, path)
+    doc = read_json(path, "truth file")
+    if not isinstance(doc, dict) or doc.get("world") is None:
+        return Truth(params)
+    w = validate(_TruthWorld, doc, path, "truth file").world
+    kin = None
+    if w.kinematics is not None:
+        k = w.kinematics
+        frames = {}
+        for name in ("base", "flange"):
+            T = np.array(getattr(k, name), float)
+            R = T[:3, :3]
+            if (np.abs(R.T @ R - np.eye(3)).max() > 1e-9 or np.linalg.det(R) < 0
+                    or np.abs(T[3] - (0, 0, 0, 1)).max() > 0):
+                raise InputError(f"{path}: world.kinematics.{name}: not a rigid 4x4 frame "
+                                 "(rotation orthonormal, last row 0 0 0 1)")
+            frames[name] = T
+        kin = Kinematics(np.array(k.alpha_rad), np.array(k.a_m), np.array(k.beta_rad),
+                         np.array(k.theta_rad), np.array(k.d_m), frames["base"],
+                         frames["flange"])
+    return Truth(params, kin, tuple(float(v) for v in w.gear_phases_rad),
+                 tuple(float(v) for v in w.laser_linearity_phases_rad))

@@ -1,0 +1,497 @@
+"""Runs on an existing distributed engine: every study (Monte Carlo, a sweep, ``plan
+--measure``, validation over truths, bootstrap) is a map of a pure function over run
+descriptions (an item carries its own seed), submitted here.
+
+``Engine`` runs the map in one of three ways:
+
+* ``Engine(jobs=1)``: in this process, item after item (dask is not imported): the
+  reference every other way must reproduce exactly;
+* ``Engine()`` / ``Engine(jobs=N)``: an in-process ``dask.distributed.LocalCluster`` on
+  this machine, N worker *processes* (default: the CPU count) of one thread each; nothing
+  to set up;
+* ``Engine(scheduler="tcp://HOST:8786")``: a cluster the user already runs::
+
+      OPENBLAS_NUM_THREADS=1 dask scheduler --port 8786                # on one machine
+      OPENBLAS_NUM_THREADS=1 dask worker tcp://HOST:8786 --nthreads 1  # on each worker
+                                                                       # (once per core)
+
+  (every worker needs planecal installed, the same version).
+
+Quiet: no dashboard, dask's own log lines at ERROR only while the engine is open; an
+unreachable scheduler (or one with no workers) is a one-line ``InputError`` after
+``connect_timeout_s``. Workers run with one BLAS thread (``OPENBLAS``/``OMP``/``MKL``
+``_NUM_THREADS=1``, set before the worker process starts) and ``MUJOCO_GL=disable``, as
+``studies.common.parallel_map``'s workers do.
+
+``Engine.map(fn, items, key=..., out=..., resume=...)`` submits every item and returns the
+results in item order; ``Engine.as_completed`` yields ``(index, result)`` as the runs
+complete. With ``out`` each result is appended to a JSON-lines file the moment it arrives
+(one ``os.write`` of a whole line: a killed map -- Ctrl-C, SIGKILL -- leaves whole lines),
+and with ``resume=True`` the items whose key is already in the file are not run again::
+
+    {"format": "planecal-results/1", "header": {...the study's settings...}}
+    {"key": 0, "result": {...}, "arrays": {"/err": ["float64", [17]], ...}}
+
+Numpy arrays are written as (nested) lists; ``arrays`` names them by JSON pointer (RFC 6901)
+with dtype and shape, so a result read back is the same arrays, bit for bit (floats are
+written with Python's shortest round-trip repr; NaN and infinities as ``NaN``,
+``Infinity``). With a file, every result returned -- read back or just computed -- is
+the decoded line, so a resumed map returns exactly what an uninterrupted one does. Tuples
+come back as lists; dict keys must be strings. ``resume`` refuses a file written with
+another ``header`` (one line naming the first field that differs).
+
+Numba: the twin's tick is compiled once and cached on disk next to ``twin/ticks.py``
+(``~7 s`` cold, ``~0.3 s`` to load). ``warmup`` (e.g. ``warm_twin``) runs first on one
+worker -- which compiles if the cache is cold and writes it -- and only then on every other
+worker, which load it: a cold start compiles once per file system, not once per worker.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import uuid
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
+
+import numpy as np
+
+from planecal.errors import InputError
+
+RESULTS_FORMAT = "planecal-results/1"
+CONNECT_TIMEOUT_S = 10.0
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+              "MUJOCO_GL": "disable"}
+_QUIET_LOGGERS = ("distributed", "tornado", "bokeh")
+
+
+class Steps(Protocol):
+    """Progress per completed item (``studies.common.Progress``)."""
+
+    def step(self, k: int = 1) -> None: ...
+
+
+# ----- results file -----------------------------------------------------------------------------
+
+def _ptr(parent: str, k) -> str:
+    return parent + "/" + str(k).replace("~", "~0").replace("/", "~1")
+
+
+def encode(obj, arrays: dict | None = None, at: str = ""):
+    """``obj`` as JSON values (arrays as nested lists, numpy scalars as Python numbers);
+    ``arrays`` collects ``{pointer: [dtype, shape]}`` of every array."""
+    if isinstance(obj, np.ndarray):
+        if obj.dtype.kind not in "biuf":
+            raise TypeError(f"result {at or '/'}: cannot write an array of dtype {obj.dtype}")
+        if arrays is not None:
+            arrays[at] = [obj.dtype.str, list(obj.shape)]
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, dict):
+        bad = [k for k in obj if not isinstance(k, str)]
+        if bad:
+            raise TypeError(f"result {at or '/'}: dict key {bad[0]!r} is not a string")
+        return {k: encode(v, arrays, _ptr(at, k)) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [encode(v, arrays, _ptr(at, i)) for i, v in enumerate(obj)]
+    if obj is None or isinstance(obj, (bool, int, float, str)):
+        return obj
+    raise TypeError(f"result {at or '/'}: cannot write a {type(obj).__name__}")
+
+
+def decode(value, arrays: dict):
+    """The inverse of ``encode``: the arrays named in ``arrays`` made numpy arrays again."""
+    for ptr, (dtype, shape) in sorted(arrays.items(), key=lambda kv: -kv[0].count("/")):
+        parts = [p.replace("~1", "/").replace("~0", "~") for p in ptr.split("/")[1:]]
+        arr = np.array(_get(value, parts), dtype=np.dtype(dtype)).reshape(shape)
+        if not parts:
+            value = arr
+        else:
+            parent = _get(value, parts[:-1])
+            parent[int(parts[-1]) if isinstance(parent, list) else parts[-1]] = arr
+    return value
+
+
+def _get(value, parts):
+    for p in parts:
+        value = value[int(p)] if isinstance(value, list) else value[p]
+    return value
+
+
+def _canon(key) -> str:
+    return json.dumps(key, sort_keys=True)
+
+
+def _line(obj) -> bytes:
+    return (json.dumps(obj, separators=(",", ":")) + "\n").encode()
+
+
+class ResultsFile:
+    """The JSON-lines results of one map (module docstring), open for appending."""
+
+    def __init__(self, path, header: dict | None, resume: bool):
+        from planecal.sampling.runfiles import RunLock
+        self.path = Path(path)
+        self.header = encode(header or {})
+        self.done: dict[str, tuple] = {}  # canonical key -> (key, result)
+        self._lock = RunLock(self.path)
+        try:
+            exists = self.path.exists() and self.path.stat().st_size > 0
+            if exists and not resume:
+                raise InputError(f"{self.path}: exists (resume to continue it, or remove it)")
+            if exists:
+                self._read()
+            flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT
+            self._fd = os.open(self.path, flags, 0o644)
+            if not exists:
+                self._write({"format": RESULTS_FORMAT, "header": self.header})
+        except BaseException:
+            self._lock.close()
+            raise
+
+    def _read(self) -> None:
+        data = self.path.read_bytes()
+        end = data.rfind(b"\n") + 1  # a torn last line (power loss) is dropped
+        lines = data[:end].split(b"\n")[:-1]
+        try:
+            head = json.loads(lines[0]) if lines else None
+        except ValueError:
+            head = None
+        if not isinstance(head, dict) or head.get("format") != RESULTS_FORMAT:
+            raise InputError(f"{self.path}: not a planecal results file "
+                             f"(first line is not {{\"format\": \"{RESULTS_FORMAT}\", ...}})")
+        if head.get("header") != json.loads(json.dumps(self.header)):
+            field = _first_difference(head.get("header"), self.header)
+            raise InputError(f"{self.path}: written for other settings ({field}); use another "
+                             "file or start afresh")
+        for n, ln in enumerate(lines[1:], start=2):
+            try:
+                rec = json.loads(ln)
+                key, res = rec["key"], decode(rec["result"], rec.get("arrays", {}))
+            except (ValueError, KeyError, TypeError, IndexError):
+                raise InputError(f"{self.path}, line {n}: not a result line") from None
+            self.done.setdefault(_canon(key), (key, res))
+        if end < len(data):
+            os.truncate(self.path, end)
+
+    def _write(self, obj) -> None:
+        b = _line(obj)
+        while b:  # one write of the whole line; loop only on a short write
+            b = b[os.write(self._fd, b):]
+
+    def append(self, key, result):
+        """Write one result; returns it as read back (``decode(encode(result))``)."""
+        arrays: dict = {}
+        rec = {"key": encode(key), "result": encode(result, arrays), "arrays": arrays}
+        self._write(rec)
+        return decode(json.loads(json.dumps(rec["result"])), arrays)
+
+    def close(self) -> None:
+        if getattr(self, "_fd", None) is not None:
+            os.close(self._fd)
+            self._fd = None
+        self._lock.close()
+
+
+def _first_difference(old, new, at: str = "header") -> str:
+    if isinstance(old, dict) and isinstance(new, dict):
+        for k in sorted(set(old) | set(new)):
+            if old.get(k) != new.get(k):
+                return _first_difference(old.get(k), new.get(k), f"{at}.{k}")
+    return f"{at}: {json.dumps(old)} in the file, {json.dumps(new)} now"
+
+
+def read_results(path) -> tuple[dict, list[tuple]]:
+    """(header, [(key, result), ...] in file order) of a results file."""
+    p = Path(path)
+    lines = p.read_bytes().split(b"\n")
+    try:
+        head = json.loads(lines[0])
+        out = []
+        for ln in lines[1:]:
+            if ln.strip():
+                rec = json.loads(ln)
+                out.append((rec["key"], decode(rec["result"], rec.get("arrays", {}))))
+    except (ValueError, KeyError, IndexError):
+        raise InputError(f"{p}: not a planecal results file") from None
+    if not isinstance(head, dict) or head.get("format") != RESULTS_FORMAT:
+        raise InputError(f"{p}: not a planecal results file")
+    return head.get("header", {}), out
+
+
+# ----- the engine -------------------------------------------------------------------------------
+
+@contextmanager
+def _quiet_logs():
+    """dask's loggers at ERROR while the engine is open (restored after)."""
+    saved = {n: logging.getLogger(n).level for n in _QUIET_LOGGERS}
+    for n in _QUIET_LOGGERS:
+        logging.getLogger(n).setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        for n, lv in saved.items():
+            logging.getLogger(n).setLevel(lv)
+
+
+@contextmanager
+def _spawn_env(env: dict):
+    """``env`` in the nanny's pre-spawn environment (set before each worker process starts,
+    so BLAS reads it at import), without leaving it in this process's environment."""
+    import dask
+    saved = {k: os.environ.get(k) for k in env}
+    try:
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": {
+                **dask.config.get("distributed.nanny.pre-spawn-environ"), **env}}):
+            yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _worker_env() -> dict:
+    return {k: os.environ.get(k) for k in WORKER_ENV} | {"pid": os.getpid()}
+
+
+def _set_worker_env() -> None:
+    os.environ.setdefault("MUJOCO_GL", "disable")
+
+
+class Engine:
+    """Where a study's runs go (module docstring). A context manager::
+
+        with Engine() as eng:                       # LocalCluster, all cores
+            results = eng.map(run_one, items, key=lambda it: it[1], out="runs.jsonl")
+    """
+
+    def __init__(self, jobs: int | None = None, scheduler: str | None = None,
+                 connect_timeout_s: float = CONNECT_TIMEOUT_S,
+                 warmup: Callable[[], Any] | None = None):
+        if jobs is not None and jobs < 1:
+            raise InputError(f"--jobs must be at least 1, got {jobs}")
+        if scheduler is not None and jobs is not None:
+            raise InputError("--jobs and --scheduler exclude each other (the scheduler's "
+                             "workers run the jobs)")
+        if scheduler is not None and not str(scheduler).strip():
+            raise InputError("--scheduler: empty address (expected tcp://HOST:8786)")
+        self.scheduler = scheduler
+        self.jobs = jobs
+        self.mode = ("scheduler" if scheduler else
+                     "local" if jobs == 1 else "cluster")
+        self.n_workers = (os.cpu_count() or 1) if jobs is None else jobs
+        self.connect_timeout_s = float(connect_timeout_s)
+        self.warmup = warmup
+        self.client = None
+        self._cluster = None
+        self._logs = None
+
+    # -- lifecycle
+    def __enter__(self) -> "Engine":
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def start(self) -> None:
+        if self.mode == "local":
+            if self.warmup is not None:
+                self.warmup()
+            return
+        if self.client is not None:
+            return
+        self._logs = _quiet_logs()
+        self._logs.__enter__()
+        try:
+            if self.mode == "cluster":
+                self._start_cluster()
+            else:
+                self._connect()
+            self.client.register_plugin(_env_plugin(), name="planecal-env")
+            if self.warmup is not None:
+                self._warm()
+        except BaseException:
+            self.close()
+            raise
+
+    def _start_cluster(self) -> None:
+        from distributed import Client, LocalCluster
+        with _spawn_env(WORKER_ENV):
+            self._cluster = LocalCluster(
+                n_workers=self.n_workers, threads_per_worker=1, processes=True,
+                host="127.0.0.1", scheduler_port=0, dashboard_address=None,
+                # no dashboard; the scheduler's plain HTTP routes (health, metrics) on a
+                # free loopback port instead of 8787 (which another cluster may hold)
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                silence_logs=logging.ERROR)
+        self.client = Client(self._cluster, set_as_default=False)
+
+    def _connect(self) -> None:
+        from distributed import Client
+        addr = self.scheduler
+        try:
+            self.client = Client(addr, timeout=self.connect_timeout_s, set_as_default=False)
+        except ValueError as e:
+            raise InputError(f"--scheduler {addr}: not a scheduler address like "
+                             f"tcp://HOST:8786 ({e})") from None
+        except (OSError, TimeoutError) as e:
+            raise InputError(f"--scheduler {addr}: no Dask scheduler answered within "
+                             f"{self.connect_timeout_s:g} s ({type(e).__name__})") from None
+        try:
+            self.client.wait_for_workers(1, timeout=self.connect_timeout_s)
+        except (OSError, TimeoutError):
+            raise InputError(f"--scheduler {addr}: the scheduler has no workers (none joined "
+                             f"within {self.connect_timeout_s:g} s); start some with "
+                             f"'dask worker {addr} --nthreads 1'") from None
+
+    def _warm(self) -> None:
+        """The warm-up on one worker first (it fills the on-disk caches), then on the
+        others at once (they load them)."""
+        workers = sorted(self.client.scheduler_info(n_workers=-1)["workers"])
+        first = self.client.submit(self.warmup, workers=[workers[0]], pure=False,
+                                   key=f"planecal-warmup-{uuid.uuid4().hex}")
+        first.result()
+        rest = [self.client.submit(self.warmup, workers=[w], pure=False,
+                                   key=f"planecal-warmup-{uuid.uuid4().hex}")
+                for w in workers[1:]]
+        self.client.gather(rest)
+
+    def close(self) -> None:
+        try:
+            if self.client is not None:
+                self.client.close()
+            if self._cluster is not None:
+                self._cluster.close()
+        finally:
+            self.client = self._cluster = None
+            if self._logs is not None:
+                self._logs.__exit__(None, None, None)
+                self._logs = None
+
+    # -- facts
+    @property
+    def slots(self) -> int:
+        """Runs that go at once (worker threads; 1 in this process)."""
+        if self.mode == "local":
+            return 1
+        return int(sum(self.client.nthreads().values()))
+
+    def describe(self) -> str:
+        if self.mode == "local":
+            return "in this process (--jobs 1)"
+        if self.mode == "cluster":
+            return f"local Dask cluster: {self.slots} worker processes"
+        return f"Dask scheduler {self.scheduler}: {self.slots} worker threads"
+
+    def worker_env(self) -> list[dict]:
+        """The BLAS / MuJoCo environment of each worker (for checks)."""
+        if self.mode == "local":
+            return [_worker_env()]
+        return list(self.client.run(_worker_env).values())
+
+    # -- the map
+    def as_completed(self, fn: Callable, items: Sequence, key: Callable | None = None,
+                     out=None, resume: bool = False, header: dict | None = None,
+                     progress: Steps | None = None) -> Iterator[tuple[int, Any]]:
+        """Yields ``(index, result)`` as runs complete: first those already in ``out``
+        (with ``resume``), in item order, then the others as they finish. ``key(item)``
+        (default: the index) names an item in the file; keys must be distinct."""
+        items = list(items)
+        keys = [i if key is None else key(it) for i, it in enumerate(items)]
+        canon = [_canon(encode(k)) for k in keys]
+        if len(set(canon)) != len(canon):
+            dup = next(k for k, c in zip(keys, canon) if canon.count(c) > 1)
+            raise ValueError(f"two items have the key {dup!r}")
+        rf = ResultsFile(out, header, resume) if out is not None else None
+        try:
+            todo = []
+            for i, c in enumerate(canon):
+                if rf is not None and c in rf.done:
+                    if progress:
+                        progress.step()
+                    yield i, rf.done[c][1]
+                else:
+                    todo.append(i)
+            for i, res in self._run(fn, items, todo):
+                if rf is not None:
+                    res = rf.append(keys[i], res)
+                if progress:
+                    progress.step()
+                yield i, res
+        finally:
+            if rf is not None:
+                rf.close()
+
+    def map(self, fn: Callable, items: Iterable, key: Callable | None = None, out=None,
+            resume: bool = False, header: dict | None = None,
+            progress: Steps | None = None,
+            on_result: Callable[[int, Any], None] | None = None) -> list:
+        """``[fn(item) for item in items]`` through the engine, in item order (see
+        ``as_completed``); ``on_result(index, result)`` as each one completes."""
+        items = list(items)
+        out_list: list = [None] * len(items)
+        for i, res in self.as_completed(fn, items, key, out, resume, header, progress):
+            out_list[i] = res
+            if on_result:
+                on_result(i, res)
+        return out_list
+
+    def _run(self, fn, items, todo) -> Iterator[tuple[int, Any]]:
+        if not todo:
+            return
+        if self.mode == "local":
+            for i in todo:
+                yield i, fn(items[i])
+            return
+        if self.client is None:
+            raise RuntimeError("Engine: use it as a context manager (or call start())")
+        from distributed import as_completed
+        tag = uuid.uuid4().hex[:12]
+        name = getattr(fn, "__name__", "run")
+        futs = {}
+        for i in todo:
+            f = self.client.submit(fn, items[i], key=f"{name}-{tag}-{i}", pure=False)
+            futs[f.key] = (i, f)
+        try:
+            for f, res in as_completed([f for _, f in futs.values()], loop=self.client.loop,
+                                       with_results=True):
+                i, _ = futs.pop(f.key)
+                yield i, res
+        finally:
+            if futs:  # stopped early (an error, Ctrl-C, the caller stopped): cancel the rest
+                self.client.cancel([f for _, f in futs.values()])
+
+
+def _env_plugin():
+    """A worker plugin setting MUJOCO_GL=disable in every worker, including workers that
+    join later (the BLAS threads must be set before a worker process starts:
+    ``WORKER_ENV``). Made here: distributed is imported only when an engine uses it."""
+    from distributed import WorkerPlugin
+
+    class EnvPlugin(WorkerPlugin):
+        idempotent = True
+
+        def setup(self, worker):
+            _set_worker_env()
+
+    return EnvPlugin()
+
+
+# ----- warm-ups -----------------------------------------------------------------------------
+
+def warm_twin(scene: str = "thesis_final") -> float:
+    """Import the twin and run three of its compiled ticks (numba: compiled, or loaded from
+    the on-disk cache); returns the seconds it took. A warm-up for studies on the twin."""
+    import time
+    t0 = time.perf_counter()
+    from planecal.scene import load_scene
+    from planecal.twin import Twin
+    twin = Twin(load_scene(scene), truth="nominal", seed=0)
+    hold = (twin.current_counts - twin.reference_counts)[None]
+    twin.run(np.repeat(hold, 3, axis=0))
+    return time.perf_counter() - t0
