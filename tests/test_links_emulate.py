@@ -97,10 +97,14 @@ class Emulate:
 def test_planecal_emulate_serves_the_twin():
     from planecal.links.zs_ld80 import ZSLD80, decode_reply, encode_reply
 
+    from planecal.commands.rehearse import make_twin
+    from planecal.scene import load_scene
+
     emu = Emulate("--seed", "3")
     try:
         assert "reference mode session" in emu.text
-        local = twin_mod.Twin("thesis_final", seed=3)
+        assert "errors realistic, seed 3" in emu.text  # the default world: as rehearse's
+        local = make_twin(load_scene("thesis_final"), 3, "realistic")
         with FD11Link("127.0.0.1", emu.port, 0, timeout_s=0.5, silence_s=2.0,
                      tick_s=0) as link, \
                 ZSLD80(emu.tty, timeout_s=1.0) as laser:
@@ -164,7 +168,7 @@ def test_a_controller_that_keeps_its_reference(tmp_path, capsys):
         # --rt-fresh: delta 0 first, a jump back to where the controller booted
         code, _, err = sample(port, tty, run, "--resume", "--rt-fresh",
                               "--rt-boot-timeout-s", "0.5", capsys=capsys)
-        assert code == 2
+        assert code == 1
         err = err.strip().splitlines()[-1]  # after the note that --seed is the sidecar's
         assert "no reply to the first packet (delta [0, 0, 0, 0, 0, 0])" in err
         assert "tripped on this packet" in err and f"{n1} samples so far" in err

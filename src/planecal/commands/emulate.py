@@ -4,6 +4,9 @@ Starts the FD11 RT emulator (UDP) and the ZS-LD80 emulator (a pseudo-terminal), 
 backed by one MuJoCo twin, prints where they listen and runs until Ctrl-C. Point
 `planecal sample` at them (``--host``/ports and the printed serial device) to rehearse
 the real-cell code path end to end. Formats: `planecal.links.fd11`, `planecal.links.zs_ld80`.
+The twin's world is drawn from ``--errors`` (ideal|realistic|FILE.json, default realistic,
+as ``rehearse``) and ``--seed``, or read from ``--truth`` (a truth file ``rehearse --truth``
+wrote; the profile then gives the twin's noise and servo).
 
 It serves any number of client sessions in a row (``sample``, ``sample --resume``, ...).
 ``--reference`` chooses what the emulated controller does with its reference between
@@ -12,8 +15,9 @@ them (`planecal.links.fd11`, "Sessions": the seed reads both ways): ``session``
 keeps the one it started with, so a client must carry on from the last delta it sent
 (``planecal sample`` does, from its ``--rt-state`` file).
 
-Faults, all deterministic (`planecal.links.emulators`): ``--drop-replies P`` loses each
-reply with probability P (``--fault-seed``), ``--boot-silence-s S`` ignores every request
+Faults, all deterministic (`planecal.links.emulators`): ``--drop-replies P`` (alias
+``--drop-rate``) loses each reply with probability P (``--fault-seed``, alias
+``--drop-seed``), ``--boot-silence-s S`` ignores every request
 for S seconds after start, ``--laser-silent-every K`` leaves every K-th laser request
 unanswered, ``--release-after-ticks N`` releases the dead-man switch after N ticks (held
 again when the next session starts).
@@ -29,7 +33,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene", default=None, help="twin scene name or JSON path (twin default)")
     p.add_argument("--seed", type=int, default=None, help="random seed of the twin's truth and noise")
     p.add_argument("--truth", default=None, metavar="T.json",
-                   help="the twin's true parameters (JSON, as written by the twin)")
+                   help="the twin's hidden truth (a parameter file, e.g. written by "
+                        "`rehearse --truth`; default: drawn from --errors and --seed)")
+    p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
+                   help="the twin's error profile: realistic (default: a robot of the MC70's "
+                        "class), ideal (the nominal robot), or a profile file")
     p.add_argument("--host", default="127.0.0.1", help="address the FD11 emulator binds")
     p.add_argument("--rt-port", type=int, default=5555,
                    help="UDP port receiving delta packets (FD11 remote port, default 5555)")
@@ -42,9 +50,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--session-gap-s", type=float, default=2.0,
                    help="silence after which the same client address begins a new session "
                         "(default 2)")
-    p.add_argument("--drop-replies", type=float, default=0.0, metavar="P",
+    p.add_argument("--drop-replies", "--drop-rate", dest="drop_replies", type=float,
+                   default=0.0, metavar="P",
                    help="fault: lose each FD11 reply with probability P (default 0)")
-    p.add_argument("--fault-seed", type=int, default=0, help="seed of the random faults")
+    p.add_argument("--fault-seed", "--drop-seed", dest="fault_seed", type=int, default=0,
+                   help="seed of the random faults (default 0)")
     p.add_argument("--boot-silence-s", type=float, default=0.0,
                    help="fault: the RT system answers nothing for this long after start")
     p.add_argument("--laser-silent-every", type=int, default=0, metavar="K",
@@ -81,9 +91,18 @@ def _make_twin(args):
             raise InputError("the MuJoCo twin (planecal.twin) is not available in this "
                              "version; cannot emulate") from None
         raise InputError(f"the MuJoCo twin cannot be loaded: missing module {e.name}") from None
-    kwargs = {k: v for k, v in (("scene", args.scene), ("seed", args.seed),
-                                ("truth", args.truth)) if v is not None}
-    return twin_mod.Twin(**kwargs)
+    from planecal.scene import load_scene
+    from planecal.twin.profile import DEFAULT_PROFILE, draw_world, load_profile, load_world
+
+    seed = 0 if args.seed is None else args.seed
+    if seed < 0:
+        raise InputError(f"--seed must be >= 0, got {seed}")
+    scene = load_scene(args.scene) if args.scene else load_scene()
+    profile = load_profile(args.errors or DEFAULT_PROFILE, scene.robot)
+    world, options = draw_world(scene, seed, profile)
+    if args.truth is not None:
+        world = load_world(scene, args.truth)
+    return twin_mod.Twin(scene, truth=world, seed=seed, options=options)
 
 
 def run(args) -> int:
@@ -91,6 +110,8 @@ def run(args) -> int:
 
     fd11_faults, laser_faults = _faults(args)
     twin = _make_twin(args)
+    print(f"twin: scene {twin.scene.name}, errors {args.errors or 'realistic'}, seed "
+          f"{twin.seed}" + (f", truth {args.truth}" if args.truth else ""), flush=True)
     reply_port = None if args.reply_port == 0 else args.reply_port
 
     def ready(emus) -> None:

@@ -34,7 +34,9 @@ reading.
 Laser: a garbled or missing reply, and a tick without a reply yet, count as an
 out-of-range reading; ``--laser-error-limit`` errors in a row stop the run (cable, port,
 power).
-Exit 0 when all samples were taken, 1 when the run stopped or gave up (files valid).
+Exit 0 when all samples were taken; 1 when the run stopped, gave up, lost its link or
+could not write its files (one line saying why; the files are valid and ``--resume``
+continues); 2 for bad input or usage; 130 interrupted. Bounds: docs/LINKS.md.
 """
 from __future__ import annotations
 
@@ -42,7 +44,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from planecal.errors import InputError
+from planecal.errors import InputError, RunFailed
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -204,7 +206,7 @@ def run(args) -> int:
             n = count_samples(Path(args.out)) if sidecar_path(args.out).exists() else 0
             where = (f"{n} samples so far are in {args.out}; continue with --resume" if n
                      else "nothing sampled")
-            raise InputError(f"run stopped: {e} ({where})") from None
+            raise RunFailed(f"run stopped: {e} ({where})") from None
         finally:
             laser.close()
     finally:

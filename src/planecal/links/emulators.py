@@ -117,6 +117,7 @@ class FD11EmulatorCounters:
     dropped_replies: int = 0  # replies dropped by fault injection (tick, no reply)
     ignored_tripped: int = 0
     released_ticks: int = 0   # requests answered with the switch released (no tick)
+    released_steps: int = 0   # of those, the ones whose command moved (a new delta)
     max_released_gap: int = 0  # largest |commanded - current| seen while released
 
 
@@ -255,6 +256,7 @@ class FD11Emulator(_Served):
         """Process one datagram; return the reply datagrams to send (delays applied here)."""
         with self._cv:
             replies, delay = self._handle(data, addr)
+            self._cv.notify_all()  # counters changed: wake `wait_until`
         if delay > 0:
             time.sleep(delay)
         return replies
@@ -299,9 +301,12 @@ class FD11Emulator(_Served):
                 and c.ticks >= f.release_after_ticks):
             self.released = True
         if self.released:  # the servo is off: the command moves on, the robot does not
-            if len(self._held) < SETTLE_TICKS * 20 and (
-                    not self._held or not np.array_equal(self._held[-1], b_delta)):
-                self._held.append(b_delta.copy())
+            moved = not np.array_equal(self._b_delta if not self._held else self._held[-1],
+                                       b_delta)
+            if moved:
+                c.released_steps += 1
+                if len(self._held) < SETTLE_TICKS * 20:
+                    self._held.append(b_delta.copy())
             reference, current = self._b_ref + self._offset, self._b_cur.copy()
             gap = int(np.max(np.abs(self._b_ref + b_delta - current)))
             c.released_ticks += 1
