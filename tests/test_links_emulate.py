@@ -50,6 +50,7 @@ def test_emulate_command_without_twin_fails_in_one_line(capsys, monkeypatch):
     (["--boot-silence-s", "-1"], "--boot-silence-s must be a number >= 0"),
     (["--session-gap-s", "0"], "--session-gap-s must be a positive number"),
     (["--laser-silent-every", "-2"], "--laser-silent-every must be >= 0"),
+    (["--errors", "nosuch"], "--errors nosuch: no such profile"),
 ])
 def test_emulate_fault_flags_are_checked_in_one_line(flags, message, capsys):
     assert main(["emulate", "--rt-port", "0", *flags]) == 2
@@ -91,6 +92,7 @@ class Emulate:
         self.proc.send_signal(signal.SIGINT)
         out, err = self.proc.communicate(timeout=30)
         self.guard.cancel()
+        self.proc_out = out  # after "running": the counters line it prints on exit
         return self.proc.returncode, err
 
 

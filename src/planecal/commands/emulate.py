@@ -114,7 +114,10 @@ def run(args) -> int:
           f"{twin.seed}" + (f", truth {args.truth}" if args.truth else ""), flush=True)
     reply_port = None if args.reply_port == 0 else args.reply_port
 
+    served = []
+
     def ready(emus) -> None:
+        served.append(emus)
         for line in emus.describe():
             print(line, flush=True)
         print("running; Ctrl-C to stop", flush=True)
@@ -127,4 +130,15 @@ def run(args) -> int:
         raise InputError(str(e)) from None
     finally:
         twin.close()
+        if served:  # what was served, faults included (the threads have stopped)
+            print(counters_line(served[0]), flush=True)
     return 0
+
+
+def counters_line(emus) -> str:
+    """``served: fd11 {...} laser {...}``: the emulators' counters as JSON, one line."""
+    import json
+    from dataclasses import asdict
+
+    return (f"served: fd11 {json.dumps(asdict(emus.fd11.counters))} "
+            f"laser {json.dumps(asdict(emus.laser.counters))}")

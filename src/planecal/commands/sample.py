@@ -20,7 +20,9 @@ once the switch is held again.
 The FD11 link (``planecal.links.fd11``) rides out lost replies: it resends the same delta
 every ``--rt-resend-s`` and gives up only after ``--rt-silence-s`` without a reply
 (``--rt-boot-timeout-s`` for the first contact, while the RT system may still be booting).
-The summary's ``link`` reports the lost replies and outages. The first packet repeats the
+The summary's ``link`` reports the session's lost replies and outages, ``link_total``
+those of every session of the run; both are written to the sidecar's ``real_cell`` when
+the session ends (stopped, failed or complete). The first packet repeats the
 last delta sent to the controller, kept in ``--rt-state`` (default RUN.tsv.fd11, rewritten
 every tick), so a restart is safe whether the controller latches a new reference per
 client session or keeps the one it booted with; the first reply is checked before any
@@ -152,6 +154,37 @@ def _check_link_flags(args, robot) -> tuple[int, Path]:
     return limit, state
 
 
+_PEAKS = ("max_lost_in_a_row", "longest_outage_s", "boot_wait_s")  # maxima, not sums
+
+
+def link_totals(before: dict | None, session: dict) -> dict:
+    """The link counters over all sessions: ``before`` (the sidecar's, None for a new run)
+    plus this session's (sums; the maxima of the peaks; last session's boot wait kept as
+    the largest)."""
+    total = dict(session)
+    for k, v in (before or {}).items():
+        if k in total and isinstance(v, (int, float)):
+            total[k] = max(total[k], v) if k in _PEAKS else total[k] + v
+    return total
+
+
+def _record_link(out: Path, real_cell: dict) -> None:
+    """Put the session's link counters (``real_cell``'s ``link``, ``link_total``) in the
+    sidecar once the session has ended. Best effort: a full disk keeps the last sidecar
+    (the run has already said why it stopped)."""
+    from planecal.params import save_json
+    from planecal.sampling.runfiles import sidecar_path
+
+    p = sidecar_path(out)
+    try:
+        import json
+        side = json.loads(p.read_text(encoding="utf-8"))
+        side["real_cell"] = {**(side.get("real_cell") or {}), **real_cell}
+        save_json(p, side)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
 def run(args) -> int:
     from dataclasses import asdict
 
@@ -193,9 +226,11 @@ def run(args) -> int:
         laser = TolerantLaser(raw_laser, args.laser_error_limit, (LaserError,), NO_READING)
         monitor = FollowingMonitor(link, limit, max_step_counts=robot.max_step_counts,
                                    trip_counts=robot.trip_step_counts, tick_s=robot.tick_s)
-        extra = {"real_cell": {"rt": args.rt, "rt_port": args.rt_port, "laser": args.laser,
-                               "follow_limit_counts": limit, "rt_state": str(state_path),
-                               "first_delta": link.start_delta.tolist()}}
+        before = ((side or {}).get("real_cell") or {}).get("link_total")
+        real_cell = {"rt": args.rt, "rt_port": args.rt_port, "laser": args.laser,
+                     "follow_limit_counts": limit, "rt_state": str(state_path),
+                     "first_delta": link.start_delta.tolist(), "link_total": before}
+        extra = {"real_cell": real_cell}
         session = session_from_args(args, pose_list_planner(args, scene, settings, checker,
                                                             model[0]),
                                     observer, extra, hold_while_planning=True, model=model)
@@ -209,6 +244,12 @@ def run(args) -> int:
             raise RunFailed(f"run stopped: {e} ({where})") from None
         finally:
             laser.close()
+            session_link = asdict(link.counters)
+            real_cell["link"] = session_link
+            real_cell["link_total"] = link_totals(before, session_link)
+            if sidecar_path(args.out).exists():
+                _record_link(Path(args.out), {"link": session_link,
+                                              "link_total": real_cell["link_total"]})
     finally:
         link.close()
         record.close()
@@ -218,7 +259,8 @@ def run(args) -> int:
     summary["laser"] = {**asdict(raw_laser.counters), "no_reply_ticks": laser.no_reply_ticks}
     if args.rrd:
         summary["rrd"] = str(getattr(observer, "path", args.rrd))
-    summary["link"] = asdict(link.counters)
+    summary["link"] = real_cell["link"]
+    summary["link_total"] = real_cell["link_total"]
     summary["following"] = {"limit_counts": limit, "max_lag_counts": monitor.max_lag}
     print_summary(summary)
     return code

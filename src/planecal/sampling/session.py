@@ -63,7 +63,9 @@ class Progress:
 
     def done(self, st: RunStats) -> None:
         self.bar.update(st.samples, self.note(st))
-        self.bar.close(None if st.status == "complete" else f"run {st.status}: {st.reason}")
+        # an "error" run raises, and the command says why in its one line
+        self.bar.close(None if st.status in ("complete", "error")
+                       else f"run {st.status}: {st.reason}")
 
 
 def run_session(session: Session, scene, settings: RunSettings, link, laser, enable,
