@@ -201,6 +201,9 @@ def test_sample_rides_out_a_lossy_booting_cell(tmp_path, capsys):
         code, s, err = sample(emu.fd11.rt_port, emu.laser.port, out, "--samples", "2",
                               "--rt-resend-s", "0.01", "--laser-timeout-s", "0.02",
                               capsys=capsys)
+        # a resend of the last tick may still be queued: let the thread see every packet
+        assert s is not None and emu.fd11.wait_until(
+            lambda c: c.datagrams >= s["link"]["sent"], 5), err
     assert code == 0, err
     assert s["status"] == "complete" and s["samples"] == 2 and s["sessions"] == 1
     link, e = s["link"], emu.fd11.counters
@@ -216,6 +219,9 @@ def test_sample_rides_out_a_lossy_booting_cell(tmp_path, capsys):
     # the laser: a silent request was given up after its timeout, and the ticks went on
     # meanwhile without a reading (a blocking read would have held the tick instead)
     laser = s["laser"]
-    assert emu.laser.counters.silent >= 1 and laser["timeouts"] == emu.laser.counters.silent
+    # (each silent request timed out, but for one still pending when the run ended; a
+    # reply later than the 0.02 s timeout on a loaded machine is a timeout too)
+    silent = emu.laser.counters.silent
+    assert silent >= 1 and laser["timeouts"] >= max(1, silent - 1)
     assert laser["no_reply_ticks"] >= laser["timeouts"]
     assert len(read_samples(out)) == 2

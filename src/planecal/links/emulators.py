@@ -446,6 +446,7 @@ class LaserEmulator(_Served):
         """Feed received bytes; return the replies to write (delays applied here)."""
         with self._cv:
             out, delay = self._handle(data)
+            self._cv.notify_all()  # counters changed: wake `wait_until`
         if delay > 0:
             time.sleep(delay)
         return out
