@@ -101,6 +101,23 @@ def test_emulate_drop_rate_is_ridden_through_and_reported(tmp_path, capsys):
     assert side["link"] == link == side["link_total"] == s["link_total"]
 
 
+# --- the laser never holds a tick ------------------------------------------------------------
+
+def test_ticks_without_a_laser_reply_are_skipped_not_out_of_range():
+    """A sensor slower than a tick: 450 ticks without a reply (more than the 400
+    out-of-range readings that give a pose up), then 100 stable readings: a sample, the
+    skipped ticks counted as reads; a sensor that never answers ends at max_reads."""
+    from planecal.sampling.laserread import NO_READING_MM, LaserSettings, read_stable
+
+    stream = iter([NO_READING_MM] * 450 + [80.0] * 100)
+    got = read_stable(lambda n: np.array([next(stream) for _ in range(n)]), LaserSettings())
+    assert (got.reason, got.value_mm, got.reads, got.out_of_range) == ("stable", 80.0, 550, 0)
+    silent = read_stable(lambda n: np.full(n, NO_READING_MM), LaserSettings(max_reads=700))
+    assert (silent.reason, silent.reads, silent.out_of_range) == ("not_stable", 700, 0)
+    out = read_stable(lambda n: np.full(n, np.nan), LaserSettings())  # out of range: as before
+    assert (out.reason, out.reads) == ("out_of_range", 400)
+
+
 # --- first contact on resume ---------------------------------------------------------------
 
 def test_a_resume_whose_first_reply_does_not_fit_stops_before_any_motion(twin, tmp_path,
@@ -153,7 +170,7 @@ def test_a_released_switch_is_noticed_within_a_few_steps(twin, tmp_path, capsys)
     assert limit == 211 and robot.max_step_counts == 51
     out = tmp_path / "RUN.tsv"
     with Emulators(twin, rt_port=0, reply_port=None,
-                   fd11_faults=FD11Faults(release_after_ticks=1500)) as emu:
+                   fd11_faults=FD11Faults(release_after_moves=1300)) as emu:
         code, s, err = sample(emu, out, "--samples", "3", capsys=capsys)
     c = emu.fd11.counters  # the thread has stopped
     assert code == 1 and s["status"] == "stopped", err

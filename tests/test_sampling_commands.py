@@ -178,7 +178,7 @@ def test_sample_against_the_emulators(tmp_path, capsys):
 
 
 def test_sample_stops_cleanly_when_the_dead_man_switch_is_released(tmp_path, capsys):
-    """Behind the emulator the robot stops following after 1500 ticks (switch released):
+    """Behind the emulator the robot stops following after 1300 moving ticks (released):
     the command notices by the following lag, sends nothing more, exits 1, files valid."""
     from planecal.links.emulators import Emulators
     from planecal.twin import Twin
@@ -187,10 +187,13 @@ def test_sample_stops_cleanly_when_the_dead_man_switch_is_released(tmp_path, cap
         def __init__(self, twin, at):
             self.twin, self.at, self.n, self.frozen = twin, at, 0, None
             self.first_move = None  # the first tick after release that commands motion
+            self.moves, self.last = 0, None  # ticks commanding motion (holds vary with speed)
 
         def exchange(self, delta):
             self.n += 1
-            if self.n <= self.at:
+            self.moves += self.last is not None and np.any(np.asarray(delta) != self.last)
+            self.last = np.asarray(delta).copy()
+            if self.frozen is None and self.moves <= self.at:
                 return self.twin.exchange(delta)
             if self.first_move is None and np.any(np.asarray(delta) != 0):
                 self.first_move = self.n
@@ -202,7 +205,7 @@ def test_sample_stops_cleanly_when_the_dead_man_switch_is_released(tmp_path, cap
             pass
 
     twin = Twin("thesis_final", seed=2)
-    robot = Released(twin, 1500)
+    robot = Released(twin, 1300)  # moving ticks: on the way to the second sample
     out = tmp_path / "RUN.tsv"
     with Emulators(robot, twin, rt_port=0, reply_port=None) as emu:
         code, stdout, stderr = run_cli([

@@ -19,8 +19,8 @@ Faults, all deterministic (`planecal.links.emulators`): ``--drop-replies P`` (al
 ``--drop-rate``) loses each reply with probability P (``--fault-seed``, alias
 ``--drop-seed``), ``--boot-silence-s S`` ignores every request
 for S seconds after start, ``--laser-silent-every K`` leaves every K-th laser request
-unanswered, ``--release-after-ticks N`` releases the dead-man switch after N ticks (held
-again when the next session starts).
+unanswered, ``--release-after-ticks N`` (or ``--release-after-moves N``, ticks that command motion)
+releases the dead-man switch (held again when the next session starts).
 """
 from __future__ import annotations
 
@@ -61,6 +61,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="fault: every K-th laser request goes unanswered")
     p.add_argument("--release-after-ticks", type=int, default=0, metavar="N",
                    help="fault: the dead-man switch is released after N ticks")
+    p.add_argument("--release-after-moves", type=int, default=0, metavar="N",
+                   help="fault: the dead-man switch is released after N ticks that command "
+                        "motion (hold ticks not counted: reproducible on any machine)")
 
 
 def _faults(args):
@@ -74,12 +77,13 @@ def _faults(args):
         raise InputError(f"--session-gap-s must be a positive number, got {args.session_gap_s}")
     if not (math.isfinite(args.boot_silence_s) and args.boot_silence_s >= 0):
         raise InputError(f"--boot-silence-s must be a number >= 0, got {args.boot_silence_s}")
-    for flag in ("laser_silent_every", "release_after_ticks"):
+    for flag in ("laser_silent_every", "release_after_ticks", "release_after_moves"):
         if getattr(args, flag) < 0:
             raise InputError(f"--{flag.replace('_', '-')} must be >= 0")
     return (FD11Faults(drop_probability=args.drop_replies, seed=args.fault_seed,
                        boot_s=args.boot_silence_s,
-                       release_after_ticks=args.release_after_ticks),
+                       release_after_ticks=args.release_after_ticks,
+                       release_after_moves=args.release_after_moves),
             LaserFaults(silent_every=args.laser_silent_every))
 
 

@@ -91,16 +91,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 class TolerantLaser:
     """The loop's `Laser` over ``ZSLD80.poll`` (never blocks a tick longer than the poll's
-    wait). ``read()``: the reading, or None for out of range, for a tick without a reply
-    yet (``no_reply_ticks``) and for a read error (``total``); ``limit`` errors in a row
-    re-raise the last one. (Until the loop tells "no reading this tick" from "out of range",
-    ``planecal.links.zs_ld80`` module doc, both are None here.)"""
+    wait). ``read()``: the reading; None for out of range and for a read error
+    (``total``); ``NO_READING_MM`` for a tick without a reply yet (``no_reply_ticks``:
+    skipped by the laser read, ``sampling.laserread``); ``limit`` errors in a row re-raise
+    the last one."""
 
     def __init__(self, laser, limit: int, errors: tuple, no_reading):
         self.laser = laser
         self.limit = limit
         self.errors = errors
-        self.no_reading = no_reading
+        from planecal.sampling.laserread import NO_READING_MM
+
+        self.no_reading = no_reading  # the poll's "no reply yet"
+        self.skip = NO_READING_MM     # the laser read's
         self.in_a_row = 0
         self.total = 0
         self.no_reply_ticks = 0
@@ -116,7 +119,7 @@ class TolerantLaser:
             return None
         if v is self.no_reading:
             self.no_reply_ticks += 1
-            return None
+            return self.skip
         self.in_a_row = 0
         return v
 

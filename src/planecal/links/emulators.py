@@ -37,9 +37,10 @@ sends unless it has received (send-first handshake).
   random with probability ``drop_probability``, delay the reply by ``delay_s`` wall-clock
   seconds, send it twice; stay silent while booting (the first ``boot_requests``
   requests, or for ``boot_s`` after `start`); release the dead-man switch after
-  ``release_after_ticks`` backend ticks (the robot stops following: the backend is no
-  longer ticked and the replies show the counts where it stopped; the switch is held again
-  when the next session starts).
+  ``release_after_ticks`` backend ticks, or ``release_after_moves`` ticks that command
+  motion (deterministic: the hold ticks while a pose is planned depend on the machine's
+  speed) -- the robot stops following: the backend is no longer ticked and the replies
+  show the counts where it stopped; the switch is held again when the next session starts.
 * Counters (`FD11EmulatorCounters`) are updated by the emulator's thread: read them with
   `snapshot()`, wait for them with `wait_until(predicate, timeout_s)`, or read
   ``counters`` after `stop()` (the thread has ended).
@@ -96,6 +97,8 @@ class FD11Faults:
     boot_requests: int = 0       # the first n valid requests are not seen (RT system booting)
     boot_s: float = 0.0          # nor any in the first boot_s seconds after start()
     release_after_ticks: int = 0  # dead-man switch released after this many ticks (0: never)
+    release_after_moves: int = 0  # ... or after this many moving ticks (a new delta): hold
+    #                               ticks (planning, laser reads) depend on the machine's speed
 
     def __post_init__(self):
         if not 0.0 <= self.drop_probability < 1.0:
@@ -109,6 +112,7 @@ class FD11EmulatorCounters:
     boot_ignored: int = 0  # valid requests not seen while booting
     sessions: int = 0    # client sessions begun
     ticks: int = 0       # backend.exchange calls for requests
+    moves: int = 0       # of those, the ones commanding motion (a delta other than the last)
     settle_ticks: int = 0  # backend.exchange calls between sessions (robot settling)
     queued: int = 0      # reply datagrams decided on (duplicates included)
     replies: int = 0     # reply datagrams sent (``queued`` once the thread is idle)
@@ -294,11 +298,13 @@ class FD11Emulator(_Served):
                                 f"{int(step[j])} counts (> {self.trip_counts}); brakes on")
             if self.trip_mode == "silent":
                 return [], 0.0
+        moving = not self.tripped and not np.array_equal(delta, self.last_delta)
         if not self.tripped:
             self.last_delta = delta
         b_delta = self.last_delta + self._offset
-        if (not self.released and not self._release_done and f.release_after_ticks > 0
-                and c.ticks >= f.release_after_ticks):
+        if not self.released and not self._release_done and (
+                (f.release_after_ticks > 0 and c.ticks >= f.release_after_ticks)
+                or (f.release_after_moves > 0 and c.moves >= f.release_after_moves)):
             self.released = True
         if self.released:  # the servo is off: the command moves on, the robot does not
             moved = not np.array_equal(self._b_delta if not self._held else self._held[-1],
@@ -315,6 +321,7 @@ class FD11Emulator(_Served):
             if not self._tick(b_delta):
                 return [], 0.0
             c.ticks += 1
+            c.moves += moving
             reference, current = self._b_ref + self._offset, self._b_cur
         if drop or _every(n, f.drop_every):
             c.dropped_replies += 1

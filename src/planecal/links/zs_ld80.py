@@ -247,6 +247,10 @@ class ZSLD80:
             self.counters.readings += 1
         return mm
 
+    def fileno(self) -> int:
+        """The serial port's file descriptor (for ``select``: readable when bytes came)."""
+        return self._ser.fileno()
+
     def close(self) -> None:
         self._ser.close()
 
