@@ -250,7 +250,8 @@ def run(args) -> int:
             session_link = asdict(link.counters)
             real_cell["link"] = session_link
             real_cell["link_total"] = link_totals(before, session_link)
-            if sidecar_path(args.out).exists():
+            # (nothing sent: the session never began -- e.g. another run holds the file)
+            if link.counters.sent and sidecar_path(args.out).exists():
                 _record_link(Path(args.out), {"link": session_link,
                                               "link_total": real_cell["link_total"]})
     finally:
