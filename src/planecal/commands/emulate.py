@@ -17,10 +17,11 @@ keeps the one it started with, so a client must carry on from the last delta it 
 
 Faults, all deterministic (`planecal.links.emulators`): ``--drop-replies P`` (alias
 ``--drop-rate``) loses each reply with probability P (``--fault-seed``, alias
-``--drop-seed``), ``--boot-silence-s S`` ignores every request
-for S seconds after start, ``--laser-silent-every K`` leaves every K-th laser request
-unanswered, ``--release-after-ticks N`` (or ``--release-after-moves N``, ticks that command motion)
-releases the dead-man switch (held again when the next session starts).
+``--drop-seed``), ``--boot-silence-s S`` ignores every request for S seconds after start,
+``--laser-silent-every K`` leaves every K-th laser request unanswered,
+``--release-after-ticks N`` (or ``--release-after-moves N``, ticks that command motion)
+releases the dead-man switch (held again when the next session starts). On exit it prints
+its counters in one line (``served: fd11 {...} laser {...}``). Bounds: docs/LINKS.md.
 """
 from __future__ import annotations
 
