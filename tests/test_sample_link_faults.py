@@ -151,6 +151,8 @@ def test_a_resume_whose_first_reply_does_not_fit_stops_before_any_motion(twin, t
                    trip_mode="hold") as emu:
         code, s1, err = sample(emu, out, "--samples", "1", capsys=capsys)
         assert code == 0, err
+        # a resend of the last tick may still be queued: let the thread take it first
+        assert emu.fd11.wait_until(lambda c: c.datagrams >= s1["link"]["sent"], 5)
         state = tmp_path / "RUN.tsv.fd11"
         last = DeltaRecord.read(state)
         assert last is not None and last.any()
