@@ -176,7 +176,7 @@ def test_a_controller_that_keeps_its_reference(tmp_path, capsys):
         err = err.strip().splitlines()[-1]  # after the note that --seed is the sidecar's
         assert "no reply to the first packet (delta [0, 0, 0, 0, 0, 0])" in err
         assert "tripped on this packet" in err and f"{n1} samples so far" in err
-        assert emu.fd11.wait_until(lambda c: c.datagrams > released.datagrams, 5)
+        assert emu.fd11.wait_until(lambda c: emu.fd11.tripped, 5)  # set under the lock
         assert emu.fd11.tripped and "encoder jump error" in emu.fd11.trip_reason
         assert len(read_samples(run)) == n1
         emu.fd11.reset_trip()  # the operator acknowledges the error on the pendant
