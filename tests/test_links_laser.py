@@ -4,14 +4,14 @@ from __future__ import annotations
 import os
 import select
 import threading
-import time
 import tty
 
 import pytest
 
 from planecal.links.emulators import LaserEmulator, LaserFaults
 from planecal.links.fake import ScriptedLaser
-from planecal.links.zs_ld80 import ZSLD80, LaserError, LaserTimeout, decode_reply, encode_reply
+from planecal.links.zs_ld80 import (NO_READING, ZSLD80, LaserError, LaserTimeout, decode_reply,
+                                    encode_reply)
 
 T = 0.3  # generous reply timeout for a loaded machine
 
@@ -105,6 +105,71 @@ def test_no_reply_is_a_timeout(pty_pair):
         assert laser.counters.timeouts == 1
 
 
+# --- poll: the per-tick read that never holds a tick (issue 16) -----------------------------
+# A fake clock makes the ages exact; wait_s = 0: a poll takes what is there and returns.
+
+def _request(master) -> bytes:
+    """The request the client wrote (it must come: bounded wait)."""
+    assert select.select([master], [], [], 5)[0], "no request"
+    return os.read(master, 100)
+
+
+def _poll_until_reading(laser):
+    """Poll (clock standing still) until the reply written to the pty is taken in."""
+    for _ in range(500):
+        v = laser.poll()
+        if v is not NO_READING:
+            return v
+        select.select([], [], [], 0.01)
+    raise AssertionError("the reply never came through the pty")
+
+
+def test_poll_returns_at_once_while_the_reply_is_awaited(pty_pair):
+    master, port = pty_pair
+    t = [0.0]
+    with ZSLD80(port, timeout_s=0.1, wait_s=0.0, clock=lambda: t[0]) as laser:
+        assert laser.poll() is NO_READING        # asked, nothing yet: the tick goes on
+        assert _request(master) == b"M\r"
+        for k in range(1, 6):                    # five more ticks, 10 ms apart
+            t[0] = k / 100
+            assert laser.poll() is NO_READING
+        assert laser.counters.requests == 1      # one request in flight, never two
+        assert laser.counters.pending_ticks == 6
+        os.write(master, b"-00001500000\r")
+        assert _poll_until_reading(laser) == pytest.approx(78.5)
+        c = laser.counters
+        assert (c.requests, c.readings, c.timeouts, c.expired) == (1, 1, 0, 0)
+        t[0] = 0.07
+        assert laser.poll() is NO_READING and laser.counters.requests == 2  # the next one
+
+
+def test_poll_gives_a_silent_request_up_after_the_timeout(pty_pair):
+    master, port = pty_pair
+    t = [0.0]
+    with ZSLD80(port, timeout_s=0.1, wait_s=0.0, clock=lambda: t[0]) as laser:
+        for k in range(10):                      # 0 .. 90 ms: awaited
+            t[0] = k / 100
+            assert laser.poll() is NO_READING
+        t[0] = 0.1
+        with pytest.raises(LaserTimeout, match="no complete reply within 0.1 s"):
+            laser.poll()
+        assert laser.counters.timeouts == 1 and laser.counters.requests == 1
+        t[0] = 0.11
+        assert laser.poll() is NO_READING        # a new request, not a second timeout
+        assert laser.counters.requests == 2 and laser.counters.timeouts == 1
+
+
+def test_poll_expires_a_request_made_before_the_robot_moved(pty_pair):
+    master, port = pty_pair
+    t = [0.0]
+    with ZSLD80(port, timeout_s=0.1, wait_s=0.0, max_age_s=0.05, clock=lambda: t[0]) as laser:
+        assert laser.poll() is NO_READING
+        t[0] = 0.06                              # polls 60 ms apart: the loop moved between
+        assert laser.poll() is NO_READING
+        c = laser.counters
+        assert (c.requests, c.expired, c.timeouts) == (2, 1, 0)
+
+
 def test_missing_port_is_a_laser_error(tmp_path):
     with pytest.raises(LaserError, match="cannot open serial port"):
         ZSLD80(str(tmp_path / "no-such-tty"))
@@ -122,7 +187,8 @@ def test_readings_through_the_emulator():
         assert got[4:] == got[:4] or got[4:][0] == pytest.approx(got[0])
         c = laser.counters
         assert (c.requests, c.readings, c.out_of_range, c.malformed, c.timeouts) == (8, 6, 2, 0, 0)
-        assert emu.counters.requests == 8 and backend.reads == 8
+    # the emulator's thread updates these: read them once it has stopped
+    assert emu.counters.requests == 8 and backend.reads == 8
 
 
 def test_garbage_reply_is_an_error_and_the_next_read_recovers():
@@ -153,7 +219,7 @@ def test_silent_sensor_then_recovery():
         with pytest.raises(LaserTimeout):
             laser.read()
         assert laser.read() == pytest.approx(85.0)
-        assert emu.counters.silent == 1
+    assert emu.counters.silent == 1  # the thread has stopped
 
 
 def test_late_reply_is_discarded_before_the_next_request():
@@ -162,10 +228,9 @@ def test_late_reply_is_discarded_before_the_next_request():
     with LaserEmulator(backend, faults=faults) as emu, ZSLD80(emu.port, timeout_s=0.1) as laser:
         with pytest.raises(LaserTimeout):
             laser.read()                       # 81.0 arrives after the timeout
-        deadline = time.monotonic() + 5
-        while emu.counters.replies < 1 and time.monotonic() < deadline:
-            time.sleep(0.02)
-        time.sleep(0.05)
+        # the late reply: written by the thread, then readable on the client's side
+        assert emu.wait_until(lambda c: c.replies >= 1, 5)
+        assert select.select([laser.fileno()], [], [], 5)[0]
         emu.faults.delay_every = 0
         assert laser.read() == pytest.approx(82.0)   # not the stale 81.0
         assert laser.counters.stale_bytes == 13
@@ -176,4 +241,6 @@ def test_unknown_commands_are_ignored():
             ZSLD80(emu.port, timeout_s=0.1, command=b"X") as laser:
         with pytest.raises(LaserTimeout):
             laser.read()
-        assert emu.counters.unknown == 1 and emu.counters.requests == 0
+        # the client gave up after 0.1 s, whether or not the thread has read the line yet
+        assert emu.wait_until(lambda c: c.unknown == 1, 5)
+    assert emu.counters.unknown == 1 and emu.counters.requests == 0

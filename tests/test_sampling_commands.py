@@ -156,7 +156,7 @@ def test_sample_against_the_emulators(tmp_path, capsys):
     assert code == 0, stderr
     summary = json.loads(stdout)
     assert summary["samples"] == 3 and summary["max_step_counts"] <= 51
-    assert summary["link"]["timeouts"] == 0 and summary["laser_read_errors"] == 0
+    assert summary["link"]["lost_replies"] == 0 and summary["laser_read_errors"] == 0
     s = read_samples(out)
     assert len(s) == 3
     # the samples are the twin's: its reading at those counts (noise ~1 um)
@@ -166,7 +166,7 @@ def test_sample_against_the_emulators(tmp_path, capsys):
 
 
 def test_sample_stops_cleanly_when_the_dead_man_switch_is_released(tmp_path, capsys):
-    """Behind the emulator the robot stops following after 1500 ticks (switch released):
+    """Behind the emulator the robot stops following after 1300 moving ticks (released):
     the command notices by the following lag, sends nothing more, exits 1, files valid."""
     from planecal.links.emulators import Emulators
     from planecal.twin import Twin
@@ -175,10 +175,13 @@ def test_sample_stops_cleanly_when_the_dead_man_switch_is_released(tmp_path, cap
         def __init__(self, twin, at):
             self.twin, self.at, self.n, self.frozen = twin, at, 0, None
             self.first_move = None  # the first tick after release that commands motion
+            self.moves, self.last = 0, None  # ticks commanding motion (holds vary with speed)
 
         def exchange(self, delta):
             self.n += 1
-            if self.n <= self.at:
+            self.moves += self.last is not None and np.any(np.asarray(delta) != self.last)
+            self.last = np.asarray(delta).copy()
+            if self.frozen is None and self.moves <= self.at:
                 return self.twin.exchange(delta)
             if self.first_move is None and np.any(np.asarray(delta) != 0):
                 self.first_move = self.n
@@ -190,7 +193,7 @@ def test_sample_stops_cleanly_when_the_dead_man_switch_is_released(tmp_path, cap
             pass
 
     twin = Twin("thesis_final", seed=2)
-    robot = Released(twin, 1500)
+    robot = Released(twin, 1300)  # moving ticks: on the way to the second sample
     out = tmp_path / "RUN.tsv"
     with Emulators(robot, twin, rt_port=0, reply_port=None) as emu:
         code, stdout, stderr = run_cli([
@@ -224,12 +227,13 @@ def test_sample_with_a_silent_controller_stops_with_one_line(tmp_path, capsys):
         master, slave = os.openpty()
         try:
             code, _, stderr = run_cli(["sample", "--rt", "127.0.0.1", "--rt-port", str(port),
-                                       "--local-port", "0", "--laser", os.ttyname(slave),
+                                       "--local-port", "0", "--rt-boot-timeout-s", "0.3",
+                                       "--laser", os.ttyname(slave),
                                        "--out", str(tmp_path / "R.tsv")], capsys)
         finally:
             os.close(master)
             os.close(slave)
-    assert code == 2 and "no reply" in stderr and "nothing sampled" in stderr
+    assert code == 1 and "no reply" in stderr and "nothing sampled" in stderr
     assert len(stderr.strip().splitlines()) == 1
 
 

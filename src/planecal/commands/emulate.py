@@ -4,6 +4,24 @@ Starts the FD11 RT emulator (UDP) and the ZS-LD80 emulator (a pseudo-terminal), 
 backed by one MuJoCo twin, prints where they listen and runs until Ctrl-C. Point
 `planecal sample` at them (``--host``/ports and the printed serial device) to rehearse
 the real-cell code path end to end. Formats: `planecal.links.fd11`, `planecal.links.zs_ld80`.
+The twin's world is drawn from ``--errors`` (ideal|realistic|FILE.json, default realistic,
+as ``rehearse``) and ``--seed``, or read from ``--truth`` (a truth file ``rehearse --truth``
+wrote; the profile then gives the twin's noise and servo).
+
+It serves any number of client sessions in a row (``sample``, ``sample --resume``, ...).
+``--reference`` chooses what the emulated controller does with its reference between
+them (`planecal.links.fd11`, "Sessions": the seed reads both ways): ``session``
+(default) latches it where the robot stands at each session's first packet; ``boot``
+keeps the one it started with, so a client must carry on from the last delta it sent
+(``planecal sample`` does, from its ``--rt-state`` file).
+
+Faults, all deterministic (`planecal.links.emulators`): ``--drop-replies P`` (alias
+``--drop-rate``) loses each reply with probability P (``--fault-seed``, alias
+``--drop-seed``), ``--boot-silence-s S`` ignores every request for S seconds after start,
+``--laser-silent-every K`` leaves every K-th laser request unanswered,
+``--release-after-ticks N`` (or ``--release-after-moves N``, ticks that command motion)
+releases the dead-man switch (held again when the next session starts). On exit it prints
+its counters in one line (``served: fd11 {...} laser {...}``). Bounds: docs/LINKS.md.
 """
 from __future__ import annotations
 
@@ -16,60 +34,110 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene", default=None, help="twin scene name or JSON path (twin default)")
     p.add_argument("--seed", type=int, default=None, help="random seed of the twin's truth and noise")
     p.add_argument("--truth", default=None, metavar="T.json",
-                   help="the twin's true parameters (JSON, as written by the twin; with its "
-                        "world, as rehearse --truth writes it)")
+                   help="the twin's hidden truth (a parameter file, e.g. written by "
+                        "`rehearse --truth-out`; default: drawn from --errors and --seed)")
     p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
-                   help="the twin's error profile (default realistic: a robot of the MC70's "
-                        "class; ideal: the nominal robot; or a profile file)")
+                   help="the twin's error profile: realistic (default: a robot of the MC70's "
+                        "class), ideal (the nominal robot), or a profile file")
     p.add_argument("--host", default="127.0.0.1", help="address the FD11 emulator binds")
     p.add_argument("--rt-port", type=int, default=5555,
                    help="UDP port receiving delta packets (FD11 remote port, default 5555)")
     p.add_argument("--reply-port", type=int, default=5556,
                    help="UDP port replies are sent to on the sender's host (default 5556; "
                         "0 = the sender's own port)")
+    p.add_argument("--reference", choices=("session", "boot"), default="session",
+                   help="the controller's reference: latched at each client session "
+                        "(default) or kept from its start")
+    p.add_argument("--session-gap-s", type=float, default=2.0,
+                   help="silence after which the same client address begins a new session "
+                        "(default 2)")
+    p.add_argument("--drop-replies", "--drop-rate", dest="drop_replies", type=float,
+                   default=0.0, metavar="P",
+                   help="fault: lose each FD11 reply with probability P (default 0)")
+    p.add_argument("--fault-seed", "--drop-seed", dest="fault_seed", type=int, default=0,
+                   help="seed of the random faults (default 0)")
+    p.add_argument("--boot-silence-s", type=float, default=0.0,
+                   help="fault: the RT system answers nothing for this long after start")
+    p.add_argument("--laser-silent-every", type=int, default=0, metavar="K",
+                   help="fault: every K-th laser request goes unanswered")
+    p.add_argument("--release-after-ticks", type=int, default=0, metavar="N",
+                   help="fault: the dead-man switch is released after N ticks")
+    p.add_argument("--release-after-moves", type=int, default=0, metavar="N",
+                   help="fault: the dead-man switch is released after N ticks that command "
+                        "motion (hold ticks not counted: reproducible on any machine)")
+
+
+def _faults(args):
+    import math
+
+    from planecal.links.emulators import FD11Faults, LaserFaults
+
+    if not 0.0 <= args.drop_replies < 1.0:
+        raise InputError(f"--drop-replies must be in [0, 1), got {args.drop_replies}")
+    if not (math.isfinite(args.session_gap_s) and args.session_gap_s > 0):
+        raise InputError(f"--session-gap-s must be a positive number, got {args.session_gap_s}")
+    if not (math.isfinite(args.boot_silence_s) and args.boot_silence_s >= 0):
+        raise InputError(f"--boot-silence-s must be a number >= 0, got {args.boot_silence_s}")
+    for flag in ("laser_silent_every", "release_after_ticks", "release_after_moves"):
+        if getattr(args, flag) < 0:
+            raise InputError(f"--{flag.replace('_', '-')} must be >= 0")
+    return (FD11Faults(drop_probability=args.drop_replies, seed=args.fault_seed,
+                       boot_s=args.boot_silence_s,
+                       release_after_ticks=args.release_after_ticks,
+                       release_after_moves=args.release_after_moves),
+            LaserFaults(silent_every=args.laser_silent_every))
 
 
 def _make_twin(args):
-    try:
-        import planecal.twin as twin_mod
-    except ModuleNotFoundError as e:
-        if e.name and e.name.startswith("planecal.twin"):
-            raise InputError("the MuJoCo twin (planecal.twin) is not available in this "
-                             "version; cannot emulate") from None
-        raise InputError(f"the MuJoCo twin cannot be loaded: missing module {e.name}") from None
-    Twin = getattr(twin_mod, "Twin", None)
-    if Twin is None:
-        raise InputError("planecal.twin has no Twin class; cannot emulate")
-    from planecal.commands.rehearse import make_twin
-    from planecal.scene import DEFAULT_SCENE, load_scene
-    from planecal.twin.profile import DEFAULT_PROFILE, load_profile, load_world
-    scene = load_scene(args.scene or DEFAULT_SCENE)
+    from planecal.twin import Twin
+    from planecal.scene import load_scene
+    from planecal.twin.profile import DEFAULT_PROFILE, draw_world, load_profile, load_world
+
     seed = 0 if args.seed is None else args.seed
-    errors = args.errors or DEFAULT_PROFILE
-    if args.truth is not None:  # that world, the profile's joint and laser errors
-        return Twin(scene, truth=load_world(scene, args.truth), seed=seed,
-                    options=load_profile(errors, scene.robot).options())
-    return make_twin(scene, seed, errors)
+    if seed < 0:
+        raise InputError(f"--seed must be >= 0, got {seed}")
+    scene = load_scene(args.scene) if args.scene else load_scene()
+    profile = load_profile(args.errors or DEFAULT_PROFILE, scene.robot)
+    world, options = draw_world(scene, seed, profile)
+    if args.truth is not None:
+        world = load_world(scene, args.truth)
+    return Twin(scene, truth=world, seed=seed, options=options)
 
 
 def run(args) -> int:
     from planecal.links.emulators import serve
 
+    fd11_faults, laser_faults = _faults(args)
     twin = _make_twin(args)
+    print(f"twin: scene {twin.scene.name}, errors {args.errors or 'realistic'}, seed "
+          f"{twin.seed}" + (f", truth {args.truth}" if args.truth else ""), flush=True)
     reply_port = None if args.reply_port == 0 else args.reply_port
 
+    served = []
+
     def ready(emus) -> None:
+        served.append(emus)
         for line in emus.describe():
             print(line, flush=True)
         print("running; Ctrl-C to stop", flush=True)
 
     try:
         serve(twin, twin, host=args.host, rt_port=args.rt_port, reply_port=reply_port,
-              on_ready=ready)
+              on_ready=ready, fd11_faults=fd11_faults, laser_faults=laser_faults,
+              reference_mode=args.reference, session_gap_s=args.session_gap_s)
     except OSError as e:
         raise InputError(str(e)) from None
     finally:
-        close = getattr(twin, "close", None)
-        if close is not None:
-            close()
+        twin.close()
+        if served:  # what was served, faults included (the threads have stopped)
+            print(counters_line(served[0]), flush=True)
     return 0
+
+
+def counters_line(emus) -> str:
+    """``served: fd11 {...} laser {...}``: the emulators' counters as JSON, one line."""
+    import json
+    from dataclasses import asdict
+
+    return (f"served: fd11 {json.dumps(asdict(emus.fd11.counters))} "
+            f"laser {json.dumps(asdict(emus.laser.counters))}")

@@ -10,26 +10,43 @@ checking (``planecal.collision``) is always on; the operator still watches the r
 (seed 7.3.1): the model knows only what the scene file describes.
 
 Dead-man switch: the PC cannot read the teach pendant's enabling device. The enable signal
-is ``planecal.sampling.enable.FollowingMonitor``: when the robot stops following the
-command (commanded minus current counts above ``--lag-tolerance-counts`` on a joint for
-``--lag-ticks`` ticks in a row, which is what happens when the switch is released while a
-path is sent), no further step is sent and the run stops cleanly; continue with
-``--resume`` once the switch is held again (the FD11 reference is re-read where the robot
-stands).
+is ``planecal.sampling.enable.FollowingMonitor``: it drops as soon as one more step could put
+the command more than ``--follow-limit-counts`` ahead of the robot (default 211 counts, the
+largest gap the servo takes up within the FD11's 60 counts a tick, from ``--servo-tau-s``;
+enable.py derives it), which a released switch shows at the first reply after the robot
+stopped. No further step is sent and the run stops cleanly; continue with ``--resume``
+once the switch is held again.
+
+The FD11 link (``planecal.links.fd11``) rides out lost replies: it resends the same delta
+every ``--rt-resend-s`` and gives up only after ``--rt-silence-s`` without a reply
+(``--rt-boot-timeout-s`` for the first contact, while the RT system may still be booting).
+The summary's ``link`` reports the session's lost replies and outages, ``link_total``
+those of every session of the run; both are written to the sidecar's ``real_cell`` when
+the session ends (stopped, failed or complete). The first packet repeats the
+last delta sent to the controller, kept in ``--rt-state`` (default RUN.tsv.fd11, rewritten
+every tick), so a restart is safe whether the controller latches a new reference per
+client session or keeps the one it booted with; the first reply is checked before any
+motion. ``--rt-fresh`` sends delta 0 first instead (the RT system was restarted since).
 
 The RT link never goes quiet: while a pose is planned, and during the laser read, the hold
-delta keeps being sent every 10 ms.
+delta keeps being sent every 10 ms. The laser is polled once a tick without blocking it
+(``ZSLD80.poll``: at most ``--laser-wait-s``); a tick whose reply has not come yet gives no
+reading.
 
-Laser: a single garbled or missing reply counts as an out-of-range reading;
-``--laser-error-limit`` failures in a row stop the run (cable, port, power).
-Exit 0 when all samples were taken, 1 when the run stopped or gave up (files valid).
+Laser: a garbled or missing reply, and a tick without a reply yet, count as an
+out-of-range reading; ``--laser-error-limit`` errors in a row stop the run (cable, port,
+power).
+Exit 0 when all samples were taken; 1 when the run stopped, gave up, lost its link or
+could not write its files (one line saying why; the files are valid and ``--resume``
+continues); 2 for bad input or usage; 130 interrupted. Bounds: docs/LINKS.md.
 """
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from planecal.errors import InputError
+from planecal.errors import InputError, RunFailed
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -42,39 +59,67 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rt-tick-s", type=float, default=0.01,
                    help="minimum interval between ticks (default 0.01; 0 for an emulator "
                         "on a virtual clock)")
+    p.add_argument("--rt-resend-s", type=float, default=0.02,
+                   help="resend the same delta when no reply came within this (default 0.02)")
+    p.add_argument("--rt-silence-s", type=float, default=0.5,
+                   help="give up when the link has been silent this long (default 0.5)")
+    p.add_argument("--rt-boot-timeout-s", type=float, default=10.0,
+                   help="how long the first contact may wait for a booting RT system "
+                        "(default 10)")
+    p.add_argument("--rt-state", default=None, metavar="FILE",
+                   help="the last delta sent to the FD11, repeated as the first packet "
+                        "(default RUN.tsv.fd11)")
+    p.add_argument("--rt-fresh", action="store_true",
+                   help="first packet delta 0, not the recorded one (the RT system was "
+                        "restarted since the last session)")
     p.add_argument("--laser", default="/dev/ttyUSB0", metavar="PORT",
                    help="ZS-LD80 serial port (default /dev/ttyUSB0)")
     p.add_argument("--baud", type=int, default=38400, help="laser baud rate (default 38400)")
+    p.add_argument("--laser-timeout-s", type=float, default=0.1,
+                   help="a laser request unanswered this long is an error (default 0.1)")
+    p.add_argument("--laser-wait-s", type=float, default=0.005,
+                   help="the longest a tick waits for the laser's reply (default 0.005)")
     p.add_argument("--laser-error-limit", type=int, default=50,
                    help="stop after this many laser read errors in a row (default 50)")
-    p.add_argument("--lag-tolerance-counts", type=int, default=600,
-                   help="enable drops when a joint lags the command by more than this "
-                        "(default 600 counts)...")
-    p.add_argument("--lag-ticks", type=int, default=5,
-                   help="...for this many ticks in a row (default 5)")
+    p.add_argument("--follow-limit-counts", type=int, default=None,
+                   help="the most the command may run ahead of the robot (default: derived "
+                        "from --servo-tau-s, 211 counts)")
+    p.add_argument("--servo-tau-s", type=float, default=None,
+                   help="the FD11 servo's time constant (default 0.03)")
     add_sampling_arguments(p)
 
 
 class TolerantLaser:
-    """A Laser wrapper: a read error counts as an out-of-range reading (None); ``limit``
-    errors in a row re-raise the last one."""
+    """The loop's `Laser` over ``ZSLD80.poll`` (never blocks a tick longer than the poll's
+    wait). ``read()``: the reading; None for out of range and for a read error
+    (``total``); ``NO_READING_MM`` for a tick without a reply yet (``no_reply_ticks``:
+    skipped by the laser read, ``sampling.laserread``); ``limit`` errors in a row re-raise
+    the last one."""
 
-    def __init__(self, laser, limit: int, errors: tuple):
+    def __init__(self, laser, limit: int, errors: tuple, no_reading):
         self.laser = laser
         self.limit = limit
         self.errors = errors
+        from planecal.sampling.laserread import NO_READING_MM
+
+        self.no_reading = no_reading  # the poll's "no reply yet"
+        self.skip = NO_READING_MM     # the laser read's
         self.in_a_row = 0
         self.total = 0
+        self.no_reply_ticks = 0
 
     def read(self):
         try:
-            v = self.laser.read()
+            v = self.laser.poll()
         except self.errors:
             self.in_a_row += 1
             self.total += 1
             if self.in_a_row >= self.limit:
                 raise
             return None
+        if v is self.no_reading:
+            self.no_reply_ticks += 1
+            return self.skip
         self.in_a_row = 0
         return v
 
@@ -82,38 +127,113 @@ class TolerantLaser:
         self.laser.close()
 
 
-def run(args) -> int:
-    from planecal.commands.rehearse import make_checker
-    from planecal.links.fd11 import FD11Link, LinkError
-    from planecal.links.zs_ld80 import ZSLD80, LaserError
-    from planecal.sampling.enable import FollowingMonitor
-    from planecal.sampling.run import count_samples, sidecar_path
-    from planecal.commands.sampling_options import (command_model, pose_list_planner, prepare,
-                                                    rerun_observer, session_from_args)
-    from planecal.sampling.session import print_summary, run_session
+def _check_link_flags(args, robot) -> tuple[int, Path]:
+    """The following limit, and the FD11 state file's path (checked)."""
+    from planecal.sampling.enable import SERVO_TAU_S, follow_limit_counts
+    from planecal.sampling.runfiles import sidecar_path
 
-    if args.lag_tolerance_counts <= 0 or args.lag_ticks <= 0:
-        raise InputError("--lag-tolerance-counts and --lag-ticks must be positive")
+    for flag in ("rt_resend_s", "rt_silence_s", "rt_boot_timeout_s", "laser_timeout_s"):
+        v = getattr(args, flag)
+        if not (v > 0 and v < float("inf")):
+            raise InputError(f"--{flag.replace('_', '-')} must be a positive number of seconds")
+    if args.rt_silence_s < args.rt_resend_s or args.rt_boot_timeout_s < args.rt_resend_s:
+        raise InputError("--rt-silence-s and --rt-boot-timeout-s must be at least --rt-resend-s")
+    if not 0 <= args.laser_wait_s <= args.laser_timeout_s:
+        raise InputError("--laser-wait-s must be in 0..--laser-timeout-s")
     if args.laser_error_limit < 1:
         raise InputError("--laser-error-limit must be at least 1")
+    tau = SERVO_TAU_S if args.servo_tau_s is None else args.servo_tau_s
+    if not (tau > 0 and tau < float("inf")):
+        raise InputError("--servo-tau-s must be a positive number of seconds")
+    limit = (follow_limit_counts(robot.trip_step_counts, tau, robot.tick_s)
+             if args.follow_limit_counts is None else args.follow_limit_counts)
+    if limit <= robot.max_step_counts:
+        raise InputError(f"--follow-limit-counts must exceed the largest step "
+                         f"({robot.max_step_counts} counts), got {limit}")
+    out = Path(args.out)
+    state = Path(args.rt_state) if args.rt_state else out.with_name(out.name + ".fd11")
+    if state.resolve() in (out.resolve(), sidecar_path(out).resolve()):
+        raise InputError(f"--rt-state {state}: is the run's own sample file or sidecar")
+    return limit, state
+
+
+_PEAKS = ("max_lost_in_a_row", "longest_outage_s", "boot_wait_s")  # maxima, not sums
+
+
+def link_totals(before: dict | None, session: dict) -> dict:
+    """The link counters over all sessions: ``before`` (the sidecar's, None for a new run)
+    plus this session's (sums; the maxima of the peaks; last session's boot wait kept as
+    the largest)."""
+    total = dict(session)
+    for k, v in (before or {}).items():
+        if k in total and isinstance(v, (int, float)):
+            total[k] = max(total[k], v) if k in _PEAKS else total[k] + v
+    return total
+
+
+def _record_link(out: Path, real_cell: dict) -> None:
+    """Put the session's link counters (``real_cell``'s ``link``, ``link_total``) in the
+    sidecar once the session has ended. Best effort: a full disk keeps the last sidecar
+    (the run has already said why it stopped)."""
+    from planecal.params import save_json
+    from planecal.sampling.runfiles import sidecar_path
+
+    p = sidecar_path(out)
+    try:
+        import json
+        side = json.loads(p.read_text(encoding="utf-8"))
+        side["real_cell"] = {**(side.get("real_cell") or {}), **real_cell}
+        save_json(p, side)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def run(args) -> int:
+    from dataclasses import asdict
+
+    from planecal.commands.rehearse import make_checker
+    from planecal.commands.sampling_options import (command_model, pose_list_planner, prepare,
+                                                    rerun_observer, session_from_args)
+    from planecal.links.fd11 import DeltaRecord, FD11Link, LinkError
+    from planecal.links.zs_ld80 import NO_READING, ZSLD80, LaserError
+    from planecal.sampling.enable import FollowingMonitor
+    from planecal.sampling.run import count_samples, sidecar_path
+    from planecal.sampling.session import print_summary, run_session
+
     scene, settings, side = prepare(args)
+    robot = scene.robot
+    limit, state_path = _check_link_flags(args, robot)
+    start_delta = None if args.rt_fresh else DeltaRecord.read(state_path)
+    if start_delta is not None and start_delta.any():
+        print(f"note: the first FD11 packet repeats the last delta sent, {start_delta.tolist()} "
+              f"({state_path}; --rt-fresh if the RT system was restarted since)", file=sys.stderr)
     model = command_model(args, scene, side)
     checker = make_checker(scene, settings.clearance_m)
     observer = rerun_observer(args.rrd, scene) if args.rrd else None
+    record = DeltaRecord(state_path)
     try:
-        link = FD11Link(args.rt, args.rt_port, args.local_port, tick_s=args.rt_tick_s)
+        link = FD11Link(args.rt, args.rt_port, args.local_port, tick_s=args.rt_tick_s,
+                        timeout_s=args.rt_resend_s, silence_s=args.rt_silence_s,
+                        boot_timeout_s=args.rt_boot_timeout_s,
+                        max_step_counts=robot.trip_step_counts, start_delta=start_delta,
+                        record=record)
     except (LinkError, ValueError) as e:
+        record.close()
         raise InputError(f"--rt {args.rt}: {e}") from None
     try:
         try:
-            raw_laser = ZSLD80(args.laser, baudrate=args.baud)
+            raw_laser = ZSLD80(args.laser, baudrate=args.baud, timeout_s=args.laser_timeout_s,
+                               wait_s=args.laser_wait_s)
         except LaserError as e:
             raise InputError(f"--laser {args.laser}: {e}") from None
-        laser = TolerantLaser(raw_laser, args.laser_error_limit, (LaserError,))
-        monitor = FollowingMonitor(link, args.lag_tolerance_counts, args.lag_ticks)
-        extra = {"real_cell": {"rt": args.rt, "rt_port": args.rt_port, "laser": args.laser,
-                               "lag_tolerance_counts": args.lag_tolerance_counts,
-                               "lag_ticks": args.lag_ticks}}
+        laser = TolerantLaser(raw_laser, args.laser_error_limit, (LaserError,), NO_READING)
+        monitor = FollowingMonitor(link, limit, max_step_counts=robot.max_step_counts,
+                                   trip_counts=robot.trip_step_counts, tick_s=robot.tick_s)
+        before = ((side or {}).get("real_cell") or {}).get("link_total")
+        real_cell = {"rt": args.rt, "rt_port": args.rt_port, "laser": args.laser,
+                     "follow_limit_counts": limit, "rt_state": str(state_path),
+                     "first_delta": link.start_delta.tolist(), "link_total": before}
+        extra = {"real_cell": real_cell}
         session = session_from_args(args, pose_list_planner(args, scene, settings, checker,
                                                             model[0]),
                                     observer, extra, hold_while_planning=True, model=model)
@@ -124,16 +244,27 @@ def run(args) -> int:
             n = count_samples(Path(args.out)) if sidecar_path(args.out).exists() else 0
             where = (f"{n} samples so far are in {args.out}; continue with --resume" if n
                      else "nothing sampled")
-            raise InputError(f"run stopped: {e} ({where})") from None
+            raise RunFailed(f"run stopped: {e} ({where})") from None
         finally:
             laser.close()
+            session_link = asdict(link.counters)
+            real_cell["link"] = session_link
+            real_cell["link_total"] = link_totals(before, session_link)
+            # (nothing sent: the session never began -- e.g. another run holds the file)
+            if link.counters.sent and sidecar_path(args.out).exists():
+                _record_link(Path(args.out), {"link": session_link,
+                                              "link_total": real_cell["link_total"]})
     finally:
         link.close()
+        record.close()
         if observer is not None:
             observer.close()
     summary["laser_read_errors"] = laser.total
+    summary["laser"] = {**asdict(raw_laser.counters), "no_reply_ticks": laser.no_reply_ticks}
     if args.rrd:
         summary["rrd"] = str(observer.path)
-    summary["link"] = {k: int(v) for k, v in vars(link.counters).items()}
+    summary["link"] = real_cell["link"]
+    summary["link_total"] = real_cell["link_total"]
+    summary["following"] = {"limit_counts": limit, "max_lag_counts": monitor.max_lag}
     print_summary(summary)
     return code

@@ -71,9 +71,12 @@ def add_arguments(p):
                         "(default alone)")
     p.add_argument("--breakdown-truth", type=int, default=None,
                    help="the truth seed of the breakdown (default: the first truth seed)")
-    p.add_argument("--level", default="offsets", choices=("offsets",),
-                   help="what the calibration fits (offsets: the joint offsets, the sensor "
-                        "pose and the planes, as planecal calibrate; default %(default)s)")
+    p.add_argument("--level", default="offsets", choices=("offsets", "full"),
+                   help="what the calibration fits, as planecal calibrate --level: offsets "
+                        "(the joint offsets, the sensor pose and the planes) or full (the "
+                        "whole kinematic model's identifiable base set; default %(default)s)")
+    p.add_argument("--compliance", action="store_true",
+                   help="the calibration also fits J2's and J3's compliance (seed 5.4)")
     from planecal.commands.engine_options import add_engine_arguments
     add_engine_arguments(p)
     p.add_argument("--calibrated", help="calibration result to validate (with --truth and --run)")
@@ -140,7 +143,8 @@ def run(args) -> int:
             poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
         base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
                         samples=args.samples, seed=args.seed, offsets_all=args.offsets_all,
-                        poses=poses, settings=st, level=args.level)
+                        poses=poses, settings=st, level=args.level,
+                        compliance=args.compliance)
         what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
         print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): rehearse "
               f"{what} (seed {args.seed}), calibrate, validate...", file=sys.stderr, flush=True)
@@ -167,7 +171,8 @@ def _truths(args, seeds, base, profile, scene, engine) -> dict:
                        engine, "validate", args.quiet)
     summary, med, worst = summarize(results)
     doc = {"format": FORMAT, "scene": scene.name, "errors": profile.name,
-           "profile": str(profile.path), "level": args.level, "truth_seeds": seeds,
+           "profile": str(profile.path), "level": args.level,
+           "compliance": args.compliance, "truth_seeds": seeds,
            **summary, **_detail(med), "detail_truth_seed": med["truth_seed"]}
     print(format_truths(summary, profile.name))
     print()
@@ -205,7 +210,8 @@ def _record(args, scene, st, doc) -> str:
         pq, pp, _ = load_poses(args.poses)
         poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
     job = TruthJob(scene=str(scene.path), errors=doc["profile"], truth_seed=doc["detail_truth_seed"], samples=args.samples, seed=args.seed,
-                   offsets_all=args.offsets_all, poses=poses, settings=st, level=args.level)
+                   offsets_all=args.offsets_all, poses=poses, settings=st, level=args.level,
+                   compliance=args.compliance)
     v, fit, run = truth_run(job)
     if fit is None:
         raise InputError(f"--rrd: truth {job.truth_seed}'s run gave up: {v['failed']}")

@@ -9,21 +9,28 @@ request, PC -> FD11 remote port (default 5555), 48 bytes, ``struct '<12i'``::
 
 reply, FD11 -> PC local port (default 5556), 48 bytes, ``struct '<12I'``::
 
-    uint32 reference[0..5]   FD11 reference counts: the robot's counts when the RT
-                             application started; constant while it runs
+    uint32 reference[0..5]   FD11 reference counts (see "Sessions" below)
     uint32 current[0..5]     current encoder counts
 
 Example: delta = (1, -1, 0, 0, 0, 0x12345678) is sent as
 ``01000000 ffffffff 00000000 00000000 00000000 78563412`` followed by
 ``ffffffff 01000000 00000000 00000000 00000000 88a9cbed``.
 
-Protocol
---------
+Ticks, lost replies, outages
+----------------------------
 The RT system only answers after it has received a message ("send first"): every
 `exchange` sends one request and waits for one reply; one request is one 10 ms tick.
-`delta` is relative to the fixed reference, not incremental, so resending the same
-delta is idempotent: on a timeout the *same* packet is resent (at most ``retries``
-times, ``timeout_s`` each), then `LinkError` is raised.
+`delta` is relative to the reference, not incremental, and the robot holds its last
+command, so resending the same delta is idempotent. A tick whose reply does not come
+within ``timeout_s`` (the resend interval, default 20 ms) resends the *same* packet, and
+keeps doing so until a reply comes or the link has been silent for ``silence_s``
+(default 0.5 s, measured from the tick's first packet): then `LinkError`. Every interval
+that ended without a reply is one lost reply (``counters.lost_replies``; a request lost
+on the way counts the same, the client cannot tell them apart). At 5 % loss, 3 lost in a
+row happen about once per 8,000 ticks; 25 in a row (0.5 s) about never (0.05**25).
+The first tick of a link (first contact) waits ``boot_timeout_s`` (default 10 s) instead:
+an RT system that is still booting stays silent for seconds. With ``enable`` given, an
+outage also ends (`LinkInterrupted`) as soon as ``enable.enabled()`` is False.
 
 Replies carry no sequence number, so they cannot be matched to their request. The
 client therefore (a) drops every datagram that is not exactly 48 bytes or does not come
@@ -35,8 +42,34 @@ the last is the freshest), and (d) after a tick that needed resends, waits up to
 delta. A reply later than that (or a duplicated datagram) can still be taken as the
 answer to the next request: the values are then a tick or so old -- always the answer
 to a delta already sent, never from a different reference.
-The reference is checked to stay constant; a change (controller restarted, new
-reference) raises `LinkError`, since the deltas would then move the robot elsewhere.
+
+Sessions and the reference (appendix C, seed 7.1.1): decision
+--------------------------------------------------------------
+The seed: commanded = FD11 reference + delta; "concurrently the delta is subtracted from
+the current q^e and because of this the FD11 reference will represent the robot's
+initial encoder position when application is booted up and will remain constant while
+the application is running". Which application? Read as the sampling application (the
+client), the RT system latches ``reference = current - delta`` at the first packet of
+each client session ("session" reference); read as the RT application, the reference is
+fixed when the RT system boots and a restarted client must carry on from the last delta
+the controller received ("boot" reference): a first packet of delta 0 then commands a
+jump back to where the RT system booted, and the FD11 trips. The text allows both, and a
+client cannot ask which before it sends (the RT system answers only a command). So the
+first packet is made safe under both: it repeats ``start_delta``, the last delta this cell
+sent to the controller and answered (kept in a `DeltaRecord` file, rewritten every
+tick; zero for a controller never driven). Under a session reference it commands the robot's current
+position; under a boot reference it commands what the controller already commands. The
+first reply is then checked before any motion: ``reference + start_delta - current``
+must be within ``contact_tolerance_counts`` (60, one trip step) on every joint, else
+`ContactError` names both readings and nothing more is sent. No reply at all to the first
+packet within the boot timeout names the other possibility (a trip on that packet).
+
+The loop never sees ``start_delta``: `exchange` takes and returns the loop's frame, whose
+reference is the commanded position at first contact (``fd11_reference + start_delta``)
+and whose first delta is zero, as in the seed. On the wire, delta + ``start_delta`` goes
+out. The FD11's reference is checked to stay constant within a link; a change
+(controller restarted, new reference) raises `LinkError`, since the deltas would then
+move the robot elsewhere.
 
 Counts are unpacked as uint32 and returned as int64 with the same value (0..2**32-1,
 no sign reinterpretation); the MC70's 24-bit encoders stay far from the wrap. Use
@@ -47,20 +80,29 @@ Safety
 The FD11 trips (encoder-jump error, brakes) when the commanded position changes by more
 than 60 counts per joint in one 10 ms cycle. `FD11Link.exchange` refuses -- raises
 `StepLimitError` and sends nothing -- any delta whose change from the previously *sent*
-delta (zero before the first packet) exceeds ``max_step_counts`` (at most 60) on any
-joint, whatever the caller. It also never sends two ticks less than ``tick_s`` apart
-(resends of the same delta excepted), so a fast caller cannot multiply the rate.
+delta (``start_delta`` before the first packet) exceeds ``max_step_counts`` (at most 60)
+on any joint, whatever the caller. It also never sends two ticks less than ``tick_s``
+apart (resends of the same delta excepted), so a fast caller cannot multiply the rate.
 This is the last line of defence, independent of the step generator (<= 51 counts).
 """
 from __future__ import annotations
 
 import dataclasses
+import os
 import select
 import socket
 import struct
 import time
+import zlib
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from planecal.errors import InputError
+
+if TYPE_CHECKING:
+    from planecal.links.base import EnableSignal
 
 REQUEST = struct.Struct("<12i")
 REPLY = struct.Struct("<12I")
@@ -68,6 +110,9 @@ PACKET_BYTES = 48
 N_JOINTS = 6
 TRIP_STEP_COUNTS = 60  # FD11 encoder-jump limit per joint per 10 ms (seed 7.1.2)
 INT32_MAX = 2**31 - 1
+RESEND_S = 0.02        # default resend interval: two 10 ms ticks without a reply
+SILENCE_S = 0.5        # default bound on an outage after first contact
+BOOT_TIMEOUT_S = 10.0  # default bound on first contact (an RT system still booting)
 
 
 class LinkError(RuntimeError):
@@ -76,6 +121,14 @@ class LinkError(RuntimeError):
 
 class StepLimitError(LinkError):
     """A delta was refused because it changes too much from the previous one; nothing sent."""
+
+
+class ContactError(LinkError):
+    """The first reply does not fit the first packet (commanded - current too large)."""
+
+
+class LinkInterrupted(LinkError):
+    """The enable signal dropped during an outage; nothing more was sent."""
 
 
 def pack_request(delta) -> bytes:
@@ -130,44 +183,150 @@ def _as_delta(delta) -> np.ndarray:
     return d
 
 
+# ----- the last delta sent, kept across processes -----------------------------------------
+
+RECORD_TAG = b"fd11-last-delta/1"
+RECORD_BYTES = len(RECORD_TAG) + N_JOINTS * 12 + len(b" crc32=") + 8 + 1
+
+
+def _record_line(delta) -> bytes:
+    body = RECORD_TAG + b"".join(b" %+011d" % int(v) for v in delta)
+    return body + b" crc32=%08x\n" % zlib.crc32(body)
+
+
+class DeltaRecord:
+    """The last delta sent to one FD11, in a one-line text file rewritten in place.
+
+    ``fd11-last-delta/1 +0000000050 ... -0000000050 crc32=1a2b3c4d`` (fixed length:
+    each delta a signed 11-character field, then the CRC-32 of the line before it).
+    `write` is one ``pwrite`` of that line at offset 0, no fsync: a killed planecal leaves
+    the file current (a PC power loss may leave it seconds old). The link records each
+    delta once the controller has answered it. A delta sent but not answered (the process
+    killed meanwhile) is at most one step from the recorded one, so repeating the recorded
+    one is safe; the first packet of a session, which can be far from it (``--rt-fresh``)
+    and may be refused (the FD11 trips), is recorded only when answered.
+    ``DeltaRecord(path)`` opens (creates) the file; it is written first when the
+    controller answers the first packet.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._sized = False
+        try:
+            self._fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as e:
+            raise InputError(f"{self.path}: cannot open the FD11 state file ({e.strerror})") from None
+
+    @staticmethod
+    def read(path: str | Path) -> np.ndarray | None:
+        """The recorded delta (int64[6]); None when the file does not exist; `InputError`
+        (file and problem in one line) when it is not an intact record."""
+        path = Path(path)
+        try:
+            with open(path, "rb") as f:
+                data = f.read(RECORD_BYTES + 1)
+        except FileNotFoundError:
+            return None
+        except OSError as e:
+            raise InputError(f"{path}: cannot read the FD11 state file ({e.strerror})") from None
+        fields = data[:-1].split(b" ")
+        delta = None
+        if len(data) == RECORD_BYTES and fields[0] == RECORD_TAG and len(fields) == 8:
+            try:
+                delta = np.array([int(v) for v in fields[1:7]], np.int64)
+            except ValueError:
+                pass
+        if delta is None:
+            raise InputError(f"{path}: line 1: not an FD11 state line "
+                             f"({RECORD_TAG.decode()}, 6 deltas, crc32)")
+        if np.any(np.abs(delta) > INT32_MAX) or _record_line(delta) != data:
+            raise InputError(f"{path}: line 1: FD11 state line damaged (checksum or field widths)")
+        return delta
+
+    def write(self, delta: np.ndarray) -> None:
+        """Record ``delta``; an OSError (disk full, ...) becomes a one-line `LinkError`
+        before the packet goes out."""
+        try:
+            os.pwrite(self._fd, _record_line(delta), 0)
+            if not self._sized:
+                os.ftruncate(self._fd, RECORD_BYTES)
+                self._sized = True
+        except OSError as e:
+            raise LinkError(f"{self.path}: cannot record the FD11 delta ({e.strerror}); "
+                            f"nothing sent") from None
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+# ----- the client ----------------------------------------------------------------------------
+
 @dataclasses.dataclass
 class LinkCounters:
-    sent: int = 0       # request datagrams sent (resends included)
-    received: int = 0   # valid replies accepted as the answer to a tick
-    timeouts: int = 0   # waits of timeout_s that ended without a valid reply
-    dropped: int = 0    # datagrams ignored: wrong size or wrong sender
-    stale: int = 0      # valid replies drained before a send (late or duplicate)
-    refused: int = 0    # deltas refused by the step limit (nothing sent)
+    """What the link saw in its life. ``sent = ticks + resends + boot_resends`` (+ the
+    packets of a failed last tick)."""
+    sent: int = 0          # request datagrams sent (resends included)
+    ticks: int = 0         # ticks answered (a valid reply taken as the answer)
+    lost_replies: int = 0  # resend intervals after first contact that ended without a reply
+    resends: int = 0       # packets re-sent after first contact (same delta)
+    outages: int = 0       # ticks that needed at least one resend
+    max_lost_in_a_row: int = 0     # the longest outage, in lost replies
+    longest_outage_s: float = 0.0  # the longest such tick, first packet to reply
+    boot_resends: int = 0          # packets re-sent before first contact (RT system booting)
+    boot_wait_s: float = 0.0       # first packet to first reply
+    dropped: int = 0       # datagrams ignored: wrong size or wrong sender
+    stale: int = 0         # valid replies not taken as an answer (late or duplicate)
+    refused: int = 0       # deltas refused by the step limit (nothing sent)
 
 
 class FD11Link:
-    """Client of the FD11 RT system over UDP; implements `RobotLink`.
+    """Client of the FD11 RT system over UDP; implements `RobotLink`. See the module doc.
 
     ``host``/``remote_port``: where requests go. ``local_port``: the port replies arrive
     on (requests are sent from it too; 0 = any free port, see `local_port`).
     ``bind_host``: local address to bind (default: loopback if ``host`` is loopback,
-    else all interfaces). ``timeout_s``: wait for one reply; ``retries``: resends of the
-    same delta before `LinkError`. ``tick_s``: minimum interval between ticks (0 for
-    emulators on a virtual clock). ``max_step_counts``: refusal threshold, 1..60.
+    else all interfaces). ``timeout_s``: the resend interval; ``silence_s``: the longest
+    outage after first contact; ``boot_timeout_s``: the longest wait for first contact.
+    ``tick_s``: minimum interval between ticks (0 for emulators on a virtual clock).
+    ``max_step_counts``: refusal threshold, 1..60. ``start_delta``: the first packet's
+    delta on the wire (the last one the controller received, `DeltaRecord.read`; default
+    zero). ``contact_tolerance_counts``: the first reply's largest |commanded - current|.
+    ``record``: a `DeltaRecord` each answered wire delta is written to.
+    ``enable``: an `EnableSignal` that ends an outage when it drops.
     """
 
     def __init__(self, host: str, remote_port: int = 5555, local_port: int = 5556, *,
-                 timeout_s: float = 0.05, retries: int = 2, tick_s: float = 0.01,
-                 max_step_counts: int = TRIP_STEP_COUNTS, bind_host: str | None = None):
+                 timeout_s: float = RESEND_S, silence_s: float = SILENCE_S,
+                 boot_timeout_s: float = BOOT_TIMEOUT_S, tick_s: float = 0.01,
+                 max_step_counts: int = TRIP_STEP_COUNTS, bind_host: str | None = None,
+                 start_delta=None, contact_tolerance_counts: int = TRIP_STEP_COUNTS,
+                 record: DeltaRecord | None = None, enable: EnableSignal | None = None):
         if not 1 <= int(max_step_counts) <= TRIP_STEP_COUNTS:
             raise ValueError(f"max_step_counts must be in 1..{TRIP_STEP_COUNTS} "
                              f"(the FD11 trips above {TRIP_STEP_COUNTS}), got {max_step_counts}")
-        if timeout_s <= 0 or retries < 0 or tick_s < 0:
-            raise ValueError("FD11Link: timeout_s must be > 0, retries >= 0, tick_s >= 0")
+        if not (timeout_s > 0 and silence_s >= timeout_s and boot_timeout_s >= timeout_s
+                and tick_s >= 0 and contact_tolerance_counts >= 0):
+            raise ValueError("FD11Link: need timeout_s > 0, silence_s and boot_timeout_s >= "
+                             "timeout_s, tick_s >= 0, contact_tolerance_counts >= 0")
         self.max_step_counts = int(max_step_counts)
         self.timeout_s = float(timeout_s)
-        self.retries = int(retries)
+        self.silence_s = float(silence_s)
+        self.boot_timeout_s = float(boot_timeout_s)
         self.tick_s = float(tick_s)
+        self.contact_tolerance_counts = int(contact_tolerance_counts)
+        self.start_delta = (np.zeros(N_JOINTS, np.int64) if start_delta is None
+                            else _as_delta(start_delta))
+        self.record = record
+        self.enable = enable
         self.counters = LinkCounters()
-        self.reference: np.ndarray | None = None  # from the first reply
-        self.last_sent = np.zeros(N_JOINTS, dtype=np.int64)  # zero before the first packet
+        self.reference: np.ndarray | None = None       # the loop's frame, from the first reply
+        self.fd11_reference: np.ndarray | None = None  # the FD11's, from the first reply
+        self.last_sent = np.zeros(N_JOINTS, dtype=np.int64)  # loop frame; zero before the first
         self._last_tick_t: float | None = None
         self._owed = 0  # replies possibly still in flight for resent packets
+        self._failed: str | None = None
         try:
             infos = socket.getaddrinfo(host, remote_port, socket.AF_INET, socket.SOCK_DGRAM)
         except OSError as e:
@@ -188,13 +347,23 @@ class FD11Link:
         """The UDP port replies are received on (useful when constructed with 0)."""
         return self._sock.getsockname()[1]
 
+    @property
+    def where(self) -> str:
+        return f"FD11 at {self.remote[0]}:{self.remote[1]}"
+
     # --- RobotLink -----------------------------------------------------------------
     def exchange(self, delta) -> tuple[np.ndarray, np.ndarray]:
-        """One tick: send ``delta`` (int counts, shape (6,)), return (reference, current).
+        """One tick: send ``delta`` (int counts, shape (6,), the loop's frame), return
+        (reference, current) in the loop's frame (module doc, "Sessions").
 
         Raises `StepLimitError` (nothing sent) if any joint's delta changes by more than
-        ``max_step_counts`` from the previously sent delta, `LinkError` on no reply.
+        ``max_step_counts`` from the previously sent delta; `LinkError` when the link has
+        been silent for ``silence_s`` (``boot_timeout_s`` at first contact); `ContactError`
+        when the first reply does not fit the first packet; `LinkInterrupted` when
+        ``enable`` drops during an outage.
         """
+        if self._failed is not None:
+            raise LinkError(f"{self.where}: link unusable after an earlier error ({self._failed})")
         d = _as_delta(delta)
         step = np.abs(d - self.last_sent)
         if np.any(step > self.max_step_counts):
@@ -203,27 +372,66 @@ class FD11Link:
             raise StepLimitError(
                 f"FD11 delta refused: joint {j + 1} changes by {int(step[j])} counts "
                 f"(limit {self.max_step_counts}) from {self.last_sent.tolist()} to {d.tolist()}")
-        packet = pack_request(d)
+        wire = _as_delta(d + self.start_delta)
+        packet = pack_request(wire)
+        first = self.fd11_reference is None
         self._settle()
         self._pace()
         self._drain()
-        for attempt in range(self.retries + 1):
-            self._send(packet)
-            if attempt == 0:
-                self.last_sent = d
-                self._last_tick_t = time.monotonic()
-            reply = self._wait_reply(self.timeout_s)
+        t0 = time.monotonic()
+        bound = self.boot_timeout_s if first else self.silence_s
+        self._send(packet)
+        self.last_sent = d
+        self._last_tick_t = t0
+        lost = 0
+        while True:
+            left = t0 + bound - time.monotonic()
+            reply = self._wait_reply(min(self.timeout_s, left)) if left > 0 else None
             if reply is not None:
                 reply = self._freshest(reply)
-                self._owed = attempt  # extra packets whose replies may still come
-                return self._accept(reply)
-            self.counters.timeouts += 1
-        self._owed = self.retries
-        raise LinkError(f"FD11 at {self.remote[0]}:{self.remote[1]}: no reply after "
-                        f"{self.retries + 1} attempts of {self.timeout_s:g} s")
+                self._owed = lost  # extra packets whose replies may still come
+                self._note_tick(first, lost, time.monotonic() - t0)
+                answer = self._accept(reply)
+                if self.record is not None:
+                    self.record.write(wire)
+                return answer
+            lost += 1
+            if not first:
+                self.counters.lost_replies += 1
+            if time.monotonic() - t0 >= bound:
+                self._owed = lost
+                raise LinkError(self._silent_message(first, wire, lost, bound))
+            if self.enable is not None and not self.enable.enabled():
+                self._owed = lost
+                raise LinkInterrupted(f"{self.where}: enable dropped during an outage "
+                                      f"({lost} replies lost); nothing more sent")
+            self._send(packet)
+            if first:
+                self.counters.boot_resends += 1
+            else:
+                self.counters.resends += 1
+
+    def collect_late(self, n: int, timeout_s: float) -> int:
+        """Wait up to ``timeout_s`` for ``n`` more valid datagrams (late replies or
+        duplicates still in flight) and count them stale; returns how many came. Nothing
+        is sent. (Tests use it to account for every reply a peer sent.)"""
+        got = 0
+        deadline = time.monotonic() + timeout_s
+        while got < n:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([self._sock], [], [], left)[0]:
+                break
+            try:
+                data = self._recv_valid()
+            except BlockingIOError:
+                continue
+            if data is not None:
+                self.counters.stale += 1
+                got += 1
+        return got
 
     def handshake(self) -> tuple[np.ndarray, np.ndarray]:
-        """The seed's first message: delta zero; returns (reference, current)."""
+        """The seed's first message: delta zero (the loop's frame); returns (reference, current)."""
         return self.exchange(np.zeros(N_JOINTS, dtype=np.int64))
 
     def close(self) -> None:
@@ -236,11 +444,32 @@ class FD11Link:
         self.close()
 
     # --- internals -----------------------------------------------------------------
+    def _silent_message(self, first: bool, wire: np.ndarray, lost: int, bound: float) -> str:
+        if first:
+            return (f"{self.where}: no reply to the first packet (delta {wire.tolist()}) within "
+                    f"the boot timeout of {bound:g} s ({lost} packets): the RT system is not "
+                    f"running, or it tripped on this packet (a controller that keeps its "
+                    f"reference across client sessions trips when the first delta is not the "
+                    f"last one it received: check the teach pendant and the FD11 state file)")
+        return (f"{self.where}: no reply for {bound:g} s ({lost} packets of delta "
+                f"{wire.tolist()} unanswered); the robot holds its last command")
+
+    def _note_tick(self, first: bool, lost: int, dt: float) -> None:
+        c = self.counters
+        if first:
+            c.boot_wait_s = round(dt, 6)
+        elif lost:
+            c.outages += 1
+            c.max_lost_in_a_row = max(c.max_lost_in_a_row, lost)
+            c.longest_outage_s = max(c.longest_outage_s, round(dt, 6))
+
     def _send(self, packet: bytes) -> None:
         try:
             self._sock.sendto(packet, self.remote)
+        except ConnectionRefusedError:  # ICMP "port unreachable" for an earlier packet:
+            pass                        # nobody listens (yet); the next interval resends
         except OSError as e:
-            raise LinkError(f"FD11 at {self.remote[0]}:{self.remote[1]}: send failed ({e})") from None
+            raise LinkError(f"{self.where}: send failed ({e})") from None
         self.counters.sent += 1
 
     def _pace(self) -> None:
@@ -278,7 +507,6 @@ class FD11Link:
                 return reply
             if data is not None:
                 self.counters.stale += 1
-                self._owed = max(0, self._owed - 1)
                 reply = data
 
     def _settle(self) -> None:
@@ -313,11 +541,25 @@ class FD11Link:
                 return data
 
     def _accept(self, data: bytes) -> tuple[np.ndarray, np.ndarray]:
-        reference, current = unpack_reply(data)
-        if self.reference is None:
-            self.reference = reference.copy()
-        elif not np.array_equal(reference, self.reference):
-            raise LinkError(f"FD11 reference counts changed from {self.reference.tolist()} to "
-                            f"{reference.tolist()}: controller restarted? refusing to go on")
-        self.counters.received += 1
-        return reference, current
+        fd11_ref, current = unpack_reply(data)
+        self.counters.ticks += 1  # answered, whether the answer is then accepted or not
+        if self.fd11_reference is None:
+            gap = wrap_diff(fd11_ref + self.start_delta, current)
+            worst = int(np.argmax(np.abs(gap)))
+            if abs(int(gap[worst])) > self.contact_tolerance_counts:
+                self._failed = "the first reply did not fit the first packet"
+                raise ContactError(
+                    f"{self.where}: the first reply does not fit the first packet (delta "
+                    f"{self.start_delta.tolist()}): commanded - current = {gap.tolist()} counts "
+                    f"(joint {worst + 1}: {int(gap[worst])}, tolerance "
+                    f"{self.contact_tolerance_counts}); neither a reference latched at this "
+                    f"connection nor one kept from the last session fits (robot moved or not "
+                    f"enabled since, or another FD11 state file?); nothing more sent")
+            self.fd11_reference = fd11_ref.copy()
+            self.reference = fd11_ref + self.start_delta
+        elif not np.array_equal(fd11_ref, self.fd11_reference):
+            self._failed = "the reference changed"
+            raise LinkError(f"{self.where}: reference counts changed from "
+                            f"{self.fd11_reference.tolist()} to {fd11_ref.tolist()}: controller "
+                            f"restarted? refusing to go on")
+        return self.reference.copy(), current

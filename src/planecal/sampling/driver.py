@@ -17,7 +17,7 @@ import numpy as np
 from planecal.encoder import counts_to_joints, joints_to_counts
 from planecal.links.base import EnableAhead, MoveLink
 from planecal.robot import Robot, within_limits
-from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
+from planecal.sampling.laserread import NO_READING_MM, LaserResult, LaserSettings, read_stable
 from planecal.sampling.observer import NullObserver, Observer
 from planecal.sampling.steps import COUNT_LIMIT, DWELL_TICKS, NOMINAL_STEP, max_step, step_path
 from planecal.scene import Scene
@@ -37,7 +37,7 @@ class Block:
     when the enable signal dropped, or ``error`` when the link failed)."""
     reference: np.ndarray | None
     current: np.ndarray  # (sent, 6)
-    readings: np.ndarray  # (sent,) mm, NaN: none
+    readings: np.ndarray  # (sent,) mm, NaN: none, NO_READING_MM: no reply yet
     sent: int
     error: BaseException | None = None
 
@@ -105,8 +105,11 @@ class Driver:
         readings; raises EnableDropped when not all went out."""
         b = self._cell.run(rows, read)
         if b.sent:
+            seen = b.readings
+            if read and np.any(seen == NO_READING_MM):  # the observer's "none" is NaN
+                seen = np.where(seen == NO_READING_MM, np.nan, seen)
             self.observer.on_ticks(self.ticks + 1, rows[:b.sent], b.reference, b.current,
-                                   b.readings)
+                                   seen)
             self.ticks += b.sent
             self.delta = rows[b.sent - 1].copy()
             self.reference = b.reference

@@ -16,6 +16,14 @@ do not clear the buffer.
   (reason ``"out_of_range"``).
 - **give up, not stable**: ``max_reads`` (1000) readings in all without a stable buffer, so a
   noisy sensor cannot hang the run (reason ``"not_stable"``, the last spread is reported).
+
+The laser never holds a tick (issue 16): on the real cell the read is a per-tick poll
+(``ZSLD80.poll``, at most 5 ms), and a tick whose reply has not come yet gives
+``NO_READING_MM`` (-inf): not a measurement and not out of range. It is skipped -- nothing
+stored, the out-of-range run not advanced (a slow sensor is not a plate out of reach) --
+but it counts as a read against ``max_reads``, so a silent sensor still ends the read
+(and its timeouts, ``--laser-error-limit``, the run). The hold delta goes out on every one
+of those ticks: the RT link keeps its 10 ms rhythm while the reply is awaited.
 """
 from __future__ import annotations
 
@@ -23,6 +31,9 @@ from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np
+
+
+NO_READING_MM = float("-inf")  # a tick whose laser reply has not come yet (module doc)
 
 
 @dataclass
@@ -60,8 +71,9 @@ class LaserResult:
 def read_stable(take: Callable[[int], np.ndarray],
                 settings: LaserSettings | None = None) -> LaserResult:
     """Read ``take(n)`` (n ticks holding still, one reading each: an array of n readings
-    in mm, NaN or 0 for none; it may raise to stop the run) until the reading is stable or
-    the reader gives up; see the module docstring."""
+    in mm, NaN or 0 for none, ``NO_READING_MM`` for a reply not come yet; it may raise to
+    stop the run) until the reading is stable or the reader gives up; see the module
+    docstring."""
     s = settings or LaserSettings()
     n = s.buffer_len
     buf = np.empty(n)
@@ -79,6 +91,8 @@ def read_stable(take: Callable[[int], np.ndarray],
         need = min(need, s.max_out_of_range - in_a_row, s.max_reads - reads)
         for v in take(need):
             reads += 1
+            if v == NO_READING_MM:  # no reply yet this tick: skipped, but a read
+                continue
             if not v == v or v == 0.0:  # NaN (none) or the sensor's 0
                 in_a_row += 1
                 out_total += 1

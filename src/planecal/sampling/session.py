@@ -8,7 +8,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from planecal.errors import InputError
+from planecal.errors import InputError, RunFailed
 from planecal.progress import Progress as ProgressBar
 from planecal.sampling.driver import (Driver, EnableDropped, PathBlocked, move_home,
                                       move_to_calibration)
@@ -63,7 +63,9 @@ class Progress:
 
     def done(self, st: RunStats) -> None:
         self.bar.update(st.samples, self.note(st))
-        self.bar.close(None if st.status == "complete" else f"run {st.status}: {st.reason}")
+        # an "error" run raises, and the command says why in its one line
+        self.bar.close(None if st.status in ("complete", "error")
+                       else f"run {st.status}: {st.reason}")
 
 
 def run_session(session: Session, scene, settings: RunSettings, link, laser, enable,
@@ -92,7 +94,7 @@ def _session(ses: Session, scene, settings, link, laser, enable, checker, lock):
     except PathBlocked as e:
         raise InputError(f"--start {ses.start}: {e}") from None
     except EnableDropped:
-        raise InputError(f"--start {ses.start}: enable dropped on the way; nothing sampled") from None
+        raise RunFailed(f"--start {ses.start}: enable dropped on the way; nothing sampled") from None
     run = SamplingRun(drv, scene, settings, ses.out, checker, resume=ses.resume,
                       background=ses.background, hold_while_planning=ses.hold_while_planning,
                       progress=progress, extra=ses.extra, lock=lock, planner=ses.planner,

@@ -178,16 +178,30 @@ def robot_frame(robot, world) -> np.ndarray:
     return T_true @ np.linalg.inv(T_nom)
 
 
-def _commanded_counts(robot, T, q_ref, delta):
-    q = ik_nearest(robot, T, q_ref, delta=delta, weights=np.abs(robot.gains))
-    if q is None:
-        return None, None
+def _commanded_counts(robot, T, q_ref, model):
+    """Joint angles and counts that put the flange at T by ``model``: joint offsets (6,)
+    (robot.json's model with them), or a level-2 ``CellParams`` (the whole calibrated
+    model: its offsets' IK, then ``compensate.solve_poses`` on the full model)."""
+    if isinstance(model, CellParams):
+        from planecal.compensate import FullModel, solve_poses
+        q0 = ik_nearest(robot, T, q_ref, delta=model.joint_offsets, weights=np.abs(robot.gains))
+        if q0 is None:
+            return None, None
+        q, _, ok, _, _ = solve_poses(FullModel(robot, model), T[None], q0[None])
+        if not ok[0]:
+            return None, None
+        q = q[0]
+    else:
+        q = ik_nearest(robot, T, q_ref, delta=model, weights=np.abs(robot.gains))
+        if q is None:
+            return None, None
     return q, joints_to_counts(robot, q)
 
 
 def iso9283(twin, scene, delta_models: dict, center, edge, R, st: ValidationSettings,
             checker=None, frame: np.ndarray | None = None, mover: Mover | None = None) -> dict:
-    """AP and RP per pose for each model in ``delta_models`` (name -> offsets (6,)): AP in
+    """AP and RP per pose for each model in ``delta_models`` (name -> offsets (6,), or a
+    level-2 ``CellParams``: ``_commanded_counts``): AP in
     the robot's frame ``frame`` (a 4x4 in the cell frame, ``robot_frame``; None: the cell
     frame) and in the cell frame."""
     robot = scene.robot
@@ -464,7 +478,8 @@ def validate(scene, world, calibrated: CellParams, sample_counts: np.ndarray,
     q_cal = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     R = fk(robot, q_cal)[:3, :3]
     frame = robot_frame(robot, world)
-    models = {"nominal": np.zeros(6), "calibrated": calibrated.joint_offsets}
+    models = {"nominal": np.zeros(6),
+              "calibrated": calibrated.joint_offsets if calibrated.is_level1 else calibrated}
     for attempt in range(6):  # a cube of our own choosing shrinks until all poses are clear
         try:
             iso = iso9283(twin, scene, models, center, edge, R, st, checker, frame, mover)
@@ -520,19 +535,21 @@ def validate(scene, world, calibrated: CellParams, sample_counts: np.ndarray,
 
 # ----- over truths, and what each error source leaves -----------------------------------------
 
-LEVELS = ("offsets",)  # what ``calibrate_run`` fits (the full model plugs in here)
+LEVELS = ("offsets", "full")  # what ``calibrate_run`` fits (planecal.calibration)
 
 
 def calibrate_run(scene, qe: np.ndarray, d: np.ndarray, plate: np.ndarray,
-                  level: str = "offsets"):
+                  level: str = "offsets", compliance: bool = False):
     """The calibration of one rehearsed set (``fit.Result``): from the scene's nominal
-    values, ``level`` 'offsets' as ``planecal calibrate`` does (the joint offsets, the
-    sensor pose and the planes; ``LEVELS``)."""
-    from planecal.fit import Problem, solve
+    values, at ``level`` (``LEVELS``) as ``planecal calibrate --level`` does (offsets: the
+    joint offsets, the sensor pose and the planes; full: the whole kinematic model's
+    identifiable base set, the arm's scale kept; ``compliance``: J2/J3's compliance too)."""
+    from planecal.calibration import calibrate
     from planecal.scene import nominal_params
     if level not in LEVELS:
         raise InputError(f"--level: one of {', '.join(LEVELS)}, got {level!r}")
-    return solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
+    return calibrate(scene.robot, qe, d, nominal_params(scene), plate, level=level,
+                     compliance=compliance).result
 
 
 def run_jobs(fn, items: list, engine=1, label: str = "validate", quiet: bool = True) -> list:
@@ -558,6 +575,7 @@ class TruthJob:
     settings: ValidationSettings = field(default_factory=ValidationSettings)
     off: tuple = ()
     level: str = "offsets"
+    compliance: bool = False
 
 
 def validate_truth(job: TruthJob) -> dict:
@@ -584,11 +602,12 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
         qe, d, plate, rejected = sample(scene, world, mc, job.seed, opts)
     except RuntimeError as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
-    fit = calibrate_run(scene, qe, d, plate, job.level)
+    fit = calibrate_run(scene, qe, d, plate, job.level, job.compliance)
     v = validate(scene, world, fit.params, qe, st, _world(job.scene, st.clearance_m), fit,
                  opts)
     v["truth_seed"] = job.truth_seed
     v["level"] = job.level
+    v["compliance"] = job.compliance
     v["off"] = list(job.off)
     v["sources"] = sources_on(scene.robot, world, opts)
     v["calibration"] = {"samples": len(d), "rejected": rejected, "fit_rms_mm": fit.rms_mm(),
