@@ -226,9 +226,14 @@ def read_results(path) -> tuple[dict, list[tuple]]:
 
 @contextmanager
 def _quiet_logs():
-    """dask's loggers at ERROR while the engine is open (restored after)."""
-    saved = {n: logging.getLogger(n).level for n in _QUIET_LOGGERS}
-    for n in _QUIET_LOGGERS:
+    """dask's loggers at ERROR while the engine is open (restored after). distributed
+    gives its modules' loggers levels of their own when it is imported (INFO for the
+    scheduler and nanny), so it is imported first and every one of them is set."""
+    import distributed  # noqa: F401  (its loggers exist, with their configured levels)
+    names = set(_QUIET_LOGGERS) | {n for n in list(logging.root.manager.loggerDict)
+                                   if n.split(".")[0] in _QUIET_LOGGERS}
+    saved = {n: logging.getLogger(n).level for n in names}
+    for n in names:
         logging.getLogger(n).setLevel(logging.ERROR)
     try:
         yield

@@ -187,7 +187,10 @@ def _commanded_counts(robot, T, q_ref, model):
         q0 = ik_nearest(robot, T, q_ref, delta=model.joint_offsets, weights=np.abs(robot.gains))
         if q0 is None:
             return None, None
-        q, _, ok, _, _ = solve_poses(FullModel(robot, model), T[None], q0[None])
+        full = FullModel(robot, model)
+        # T is in the robot's frame (J1's axis and zero): the model's own base frame is
+        # registered to it, as compensate does
+        q, _, ok, _, _ = solve_poses(full, (full.robot_frame() @ T)[None], q0[None])
         if not ok[0]:
             return None, None
         q = q[0]
