@@ -142,7 +142,7 @@ def test_a_parameter_no_run_reports_is_counted_not_averaged():
     them. ``analyze`` must say so without numpy's 'Mean of empty slice' warning."""
     import warnings
     st = MCSettings(mode="synthetic", samples=40, runs=4, seed=7)
-    runs = run_many(st, jobs=1, quiet=True)
+    runs = run_many(st, 1, quiet=True)
     names = analyze(runs, st)["free"]
     k = names.index("phi_z")
     for r in runs[:2]:
@@ -168,7 +168,7 @@ def test_a_parameter_no_run_reports_is_counted_not_averaged():
 def test_realistic_twin_runs_analyze_without_warnings():
     import warnings
     st = MCSettings(runs=2, samples=30, errors="realistic", seed=3)
-    runs = run_many(st, jobs=1, quiet=True)
+    runs = run_many(st, 1, quiet=True)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         res = analyze(runs, st)

@@ -150,9 +150,28 @@ def test_level_and_seed_errors(capsys):
     from planecal.scene import load_scene
     with pytest.raises(InputError, match="--level"):
         calibrate_run(load_scene("thesis_final"), np.zeros((0, 6)), np.zeros(0),
-                      np.zeros(0, int), "full")
+                      np.zeros(0, int), "level3")
     assert main(["validate", "--truth-seeds", "0,0"]) == 2
     assert "a seed twice" in capsys.readouterr().err
     assert main(["validate", "--truth-seed", "1", "--truth-seeds", "2"]) == 2
     assert main(["validate", "--errors", "nonesuch"]) == 2
     assert main(["validate", "--calibrated", "x.json"]) == 2
+
+
+def test_validate_level_full_commands_the_whole_calibrated_model(tmp_path):
+    """--level full on three plates in the realistic world: the JSON records the level; the
+    full model (with J2/J3 compliance) places the ISO poses better than nominal by far, and
+    its fit leaves a smaller max model error than offsets-only on the same samples."""
+    out = {}
+    for level in ("offsets", "full"):
+        f = tmp_path / f"{level}.json"
+        argv = ["validate", "--scene", "three_plates", "--truth-seed", "3", "--samples", "90",
+                "--cycles", "3", "--gauge-repeats", "2", "--jobs", "1", "--breakdown", "none",
+                "--level", level, "--out", str(f)]
+        assert main(argv + (["--compliance"] if level == "full" else [])) == 0
+        out[level] = json.loads(f.read_text())
+    full, off = out["full"], out["offsets"]
+    assert full["level"] == "full" and full["compliance"] is True and off["level"] == "offsets"
+    t_full, t_off = full["truths"][0], off["truths"][0]
+    assert t_full["ap_after_mm"] < t_full["ap_before_mm"] / 3
+    assert t_full["max_model_error_mm"] < t_off["max_model_error_mm"]

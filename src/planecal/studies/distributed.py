@@ -48,6 +48,7 @@ worker, which load it: a cold start compiles once per file system, not once per 
 """
 from __future__ import annotations
 
+import importlib
 import json
 import logging
 import os
@@ -229,7 +230,7 @@ def _quiet_logs():
     """dask's loggers at ERROR while the engine is open (restored after). distributed
     gives its modules' loggers levels of their own when it is imported (INFO for the
     scheduler and nanny), so it is imported first and every one of them is set."""
-    import distributed  # noqa: F401  (its loggers exist, with their configured levels)
+    importlib.import_module("distributed")  # its loggers exist, with their configured levels
     names = set(_QUIET_LOGGERS) | {n for n in list(logging.root.manager.loggerDict)
                                    if n.split(".")[0] in _QUIET_LOGGERS}
     saved = {n: logging.getLogger(n).level for n in names}
