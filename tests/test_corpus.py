@@ -143,14 +143,19 @@ def run_inprocess(argv: list[str]) -> tuple[int, str, str]:
     return code, out.getvalue(), err.getvalue()
 
 
+# the peak RSS of this process's own memory: /proc/self/status VmHWM. (getrusage's
+# ru_maxrss is not: Linux keeps the high-water mark of the memory a process had before its
+# exec, so a command started from a large pytest process reports pytest's peak.)
 _RSS_WRAPPER = """
-import resource, sys
+import sys
 from planecal.cli import main
 try:
     code = main(sys.argv[2:])
 finally:
+    with open("/proc/self/status") as st:
+        hwm = next(line.split()[1] for line in st if line.startswith("VmHWM:"))
     with open(sys.argv[1], "w") as f:
-        f.write(str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+        f.write(hwm)
 sys.exit(code)
 """
 
