@@ -1,8 +1,8 @@
 """Gravity torque on each joint from robot.json's link masses, for the calibration's
 compliance parameters (level 3, seed 5.4: theta_j += c_j tau_j(q)).
 
-One formula: the realistic twin's (``planecal.twin.ticks.gravity_torque``, which deflects
-the twin's joints), imported, not copied; this module builds its world ``W`` from
+One formula: ``planecal.gravity_kernel.gravity_torque``, which also deflects the realistic
+twin's joints (``twin.ticks``); this module builds its world ``W`` from
 robot.json without MuJoCo, the way ``twin.mjcf`` builds the twin's bodies and
 ``twin.errors.gravity_model`` reads them back: body j's pose before its hinge is the
 nominal model's joint transform (``kinematics.Kinematics.joint_transform``), each point
@@ -61,7 +61,7 @@ def _compiled():
     """The twin's gravity_torque over many rows, compiled with numba (cached)."""
     from numba import njit
 
-    from planecal.twin.ticks import gravity_torque
+    from planecal.gravity_kernel import gravity_torque
 
     @njit(cache=True)
     def rows(Q, W, out):

@@ -32,22 +32,18 @@ recomputed there): checked against central differences in the tests.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from planecal.cell_params import CellParams
 from planecal.gravity import joint_torques
 from planecal.kinematics import Kinematics, frame_error, from_robot, rot
+from planecal.layout import ParamLayout
 from planecal.robot import Robot
-
-if TYPE_CHECKING:  # the parameters' type lives in cell.py, one layer up
-    from planecal.cell import CellParams
-    from planecal.layout import ParamLayout
 
 LEVEL2_KINDS = ("joint_geometry", "base_frame", "compliance")
 
 
-def kinematics_of(robot: Robot, params: "CellParams") -> Kinematics:
+def kinematics_of(robot: Robot, params: CellParams) -> Kinematics:
     """robot.json's nominal model with params' joint offsets, geometry and base frame
     (compliance is pose-dependent: ``effective_joints``)."""
     nom = from_robot(robot, params.joint_offsets)
@@ -56,7 +52,7 @@ def kinematics_of(robot: Robot, params: "CellParams") -> Kinematics:
                       nom.d + g[:, 3], frame_error(params.base), nom.flange)
 
 
-def effective_joints(robot: Robot, q: np.ndarray, params: "CellParams"):
+def effective_joints(robot: Robot, q: np.ndarray, params: CellParams):
     """(q + c tau(q), tau (N, 6) or None): the joint angles with the gravity deflection."""
     q = np.atleast_2d(np.asarray(q, float))
     if not params.compliance.any():
@@ -102,7 +98,7 @@ def _flange(kin: Kinematics, last):
     return fx, fy, fz, fp
 
 
-def flange_pose(robot: Robot, q: np.ndarray, params: "CellParams") -> np.ndarray:
+def flange_pose(robot: Robot, q: np.ndarray, params: CellParams) -> np.ndarray:
     """The calibrated model's flange (standard DH frame 6) in the base (cell) frame,
     (N, 4, 4), gravity deflection included. Equal to ``robot.fk(robot, q, delta)`` when
     params carry no level-2 correction."""
@@ -117,7 +113,7 @@ def flange_pose(robot: Robot, q: np.ndarray, params: "CellParams") -> np.ndarray
     return T
 
 
-def sensor_in_base(robot: Robot, q: np.ndarray, params: "CellParams"):
+def sensor_in_base(robot: Robot, q: np.ndarray, params: CellParams):
     """Beam origin o_b (N, 3) and direction z_b (N, 3) in the base frame."""
     T = flange_pose(robot, q, params)
     zf = _beam(params)
@@ -146,7 +142,7 @@ def _rotation_column(n, w, c, p_m, s):
     return -_dot(r, nxw) / s
 
 
-def distance_with_jacobian(robot: Robot, q: np.ndarray, params: "CellParams",
+def distance_with_jacobian(robot: Robot, q: np.ndarray, params: CellParams,
                            plane_index: np.ndarray, layout: "ParamLayout"):
     """Distance d (N,) [m] along the beam to each sample's plane for joint angles q (N, 6)
     and its Jacobian (N, len(layout)) w.r.t. the layout's parameters (module docstring);
