@@ -209,6 +209,7 @@ def test_cli_calibrate_level_full_result_is_read_by_predict_and_export(tmp_path,
     resid = np.array([float(r[-1]) for r in rows if len(r) == 4])
     assert len(resid) == len(qe) and np.abs(resid).max() < 1e-4  # mm
     assert main(["export", str(out)]) == 0
+    assert "planecal compensate" in capsys.readouterr().err  # the geometry is not in counts
     assert main(["report", str(out), "--out", str(tmp_path / "report")]) == 0
     assert (tmp_path / "report" / "index.html").exists()
     # level offsets: the same file keys as before plus level "offsets"

@@ -84,9 +84,9 @@ def add_arguments(p):
                    help="with --weighted: std of a sample's distance from the sensor itself "
                         "(default 1 um)")
     add_report_argument(p)
-    p.add_argument("--rrd", nargs="?", const="auto", default=None,
-                   help="write a Rerun recording of the fit (file name, directory, or nothing "
-                        "for recordings/calibrate-<scene>-<time>.rrd)")
+    p.add_argument("--rrd", default=None, metavar="FILE",
+                   help="write a Rerun recording of the fit (a file name, a directory, or "
+                        "'auto' for recordings/calibrate-<scene>-<time>.rrd)")
 
 
 def result_dict(res: Result, cal: Calibration | None = None) -> dict:

@@ -36,9 +36,9 @@ def add_arguments(p):
     p.add_argument("--dir", default="runs/demo", help="output directory (default %(default)s)")
     p.add_argument("--errors", default="realistic", metavar="ideal|realistic|FILE.json",
                    help="the twin's error profile (default %(default)s)")
-    p.add_argument("--rrd", nargs="?", const="auto", default=None,
+    p.add_argument("--rrd", default=None, metavar="FILE",
                    help="also write Rerun recordings of the run and of the fit (a directory, "
-                        "a file name, or nothing for recordings/)")
+                        "a file name, or 'auto' for recordings/)")
     p.add_argument("--force", action="store_true",
                    help="replace files in --dir even if the demo did not write them")
 

@@ -13,6 +13,7 @@ The current values are the encoder offsets the samples were converted with: robo
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +68,11 @@ def run(args) -> int:
               f"{change[j]:>+8d} {residual[j] * 1e6:>13.3f}")
     print(f"rounding to whole counts moves the flange by {tcp * 1e6:.2f} um at the "
           f"calibration position of {scene.name}")
+    if not params.is_level1:
+        print(f"note: {args.result} is a whole-model calibration (--level full); the FD11 "
+              "takes encoder offsets only, so its geometry and compliance corrections are "
+              "not in these counts: correct the program's targets with planecal compensate",
+              file=sys.stderr)
     if args.out:
         save_json(args.out, {
             "format": FORMAT, "robot": robot.name, "result": str(args.result),
