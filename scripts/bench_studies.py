@@ -28,7 +28,8 @@ def main() -> int:
     args = ap.parse_args()
     from planecal.fit import Problem, solve
     from planecal.scene import nominal_params
-    from planecal.studies.montecarlo import MCSettings, _scene, run_many, truth_for, twin_samples
+    from planecal.studies.common import cached_scene
+    from planecal.studies.montecarlo import MCSettings, run_many, truth_for, twin_samples
 
     jobs = args.jobs or (os.cpu_count() or 1)  # run_many: an Engine of this many jobs
     print(f"cpus {os.cpu_count()}, jobs {jobs}, load average {os.getloadavg()[0]:.1f}")
@@ -39,7 +40,7 @@ def main() -> int:
     rate = len(runs) / wall
     print(f"{len(runs)} {args.mode} runs of {args.samples} samples in {wall:.2f} s "
           f"({wall / len(runs) * jobs:.2f} s per run per process)")
-    scene = _scene(st.scene)
+    scene = cached_scene(st.scene)
     qe, d, plate, _ = twin_samples(scene, truth_for(st, 0), MCSettings(samples=args.samples), 7)
     n = 20
     t0 = time.perf_counter()

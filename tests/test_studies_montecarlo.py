@@ -5,7 +5,8 @@ import pytest
 
 from planecal.cli import main
 from planecal.studies.common import covariances
-from planecal.studies.montecarlo import (MCSettings, _scene, analyze, format_montecarlo,
+from planecal.studies.common import cached_scene
+from planecal.studies.montecarlo import (MCSettings, analyze, format_montecarlo,
                                          rehearse_samples, run_many, truth_for, twin_samples)
 
 
@@ -23,7 +24,7 @@ def test_covariance_forms_agree_for_white_noise_and_order_otherwise():
 
 def test_twin_mode_reproduces_the_rehearsal_sample_for_sample():
     st = MCSettings(samples=4)
-    scene = _scene(st.scene)
+    scene = cached_scene(st.scene)
     truth = truth_for(st, 0)
     qe_r, d_r, p_r, _ = rehearse_samples(scene, truth, st, 11)
     qe_t, d_t, p_t, _ = twin_samples(scene, truth, st, 11)
@@ -119,7 +120,7 @@ def test_pose_draw_settings_reach_the_runs():
     x axis on the plate's x edge, so the last joint moves far less than at any roll."""
     from planecal.encoder import counts_to_joints
     from planecal.errors import InputError
-    scene = _scene("thesis_final")
+    scene = cached_scene("thesis_final")
 
     def q(**kw):
         st = MCSettings(samples=40, **kw)

@@ -511,18 +511,8 @@ class FD11Link:
 
     def _settle(self) -> None:
         """After resends, collect (as stale) up to the replies still owed, for <= timeout_s."""
-        deadline = time.monotonic() + self.timeout_s
-        while self._owed > 0:
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([self._sock], [], [], left)[0]:
-                break
-            try:
-                data = self._recv_valid()
-            except BlockingIOError:
-                continue
-            if data is not None:
-                self.counters.stale += 1
-                self._owed -= 1
+        if self._owed > 0:
+            self.collect_late(self._owed, self.timeout_s)
         self._owed = 0
 
     def _wait_reply(self, timeout_s: float) -> bytes | None:

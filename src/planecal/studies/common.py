@@ -118,3 +118,35 @@ def _pinv_sym(G: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
     lam, V = np.linalg.eigh(G)
     keep = lam > rcond * lam[-1]
     return (V[:, keep] / lam[keep]) @ V[:, keep].T
+
+
+# ----- per-process caches of what every run of a study rebuilds otherwise -------------------
+
+_CACHE: dict = {}
+
+
+def cached_scene(name):
+    """The scene ``name`` (``scene.load_scene``), loaded once per process."""
+    from planecal.scene import load_scene
+    key = ("scene", name)
+    if key not in _CACHE:
+        _CACHE[key] = load_scene(name)
+    return _CACHE[key]
+
+
+def cached_world(name, clearance_m: float):
+    """The collision world of scene ``name`` at ``clearance_m``, built once per process."""
+    key = ("world", name, clearance_m)
+    if key not in _CACHE:
+        from planecal.collision import CollisionWorld
+        _CACHE[key] = CollisionWorld(cached_scene(name), clearance_m=clearance_m)
+    return _CACHE[key]
+
+
+def cached_profile(scene_name, errors):
+    """The error profile ``errors`` for scene ``scene_name``'s robot, read once per process."""
+    from planecal.twin.profile import load_profile
+    key = ("profile", scene_name, str(errors))
+    if key not in _CACHE:
+        _CACHE[key] = load_profile(errors, cached_scene(scene_name).robot)
+    return _CACHE[key]

@@ -58,15 +58,14 @@ from planecal.cell import predict_with_jacobian
 from planecal.errors import InputError
 from planecal.fit import noise_variance
 from planecal.layout import ParamLayout, level1_layout
-from planecal.studies.common import (BUFFER_LEN, Progress, covariances,
-                                     parallel_map, table)
+from planecal.studies.common import (BUFFER_LEN, Progress, cached_profile, cached_scene,
+                                     cached_world, covariances, parallel_map, table)
 
 MODES = ("twin", "rehearse", "synthetic")
 FORMAT = "planecal-montecarlo/1"
 TARGET_RATIO = 0.15  # issue 6: empirical spread within 15 % of the bound
 TARGET_BIAS = 0.2  # bias under a fifth of the bound
 
-_CACHE: dict = {}
 
 
 @dataclass(frozen=True)
@@ -106,7 +105,7 @@ class MCSettings:
                              "model with the ideal world's noise; the other worlds need the "
                              "twin (--mode twin or rehearse), or give --errors ideal")
         opts = mc_options(self)  # the profile, read (InputError if it cannot be)
-        if opts.laser_noise_mm == 0 and joint_sigma(_scene(self.scene).robot, self) == 0 \
+        if opts.laser_noise_mm == 0 and joint_sigma(cached_scene(self.scene).robot, self) == 0 \
                 and not (opts.quantization or self.quantization):
             raise InputError("laser noise and repeatability are both 0: no noise to study")
         if self.weighted and self.quantization:
@@ -123,34 +122,10 @@ class MCSettings:
                              "the twin's comes from its error profile (realistic has it)")
 
 
-def _scene(name):
-    from planecal.scene import load_scene
-    key = ("scene", name)
-    if key not in _CACHE:
-        _CACHE[key] = load_scene(name)
-    return _CACHE[key]
-
-
-def _world(name, clearance):
-    key = ("world", name, clearance)
-    if key not in _CACHE:
-        from planecal.collision import CollisionWorld
-        _CACHE[key] = CollisionWorld(_scene(name), clearance_m=clearance)
-    return _CACHE[key]
-
-
-def _profile(scene_name: str, errors: str):
-    from planecal.twin.profile import load_profile
-    key = ("profile", scene_name, str(errors))
-    if key not in _CACHE:
-        _CACHE[key] = load_profile(errors, _scene(scene_name).robot)
-    return _CACHE[key]
-
-
 def mc_options(st: MCSettings, base=None):
     """The twin's options: ``base`` (default: the profile's) with the settings' noise
     overrides."""
-    opts = _profile(st.scene, st.errors).options() if base is None else base
+    opts = cached_profile(st.scene, st.errors).options() if base is None else base
     kw = {}
     if st.laser_noise_mm is not None:
         kw["laser_noise_mm"] = st.laser_noise_mm
@@ -166,7 +141,7 @@ def world_for(st: MCSettings, k: int):
     from planecal.twin.profile import draw_world
     from planecal.twin.truth import draw_truth
     seed = st.seed + k if st.vary_truth else st.truth_seed
-    scene, profile = _scene(st.scene), _profile(st.scene, st.errors)
+    scene, profile = cached_scene(st.scene), cached_profile(st.scene, st.errors)
     world, opts = draw_world(scene, seed, profile)
     if st.offsets_all:
         tol = profile.tolerances()
@@ -254,7 +229,7 @@ def path_dependent(options) -> bool:
 
 def layout_for(name: str) -> ParamLayout:
     """The parameter layout of a study on scene ``name`` (one n~ per plate)."""
-    return level1_layout(len(_scene(name).plates))
+    return level1_layout(len(cached_scene(name).plates))
 
 
 def truth_for(st: MCSettings, k: int):
@@ -324,7 +299,7 @@ def twin_samples(scene, world, st: MCSettings, seed: int, options=None):
     from planecal.sampling.planner import Planner
 
     twin, rs = _twin_and_settings(scene, world, st, seed, options)
-    return _collect(scene, Planner(scene, rs.pose, _world(st.scene, st.clearance_m)), twin,
+    return _collect(scene, Planner(scene, rs.pose, cached_world(st.scene, st.clearance_m)), twin,
                     rs, seed)
 
 
@@ -338,7 +313,7 @@ def pose_list_samples(scene, world, st: MCSettings, seed: int, options=None):
     counts = np.array([c for c, _ in st.poses], np.int64)
     plates = np.array([k for _, k in st.poses], int)
     rs.samples = len(counts)
-    planner = ListPlanner(scene, counts, plates, _world(st.scene, st.clearance_m))
+    planner = ListPlanner(scene, counts, plates, cached_world(st.scene, st.clearance_m))
     return _collect(scene, planner, twin, rs, seed)
 
 
@@ -353,7 +328,7 @@ def rehearse_samples(scene, world, st: MCSettings, seed: int, options=None):
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "run.tsv")
         drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
-        stats = SamplingRun(drv, scene, rs, out, _world(st.scene, st.clearance_m)).run()
+        stats = SamplingRun(drv, scene, rs, out, cached_world(st.scene, st.clearance_m)).run()
         if stats.status != "complete":
             raise RuntimeError(f"rehearsal with seed {seed}: {stats.status} ({stats.reason})")
         s = read_samples(out)
@@ -402,7 +377,7 @@ def run_one(job) -> dict:
     from planecal.scene import nominal_params
 
     st, k = job
-    scene = _scene(st.scene)
+    scene = cached_scene(st.scene)
     robot = scene.robot
     seed = st.seed + k
     world, opts = world_for(st, k)
@@ -583,7 +558,7 @@ def analyze(runs: list[dict], st: MCSettings) -> dict:
 def _world_summary(st: MCSettings, runs: list[dict]) -> dict:
     """The world the runs sampled in (profile, its error sources, the effective noise) and
     how far the fit's residuals exceed the noise (the model mismatch)."""
-    scene = _scene(st.scene)
+    scene = cached_scene(st.scene)
     opts = mc_options(st)
     if st.mode == "synthetic":
         on = ["noise"]
@@ -593,7 +568,7 @@ def _world_summary(st: MCSettings, runs: list[dict]) -> dict:
     sig_model = float(np.mean([r["sigma_model_mm"] for r in runs]))
     sig_fit = float(np.mean([r["sigma_fit_mm"] for r in runs]))
     mx = np.array([r["max_residual_mm"] for r in runs])
-    return {"errors": str(st.errors), "profile": str(_profile(st.scene, st.errors).path),
+    return {"errors": str(st.errors), "profile": str(cached_profile(st.scene, st.errors).path),
             "sources": on, "model_mismatch": [f for f in on if f in MISMATCH],
             "laser_noise_mm": opts.laser_noise_mm,
             "repeatability_mm": scene.robot.repeatability_m * 1e3 if rep is None else rep,

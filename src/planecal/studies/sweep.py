@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from planecal.errors import InputError
-from planecal.studies.common import table
+from planecal.studies.common import cached_profile, cached_scene, cached_world, table
 
 FORMAT = "planecal-sweep/1"
 DESIGNS = ("random", "planned", "planned+ordered")
@@ -51,7 +51,6 @@ LEVELS = ("offsets",)  # "full" comes with the level-2 calibration
 KNOWN_LEVELS = ("offsets", "full")
 AXES = ("scene", "errors", "design", "samples", "level")
 
-_CACHE: dict = {}
 
 
 @dataclass(frozen=True)
@@ -166,9 +165,9 @@ def spec_from_dict(doc: dict, path: Path | None = None) -> SweepSpec:
         raise InputError(f"{where}: sweep.plan_candidates ({spec.plan_candidates}) must be at "
                          f"least the largest planned sample count ({max(planned)})")
     for s in spec.scene:
-        _scene(s)  # InputError if unknown
+        cached_scene(s)  # InputError if unknown
     for s, e in itertools.product(spec.scene, spec.errors):
-        _profile(s, e)
+        cached_profile(s, e)
     return spec
 
 
@@ -183,30 +182,6 @@ def _resolve_errors(e: str, path: Path | None, where: str) -> str:
         raise InputError(f"{where}: grid.errors: {e!r} is neither a profile "
                          f"({', '.join(PROFILES)}) nor an existing file")
     return str(p.resolve())
-
-
-def _scene(name):
-    from planecal.scene import load_scene
-    key = ("scene", name)
-    if key not in _CACHE:
-        _CACHE[key] = load_scene(name)
-    return _CACHE[key]
-
-
-def _checker(name, clearance):
-    key = ("checker", name, clearance)
-    if key not in _CACHE:
-        from planecal.collision import CollisionWorld
-        _CACHE[key] = CollisionWorld(_scene(name), clearance_m=clearance)
-    return _CACHE[key]
-
-
-def _profile(scene: str, errors: str):
-    from planecal.twin.profile import load_profile
-    key = ("profile", scene, errors)
-    if key not in _CACHE:
-        _CACHE[key] = load_profile(errors, _scene(scene).robot)
-    return _CACHE[key]
 
 
 # ----- seeds ----------------------------------------------------------------------------------
@@ -239,8 +214,8 @@ def plan_poses(spec: SweepSpec, scene: str, design: str, samples: int) -> dict:
     """The pose list of a planned design (``studies.planning.plan`` at the spec's
     candidates and plan seed): {"counts", "plates", "predicted_robot_time_s"}."""
     from planecal.studies.planning import plan
-    res = plan(_scene(scene), samples, spec.plan_candidates, spec.plan_seed, None,
-               _checker(scene, spec.clearance_m), ordered=design == "planned+ordered")
+    res = plan(cached_scene(scene), samples, spec.plan_candidates, spec.plan_seed, None,
+               cached_world(scene, spec.clearance_m), ordered=design == "planned+ordered")
     return {"counts": res["counts"], "plates": res["plates"],
             "predicted_robot_time_s": res["robot_time_s"]["planned"]}
 
@@ -292,14 +267,14 @@ def run_one(item: Item) -> dict:
     from planecal.twin.profile import draw_world
 
     cell = item.cell
-    scene = _scene(cell["scene"])
+    scene = cached_scene(cell["scene"])
     robot = scene.robot
-    world, opts = draw_world(scene, item.world_seed, _profile(cell["scene"], cell["errors"]))
+    world, opts = draw_world(scene, item.world_seed, cached_profile(cell["scene"], cell["errors"]))
     twin = Twin(scene, truth=world, seed=item.seed, options=opts)
     try:
         rs = RunSettings.for_scene(scene, samples=cell["samples"], seed=item.seed)
         rs.clearance_m = item.clearance_m
-        checker = _checker(cell["scene"], item.clearance_m)
+        checker = cached_world(cell["scene"], item.clearance_m)
         if item.poses is None:
             planner = Planner(scene, rs.pose, checker)
         else:
@@ -385,7 +360,7 @@ def summarize(spec: SweepSpec, its: list[Item], results: list[dict]) -> dict:
             E = np.array([r["err"] for r in ok])
             t = np.array([r["robot_time_s"] for r in ok])
             n = np.array([r["samples"] for r in ok])
-            trav = np.array([r["travel_ticks"] for r in ok]) * _scene(cell["scene"]).robot.tick_s
+            trav = np.array([r["travel_ticks"] for r in ok]) * cached_scene(cell["scene"]).robot.tick_s
             std = E.std(0, ddof=1) if len(ok) > 1 else np.full(len(names), np.nan)
             row.update({
                 "names": names,

@@ -591,14 +591,15 @@ def validate_truth(job: TruthJob) -> dict:
 def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
     """``validate_truth``'s result, the calibration (``fit.Result``, None if the sampling
     gave up) and its samples ``(qe, d_m, plate)``: what a recording of the run draws."""
-    from planecal.studies.montecarlo import (MCSettings, _scene, _world, pose_list_samples,
+    from planecal.studies.common import cached_scene, cached_world
+    from planecal.studies.montecarlo import (MCSettings, pose_list_samples,
                                              sources_on, twin_samples, without, world_for)
 
     st = job.settings
     mc = MCSettings(scene=job.scene, samples=len(job.poses) if job.poses else job.samples,
                     seed=job.seed, errors=job.errors, truth_seed=job.truth_seed,
                     offsets_all=job.offsets_all, poses=job.poses, clearance_m=st.clearance_m)
-    scene = _scene(job.scene)
+    scene = cached_scene(job.scene)
     world, opts = without(*world_for(mc, 0), job.off)
     try:
         sample = pose_list_samples if job.poses else twin_samples
@@ -606,7 +607,7 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
     except RuntimeError as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
     fit = calibrate_run(scene, qe, d, plate, job.level, job.compliance)
-    v = validate(scene, world, fit.params, qe, st, _world(job.scene, st.clearance_m), fit,
+    v = validate(scene, world, fit.params, qe, st, cached_world(job.scene, st.clearance_m), fit,
                  opts)
     v["truth_seed"] = job.truth_seed
     v["level"] = job.level
@@ -689,10 +690,11 @@ def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) 
     rehearsal seed: the same pose draws)."""
     from dataclasses import replace
 
-    from planecal.studies.montecarlo import MCSettings, _scene, sources_on, world_for
+    from planecal.studies.common import cached_scene
+    from planecal.studies.montecarlo import MCSettings, sources_on, world_for
     mc = MCSettings(scene=job.scene, errors=job.errors, truth_seed=job.truth_seed,
                     offsets_all=job.offsets_all)
-    on = sources_on(_scene(job.scene).robot, *world_for(mc, 0))
+    on = sources_on(cached_scene(job.scene).robot, *world_for(mc, 0))
     variants = breakdown_variants(on, mode)
     st = replace(job.settings, gauge=False)
     res = run_jobs(validate_truth, [replace(job, off=off, settings=st)
