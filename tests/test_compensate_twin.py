@@ -10,7 +10,8 @@ from planecal.collision import CollisionWorld
 from planecal.compensate import OffsetsModel
 from planecal.fit import Problem, solve
 from planecal.scene import load_scene, nominal_params
-from planecal.studies.compensation import compensation_study, robot_frame
+from planecal.studies.compensation import compensation_study
+from planecal.studies.validation import robot_frame
 from planecal.studies.montecarlo import MCSettings, twin_samples, world_for
 
 SCENE = "thesis_final"

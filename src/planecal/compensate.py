@@ -87,8 +87,9 @@ class CalibratedKinematics(Protocol):
         ...
 
 
-def _registered(robot: Robot, kin) -> np.ndarray:
-    """``kin``'s frame of joint 1 at q = 0 mapped onto robot.json's (``robot_frame``)."""
+def registered_frame(robot: Robot, kin) -> np.ndarray:
+    """``kin``'s frame of joint 1 at q = 0 mapped onto robot.json's (``robot_frame``): how
+    a model's base frame sits in the frame a robot is measured in (ISO 9283's)."""
     from planecal.kinematics import frames, from_robot
     z = np.zeros(robot.n_joints)
     return frames(kin, z)[1] @ np.linalg.inv(frames(from_robot(robot), z)[1])
@@ -106,7 +107,7 @@ class OffsetsModel:
 
     def robot_frame(self) -> np.ndarray:
         from planecal.kinematics import from_robot
-        return _registered(self.robot, from_robot(self.robot, self.delta))
+        return registered_frame(self.robot, from_robot(self.robot, self.delta))
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,7 @@ class FullModel:
 
     def robot_frame(self) -> np.ndarray:
         from planecal.model_full import kinematics_of
-        return _registered(self.robot, kinematics_of(self.robot, self.params))
+        return registered_frame(self.robot, kinematics_of(self.robot, self.params))
 
 
 def load_calibrated(robot: Robot, path) -> tuple[CalibratedKinematics, dict]:

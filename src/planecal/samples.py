@@ -66,17 +66,8 @@ def _is_header(fields: list[str]) -> bool:
 
 def _open(path: Path):
     """The file as text, read lazily; size checked first where the size is known."""
-    try:
-        raw = open(path, "rb")
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, not a sample file") from None
-    except PermissionError:
-        raise InputError(f"{path}: cannot read the sample file (permission denied)") from None
-    except (OSError, ValueError) as e:
-        raise InputError(f"{path}: cannot open the sample file "
-                         f"({getattr(e, 'strerror', None) or e})") from None
+    from planecal.formats.base import open_input
+    raw = open_input(path, "sample file")
     st = os.fstat(raw.fileno())
     if stat.S_ISREG(st.st_mode) and st.st_size > MAX_FILE_BYTES:
         raw.close()

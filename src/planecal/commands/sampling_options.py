@@ -69,7 +69,7 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
                    help="write distances with a decimal comma (92,520000), as the seed's "
                         "LabVIEW tools do; readers accept both; a resumed run keeps its file's")
     p.add_argument("--rrd", default=None, metavar="FILE",
-                   help="record the run for Rerun (needs planecal.rerun_log)")
+                   help="record the run for Rerun (planecal view FILE opens it)")
     p.add_argument("--params", default=None, metavar="RESULT.json",
                    help="aim with this calibration result (its sensor pose, planes and joint "
                         "offsets) instead of the scene's nominal values: live validation "

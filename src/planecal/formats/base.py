@@ -30,11 +30,11 @@ M = TypeVar("M", bound=BaseModel)
 
 # ----- reading ------------------------------------------------------------------------------
 
-def read_bounded(path: Path, what: str, limit: int) -> bytes:
-    """The bytes of ``path`` (at most ``limit``), refusing directories, devices that never
-    end (/dev/zero), binary data and oversized files with a one-line InputError."""
+def open_input(path: Path, what: str):
+    """``path`` opened for binary reading, or a one-line InputError naming the file, the
+    ``what`` it should be and why it cannot be opened (every reader's opening)."""
     try:
-        f = open(path, "rb")
+        return open(path, "rb")
     except FileNotFoundError:
         raise InputError(f"{path}: file not found ({what})") from None
     except IsADirectoryError:
@@ -43,6 +43,12 @@ def read_bounded(path: Path, what: str, limit: int) -> bytes:
         raise InputError(f"{path}: cannot read the {what} (permission denied)") from None
     except (OSError, ValueError) as e:  # ValueError: a NUL character in the path
         raise InputError(f"{path}: cannot open the {what} ({_reason(e)})") from None
+
+
+def read_bounded(path: Path, what: str, limit: int) -> bytes:
+    """The bytes of ``path`` (at most ``limit``), refusing directories, devices that never
+    end (/dev/zero), binary data and oversized files with a one-line InputError."""
+    f = open_input(path, what)
     chunks, size = [], 0
     with f:
         while True:

@@ -35,18 +35,6 @@ from planecal.encoder import counts_to_joints
 from planecal.robot import fk, within_limits
 
 
-def robot_frame(robot, world) -> np.ndarray:
-    """The robot's frame in the cell frame (module docstring), 4x4: the true robot's frame
-    of joint 1 at q = 0 (its geometry, base frame and delta1) times the inverse of the
-    nominal one's. Identity in the ideal world with delta1 = 0."""
-    from planecal.kinematics import frames, from_robot
-    nom = from_robot(robot)
-    kin = world.kinematics if world.kinematics is not None else nom
-    z = np.zeros(robot.n_joints)
-    T_true = frames(kin.with_offsets(world.params.joint_offsets), z)[1]
-    return T_true @ np.linalg.inv(frames(nom, z)[1])
-
-
 def draw_targets(robot, region: Region, n: int, rng, checker=None, max_draws: int = 100_000):
     """``n`` joint configurations uniform in the region's box, within the joint limits and
     (with ``checker``) collision-free: (n, 6) rad."""
@@ -106,7 +94,7 @@ def compensation_study(scene, world, options, model: CalibratedKinematics, sampl
     (a ``twin.truth.Truth``) with the twin's ``options`` (module docstring). Figures in
     mm; keys ``validation_{nominal,compensated}[_cell]_{median,max}_mm`` and
     ``iso_...`` alike, plus the arrays per target."""
-    from planecal.studies.validation import cube_from_flanges, iso_points
+    from planecal.studies.validation import cube_from_flanges, iso_points, robot_frame
     from planecal.twin import Twin
 
     robot = scene.robot

@@ -169,13 +169,10 @@ def robot_frame(robot, world) -> np.ndarray:
     """The frame ISO 9283 measures in, in the cell frame (module docstring): the true
     robot's frame of joint 1 at its zero, mapped onto the nominal one's. Identity in the
     ideal world with delta1 = 0."""
-    from planecal.kinematics import frames, from_robot
-    nom = from_robot(robot)
-    kin = world.kinematics if world.kinematics is not None else nom
-    z = np.zeros(robot.n_joints)
-    T_true = frames(kin.with_offsets(world.params.joint_offsets), z)[1]
-    T_nom = frames(nom, z)[1]
-    return T_true @ np.linalg.inv(T_nom)
+    from planecal.compensate import registered_frame
+    from planecal.kinematics import from_robot
+    kin = world.kinematics if world.kinematics is not None else from_robot(robot)
+    return registered_frame(robot, kin.with_offsets(world.params.joint_offsets))
 
 
 def _commanded_counts(robot, T, q_ref, model):
