@@ -460,13 +460,15 @@ class CollisionWorld:
     def _frames(self, Q: np.ndarray) -> np.ndarray:
         return fk_frames(self.robot, Q)
 
-    def _lower_bounds(self, F: np.ndarray, idx: np.ndarray):
-        """Cheap lower bounds of the distances of pairs idx with frames F (len(idx), 7, 4, 4):
-        bounding sphere of the moving part against the static part's box (its exact box,
-        else its axis-aligned bounding box), or sphere against sphere for self pairs.
-        Also returns the world centres of the pairs' upper parts."""
+    def _lower_bounds(self, F: np.ndarray, idx: np.ndarray, rows: np.ndarray | None = None):
+        """Cheap lower bounds of the distances of pairs idx, pair idx[e] with the frames
+        F[rows[e]] (F: (K, 7, 4, 4); rows default: one frame set per pair): bounding sphere
+        of the moving part against the static part's box (its exact box, else its
+        axis-aligned bounding box), or sphere against sphere for self pairs. Also returns
+        the world centres of the pairs' upper parts. Only the two frames of each pair are
+        gathered (not F[rows]: the path check's 544 x 7 frames were a 0.5 MB copy a call)."""
         i, j = self._pairs[idx, 0], self._pairs[idx, 1]
-        r = np.arange(len(idx))
+        r = np.arange(len(idx)) if rows is None else rows
         Fi, Fj = F[r, self._body_of[i]], F[r, self._body_of[j]]
         ci = np.einsum("nab,nb->na", Fi[:, :3, :3], self._centers[i]) + Fi[:, :3, 3]
         cj = np.einsum("nab,nb->na", Fj[:, :3, :3], self._centers[j]) + Fj[:, :3, 3]
@@ -581,7 +583,7 @@ class CollisionWorld:
             P = len(self._pairs)
             if P == 0:
                 return CheckResult(True, float("inf"), None)
-            lb, _ = self._lower_bounds(np.broadcast_to(F, (P,) + F.shape), np.arange(P))
+            lb, _ = self._lower_bounds(F[None], np.arange(P), np.zeros(P, np.intp))
             lb[self._covered(q, q)] = np.inf  # certified clear by a safe set
             best, best_n = float("inf"), None
             for n in np.argsort(lb):
@@ -606,13 +608,15 @@ class CollisionWorld:
         finally:
             self.check_time_s += time.perf_counter() - t0
 
-    def _step_sizes(self, F, cu, idx, gap, adq, L):
-        """Safe path-parameter steps for pair-ends idx with clearance gaps ``gap`` (m):
-        the largest Delta with displacement bound <= gap (module docstring)."""
+    def _step_sizes(self, F, cu, idx, gap, adq, L, rows=None):
+        """Safe path-parameter steps for pair-ends idx (pair idx[e] at frames F[rows[e]],
+        as ``_lower_bounds``) with clearance gaps ``gap`` (m): the largest Delta with
+        displacement bound <= gap (module docstring)."""
         W = self._W[idx]  # (E, 6) global axis radii of the upper part, masked to its joints
         up = self._upper[idx]
-        o = F[:, :6, :3, 3]  # axis k passes through o_{k-1} along z_{k-1}
-        z = F[:, :6, :3, 2]
+        r = np.arange(len(idx)) if rows is None else rows
+        o = F[r, :6, :3, 3]  # axis k passes through o_{k-1} along z_{k-1}
+        z = F[r, :6, :3, 2]
         v = cu[:, None, :] - o
         dist = np.linalg.norm(v - np.sum(v * z, -1, keepdims=True) * z, axis=-1)
         D = np.minimum(dist + self._radii[up][:, None], W)  # current distance from axis k
@@ -648,7 +652,7 @@ class CollisionWorld:
         CU = np.zeros((K, P, 3))  # centre of the pair's moving part
 
         def bound(rows, cols):
-            D[rows, cols], CU[rows, cols] = self._lower_bounds(Fg[rows], cols)
+            D[rows, cols], CU[rows, cols] = self._lower_bounds(Fg, cols, rows)
 
         def exact(rows, cols):
             for k, n in zip(rows, cols):
@@ -660,8 +664,8 @@ class CollisionWorld:
             return None
 
         def steps(rows, cols):
-            G[rows, cols] = self._step_sizes(Fg[rows], CU[rows, cols], cols, D[rows, cols] - c,
-                                             adq, L[cols])
+            G[rows, cols] = self._step_sizes(Fg, CU[rows, cols], cols, D[rows, cols] - c,
+                                             adq, L[cols], rows)
 
         def certify(rows, cols, bounds=True):
             """Grid points (rows, cols): lower bounds (``bounds``) and exact distances where
