@@ -5,8 +5,9 @@ subprocess), three ways, on the same settings:
 * ``jobs1``: ``--jobs 1`` (in the command's process);
 * ``cluster``: no engine option (the default: a LocalCluster, one worker process per core);
 * ``scheduler``: ``--scheduler tcp://127.0.0.1:PORT`` after this script starts
-  ``dask scheduler`` and ``--workers`` ``dask worker ... --nthreads 1`` processes by hand
-  (stopped at the end, whatever happens).
+  ``dask scheduler`` and ``--workers`` ``dask worker ... --nthreads 1`` processes by hand,
+  after ``export $(planecal worker-env)`` as the README says (stopped at the end,
+  whatever happens).
 
     python scripts/bench_distributed.py [--runs 200] [--samples 150] [--mode twin]
                                         [--errors realistic] [--workers 2]
@@ -70,8 +71,9 @@ def stop(procs) -> None:
 def start_by_hand(d: Path, workers: int, log) -> tuple[str, list]:
     """``dask scheduler`` + ``workers`` ``dask worker`` processes on 127.0.0.1, as the
     README starts them; returns (address, processes) once every worker has joined."""
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-           "MKL_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
+    printed = subprocess.run([str(BIN / "planecal"), "worker-env"], capture_output=True,
+                             text=True, check=True).stdout.split()
+    env = {**os.environ, **dict(line.split("=", 1) for line in printed)}  # export $(...)
     sfile = d / "dask-scheduler.json"
     procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
                                "--port", "0", "--no-dashboard", "--scheduler-file", str(sfile)],

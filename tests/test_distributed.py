@@ -152,6 +152,11 @@ def test_local_cluster_workers_have_one_blas_thread_and_no_gl(cluster):
     assert len(envs) == 2 and len({e["pid"] for e in envs}) == 2
     for e in envs:
         assert {k: e[k] for k in D.WORKER_ENV} == D.WORKER_ENV
+    # dask's settings for the workers (no profiler, slower housekeeping), not this process's
+    for c in cluster.client.run(D._worker_config).values():
+        assert c == D.WORKER_CONFIG
+    import dask
+    assert dask.config.get("distributed.worker.profile.enabled") is True
     # the workers' environment is not left in this process
     assert {k: os.environ.get(k) for k in D.WORKER_ENV} == ENV_BEFORE
 
@@ -179,11 +184,16 @@ def _stop(procs):
 @pytest.fixture(scope="module")
 def by_hand(tmp_path_factory):
     """`dask scheduler` and two `dask worker` processes on 127.0.0.1, started as a user
-    would (the README's two commands): the scheduler's address. Bounded waits; stopped
-    (and, past 20 s, killed) at the end of the module whatever happened."""
+    would: the scheduler and the first worker after ``export $(planecal worker-env)`` (the
+    README's commands), the second worker without it (a user who forgot): the scheduler's
+    address. Bounded waits; stopped (and, past 20 s, killed) at the end of the module
+    whatever happened."""
     d = tmp_path_factory.mktemp("dask")
     sfile = d / "scheduler.json"
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
+    printed = subprocess.run([str(Path(sys.executable).parent / "planecal"), "worker-env"],
+                             capture_output=True, text=True, check=True).stdout.split()
+    env = {**os.environ, **dict(line.split("=", 1) for line in printed)}
+    plain = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
     log = open(d / "dask.log", "w")
     procs = [subprocess.Popen(DASK + ["scheduler", "--host", "127.0.0.1", "--port", "0",
                                       "--no-dashboard", "--dashboard-address", "127.0.0.1:0",
@@ -197,11 +207,11 @@ def by_hand(tmp_path_factory):
             time.sleep(0.2)
         addr = json.loads(sfile.read_text())["address"]
         assert addr.startswith("tcp://127.0.0.1:")
-        for _ in range(2):
+        for e in (env, plain):
             procs.append(subprocess.Popen(
                 DASK + ["worker", addr, "--nthreads", "1", "--no-dashboard", "--host",
                         "127.0.0.1", "--dashboard-address", "127.0.0.1:0"], stdout=log,
-                stderr=log, env=env, start_new_session=True))
+                stderr=log, env=e, start_new_session=True))
         with D.Engine(scheduler=addr, connect_timeout_s=60) as eng:
             eng.client.wait_for_workers(2, timeout=60)
         yield addr
@@ -212,10 +222,21 @@ def by_hand(tmp_path_factory):
 
 
 def test_scheduler_and_workers_started_by_hand_give_the_same_results(by_hand, reference):
-    with D.Engine(scheduler=by_hand, connect_timeout_s=60) as eng:
+    notes = []
+    with D.Engine(scheduler=by_hand, connect_timeout_s=60, notify=notes.append) as eng:
         assert eng.slots == 2
-        for e in eng.worker_env():
+        for e in eng.worker_env():  # MUJOCO_GL: set by the engine's plugin where missing
             assert e["OPENBLAS_NUM_THREADS"] == "1" and e["MUJOCO_GL"] == "disable"
+        # the worker started without planecal's dask settings is named, with the remedy
+        configs = sorted(eng.client.run(D._worker_config).values(), key=str)
+        assert configs[0] == D.WORKER_CONFIG
+        assert configs[1]["distributed.worker.profile.enabled"] is True
+        assert eng.untuned == 1
+        assert notes == ["1 of the scheduler's workers run without planecal's dask "
+                         "settings (dask's profiler on: ~10 % slower); start them after "
+                         "'export $(planecal worker-env)'"]
+        assert eng.describe() == (f"Dask scheduler {by_hand}: 2 worker threads (1 without "
+                                  "planecal's dask settings)")
         res = eng.map(run_one, ITEMS)
     assert_same_results(res, reference)
 

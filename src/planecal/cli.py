@@ -38,6 +38,7 @@ COMMANDS = {
     "sweep": "accuracy against robot time over a grid of worlds, pose designs and sizes",
     "compensate": "correct a program's targets with a calibration (counts the controller plays)",
     "layouts": "identifiable parameters and predicted std for 1, 2 and 3 of a scene's plates",
+    "worker-env": "the environment of a Dask worker for the studies: export $(planecal worker-env)",
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,
@@ -72,7 +73,7 @@ class DefaultsFormatter(argparse.RawDescriptionHelpFormatter):
 
 
 def _module(name: str):
-    return importlib.import_module(f"planecal.commands.{name}")
+    return importlib.import_module(f"planecal.commands.{name.replace('-', '_')}")
 
 
 def _common(p: argparse.ArgumentParser) -> None:

@@ -13,13 +13,15 @@ and its results file (``add_results_arguments``):
 
 A cluster on other machines (every machine with planecal installed, the same version)::
 
-    OPENBLAS_NUM_THREADS=1 dask scheduler --port 8786
-    OPENBLAS_NUM_THREADS=1 dask worker tcp://SCHEDULER-HOST:8786 --nthreads 1  # once per core
+    export $(planecal worker-env)
+    dask scheduler --port 8786
+    dask worker tcp://SCHEDULER-HOST:8786 --nthreads 1  # once per core
 
 then ``planecal montecarlo ... --scheduler tcp://SCHEDULER-HOST:8786``.
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any, Callable
 
@@ -36,14 +38,16 @@ def add_engine_arguments(p) -> None:
                    help="1: run in this process; N: a local Dask cluster of N worker "
                         "processes (default: one per core)")
     g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="run on a Dask cluster you already run ('dask scheduler' and "
-                        "'dask worker tcp://HOST:PORT --nthreads 1' on each machine)")
+                   help="run on a Dask cluster you already run ('export $(planecal "
+                        "worker-env)', then 'dask scheduler' and 'dask worker "
+                        "tcp://HOST:PORT --nthreads 1' on each machine)")
 
 
 def engine_from_args(args, warmup: Callable[[], Any] | None = None) -> Engine:
     """The ``Engine`` the options name (not started: use it as a context manager).
     ``warmup`` runs on every worker before the runs (``studies.distributed.warm_twin``)."""
-    return Engine(jobs=args.jobs, scheduler=args.scheduler, warmup=warmup)
+    return Engine(jobs=args.jobs, scheduler=args.scheduler, warmup=warmup,
+                  notify=lambda m: print(f"note: {m}", file=sys.stderr, flush=True))
 
 
 def add_results_arguments(p) -> None:
