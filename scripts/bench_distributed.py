@@ -12,11 +12,12 @@ subprocess), three ways, on the same settings:
     python scripts/bench_distributed.py [--runs 200] [--samples 150] [--mode twin]
                                         [--errors realistic] [--workers 2]
 
-Each command writes its summary JSON; the script fails unless the three ``run_errors``
-(in run order) are identical. Throughput: runs per second of the command's map (its
-``runs: R in T s`` line on stderr: from the first run submitted to the last result, after
-the engine started and warmed up), and of the whole command (wall time, start-up
-included). The machine's load average is printed before and after each way: on a shared
+By default ``--jobs 1`` runs first and last and its mean is the reference (the host's
+speed drifts over the ~10 minutes; ``jobs1_drift`` is last over first). Each command
+writes its summary JSON; the script fails unless every ``run_errors`` (in run order) is
+identical. Throughput: runs per second of the command's map (its ``runs: R in T s`` line
+on stderr: from the first run submitted to the last result, after the engine started and
+warmed up), and of the whole command (wall time, start-up included). The machine's load average is printed before and after each way: on a shared
 machine the ratios mean little without it. Lines ``name: X``; the last one is
 ``distributed_speedup: X``, the smaller of the two distributed map throughputs over the
 ``--jobs 1`` one (issue 15's target: >= 1.7 on 2 cores).
@@ -106,20 +107,23 @@ def main() -> int:
     ap.add_argument("--errors", default=None, help="error profile (default: the command's)")
     ap.add_argument("--scene", default="thesis_final")
     ap.add_argument("--workers", type=int, default=2, help="dask workers started by hand")
-    ap.add_argument("--only", default="jobs1,cluster,scheduler",
-                    help="comma-separated ways to run (default: all three)")
+    ap.add_argument("--only", default="jobs1,cluster,scheduler,jobs1",
+                    help="comma-separated ways to run, in order; a way given twice is run "
+                         "twice and its mean taken (default: all three, --jobs 1 first and "
+                         "last, so the reference brackets the host's drift)")
     args = ap.parse_args()
-    ways = args.only.split(",")
+    order = args.only.split(",")
+    ways = list(dict.fromkeys(order))
     base = ["montecarlo", "--scene", args.scene, "--runs", str(args.runs), "--samples",
             str(args.samples), "--mode", args.mode]
     if args.errors:
         base += ["--errors", args.errors]
     print(f"cpus {os.cpu_count()}; planecal {' '.join(base)}")
-    docs, rate, wall = {}, {}, {}
+    docs, rates, walls = {}, {w: [] for w in ways}, {w: [] for w in ways}
     with tempfile.TemporaryDirectory(prefix="bench_distributed_") as tmp:
         d = Path(tmp)
         log = open(d / "log.txt", "w")
-        for way in ways:
+        for n, way in enumerate(order):
             procs = []
             extra = {"jobs1": ["--jobs", "1"], "cluster": []}.get(way)
             try:
@@ -129,22 +133,27 @@ def main() -> int:
                 elif extra is None:
                     sys.exit(f"--only: unknown way {way!r}")
                 before = load()
-                out = d / f"{way}.json"
+                out = d / f"{n}-{way}.json"
                 r_map, t_wall, err = run_command(base + extra + ["--out", str(out)], log)
             finally:
                 stop(procs[1:])
                 stop(procs[:1])
-            docs[way] = json.loads(out.read_text())
-            rate[way], wall[way] = r_map, t_wall
+            docs.setdefault(way, []).append(json.loads(out.read_text()))
+            rates[way].append(r_map)
+            walls[way].append(t_wall)
             line = RUNS_LINE.search(err).group(0).split("; each written")[0]
             print(f"{way}: {line}; whole command {t_wall:.1f} s; load average {before} "
                   f"before, {load()} after", flush=True)
         log.close()
+    rate = {w: sum(v) / len(v) for w, v in rates.items()}
+    wall = {w: sum(v) / len(v) for w, v in walls.items()}
     for way in ways:
         print(f"{way}_runs_per_s: {rate[way]:.4f}")
         print(f"{way}_command_wall_s: {wall[way]:.1f}")
-    first = docs[ways[0]]["run_errors"]
-    same = all(docs[w]["run_errors"] == first for w in ways)
+        if len(rates[way]) > 1:  # the same command later: how far the host drifted
+            print(f"{way}_drift: {rates[way][-1] / rates[way][0]:.3f}")
+    first = docs[ways[0]][0]["run_errors"]
+    same = all(doc["run_errors"] == first for w in ways for doc in docs[w])
     print(f"run_errors_identical: {int(same)}")
     if not same:
         print("the ways gave different run_errors", file=sys.stderr)
