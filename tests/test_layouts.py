@@ -201,3 +201,13 @@ def test_three_plates_random_draws_mostly_reachable(three):
                     ok += 1
                     break
         assert ok >= 90, f"{scene.plates[k].name}: {ok} of 100 draws reachable"
+
+
+@pytest.mark.parametrize("plates", [(0, 1), (0, 1, 2)])
+def test_candidates_take_every_plate_in_turn(three, plates):
+    """Each draw offers both wrist branches (two candidates): the plate goes round by draw,
+    not by candidate (by candidate every draw of a 2-plate scene fell on its first plate)."""
+    scene, checker = three
+    _, _, plate = candidates(subscene(scene, plates), 60, 3, checker)
+    counts = np.bincount(plate, minlength=len(plates))
+    assert len(plate) == 60 and counts.min() >= 60 // len(plates) // 2, counts

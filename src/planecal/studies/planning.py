@@ -71,7 +71,7 @@ def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = N
     draws = 0
     max_draws = max_draws or 20 * m
     while len(qe) < m and draws < max_draws:
-        k = gen.plate_for(len(qe), rng)
+        k = gen.plate_for(draws, rng)  # by draw: a draw gives up to two candidates
         pose = gen.draw(rng, k)
         draws += 1
         for q in gen.branch_targets(pose, q_ref):
