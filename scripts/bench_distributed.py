@@ -17,10 +17,11 @@ speed drifts over the ~10 minutes; ``jobs1_drift`` is last over first). Each com
 writes its summary JSON; the script fails unless every ``run_errors`` (in run order) is
 identical. Throughput: runs per second of the command's map (its ``runs: R in T s`` line
 on stderr: from the first run submitted to the last result, after the engine started and
-warmed up), and of the whole command (wall time, start-up included). The machine's load average is printed before and after each way: on a shared
-machine the ratios mean little without it. Lines ``name: X``; the last one is
-``distributed_speedup: X``, the smaller of the two distributed map throughputs over the
-``--jobs 1`` one (issue 15's target: >= 1.7 on 2 cores).
+warmed up), and of the whole command (wall time, start-up included). The machine's load
+average is printed before and after each way: on a shared machine the ratios mean little
+without it. Lines ``name: X``; the last one is ``distributed_speedup: X``, the smaller of
+the two distributed map throughputs over the ``--jobs 1`` one (issue 15's target: >= 1.7
+on 2 cores).
 """
 from __future__ import annotations
 

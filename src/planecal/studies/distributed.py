@@ -355,8 +355,8 @@ class Engine:
                 self._connect()
             self.client.register_plugin(_env_plugin(), name="planecal-env")
             if self.mode == "scheduler":
-                want = json.loads(json.dumps(WORKER_CONFIG))
-                self.untuned = sum(c != want for c in self.client.run(_worker_config).values())
+                configs = self.client.run(_worker_config).values()
+                self.untuned = sum(c != WORKER_CONFIG for c in configs)
                 if self.untuned and self.notify:
                     self.notify(f"{self.untuned} of the scheduler's workers run without "
                                 "planecal's dask settings (dask's profiler on: ~10 % slower); "
@@ -545,4 +545,3 @@ def warm_twin(scene: str = "thesis_final") -> float:
     hold = (twin.current_counts - twin.reference_counts)[None]
     twin.run(np.repeat(hold, 3, axis=0))
     return time.perf_counter() - t0
-
