@@ -146,60 +146,53 @@ def _spot_poses(gen, frame, spot, rng, tries=400):
         yield T @ gen.T_sf
 
 
-def test_every_plate_of_three_plates_is_reachable_from_clear_poses(three):
+@pytest.fixture(scope="module")
+def reach(three):
+    """(scene, pose generator, ``clear_hit(q, k)``): whether the collision checker clears
+    q (10 mm) and the laser at q -- MuJoCo's ray on the exact twin -- hits plate k within
+    its window."""
+    from planecal.sampling.poses import PoseGenerator, PoseSettings
+    from planecal.twin import Twin, TwinOptions
+    scene, checker = three
+    twin = Twin(scene, truth="nominal", options=TwinOptions.exact())
+    gen = PoseGenerator(scene, PoseSettings(cone_deg=scene.cone_deg,
+                                            distance_mm=tuple(scene.distance_mm)))
+    lo, hi = scene.laser_range_mm
+
+    def clear_hit(q, k) -> bool:
+        if not checker.check_config(q).ok:
+            return False
+        twin.set_counts(joints_to_counts(scene.robot, q))
+        h = twin.hit()
+        return h.plate == k and lo <= h.distance_m * 1e3 <= hi
+    return scene, gen, clear_hit
+
+
+def test_every_plate_of_three_plates_is_reachable_from_clear_poses(reach):
     """A 3 x 3 grid of spots on each plate (30 mm from the edges, as the scene states):
     each spot is hit by the laser -- MuJoCo's ray on the twin at those counts, within the
     laser window -- from a pose within the MC70's joint limits that the collision checker
     clears (10 mm clearance)."""
-    from planecal.sampling.poses import PoseGenerator, PoseSettings
-    from planecal.twin import Twin, TwinOptions
-    scene, checker = three
-    twin = Twin(scene, truth="nominal", options=TwinOptions.exact())
-    gen = PoseGenerator(scene, PoseSettings(cone_deg=scene.cone_deg,
-                                            distance_mm=tuple(scene.distance_mm)))
+    scene, gen, clear_hit = reach
     rng = np.random.default_rng(0)
-    lo, hi = scene.laser_range_mm
     for k, plate in enumerate(scene.plates):
         for u in np.linspace(0.03, plate.size[0] - 0.03, 3):
             for v in np.linspace(0.03, plate.size[1] - 0.03, 3):
-                found = False
-                for Tf in _spot_poses(gen, gen.frames[k], (u, v), rng):
-                    for q in ik_all(scene.robot, Tf):  # within the joint limits
-                        if not checker.check_config(q).ok:
-                            continue
-                        twin.set_counts(joints_to_counts(scene.robot, q))
-                        h = twin.hit()
-                        if h.plate == k and lo <= h.distance_m * 1e3 <= hi:
-                            found = True
-                            break
-                    if found:
-                        break
+                found = any(clear_hit(q, k)  # ik_all: within the joint limits
+                            for Tf in _spot_poses(gen, gen.frames[k], (u, v), rng)
+                            for q in ik_all(scene.robot, Tf))
                 assert found, f"{plate.name}: spot ({u:.3f}, {v:.3f}) m not reachable"
 
 
-def test_three_plates_random_draws_mostly_reachable(three):
+def test_three_plates_random_draws_mostly_reachable(reach):
     """The sampling run's own draws: measured 95-99.5 % of them have a clear pose whose
     beam hits the plate in the window (200 draws per plate)."""
-    from planecal.sampling.poses import PoseGenerator, PoseSettings
-    from planecal.twin import Twin, TwinOptions
-    scene, checker = three
-    twin = Twin(scene, truth="nominal", options=TwinOptions.exact())
-    gen = PoseGenerator(scene, PoseSettings(cone_deg=scene.cone_deg,
-                                            distance_mm=tuple(scene.distance_mm)))
+    scene, gen, clear_hit = reach
     rng = np.random.default_rng(0)
-    lo, hi = scene.laser_range_mm
     for k in range(3):
-        ok = 0
-        for _ in range(100):
-            pose = gen.draw(rng, k)
-            for q in gen.branch_targets(pose, scene.calibration_q):
-                if not checker.check_config(q).ok:
-                    continue
-                twin.set_counts(joints_to_counts(scene.robot, q))
-                h = twin.hit()
-                if h.plate == k and lo <= h.distance_m * 1e3 <= hi:
-                    ok += 1
-                    break
+        ok = sum(any(clear_hit(q, k) for q in gen.branch_targets(gen.draw(rng, k),
+                                                                 scene.calibration_q))
+                 for _ in range(100))
         assert ok >= 90, f"{scene.plates[k].name}: {ok} of 100 draws reachable"
 
 
