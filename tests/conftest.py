@@ -30,6 +30,18 @@ INITIAL = CellParams(np.zeros(6), [0.0257, -0.0725, 0.1769], 1.2427, -1.0472,
                      [[0.0, -1.02511, 3.62708]])
 
 
+@pytest.fixture(scope="module")
+def rerun_home(tmp_path_factory):
+    """HOME and the XDG directories in a fresh folder for one module, restored after: keeps
+    rerun (and anything it might start) off the real ~/.config and ~/.local."""
+    home = tmp_path_factory.mktemp("home")
+    with pytest.MonkeyPatch.context() as mp:
+        for key, sub in (("HOME", ""), ("XDG_CONFIG_HOME", ".config"),
+                         ("XDG_DATA_HOME", ".local/share"), ("XDG_CACHE_HOME", ".cache")):
+            mp.setenv(key, str(home / sub))
+        yield home
+
+
 @pytest.fixture(scope="session")
 def robot():
     return load_robot()

@@ -4,7 +4,6 @@ as real-cell data, the optimizer's histograms, file naming, and the view command
 no viewer is ever spawned, and rerun's config/data dirs point into a temporary HOME."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -32,21 +31,7 @@ N_SAMPLES = 20
 EVERY = 5
 
 
-@pytest.fixture(scope="module", autouse=True)
-def rerun_home(tmp_path_factory):
-    """Keep rerun (and anything it might start) off the real ~/.config and ~/.local."""
-    home = tmp_path_factory.mktemp("home")
-    keys = ("HOME", "XDG_CONFIG_HOME", "XDG_DATA_HOME", "XDG_CACHE_HOME")
-    old = {k: os.environ.get(k) for k in keys}
-    os.environ.update(HOME=str(home), XDG_CONFIG_HOME=str(home / ".config"),
-                      XDG_DATA_HOME=str(home / ".local/share"),
-                      XDG_CACHE_HOME=str(home / ".cache"))
-    yield home
-    for k, v in old.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
+pytestmark = pytest.mark.usefixtures("rerun_home")  # rerun off the real ~/.config (conftest)
 
 
 # ----- reading recordings back -----

@@ -5,7 +5,6 @@ view starts on the plate and the tool and hides the rejections. Plus the numbers
 charts carry (histograms recomputed with numpy). Headless: no viewer is started."""
 from __future__ import annotations
 
-import os
 
 import numpy as np
 import pytest
@@ -22,21 +21,7 @@ from planecal.twin.truth import draw_truth  # noqa: E402
 SPATIAL = {"/cell/**", "/robot/**", "/laser/**", "/samples/**"}
 
 
-@pytest.fixture(scope="module", autouse=True)
-def rerun_home(tmp_path_factory):
-    """Keep rerun off the real ~/.config and ~/.local."""
-    home = tmp_path_factory.mktemp("home")
-    keys = ("HOME", "XDG_CONFIG_HOME", "XDG_DATA_HOME", "XDG_CACHE_HOME")
-    old = {k: os.environ.get(k) for k in keys}
-    os.environ.update(HOME=str(home), XDG_CONFIG_HOME=str(home / ".config"),
-                      XDG_DATA_HOME=str(home / ".local/share"),
-                      XDG_CACHE_HOME=str(home / ".cache"))
-    yield
-    for k, v in old.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
+pytestmark = pytest.mark.usefixtures("rerun_home")  # rerun off the real ~/.config (conftest)
 
 
 @pytest.fixture(scope="module")
