@@ -20,6 +20,7 @@ from planecal.links.emulators import Emulators, FD11Faults, LaserFaults
 from planecal.links.fd11 import DeltaRecord, FD11Link
 from planecal.samples import read_samples
 from planecal.sampling.runfiles import load_sidecar
+from wire import sample_argv
 
 mujoco = pytest.importorskip("mujoco")
 twin_mod = pytest.importorskip("planecal.twin")
@@ -32,8 +33,7 @@ RELEASE_AT = 1300
 def sample(port, tty, out, *extra, capsys):
     """`planecal sample` against emulators at ``port`` / ``tty``: (exit code, summary or
     None, stderr)."""
-    code = main(["sample", "--rt", "127.0.0.1", "--rt-port", str(port), "--local-port", "0",
-                 "--rt-tick-s", "0", "--laser", tty, "--seed", "2", "--out", str(out), *extra])
+    code = main(sample_argv(port, tty, out, *extra))
     cap = capsys.readouterr()
     summary = json.loads(cap.out[cap.out.index("{"):]) if "{" in cap.out else None
     return code, summary, cap.err

@@ -26,6 +26,7 @@ from planecal.rerun_log import (HIST_BINS, SamplingObserver, log_fit_to_file,  #
 from planecal.samples import read_samples  # noqa: E402
 from planecal.sampling import Driver, RunSettings, SamplingRun  # noqa: E402
 from planecal.scene import load_scene, nominal_params  # noqa: E402
+from wire import sample_argv  # noqa: E402
 
 N_SAMPLES = 20
 EVERY = 5
@@ -294,10 +295,8 @@ def test_sample_command_over_the_emulators_records_the_same_tree(rehearsal, tmp_
     twin = twin_mod.Twin("thesis_final", seed=2)
     rrd = tmp_path / "real.rrd"
     with Emulators(twin, rt_port=0, reply_port=None) as emu:
-        code = cli.main(["sample", "--rt", "127.0.0.1", "--rt-port", str(emu.fd11.rt_port),
-                         "--local-port", "0", "--rt-tick-s", "0", "--laser", emu.laser.port,
-                         "--samples", "3", "--seed", "2", "--out", str(tmp_path / "RUN.tsv"),
-                         "--rrd", str(rrd)])
+        code = cli.main(sample_argv(emu.fd11.rt_port, emu.laser.port, tmp_path / "RUN.tsv",
+                                    "--samples", "3", "--rrd", str(rrd)))
     assert code == 0
     assert json.loads(capsys.readouterr().out)["rrd"] == str(rrd)
     data = read_rrd(rrd)

@@ -25,6 +25,7 @@ from planecal.links.fd11 import DeltaRecord
 from planecal.samples import read_samples
 from planecal.sampling.enable import follow_limit_counts
 from planecal.sampling.runfiles import count_samples, load_sidecar
+from wire import sample_argv
 
 mujoco = pytest.importorskip("mujoco")
 twin_mod = pytest.importorskip("planecal.twin")
@@ -33,15 +34,9 @@ SEED = 2
 FAR_COUNTS = 1000  # two random poses differ by thousands of counts; a duplicate by a few
 
 
-def sample_argv(port, tty, out, *extra):
-    return ["sample", "--rt", "127.0.0.1", "--rt-port", str(port), "--local-port", "0",
-            "--rt-tick-s", "0", "--laser", tty, "--seed", str(SEED), "--out", str(out),
-            *extra]
-
-
 def sample(emu, out, *extra, capsys):
     """In-process `planecal sample` against ``emu``: (exit code, summary or None, stderr)."""
-    code = main(sample_argv(emu.fd11.rt_port, emu.laser.port, out, *extra))
+    code = main(sample_argv(emu.fd11.rt_port, emu.laser.port, out, *extra, seed=SEED))
     cap = capsys.readouterr()
     summary = json.loads(cap.out[cap.out.index("{"):]) if "{" in cap.out else None
     return code, summary, cap.err
@@ -81,7 +76,8 @@ def test_emulate_drop_rate_is_ridden_through_and_reported(tmp_path, capsys):
                   "--drop-seed", "3")
     out = tmp_path / "RUN.tsv"
     try:
-        code = main(sample_argv(emu.port, emu.tty, out, "--samples", "3"))
+        # the cell's resend interval: each dropped reply waits it out
+        code = main(sample_argv(emu.port, emu.tty, out, "--samples", "3", "--rt-resend-s", "0.02"))
         cap = capsys.readouterr()
     finally:
         rc, err = emu.stop()

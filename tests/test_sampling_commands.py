@@ -10,6 +10,7 @@ from planecal.samples import read_samples
 from planecal.sampling.runfiles import load_sidecar
 from planecal.sampling.session import Progress
 from planecal.sampling.run import RunStats
+from wire import sample_argv
 
 pytest.importorskip("planecal.twin")
 
@@ -148,10 +149,8 @@ def test_sample_against_the_emulators(tmp_path, capsys):
     twin = Twin("thesis_final", seed=2)
     out = tmp_path / "RUN.tsv"
     with Emulators(twin, rt_port=0, reply_port=None) as emu:
-        code, stdout, stderr = run_cli([
-            "sample", "--rt", "127.0.0.1", "--rt-port", str(emu.fd11.rt_port), "--local-port", "0",
-            "--rt-tick-s", "0", "--laser", emu.laser.port, "--samples", "3", "--seed", "2",
-            "--out", str(out)], capsys)
+        code, stdout, stderr = run_cli(
+            sample_argv(emu.fd11.rt_port, emu.laser.port, out, "--samples", "3"), capsys)
         assert not emu.fd11.tripped
     assert code == 0, stderr
     summary = json.loads(stdout)
@@ -196,10 +195,8 @@ def test_sample_stops_cleanly_when_the_dead_man_switch_is_released(tmp_path, cap
     robot = Released(twin, 1300)  # moving ticks: on the way to the second sample
     out = tmp_path / "RUN.tsv"
     with Emulators(robot, twin, rt_port=0, reply_port=None) as emu:
-        code, stdout, stderr = run_cli([
-            "sample", "--rt", "127.0.0.1", "--rt-port", str(emu.fd11.rt_port), "--local-port", "0",
-            "--rt-tick-s", "0", "--laser", emu.laser.port, "--samples", "5", "--seed", "2",
-            "--out", str(out)], capsys)
+        code, stdout, stderr = run_cli(
+            sample_argv(emu.fd11.rt_port, emu.laser.port, out, "--samples", "5"), capsys)
     assert code == 1
     summary = json.loads(stdout)
     assert summary["status"] == "stopped" and "dead-man" in summary["stop_reason"]

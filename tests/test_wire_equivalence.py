@@ -8,6 +8,7 @@ from planecal.commands.rehearse import make_twin
 from planecal.links.emulators import Emulators
 from planecal.samples import read_samples
 from planecal.scene import load_scene
+from wire import sample_argv
 
 
 def test_sample_over_udp_and_serial_equals_rehearsal_in_process(tmp_path, capsys):
@@ -17,9 +18,7 @@ def test_sample_over_udp_and_serial_equals_rehearsal_in_process(tmp_path, capsys
     wire = tmp_path / "wire.tsv"
     twin = make_twin(load_scene("thesis_final"), 7, "realistic")  # rehearse's default world
     with Emulators(twin, rt_port=0, reply_port=None) as emu:
-        code = main(["sample", "--rt", "127.0.0.1", "--rt-port", str(emu.fd11.rt_port),
-                     "--local-port", "0", "--rt-tick-s", "0", "--laser", emu.laser.port,
-                     "--out", str(wire), *common])
+        code = main(sample_argv(emu.fd11.rt_port, emu.laser.port, wire, *common))
         assert not emu.fd11.tripped
     capsys.readouterr()
     assert code == 0

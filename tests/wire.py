@@ -1,0 +1,25 @@
+"""`planecal sample` against emulators, the command line every wire test runs.
+
+The link's defaults are the cell's: resend after 20 ms without a reply, give a laser
+request up after 0.1 s. Behind the emulators the replies come from threads of the test's
+own process, and on a loaded 2-core CI machine such a thread can wait longer than 20 ms
+for the CPU: the link then counts a lost reply and resends, the emulator ticks the twin
+once more (an extra hold tick, one more laser-noise draw), and a reply a tick old can even
+read as a released switch. Tests that are not about timing therefore run with the same
+generous intervals as the link tests (``T`` in test_links_fd11 and test_links_laser): a
+reply is lost only if a thread stalls for a quarter of a second. Tests of resending pass
+their own ``--rt-resend-s`` after these (argparse keeps the last).
+"""
+from __future__ import annotations
+
+RESEND_S = 0.25
+LASER_TIMEOUT_S = 0.3
+
+
+def sample_argv(port, tty, out, *extra, seed: int = 2) -> list[str]:
+    """argv of `planecal sample` against the FD11 emulator on UDP ``port`` and the laser
+    emulator on ``tty``, writing ``out``; ``extra`` flags come last."""
+    return ["sample", "--rt", "127.0.0.1", "--rt-port", str(port), "--local-port", "0",
+            "--rt-tick-s", "0", "--rt-resend-s", str(RESEND_S),
+            "--laser", str(tty), "--laser-timeout-s", str(LASER_TIMEOUT_S),
+            "--seed", str(seed), "--out", str(out), *extra]
