@@ -76,8 +76,10 @@ def test_emulate_drop_rate_is_ridden_through_and_reported(tmp_path, capsys):
                   "--drop-seed", "3")
     out = tmp_path / "RUN.tsv"
     try:
-        # the cell's resend interval: each dropped reply waits it out
-        code = main(sample_argv(emu.port, emu.tty, out, "--samples", "3", "--rt-resend-s", "0.02"))
+        # each dropped reply waits one resend interval out: 0.05 s keeps that short and
+        # still gives the emulate process 50 ms to answer on a loaded machine
+        code = main(sample_argv(emu.port, emu.tty, out, "--samples", "3",
+                                "--rt-resend-s", "0.05"))
         cap = capsys.readouterr()
     finally:
         rc, err = emu.stop()
