@@ -7,8 +7,6 @@ than the derived limit ahead), a kill between the sidecar's and the sample file'
 temp file)."""
 from __future__ import annotations
 
-import builtins
-import errno
 import json
 import math
 import signal
@@ -25,6 +23,7 @@ from planecal.links.fd11 import DeltaRecord
 from planecal.samples import read_samples
 from planecal.sampling.enable import follow_limit_counts
 from planecal.sampling.runfiles import count_samples, load_sidecar
+from full_disk import FullDisk
 from wire import sample_argv
 
 mujoco = pytest.importorskip("mujoco")
@@ -260,27 +259,6 @@ def test_a_kill_between_the_sidecar_and_the_sample_line_leaves_no_duplicate(twin
 
 # --- a full disk -----------------------------------------------------------------------------
 
-class FullDisk:
-    """``os`` for planecal.samples whose writes fail with ENOSPC once ``left`` bytes are
-    written (a partial write first), the rest of ``os`` untouched."""
-
-    def __init__(self, left: int):
-        import os
-        self._os, self.left = os, left
-
-    def __getattr__(self, name):
-        return getattr(self._os, name)
-
-    def write(self, fd, data):
-        if len(data) > self.left:
-            n, self.left = self.left, 0
-            if n:
-                return self._os.write(fd, data[:n])
-            raise OSError(errno.ENOSPC, "No space left on device")
-        self.left -= len(data)
-        return self._os.write(fd, data)
-
-
 def test_a_full_disk_stops_with_one_line_and_consistent_files(twin, tmp_path, capsys,
                                                              monkeypatch):
     """The disk fills up on the third sample's line (and the sidecar's temp file cannot be
@@ -292,16 +270,9 @@ def test_a_full_disk_stops_with_one_line_and_consistent_files(twin, tmp_path, ca
     out = tmp_path / "RUN.tsv"
     header = len("\t".join(samples_mod.HEADER) + "\n")
     disk = FullDisk(left=header + 2 * 60 + 20)  # header, two lines, then a line is cut
-    real_open = builtins.open
-
-    def open_on_full_disk(file, mode="r", *a, **k):
-        if str(file).endswith(".tmp") and disk.left == 0:
-            raise OSError(errno.ENOSPC, "No space left on device", str(file))
-        return real_open(file, mode, *a, **k)
 
     with Emulators(twin, rt_port=0, reply_port=None) as emu:
-        monkeypatch.setattr(samples_mod, "os", disk)
-        monkeypatch.setattr(builtins, "open", open_on_full_disk)
+        disk.install(monkeypatch, samples_mod)
         code, s, err = sample(emu, out, "--samples", "5", capsys=capsys)
         monkeypatch.undo()
         assert code == 1 and s is None

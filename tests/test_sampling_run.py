@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from full_disk import FullDisk
 from test_sampling_fakes import Clear, DropAfter, FakeCell, NullChecker
 
 from planecal.encoder import joints_to_counts
@@ -485,48 +486,14 @@ def test_background_planner_ends_when_the_run_is_killed(tmp_path, plan_s):
             run.kill()
 
 
-class FullDisk:
-    """``os`` for planecal.samples and planecal.params whose writes fail with ENOSPC once
-    ``left`` bytes are written (the disk fills up), the rest of ``os`` untouched."""
-
-    def __init__(self, left: int):
-        import os as _os
-        self._os, self.left = _os, left
-
-    def __getattr__(self, name):
-        return getattr(self._os, name)
-
-    def write(self, fd, data):
-        import errno
-        if len(data) > self.left:
-            n = self.left  # a partial write, then the disk is full
-            self.left = 0
-            if n:
-                return self._os.write(fd, data[:n])
-            raise OSError(errno.ENOSPC, "No space left on device")
-        self.left -= len(data)
-        return self._os.write(fd, data)
-
-
 def test_a_full_disk_stops_the_run_with_whole_lines_and_a_resumable_record(scene, tmp_path,
                                                                          monkeypatch):
-    import builtins
-    import errno
-
     import planecal.samples as samples_mod
     from planecal.sampling.runfiles import RunWriteError
 
     out = tmp_path / "RUN.tsv"
     disk = FullDisk(left=250)  # the header and a few samples fit, then a line is cut
-    monkeypatch.setattr(samples_mod, "os", disk)
-    real_open = builtins.open
-
-    def open_on_full_disk(file, mode="r", *a, **k):  # the sidecar's temp file
-        if str(file).endswith(".tmp") and disk.left == 0:
-            raise OSError(errno.ENOSPC, "No space left on device", str(file))
-        return real_open(file, mode, *a, **k)
-
-    monkeypatch.setattr(builtins, "open", open_on_full_disk)
+    disk.install(monkeypatch, samples_mod)  # and the sidecar's temp file
     with pytest.raises(RunWriteError, match="No space left on device.*continue with --resume"):
         run(scene, out, 8)
     monkeypatch.undo()
