@@ -25,10 +25,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 from scipy.optimize import least_squares
 
-from planecal.cell import CellParams, predict
-from planecal.fit import FitOptions, Problem, solve
-from planecal.scene import load_scene, nominal_params
-from planecal.synthetic import synthetic_samples
+from planecal.model.cell import CellParams, predict
+from planecal.estimation.fit import FitOptions, Problem, solve
+from planecal.model.scene import load_scene, nominal_params
+from planecal.twin.synthetic import synthetic_samples
 from planecal.twin.truth import draw_truth
 
 
@@ -82,8 +82,8 @@ def main():
 
 
 def level2():
-    from planecal.calibration import calibrate
-    from planecal.cell import predict_with_jacobian
+    from planecal.estimation.calibrate import calibrate
+    from planecal.model.cell import predict_with_jacobian
 
     scene = load_scene("three_plates")
     robot = scene.robot

@@ -42,11 +42,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the te
 import numpy as np  # noqa: E402
 
 from mujoco_oracle import ExactOracle  # noqa: E402
-from planecal.collision import CollisionWorld  # noqa: E402
-from planecal.encoder import counts_to_joints, joints_to_counts  # noqa: E402
+from planecal.safety.collision import CollisionWorld  # noqa: E402
+from planecal.model.encoder import counts_to_joints, joints_to_counts  # noqa: E402
 from planecal.sampling.planner import Planner  # noqa: E402
 from planecal.sampling.run import RunSettings  # noqa: E402
-from planecal.scene import load_scene  # noqa: E402
+from planecal.model.scene import load_scene  # noqa: E402
 
 
 def draws(scene, seed: int, samples: int, checker):
@@ -101,7 +101,7 @@ def main(argv=None) -> int:
         checker = CollisionWorld(scene, clearance_m=c)
         other = None
         if compare:
-            from planecal import geometry
+            from planecal.model import geometry
             m = args.compare_margin_mm * 1e-3
             other = CollisionWorld(scene, clearance_m=c,
                                    links=geometry.robot_link_meshes(scene.robot, "collision",

@@ -35,7 +35,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def main(argv=None) -> int:
-    from planecal.progress import Progress as Bar
+    from planecal.base.progress import Progress as Bar
     from planecal.studies.common import Progress
     from planecal.studies.distributed import Engine, warm_twin
     from planecal.studies.sweep import format_sweep, plans_needed, run_sweep, spec_from_dict
@@ -77,7 +77,7 @@ def main(argv=None) -> int:
     res = {"cells": cells_all}
     wall = time.perf_counter() - t0
     print(format_sweep(res))
-    from planecal.report.sweep import fig_accuracy_vs_time
+    from planecal.present.report.sweep import fig_accuracy_vs_time
     print(f"plot: {out / fig_accuracy_vs_time(out, res).file}")
     cells = {(c["design"], c["samples"]): c for c in res["cells"] if c.get("runs", 0) > 1}
     rnd = cells[("random", a.random_samples)]

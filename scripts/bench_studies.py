@@ -26,8 +26,8 @@ def main() -> int:
     ap.add_argument("--mode", default="twin", choices=("twin", "synthetic", "rehearse"))
     ap.add_argument("--jobs", type=int, default=None)
     args = ap.parse_args()
-    from planecal.fit import Problem, solve
-    from planecal.scene import nominal_params
+    from planecal.estimation.fit import Problem, solve
+    from planecal.model.scene import nominal_params
     from planecal.studies.common import cached_scene
     from planecal.studies.montecarlo import MCSettings, run_many, truth_for, twin_samples
 

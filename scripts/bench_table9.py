@@ -42,12 +42,12 @@ TABLE9 = {"sizes": [98, 49, 48, 30, 32, 62, 257],
 def one_set(scene, world, opts, twin_seed, samples, seed, world_checker, pose):
     """A rehearsal set (the product's sampling run) calibrated offsets-only: (max |model
     error| mm, identified delta2..delta5 rad)."""
-    from planecal.fit import Problem, solve
+    from planecal.estimation.fit import Problem, solve
     from planecal.links.base import AlwaysEnabled
-    from planecal.samples import read_samples
+    from planecal.io.samples import read_samples
     from planecal.sampling.driver import Driver
     from planecal.sampling.run import RunSettings, SamplingRun
-    from planecal.scene import nominal_params
+    from planecal.model.scene import nominal_params
     from planecal.twin import Twin
 
     twin = Twin(scene, truth=world, seed=twin_seed, options=opts)
@@ -66,8 +66,8 @@ def one_set(scene, world, opts, twin_seed, samples, seed, world_checker, pose):
 
 
 def main(argv=None) -> int:
-    from planecal.collision import CollisionWorld
-    from planecal.scene import load_scene
+    from planecal.safety.collision import CollisionWorld
+    from planecal.model.scene import load_scene
     from planecal.twin.profile import draw_world, load_profile
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

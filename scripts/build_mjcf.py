@@ -11,8 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from planecal.errors import InputError
-from planecal.robot import load_robot
+from planecal.base.errors import InputError
+from planecal.model.robot import load_robot
 from planecal.twin.mjcf import robot_xml, robot_xml_path, view_scene_path, view_scene_xml
 
 

@@ -16,7 +16,7 @@ import argparse
 import sys
 
 from planecal.formats import schema_documents
-from planecal.paths import data_path
+from planecal.base.paths import data_path
 
 
 def main(argv=None) -> int:

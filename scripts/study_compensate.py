@@ -3,11 +3,11 @@
 robot frame (cell frame in brackets), nominal vs compensated, unseen targets and ISO P1..P5."""
 import sys
 import time
-from planecal.scene import load_scene, nominal_params
+from planecal.model.scene import load_scene, nominal_params
 from planecal.studies.montecarlo import MCSettings, twin_samples, world_for
-from planecal.fit import Problem, solve
-from planecal.compensate import OffsetsModel
-from planecal.collision import CollisionWorld
+from planecal.estimation.fit import Problem, solve
+from planecal.estimation.compensate import OffsetsModel
+from planecal.safety.collision import CollisionWorld
 from planecal.studies.compensation import compensation_study
 errors, sc, seeds = sys.argv[1], sys.argv[2], [int(x) for x in sys.argv[3].split(",")]
 scene = load_scene(sc)

@@ -58,7 +58,7 @@ def studies(out: str, jobs: str) -> dict:
 
 def make_pool(path: str, n: int = 1000) -> None:
     """The bootstrap pool: one long twin rehearsal (twin mode, truth seed 0, seed 77)."""
-    from planecal.samples import write_samples
+    from planecal.io.samples import write_samples
     from planecal.studies.common import cached_scene
     from planecal.studies.montecarlo import MCSettings, truth_for, twin_samples
     st = MCSettings(samples=n)

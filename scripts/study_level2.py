@@ -30,14 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.calibration import calibrate_samples
-from planecal.cell import beam_direction, predict
-from planecal.encoder import counts_to_joints
-from planecal.gravity import joint_torques
-from planecal.kinematics import fk as kin_fk
-from planecal.model_full import flange_pose
-from planecal.samples import read_samples
-from planecal.scene import load_scene, nominal_params
+from planecal.estimation.calibrate import calibrate_samples
+from planecal.model.cell import beam_direction, predict
+from planecal.model.encoder import counts_to_joints
+from planecal.model.gravity import joint_torques
+from planecal.model.kinematics import fk as kin_fk
+from planecal.model.model_full import flange_pose
+from planecal.io.samples import read_samples
+from planecal.model.scene import load_scene, nominal_params
 from planecal.twin.profile import load_profile, load_world
 
 # (label, level, compliance, geometry prior (length m, angle rad) or None)

@@ -7,7 +7,7 @@ import os
 
 
 class FullDisk:
-    """``os`` for a module (planecal.samples) whose writes fail with ENOSPC once ``left``
+    """``os`` for a module (planecal.io.samples) whose writes fail with ENOSPC once ``left``
     bytes are written (a partial write first), the rest of ``os`` untouched. `install` puts
     it in place and also makes ``open`` of a temp file (``*.tmp``: the sidecar's) fail once
     the disk is full; ``monkeypatch.undo()`` gives the room back."""

@@ -1,4 +1,4 @@
-"""Test-only MuJoCo references for the collision checker (planecal.collision).
+"""Test-only MuJoCo references for the collision checker (planecal.safety.collision).
 
 * ``mujoco_contacts`` / ``mujoco_contacts_along_path``: MuJoCo's own contacts
   (mj_kinematics + mj_collision) for a model such as the twin's scene.
@@ -32,8 +32,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from planecal.collision import FLOOR_DEPTH_M, CollisionWorld
-from planecal.errors import InputError
+from planecal.safety.collision import FLOOR_DEPTH_M, CollisionWorld
+from planecal.base.errors import InputError
 
 
 # ----- MuJoCo's own contacts --------------------------------------------------------------
@@ -144,7 +144,7 @@ class ExactOracle:
     FCL distances of the same shapes, for cross-checks); ``model``/``data``: MuJoCo."""
 
     def __init__(self, scene, clearance_m: float = 0.01):
-        from planecal import geometry
+        from planecal.model import geometry
         self.scene = scene
         self.robot = scene.robot
         self.world = CollisionWorld(scene, clearance_m=clearance_m,

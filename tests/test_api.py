@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import planecal
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 pytest.importorskip("planecal.twin")
 
@@ -29,14 +29,14 @@ def test_import_is_cheap_and_names_resolve_lazily():
 
 @pytest.fixture(scope="module")
 def scene():
-    from planecal.scene import load_scene
+    from planecal.model.scene import load_scene
     return load_scene("thesis_final")
 
 
 @pytest.fixture(scope="module")
 def synthetic(scene):
     """40 noise-free samples of the analytic model at a drawn truth."""
-    from planecal.synthetic import synthetic_samples
+    from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import draw_truth
     truth = draw_truth(scene, 7)
     qe, d, plate = synthetic_samples(scene, truth, 40, np.random.default_rng(2))
@@ -44,7 +44,7 @@ def synthetic(scene):
 
 
 def test_load_samples_reads_mm_as_metres(tmp_path, synthetic):
-    from planecal.samples import write_samples
+    from planecal.io.samples import write_samples
     _, s = synthetic
     path = tmp_path / "run.tsv"
     d_mm = np.round(s.distance_m * 1e3, 6)  # the file's resolution
@@ -61,8 +61,8 @@ def test_load_samples_reads_mm_as_metres(tmp_path, synthetic):
 
 
 def test_calibrate_recovers_the_truth_and_wraps_fit_solve(scene, synthetic, tmp_path):
-    from planecal.fit import Problem, solve
-    from planecal.scene import nominal_params
+    from planecal.estimation.fit import Problem, solve
+    from planecal.model.scene import nominal_params
     truth, s = synthetic
     cal = planecal.calibrate(s, scene)
     # independent peer: the truth the samples were drawn at (delta1, delta6 fixed at 0)
@@ -83,7 +83,7 @@ def test_calibrate_recovers_the_truth_and_wraps_fit_solve(scene, synthetic, tmp_
         assert f"\n  {name} " in text
     assert "fixed" in text
     # a file path works too; bad input is one InputError
-    from planecal.samples import write_samples
+    from planecal.io.samples import write_samples
     write_samples(tmp_path / "s.tsv", s.counts, s.distance_m * 1e3, s.plate)
     assert planecal.calibrate(tmp_path / "s.tsv", scene).iterations >= 1
     with pytest.raises(InputError, match="SampleSet"):
@@ -98,8 +98,8 @@ def rehearsal():
 
 
 def test_rehearse_gives_si_samples_that_match_the_model_at_the_truth(scene, rehearsal):
-    from planecal.cell import predict
-    from planecal.scene import nominal_params
+    from planecal.model.cell import predict
+    from planecal.model.scene import nominal_params
     s = rehearsal.samples
     assert len(s) == 30 and s.counts.shape == (30, 6) and s.counts.dtype == np.int64
     lo, hi = scene.laser_range_mm

@@ -1,10 +1,10 @@
 import numpy as np
 
 from conftest import INITIAL, SEED_DM, SEED_QE, TABLE10
-from planecal.cell import (CellParams, beam_direction, n_tilde_from_point_normal,
+from planecal.model.cell import (CellParams, beam_direction, n_tilde_from_point_normal,
                            point_normal_from_n_tilde, predict, predict_with_jacobian,
                            sensor_rotation, transform_n_tilde)
-from planecal.layout import level1_layout
+from planecal.model.layout import level1_layout
 
 
 def test_seed_samples_with_table10(robot):

@@ -8,9 +8,9 @@ import pytest
 
 from conftest import INITIAL, perturbed, synthetic_counts
 from planecal.cli import main
-from planecal.params import save_params
-from planecal.paths import data_path
-from planecal.samples import write_samples
+from planecal.io.params import save_params
+from planecal.base.paths import data_path
+from planecal.io.samples import write_samples
 
 SEED = str(data_path("examples", "seed_samples.tsv"))
 TABLE10 = str(data_path("examples", "table10_params.json"))

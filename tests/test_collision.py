@@ -1,4 +1,4 @@
-"""Collision checker (planecal.collision): exact distances, pair filtering, configurations
+"""Collision checker (planecal.safety.collision): exact distances, pair filtering, configurations
 and certified paths. MuJoCo cross-checks are in test_collision_mujoco.py."""
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from planecal.collision import FLOOR_DEPTH_M, CollisionWorld
-from planecal.errors import InputError
-from planecal.geometry import LinkMesh, StaticMesh, box_mesh
-from planecal.robot import fk, fk_frames
-from planecal.scene import load_scene
+from planecal.safety.collision import FLOOR_DEPTH_M, CollisionWorld
+from planecal.base.errors import InputError
+from planecal.model.geometry import LinkMesh, StaticMesh, box_mesh
+from planecal.model.robot import fk, fk_frames
+from planecal.model.scene import load_scene
 
 C = 0.01  # clearance used throughout [m]
 
@@ -378,7 +378,7 @@ def test_appendix_d_rehearsal_completes(tmp_path, capsys, start):
 
 
 def test_one_joint_safe_sets_are_clear_and_cover_the_mc70_pairs(world, scene):
-    """planecal.collision_joint: where a safe set covers its joint's angle, the real parts
+    """planecal.safety.collision_joint: where a safe set covers its joint's angle, the real parts
     (not the hull) are farther than the clearance whatever the other joints do; the
     sets exist for the pairs that cost the most queries, and cover their ranges."""
     rng = np.random.default_rng(3)

@@ -9,11 +9,11 @@ import pytest
 pytest.importorskip("mujoco")
 
 from mujoco_oracle import ExactOracle  # noqa: E402
-from planecal.collision import CollisionWorld  # noqa: E402
-from planecal.geometry import COLLISION_MARGIN, scene_meshes  # noqa: E402
-from planecal.robot import ik_nearest  # noqa: E402
+from planecal.safety.collision import CollisionWorld  # noqa: E402
+from planecal.model.geometry import COLLISION_MARGIN, scene_meshes  # noqa: E402
+from planecal.model.robot import ik_nearest  # noqa: E402
 from planecal.sampling.poses import PoseGenerator  # noqa: E402
-from planecal.scene import load_scene  # noqa: E402
+from planecal.model.scene import load_scene  # noqa: E402
 
 C = 0.01
 M = COLLISION_MARGIN
@@ -170,7 +170,7 @@ def test_visual_shapes_clear_where_the_checker_accepts_the_sampling_draws():
     """A short run of the sampling planner on three_plates: its accepted targets and
     paths keep the exact shapes the clearance apart (the bench's accepted_colliding_paths
     criterion, on a test-sized run)."""
-    from planecal.encoder import counts_to_joints, joints_to_counts
+    from planecal.model.encoder import counts_to_joints, joints_to_counts
     from planecal.sampling.planner import Planner
     from planecal.sampling.run import RunSettings
     scene = load_scene("three_plates")

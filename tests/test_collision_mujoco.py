@@ -33,9 +33,9 @@ import pytest
 mujoco = pytest.importorskip("mujoco")
 
 from mujoco_oracle import mujoco_contacts, mujoco_contacts_along_path  # noqa: E402
-from planecal.collision import FLOOR_DEPTH_M, CollisionWorld  # noqa: E402
-from planecal.robot import fk  # noqa: E402
-from planecal.scene import load_scene  # noqa: E402
+from planecal.safety.collision import FLOOR_DEPTH_M, CollisionWorld  # noqa: E402
+from planecal.model.robot import fk  # noqa: E402
+from planecal.model.scene import load_scene  # noqa: E402
 
 C = 0.01
 TOL = 0.002
@@ -123,7 +123,7 @@ def obstacle():
 def _head_centre_track(scene, q0, q1, n=200):
     """Centre of the laser head box (30 mm behind the sensor origin along the beam) along
     the path: a point inside the robot's solid, whatever the link shapes."""
-    from planecal.geometry import HEAD_EXTENTS, sensor_pose
+    from planecal.model.geometry import HEAD_EXTENTS, sensor_pose
     T_fs = sensor_pose(scene.sensor_origin, scene.phi_y, scene.phi_z)
     S = np.linspace(0, 1, n)
     T = fk(scene.robot, q0 + S[:, None] * (q1 - q0)) @ T_fs
@@ -131,7 +131,7 @@ def _head_centre_track(scene, q0, q1, n=200):
 
 
 def _inside_box(box, p):
-    from planecal.geometry import _rpy_matrix
+    from planecal.model.geometry import _rpy_matrix
     x = (p - box.center) @ _rpy_matrix(box.rpy)
     return np.all(np.abs(x) < box.size / 2, axis=-1)
 

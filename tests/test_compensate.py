@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
-from planecal.compensate import (COMPENSATED_FORMAT, OffsetsModel, Region, Targets,
+from planecal.estimation.compensate import (COMPENSATED_FORMAT, OffsetsModel, Region, Targets,
                                  compensate, flange_jacobian, load_calibrated, pose_from,
                                  read_targets, solve_poses)
-from planecal.encoder import joints_to_counts, offsets_to_qe0
-from planecal.errors import InputError
-from planecal.robot import fk, ik_nearest, jacobian, load_robot
+from planecal.model.encoder import joints_to_counts, offsets_to_qe0
+from planecal.base.errors import InputError
+from planecal.model.robot import fk, ik_nearest, jacobian, load_robot
 
 ROBOT = load_robot()
 DELTA = np.array([0.0, 2e-3, -1.5e-3, 1e-3, -2e-3, 0.0])

@@ -1,13 +1,13 @@
-"""compensate behind the seam with level 2's whole model (``FullModel``: planecal.model_full)."""
+"""compensate behind the seam with level 2's whole model (``FullModel``: planecal.model.model_full)."""
 import numpy as np
 
 
-from planecal.cell import CellParams  # noqa: E402
-from planecal.compensate import (FullModel, OffsetsModel, Region, Targets,  # noqa: E402
+from planecal.model.cell import CellParams  # noqa: E402
+from planecal.estimation.compensate import (FullModel, OffsetsModel, Region, Targets,  # noqa: E402
                                  compensate, load_calibrated)
-from planecal.kinematics import frame_error  # noqa: E402
-from planecal.params import save_params  # noqa: E402
-from planecal.robot import fk, load_robot  # noqa: E402
+from planecal.model.kinematics import frame_error  # noqa: E402
+from planecal.io.params import save_params  # noqa: E402
+from planecal.model.robot import fk, load_robot  # noqa: E402
 
 ROBOT = load_robot()
 DELTA = np.array([0.0, 2e-3, -1.5e-3, 1e-3, -2e-3, 0.0])

@@ -6,10 +6,10 @@ scenes: scripts/study_compensate.py, tabulated in docs/COMPENSATE.md."""
 import numpy as np
 import pytest
 
-from planecal.collision import CollisionWorld
-from planecal.compensate import OffsetsModel
-from planecal.fit import Problem, solve
-from planecal.scene import load_scene, nominal_params
+from planecal.safety.collision import CollisionWorld
+from planecal.estimation.compensate import OffsetsModel
+from planecal.estimation.fit import Problem, solve
+from planecal.model.scene import load_scene, nominal_params
 from planecal.studies.compensation import compensation_study
 from planecal.studies.validation import robot_frame
 from planecal.studies.montecarlo import MCSettings, twin_samples, world_for

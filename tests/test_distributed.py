@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.studies import distributed as D
 from planecal.studies.montecarlo import MCSettings, run_one
 
@@ -420,10 +420,10 @@ def test_engine_options_are_checked_before_any_run(capsys):
 def test_bootstrap_fits_are_the_same_on_a_local_cluster(cluster, tmp_path):
     """Subset r of size s is drawn from (seed, s, r) by the run itself: the same fits on 2
     workers as here, through a results file and resumed."""
-    from planecal.fit import FitOptions, Problem
-    from planecal.scene import load_scene, nominal_params
+    from planecal.estimation.fit import FitOptions, Problem
+    from planecal.model.scene import load_scene, nominal_params
     from planecal.studies.bootstrap import BootstrapSettings, bootstrap
-    from planecal.synthetic import synthetic_samples
+    from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import draw_truth
     scene = load_scene("thesis_final")
     qe, d, plate = synthetic_samples(scene, draw_truth(scene, 3), 120,

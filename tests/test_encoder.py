@@ -2,7 +2,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from planecal.encoder import counts_to_joints, joints_to_counts, offsets_to_qe0
+from planecal.model.encoder import counts_to_joints, joints_to_counts, offsets_to_qe0
 
 # Seed Table 7: encoder model WITHOUT coupling, each row one joint turned 10 deg on the
 # teach pendant (Table 6). Entries in degrees.

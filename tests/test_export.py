@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
-from planecal.encoder import counts_to_joints, encoder_zero_counts
-from planecal.robot import jacobian, load_robot
+from planecal.model.encoder import counts_to_joints, encoder_zero_counts
+from planecal.model.robot import jacobian, load_robot
 
 ROBOT = load_robot()
 

@@ -3,10 +3,10 @@ import pytest
 from scipy.optimize import least_squares
 
 from conftest import INITIAL, perturbed, synthetic_counts
-from planecal.cell import CellParams, predict
-from planecal.fit import FitOptions, Problem, analyze, solve
-from planecal.layout import level1_layout
-from planecal.scene import load_scene, nominal_params
+from planecal.model.cell import CellParams, predict
+from planecal.estimation.fit import FitOptions, Problem, analyze, solve
+from planecal.model.layout import level1_layout
+from planecal.model.scene import load_scene, nominal_params
 
 
 @pytest.fixture(scope="module")
@@ -129,7 +129,7 @@ def test_scene_nominal_values_are_thesis_initial_values():
 
 def _scene_problem(name, n, seed, **pose):
     from planecal.sampling.poses import PoseSettings
-    from planecal.synthetic import synthetic_samples
+    from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import draw_truth
     scene = load_scene(name)
     nominal = nominal_params(scene)
@@ -182,10 +182,10 @@ def three_plate_design():
     """150 fixed poses round robin on the three-plate cell, the truth, the repeatability's
     joint std and the noise-free joint angles. The design of docs/STUDIES.md's three-plate
     study: any roll about the beam, IK nearest (pinned: the run's defaults changed)."""
-    from planecal.encoder import counts_to_joints
-    from planecal.robot import repeatability_sigma
+    from planecal.model.encoder import counts_to_joints
+    from planecal.model.robot import repeatability_sigma
     from planecal.sampling.poses import PoseSettings
-    from planecal.synthetic import synthetic_samples
+    from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import draw_truth
     scene = load_scene("three_plates")
     truth = draw_truth(scene, 3)
@@ -198,7 +198,7 @@ def three_plate_design():
 
 def _measure(scene, truth, q0, plate, s, rng, laser_m=1e-7):
     """Distances with the robot's repeatability (joints ~ N(0, s^2) per sample) + laser."""
-    from planecal.cell import plane_distance, sensor_in_base
+    from planecal.model.cell import plane_distance, sensor_in_base
     o, z = sensor_in_base(scene.robot, q0 + rng.normal(0.0, s, q0.shape), truth)
     return plane_distance(truth.planes[plate], o, z) + rng.normal(0.0, laser_m, len(q0))
 
@@ -206,8 +206,8 @@ def _measure(scene, truth, q0, plate, s, rng, laser_m=1e-7):
 def test_weighted_fit_is_the_fixed_point_of_scipy_with_its_weights(three_plate_design):
     # iteratively reweighted: at the solution, x minimises sum (w_i r_i)^2 with the w_i
     # of the solution; scipy's least_squares with those weights held finds the same x
-    from planecal.fit import row_weights
-    from planecal.cell import predict_with_jacobian
+    from planecal.estimation.fit import row_weights
+    from planecal.model.cell import predict_with_jacobian
     scene, truth, qe, plate, s, q0 = three_plate_design
     d = _measure(scene, truth, q0, plate, s, np.random.default_rng(1))
     opts = FitOptions(joint_sigma_rad=s, distance_sigma_m=1e-7)
@@ -236,8 +236,8 @@ def test_weighted_fit_reports_honest_std_where_the_unweighted_does_not(three_pla
     # projected on the beam the noise is heteroscedastic: the unweighted fit's white-noise
     # covariance misjudges delta3 by ~20 %; the weighted one is honest, reaches the
     # Cramer-Rao bound and finds the noise level (variance factor ~1)
-    from planecal.cell import predict_with_jacobian
-    from planecal.fit import noise_variance
+    from planecal.model.cell import predict_with_jacobian
+    from planecal.estimation.fit import noise_variance
     scene, truth, qe, plate, s, q0 = three_plate_design
     rng = np.random.default_rng(7)
     init = nominal_params(scene)
@@ -271,7 +271,7 @@ def test_sigma_counts_only_the_identifiable_directions(robot, problem):
     # everything free: two directions (delta1, delta6 with their partners) are not
     # identifiable, the fit moves rank = p - 2 directions, and sigma^2 = |r|^2/(m - rank);
     # analyze() with a known sigma predicts exactly sigma sqrt(diag((J^T J)^-1))
-    from planecal.cell import predict_with_jacobian
+    from planecal.model.cell import predict_with_jacobian
     truth, qe, d = problem
     dn = d + np.random.default_rng(4).normal(0, 2e-6, len(d))
     everything = np.ones(len(INITIAL.to_vector()), bool)
@@ -317,7 +317,7 @@ def test_solve_matches_scipy_least_squares_by_name(two_plane_problem):
     # it (the predicted distances to 2e-9 of the noise: femtometres); bounds 1e-6 and 1e-7.
     # scipy's numeric Jacobian resolves the minimum to ~2e-6 of it (forward differences);
     # bound 1e-4.
-    from planecal.cell import predict_with_jacobian
+    from planecal.model.cell import predict_with_jacobian
     pb = two_plane_problem
     L, free = pb.layout, pb.free
     x0 = pb.initial.to_vector(L)
@@ -397,8 +397,8 @@ def test_covariance_and_identifiability_are_typed_and_agree(two_plane_problem):
 
 
 def test_problem_from_samples_and_its_checks(robot, problem, tmp_path):
-    from planecal.errors import InputError
-    from planecal.samples import read_samples, write_samples
+    from planecal.base.errors import InputError
+    from planecal.io.samples import read_samples, write_samples
     truth, qe, d = problem
     f = tmp_path / "s.tsv"
     write_samples(f, qe, d * 1e3)

@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
 
-from planecal.errors import InputError
-from planecal.geometry import (COLLISION_MARGIN, HEAD_EXTENTS, KINDS, LinkMesh, StaticMesh,
+from planecal.base.errors import InputError
+from planecal.model.geometry import (COLLISION_MARGIN, HEAD_EXTENTS, KINDS, LinkMesh, StaticMesh,
                                robot_link_meshes, scene_meshes, tool_meshes)
-from planecal.robot import fk_frames, load_robot
-from planecal.scene import load_scene
+from planecal.model.robot import fk_frames, load_robot
+from planecal.model.scene import load_scene
 
 ROBOT = load_robot()
 
@@ -112,7 +112,7 @@ def test_envelope_matches_dh_dimensions():
 def test_upper_arm_beside_the_forearm_plane():
     """The upper arm is a beam on the +z2 side of the arm's plane (z2 = 0, where the
     forearm swings), so the forearm passes beside it (datasheet J3 +260/-146 deg)."""
-    from planecal.geometry import UPPER_ARM_Z
+    from planecal.model.geometry import UPPER_ARM_Z
     arm = [lm for lm in robot_link_meshes(ROBOT, "visual") if lm.name == "upper_arm"][0]
     z = arm.mesh.vertices[:, 2]
     assert z.min() == pytest.approx(UPPER_ARM_Z[0]) and z.max() == pytest.approx(UPPER_ARM_Z[1])
@@ -125,7 +125,7 @@ def test_wrist_clears_the_forearm_up_to_the_j5_limit(q5_deg):
     """Datasheet J5 +-125 deg: bent to its limit, the J6 housing and the flange (bodies 5
     and 6) stay 15 mm short of the forearm's end between the prongs (in frame 4, the
     forearm along +y4), and fit between the prongs at any angle."""
-    from planecal.geometry import FORK_CROTCH, FORK_INNER
+    from planecal.model.geometry import FORK_CROTCH, FORK_INNER
     q = np.deg2rad([0, 0, 0, 0, q5_deg, 0])
     F = fk_frames(ROBOT, q)
     to4 = np.linalg.inv(F[4])
@@ -139,7 +139,7 @@ def test_wrist_clears_the_forearm_up_to_the_j5_limit(q5_deg):
 
 def test_laser_head_beam_exit_at_sensor_origin():
     scene = load_scene()
-    from planecal.geometry import sensor_pose
+    from planecal.model.geometry import sensor_pose
     T = sensor_pose(scene.sensor_origin, scene.phi_y, scene.phi_z)
     for kind, grow in (("visual", 0.0), ("collision", COLLISION_MARGIN)):
         head = [m for m in tool_meshes(scene, kind) if m.name == "laser_head"][0]

@@ -4,10 +4,10 @@ product of 4x4 joint transforms, with every parameter moved."""
 import numpy as np
 import pytest
 
-from planecal.kinematics import (Kinematics, fk, frame_error, frames, from_robot,
+from planecal.model.kinematics import (Kinematics, fk, frame_error, frames, from_robot,
                                  parallel_pairs)
-from planecal.robot import fk as dh_fk
-from planecal.robot import fk_frames, load_robot
+from planecal.model.robot import fk as dh_fk
+from planecal.model.robot import fk_frames, load_robot
 
 ROBOT = load_robot()
 

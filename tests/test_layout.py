@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from conftest import SEED_QE
-from planecal.cell import CellParams, predict, predict_with_jacobian
-from planecal.errors import InputError
-from planecal.layout import (ParamLayout, joint_offsets_group, level1_layout, plane_group,
+from planecal.model.cell import CellParams, predict, predict_with_jacobian
+from planecal.base.errors import InputError
+from planecal.model.layout import (ParamLayout, joint_offsets_group, level1_layout, plane_group,
                              sensor_angles_group, sensor_origin_group)
 
 NAMES_2 = ["delta1", "delta2", "delta3", "delta4", "delta5", "delta6", "o_x", "o_y", "o_z",

@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from planecal.cell import CellParams, predict
+from planecal.model.cell import CellParams, predict
 from planecal.cli import main
-from planecal.collision import CollisionWorld
-from planecal.encoder import joints_to_counts
-from planecal.layout import level1_layout
-from planecal.robot import ik_all
-from planecal.scene import load_scene, nominal_params
+from planecal.safety.collision import CollisionWorld
+from planecal.model.encoder import joints_to_counts
+from planecal.model.layout import level1_layout
+from planecal.model.robot import ik_all
+from planecal.model.scene import load_scene, nominal_params
 from planecal.studies.layouts import layout_study, rank_test, subscene, subsets
 from planecal.studies.planning import candidates
 
@@ -62,7 +62,7 @@ def test_identifiable_set_agrees_with_an_svd_of_a_finite_difference_jacobian(thr
     qe, plate = np.vstack(qe), np.concatenate(plate)
     layout = level1_layout(len(plates))
     free = layout.free_from_names("all")
-    from planecal.cell import predict_with_jacobian
+    from planecal.model.cell import predict_with_jacobian
     _, J = predict_with_jacobian(scene.robot, qe, nominal_params(sub), plate, layout)
     rt = rank_test(J[:, free], layout.names_of(free))
     Jfd = _fd_jacobian(scene.robot, qe, nominal_params(sub), plate, layout)[:, free]

@@ -4,13 +4,13 @@ import json
 import numpy as np
 import pytest
 
-from planecal.calibration import calibrate, layout_for
-from planecal.cell import CellParams, predict, predict_with_jacobian
-from planecal.fit import Problem, solve
-from planecal.identify import select_base
-from planecal.layout import level1_layout
-from planecal.scene import load_scene, nominal_params
-from planecal.synthetic import synthetic_samples
+from planecal.estimation.calibrate import calibrate, layout_for
+from planecal.model.cell import CellParams, predict, predict_with_jacobian
+from planecal.estimation.fit import Problem, solve
+from planecal.estimation.identify import select_base
+from planecal.model.layout import level1_layout
+from planecal.model.scene import load_scene, nominal_params
+from planecal.twin.synthetic import synthetic_samples
 
 
 def _design(name, per_plate=60, seed=2):
@@ -95,7 +95,7 @@ def test_identifiable_counts_of_one_and_three_plates():
 
 
 def test_select_base_names_zero_and_combined_columns():
-    from planecal.layout import Group, Param, ParamLayout
+    from planecal.model.layout import Group, Param, ParamLayout
     g = Group("g", "g", 0, tuple(Param(n, "m", "g", 1.0, "m", 1.0) for n in "abcde"))
     L = ParamLayout([g])
     rng = np.random.default_rng(0)
@@ -183,7 +183,7 @@ def test_calibrate_free_overrides_the_candidates():
 
 def test_cli_calibrate_level_full_result_is_read_by_predict_and_export(tmp_path, capsys):
     from planecal.cli import main
-    from planecal.samples import write_samples
+    from planecal.io.samples import write_samples
     scene, nominal, qe, plate = _design("thesis_final", 80)
     truth = nominal.copy()
     truth.geometry[1, 1] = 3e-4  # a2 0.3 mm long
@@ -264,9 +264,9 @@ def test_the_arms_scale_stays_nominal_unless_freed_a_laser_gain_error_shows_why(
     with the arm's scale free makes the arm longer and misplaces the flange by ~1 mm at
     2 m; with the scale kept at robot.json's (the default) the error stays in the sensor
     and plane parameters and the flange is within 0.1 mm."""
-    from planecal.calibration import scale_lengths
-    from planecal.encoder import counts_to_joints
-    from planecal.model_full import flange_pose
+    from planecal.estimation.calibrate import scale_lengths
+    from planecal.model.encoder import counts_to_joints
+    from planecal.model.model_full import flange_pose
     scene, nominal, qe, plate = _design("three_plates", 60)
     robot = scene.robot
     assert scale_lengths(robot) == ["d4", "a3"]  # 0.99 m and 0.9 m

@@ -5,15 +5,15 @@ import numpy as np
 import pytest
 
 from conftest import INITIAL, SEED_QE, TABLE10
-from planecal.calibration import layout_for
-from planecal.cell import CellParams, predict, predict_with_jacobian
-from planecal.encoder import counts_to_joints
-from planecal.gravity import gravity_world, joint_torques
-from planecal.kinematics import Kinematics, fk as kin_fk
-from planecal.layout import level1_layout, level2_layout
-from planecal.model_full import flange_pose, kinematics_of
-from planecal.params import load_params, save_params
-from planecal.robot import fk
+from planecal.estimation.calibrate import layout_for
+from planecal.model.cell import CellParams, predict, predict_with_jacobian
+from planecal.model.encoder import counts_to_joints
+from planecal.model.gravity import gravity_world, joint_torques
+from planecal.model.kinematics import Kinematics, fk as kin_fk
+from planecal.model.layout import level1_layout, level2_layout
+from planecal.model.model_full import flange_pose, kinematics_of
+from planecal.io.params import load_params, save_params
+from planecal.model.robot import fk
 
 
 def corrected(params: CellParams, rng, compliance=True) -> CellParams:

@@ -18,7 +18,7 @@ import pytest
 from planecal.cli import main
 from planecal.links.emulators import Emulators, FD11Faults, LaserFaults
 from planecal.links.fd11 import DeltaRecord, FD11Link
-from planecal.samples import read_samples
+from planecal.io.samples import read_samples
 from planecal.sampling.runfiles import load_sidecar
 from wire import sample_argv
 
@@ -95,7 +95,7 @@ def test_planecal_emulate_serves_the_twin():
     from planecal.links.zs_ld80 import ZSLD80, decode_reply, encode_reply
 
     from planecal.commands.rehearse import make_twin
-    from planecal.scene import load_scene
+    from planecal.model.scene import load_scene
 
     emu = Emulate("--seed", "3")
     try:

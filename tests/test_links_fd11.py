@@ -10,7 +10,7 @@ import zlib
 import numpy as np
 import pytest
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.links.emulators import Emulators, FD11Emulator, FD11Faults, serve
 from planecal.links.fake import HOME, FakeCell
 from planecal.links.fd11 import (ContactError, DeltaRecord, FD11Link, LinkError,
@@ -694,7 +694,7 @@ def test_emulate_twin_is_the_profiles_world():
     import argparse
     from planecal.commands import emulate
     from planecal.commands.rehearse import make_twin
-    from planecal.scene import load_scene
+    from planecal.model.scene import load_scene
     p = argparse.ArgumentParser()
     emulate.add_arguments(p)
     scene = load_scene("thesis_final")

@@ -6,9 +6,9 @@ import json
 import numpy as np
 
 from planecal.cli import main
-from planecal.params import save_params
-from planecal.samples import read_samples
-from planecal.scene import load_scene
+from planecal.io.params import save_params
+from planecal.io.samples import read_samples
+from planecal.model.scene import load_scene
 from planecal.twin.truth import draw_truth
 
 

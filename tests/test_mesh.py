@@ -1,10 +1,10 @@
-"""planecal.mesh: hulls against trimesh's own, the disk cache (hit == miss, a damaged or
+"""planecal.model.mesh: hulls against trimesh's own, the disk cache (hit == miss, a damaged or
 unwritable cache is ignored), and the properties the checker and the twin read."""
 import numpy as np
 import pytest
 import trimesh
 
-from planecal import mesh as M
+from planecal.model import mesh as M
 
 
 @pytest.fixture

@@ -13,8 +13,8 @@ from planecal.studies import planning as P
 
 @pytest.fixture(scope="module")
 def cell():
-    from planecal.collision import CollisionWorld
-    from planecal.scene import load_scene
+    from planecal.safety.collision import CollisionWorld
+    from planecal.model.scene import load_scene
     scene = load_scene("thesis_final")
     return scene, CollisionWorld(scene, clearance_m=0.01)
 
@@ -22,7 +22,7 @@ def cell():
 @pytest.fixture(scope="module")
 def small_plan(cell):
     """A predictor over 120 candidates and its scaled rows."""
-    from planecal.layout import level1_layout
+    from planecal.model.layout import level1_layout
     scene, world = cell
     layout = level1_layout(len(scene.plates))
     free = layout.free_from_names(None)
@@ -50,8 +50,8 @@ def test_choose_count_is_the_smallest_n_meeting_the_target(small_plan, kind):
 def test_position_error_matches_finite_differences(cell):
     """predicted_position_mm propagates the offsets' covariance through the flange
     Jacobian: against a finite-difference Jacobian of the forward kinematics."""
-    from planecal.layout import level1_layout
-    from planecal.robot import fk_frames
+    from planecal.model.layout import level1_layout
+    from planecal.model.robot import fk_frames
     scene, _ = cell
     layout = level1_layout(len(scene.plates))
     free = layout.free_from_names(None)

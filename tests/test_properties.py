@@ -31,8 +31,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from planecal.cli import COMMANDS, Parser, _common, _module, parse
-from planecal.errors import InputError
-from planecal.samples import COUNT_LIMIT, MAX_DM_MM, read_samples, write_samples
+from planecal.base.errors import InputError
+from planecal.io.samples import COUNT_LIMIT, MAX_DM_MM, read_samples, write_samples
 
 SETTINGS = dict(derandomize=True, database=None, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow,
@@ -174,7 +174,7 @@ def test_decimal_comma_round_trip(rows, comma, plates):
 def test_appended_file_keeps_its_decimal_mark(tmp_path):
     """A resumed run continues its file in the mark it was started with, whatever the
     new writer was asked for: one file, one style."""
-    from planecal.samples import SampleWriter
+    from planecal.io.samples import SampleWriter
     path = tmp_path / "run.tsv"
     with SampleWriter(path, decimal_comma=True) as w:
         w.write([1, 2, 3, 4, 5, 6], 80.25)

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from conftest import SEED_DM, SEED_QE, TABLE10
 
-from planecal.cell import beam_direction, plane_distance
+from planecal.model.cell import beam_direction, plane_distance
 from planecal.cli import main
-from planecal.encoder import counts_to_joints
-from planecal.kinematics import fk
-from planecal.scene import load_scene
+from planecal.model.encoder import counts_to_joints
+from planecal.model.kinematics import fk
+from planecal.model.scene import load_scene
 from planecal.studies.montecarlo import without
 from planecal.studies.replay import replay, replay_world
 from planecal.twin.profile import load_profile
@@ -57,7 +57,7 @@ def test_realistic_geometry_against_the_analytic_true_kinematics(scene):
 
 
 def test_replay_command_errors(tmp_path, capsys):
-    from planecal.paths import data_path
+    from planecal.base.paths import data_path
     ex = data_path("examples")
     args = [str(ex / "seed_samples.tsv"), "--params", str(ex / "table10_params.json")]
     out = tmp_path / "R.json"

@@ -9,11 +9,11 @@ import pytest
 from PIL import Image
 
 from planecal.cli import main
-from planecal.errors import InputError
-from planecal.paths import data_path
-from planecal.report import detect_kind, write_report
-from planecal.report.figures import display_scale, num
-from planecal.report.inputs import sha256
+from planecal.base.errors import InputError
+from planecal.base.paths import data_path
+from planecal.present.report import detect_kind, write_report
+from planecal.present.report.figures import display_scale, num
+from planecal.present.report.inputs import sha256
 
 TABLE10 = str(data_path("examples", "table10_params.json"))
 
@@ -91,11 +91,11 @@ def _covariance_and_history(doc, tsv):
     """What the result file will hold (another engineer's change): the covariance of the
     free parameters by name, and the fit's iteration history. Made here from the fit's
     own formula at the solution (sigma^2 (J^T J)^-1), one parameter marked unidentifiable."""
-    from planecal.cell import predict_with_jacobian
-    from planecal.params import params_from_dict
-    from planecal.report.calibration import parameter_rows
-    from planecal.samples import read_samples
-    from planecal.scene import load_scene
+    from planecal.model.cell import predict_with_jacobian
+    from planecal.io.params import params_from_dict
+    from planecal.present.report.calibration import parameter_rows
+    from planecal.io.samples import read_samples
+    from planecal.model.scene import load_scene
     s = read_samples(tsv)
     robot = load_scene("thesis_final").robot
     _, J = predict_with_jacobian(robot, s.qe, params_from_dict(doc), s.plate)
@@ -121,7 +121,7 @@ def test_covariance_and_history_give_heatmap_and_convergence(results, tmp_path):
     index = write_report(doc, tmp_path / "rep", samples=[results["tsv"]])
     imgs = check_page(index, 8)
     assert "correlation.png" in imgs and "convergence.png" in imgs
-    from planecal.report.calibration import correlation
+    from planecal.present.report.calibration import correlation
     names, R = correlation(cov)
     k = names.index("phi_z")
     assert np.all(np.isnan(R[k])) and np.all(np.isnan(R[:, k]))
@@ -132,7 +132,7 @@ def test_covariance_and_history_give_heatmap_and_convergence(results, tmp_path):
 
 
 def test_wrong_samples_are_said_not_drawn(results, tmp_path):
-    from planecal.samples import read_samples, write_samples
+    from planecal.io.samples import read_samples, write_samples
     s = read_samples(results["tsv"])
     other = tmp_path / "other.tsv"
     write_samples(other, s.qe, s.d_mm + 0.05)  # 50 um off: not this result's data

@@ -1,4 +1,4 @@
-"""Rerun recordings (planecal.rerun_log, planecal view), read back with rerun's own reader:
+"""Rerun recordings (planecal.present.rerun, planecal view), read back with rerun's own reader:
 the entity tree, samples and hit points of a short twin rehearsal, the same run replayed
 as real-cell data, the optimizer's histograms, file naming, and the view command. Headless:
 no viewer is ever spawned, and rerun's config/data dirs point into a temporary HOME."""
@@ -12,20 +12,20 @@ import pytest
 
 rr = pytest.importorskip("rerun")
 twin_mod = pytest.importorskip("planecal.twin")
-collision = pytest.importorskip("planecal.collision")
+collision = pytest.importorskip("planecal.safety.collision")
 
 from rerun.chunk import RrdReader  # noqa: E402
 
 from planecal import cli  # noqa: E402
-from planecal.cell import predict  # noqa: E402
-from planecal.errors import InputError  # noqa: E402
-from planecal.fit import Problem, solve  # noqa: E402
+from planecal.model.cell import predict  # noqa: E402
+from planecal.base.errors import InputError  # noqa: E402
+from planecal.estimation.fit import Problem, solve  # noqa: E402
 from planecal.links.base import AlwaysEnabled  # noqa: E402
-from planecal.rerun_log import (HIST_BINS, SamplingObserver, log_fit_to_file,  # noqa: E402
+from planecal.present.rerun import (HIST_BINS, SamplingObserver, log_fit_to_file,  # noqa: E402
                                 open_recording, recording_path, reject_kind, sampling_observer)
-from planecal.samples import read_samples  # noqa: E402
+from planecal.io.samples import read_samples  # noqa: E402
 from planecal.sampling import Driver, RunSettings, SamplingRun  # noqa: E402
-from planecal.scene import load_scene, nominal_params  # noqa: E402
+from planecal.model.scene import load_scene, nominal_params  # noqa: E402
 from wire import sample_argv  # noqa: E402
 
 N_SAMPLES = 20
@@ -175,7 +175,7 @@ def test_samples_logged_equal_the_samples_in_the_run(scene, rehearsal):
 
 
 def test_hit_points_lie_on_the_true_plate(rehearsal):
-    from planecal.rerun_log.sampling import SAMPLE_RADIUS_M
+    from planecal.present.rerun.sampling import SAMPLE_RADIUS_M
     data = rehearsal["data"]
     n_t = rehearsal["twin"].truth.planes[0]
     exact = np.column_stack([np.ravel(last(data, "/samples/points", f"hit_{c}_m"))
@@ -256,9 +256,9 @@ def test_fit_recording_histograms_match_the_optimizer(scene, rehearsal, tmp_path
     assert "Identifiability" in ident_text and "variance factor" not in ident_text
     assert len(last(data, "/samples/points", "Points3D:positions")) == len(s)
     # a weighted fit says so, with its variance factor
-    from planecal.fit import FitOptions
-    from planecal.rerun_log.fit import identifiability_markdown
-    from planecal.robot import repeatability_sigma
+    from planecal.estimation.fit import FitOptions
+    from planecal.present.rerun.fit import identifiability_markdown
+    from planecal.model.robot import repeatability_sigma
     wres = solve(Problem.from_samples(
         scene.robot, s, nominal_params(scene),
         options=FitOptions(joint_sigma_rad=repeatability_sigma(scene.robot))))
@@ -435,8 +435,8 @@ def test_logged_tool_frame_is_the_kinematics_at_that_tick(scene, rehearsal):
     counts of that tick (translation + quaternion, float32)."""
     from scipy.spatial.transform import Rotation
 
-    from planecal.encoder import counts_to_joints
-    from planecal.robot import fk_frames
+    from planecal.model.encoder import counts_to_joints
+    from planecal.model.robot import fk_frames
 
     data = rehearsal["data"]
     tick = max(r["tick"] for r in data["/series/model_error_mm"]["rows"])
@@ -452,7 +452,7 @@ def test_logged_tool_frame_is_the_kinematics_at_that_tick(scene, rehearsal):
 def test_matrix_to_quaternion_handles_half_turns():
     from scipy.spatial.transform import Rotation
 
-    from planecal.rerun_log.sampling import matrix_to_quaternion
+    from planecal.present.rerun.sampling import matrix_to_quaternion
 
     rng = np.random.default_rng(0)
     axes = rng.normal(size=(200, 3))

@@ -12,10 +12,10 @@ import pytest
 pytest.importorskip("rerun")
 twin_mod = pytest.importorskip("planecal.twin")
 
-from planecal.rerun_log.common import blueprint_views, plate_face_normal, summarize  # noqa: E402
-from planecal.samples import Samples  # noqa: E402
-from planecal.scene import load_scene, nominal_params  # noqa: E402
-from planecal.synthetic import synthetic_samples  # noqa: E402
+from planecal.present.rerun.common import blueprint_views, plate_face_normal, summarize  # noqa: E402
+from planecal.io.samples import Samples  # noqa: E402
+from planecal.model.scene import load_scene, nominal_params  # noqa: E402
+from planecal.twin.synthetic import synthetic_samples  # noqa: E402
 from planecal.twin.truth import draw_truth  # noqa: E402
 
 SPATIAL = {"/cell/**", "/robot/**", "/laser/**", "/samples/**"}
@@ -37,7 +37,7 @@ def truth(scene):
 @pytest.fixture(scope="module")
 def data(scene, truth):
     """40 noise-free samples of the analytic model at the truth, and their fit."""
-    from planecal.fit import Problem, solve
+    from planecal.estimation.fit import Problem, solve
     qe, d, plate = synthetic_samples(scene, truth, 40, np.random.default_rng(5))
     s = Samples(qe, d * 1e3, plate, np.arange(1, len(d) + 1), 0)
     res = solve(Problem.from_samples(scene.robot, s, nominal_params(scene)))
@@ -101,7 +101,7 @@ def check_space_view(views, scene, path, hidden_rejections=False, tool=None):
 
 @pytest.mark.parametrize("kind", ["rehearsal", "real"])
 def test_sampling_blueprints(scene, tmp_path, kind):
-    from planecal.rerun_log import sampling_observer
+    from planecal.present.rerun import sampling_observer
     twin = twin_mod.Twin(scene, seed=1, options=twin_mod.TwinOptions.exact())
     obs = sampling_observer(tmp_path / f"{kind}.rrd", scene,
                             twin=twin if kind == "rehearsal" else None)
@@ -128,9 +128,9 @@ def test_sampling_blueprints(scene, tmp_path, kind):
 # ----- calibration -----------------------------------------------------------------------
 
 def test_calibration_blueprint_and_log_axis(scene, data, tmp_path):
-    from planecal.rerun_log import log_fit_to_file
-    from planecal.rerun_log.common import tool_point
-    from planecal.rerun_log.fit import pose_shown
+    from planecal.present.rerun import log_fit_to_file
+    from planecal.present.rerun.common import tool_point
+    from planecal.present.rerun.fit import pose_shown
     from test_rerun_log import read_rrd
 
     res, s = data["fit"], data["samples"]
@@ -163,7 +163,7 @@ def test_calibration_blueprint_and_log_axis(scene, data, tmp_path):
 def test_montecarlo_blueprint_and_histograms(scene, tmp_path):
     from scipy import stats
 
-    from planecal.rerun_log.studies import Z_BINS, log_montecarlo, order_pose_set
+    from planecal.present.rerun.studies import Z_BINS, log_montecarlo, order_pose_set
     from planecal.studies.montecarlo import (MCSettings, analyze, run_many,
                                              synthetic_noisy_samples, world_for)
     from test_rerun_log import read_rrd, tensor
@@ -193,8 +193,8 @@ def test_montecarlo_blueprint_and_histograms(scene, tmp_path):
 
 
 def test_bootstrap_blueprint_lays_out_every_parameter(scene, data, tmp_path):
-    from planecal.fit import Problem
-    from planecal.rerun_log.studies import log_bootstrap
+    from planecal.estimation.fit import Problem
+    from planecal.present.rerun.studies import log_bootstrap
     from planecal.studies.bootstrap import BootstrapSettings, bootstrap
 
     problem = Problem.from_samples(scene.robot, data["samples"], nominal_params(scene))
@@ -207,8 +207,8 @@ def test_bootstrap_blueprint_lays_out_every_parameter(scene, data, tmp_path):
 
 
 def test_validate_blueprint(scene, truth, data, tmp_path):
-    from planecal.collision import CollisionWorld
-    from planecal.rerun_log.studies import log_validate
+    from planecal.safety.collision import CollisionWorld
+    from planecal.present.rerun.studies import log_validate
     from planecal.studies.validation import ValidationSettings, validate
     from test_rerun_log import read_rrd, tensor
 

@@ -3,8 +3,8 @@ import json
 import numpy as np
 import pytest
 
-from planecal.errors import InputError
-from planecal.robot import fk, fk_frames, ik_all, ik_nearest, jacobian, load_robot, within_limits
+from planecal.base.errors import InputError
+from planecal.model.robot import fk, fk_frames, ik_all, ik_nearest, jacobian, load_robot, within_limits
 
 HOME = np.array([[0, 0, 1, 1.315], [0, -1, 0, 0], [1, 0, 0, 1.65], [0, 0, 0, 1]])
 

@@ -20,7 +20,7 @@ import pytest
 from planecal.cli import main
 from planecal.links.emulators import Emulators, FD11Faults
 from planecal.links.fd11 import DeltaRecord
-from planecal.samples import read_samples
+from planecal.io.samples import read_samples
 from planecal.sampling.enable import follow_limit_counts
 from planecal.sampling.runfiles import count_samples, load_sidecar
 from full_disk import FullDisk
@@ -204,7 +204,7 @@ def test_a_released_switch_is_noticed_within_a_few_steps(twin, tmp_path, capsys)
 
 KILLER = textwrap.dedent("""
     import os, signal, sys
-    import planecal.samples as samples
+    import planecal.io.samples as samples
     from planecal.cli import main
 
     at, where = int(sys.argv[1]), sys.argv[2]
@@ -265,7 +265,7 @@ def test_a_full_disk_stops_with_one_line_and_consistent_files(twin, tmp_path, ca
     created any more): one line, exit 1, whole lines in the sample file, the sidecar at
     most the one sample ahead it is written with, no temp file; with room again the
     resumed run completes without a duplicate pose."""
-    import planecal.samples as samples_mod
+    import planecal.io.samples as samples_mod
 
     out = tmp_path / "RUN.tsv"
     header = len("\t".join(samples_mod.HEADER) + "\n")

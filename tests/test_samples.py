@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 
 from conftest import SEED_DM, SEED_QE
-from planecal.errors import InputError
-from planecal.samples import HEADER, SampleWriter, read_samples, write_samples
-from planecal.paths import data_path
+from planecal.base.errors import InputError
+from planecal.io.samples import HEADER, SampleWriter, read_samples, write_samples
+from planecal.base.paths import data_path
 
 
 def test_reads_the_seed_format(tmp_path):
@@ -114,8 +114,8 @@ def test_one_row_repeated_has_no_information(tmp_path):
 
 
 def test_readings_outside_the_scene_laser_window(tmp_path):
-    from planecal.samples import check_samples
-    from planecal.scene import load_scene
+    from planecal.io.samples import check_samples
+    from planecal.model.scene import load_scene
     scene = load_scene("thesis_final")  # ZS-LD80 window 65-95 mm
     p = tmp_path / "w.tsv"
     p.write_text(_rows([80, 95, 500, 65]))
@@ -131,8 +131,8 @@ def test_readings_outside_the_scene_laser_window(tmp_path):
 
 
 def test_plate_numbers_the_scene_lacks(tmp_path):
-    from planecal.samples import read_many
-    from planecal.scene import load_scene
+    from planecal.io.samples import read_many
+    from planecal.model.scene import load_scene
     p = tmp_path / "k.tsv"
     p.write_text(_rows([80, 81, 82], [1, 3, 4]))
     with pytest.raises(InputError, match=r"k.tsv:3: plate 4, but scene three_plates has 3 plates$"):
@@ -168,7 +168,7 @@ def test_utf16_file_is_named_binary(tmp_path):
 
 
 def test_caps_on_lines_and_size(tmp_path, monkeypatch):
-    import planecal.samples as samples
+    import planecal.io.samples as samples
     p = tmp_path / "long.tsv"
     p.write_text(_rows([80 + i * 0.01 for i in range(12)]))
     monkeypatch.setattr(samples, "MAX_LINES", 10)
@@ -206,7 +206,7 @@ def test_large_file_is_stored_compactly(tmp_path):
     qe = rng.integers(8_000_000, 9_000_000, (20_000, 6))
     dm = rng.uniform(65, 95, 20_000)
     p = tmp_path / "n.tsv"
-    from planecal.samples import format_line  # write_samples fsyncs each line: slow here
+    from planecal.io.samples import format_line  # write_samples fsyncs each line: slow here
     p.write_text("\t".join(HEADER) + "\n" + "".join(format_line(q, d) for q, d in zip(qe, dm)))
     s = read_samples(p)
     np.testing.assert_array_equal(s.qe, qe)

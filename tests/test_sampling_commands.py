@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
-from planecal.params import load_params
-from planecal.samples import read_samples
+from planecal.io.params import load_params
+from planecal.io.samples import read_samples
 from planecal.sampling.runfiles import load_sidecar
 from planecal.sampling.session import Progress
 from planecal.sampling.run import RunStats

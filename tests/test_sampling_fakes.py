@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.cell import CellParams, plane_distance, sensor_in_base
-from planecal.encoder import counts_to_joints
-from planecal.encoder import joints_to_counts
-from planecal.scene import Scene, nominal_params
+from planecal.model.cell import CellParams, plane_distance, sensor_in_base
+from planecal.model.encoder import counts_to_joints
+from planecal.model.encoder import joints_to_counts
+from planecal.model.scene import Scene, nominal_params
 
 TRUE_OFFSETS = np.array([0.0, 0.0008, -0.0012, 0.0007, 0.0005, 0.0])
 

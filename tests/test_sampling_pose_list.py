@@ -4,7 +4,7 @@ import json
 import numpy as np
 
 from planecal.cli import main
-from planecal.samples import read_samples
+from planecal.io.samples import read_samples
 
 
 def _plan(tmp_path, n=14):
@@ -43,7 +43,7 @@ def test_pose_list_errors(tmp_path, capsys):
 def test_a_pose_list_that_runs_out_completes_with_what_it_could_measure(tmp_path, capsys):
     """A pose whose beam misses the plate is rejected by the laser; the run still ends
     'complete' (exit 0) once every pose of the list was tried, and says how many it got."""
-    from planecal.robot import load_robot
+    from planecal.model.robot import load_robot
     poses, counts = _plan(tmp_path, n=13)
     doc = json.loads(poses.read_text())
     robot = load_robot()

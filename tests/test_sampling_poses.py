@@ -6,12 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from planecal.cell import predict, sensor_in_base
-from planecal.encoder import joints_to_counts
-from planecal.errors import InputError
-from planecal.robot import fk, within_limits
+from planecal.model.cell import predict, sensor_in_base
+from planecal.model.encoder import joints_to_counts
+from planecal.base.errors import InputError
+from planecal.model.robot import fk, within_limits
 from planecal.sampling.poses import PoseGenerator, PoseSettings
-from planecal.scene import load_scene, nominal_params
+from planecal.model.scene import load_scene, nominal_params
 
 
 @pytest.fixture(scope="module")
@@ -103,7 +103,7 @@ def test_flange_pose_and_ik_meet_the_plate_at_the_drawn_distance(scene):
 
 def test_ik_nearest_prefers_short_moves(scene):
     """Among IK solutions the target needs the fewest ticks from the current configuration."""
-    from planecal.robot import ik_all
+    from planecal.model.robot import ik_all
     gen = PoseGenerator(scene)
     rng = np.random.default_rng(2)
     q = scene.calibration_q

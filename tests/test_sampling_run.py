@@ -8,15 +8,15 @@ import pytest
 from full_disk import FullDisk
 from test_sampling_fakes import Clear, DropAfter, FakeCell, NullChecker
 
-from planecal.encoder import joints_to_counts
+from planecal.model.encoder import joints_to_counts
 from planecal.links.base import AlwaysEnabled
-from planecal.samples import read_samples
+from planecal.io.samples import read_samples
 from planecal.sampling import (Driver, EnableDropped, FollowingMonitor, NullObserver,
                                PathBlocked,
                                PoseSettings, RunSettings, SamplingRun, load_sidecar,
                                move_home, move_to_calibration, sidecar_path)
 from planecal.sampling.runfiles import count_samples
-from planecal.scene import load_scene
+from planecal.model.scene import load_scene
 
 
 @pytest.fixture(scope="module")
@@ -267,7 +267,7 @@ def test_a_given_planner_supplies_the_targets(scene, tmp_path):
             return False
 
         def plan(self, q_start, index, rng_state, budget):
-            from planecal.encoder import counts_to_joints
+            from planecal.model.encoder import counts_to_joints
             out = Plan(index, q_start, [], rng_state)
             out.qe_goal = targets[index]
             out.q = counts_to_joints(scene.robot, out.qe_goal)
@@ -488,7 +488,7 @@ def test_background_planner_ends_when_the_run_is_killed(tmp_path, plan_s):
 
 def test_a_full_disk_stops_the_run_with_whole_lines_and_a_resumable_record(scene, tmp_path,
                                                                          monkeypatch):
-    import planecal.samples as samples_mod
+    import planecal.io.samples as samples_mod
     from planecal.sampling.runfiles import RunWriteError
 
     out = tmp_path / "RUN.tsv"

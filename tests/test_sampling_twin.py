@@ -5,15 +5,15 @@ import numpy as np
 import pytest
 from test_sampling_fakes import DropAfter
 
-from planecal.encoder import counts_to_joints
-from planecal.fit import Problem, solve
+from planecal.model.encoder import counts_to_joints
+from planecal.estimation.fit import Problem, solve
 from planecal.links.base import AlwaysEnabled
-from planecal.samples import read_samples
+from planecal.io.samples import read_samples
 from planecal.sampling import Driver, RunSettings, SamplingRun, load_sidecar
-from planecal.scene import load_scene, nominal_params
+from planecal.model.scene import load_scene, nominal_params
 
 twin_mod = pytest.importorskip("planecal.twin")
-collision = pytest.importorskip("planecal.collision")
+collision = pytest.importorskip("planecal.safety.collision")
 
 
 @pytest.fixture(scope="module")

@@ -10,13 +10,13 @@ import jsonschema
 import numpy as np
 import pytest
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.formats import MODELS, load_sidecar, schema_documents, schema_file_name
 from planecal.formats.params import RESULT_FORMAT, ResultFile, provenance, result_document
-from planecal.params import load_params, params_to_dict, save_params
-from planecal.paths import data_path
-from planecal.robot import load_robot
-from planecal.scene import load_scene, nominal_params
+from planecal.io.params import load_params, params_to_dict, save_params
+from planecal.base.paths import data_path
+from planecal.model.robot import load_robot
+from planecal.model.scene import load_scene, nominal_params
 from planecal.studies.planning import load_poses
 
 ROBOT = json.loads(data_path("models", "mc70", "robot.json").read_text())

@@ -26,16 +26,16 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.formats import (
     ERRORS_FORMAT, MODELS, PARAMS_FORMAT, POSES_FORMAT, RESULT_FORMAT, ROBOT_FORMAT,
     SCENE_FORMAT, SIDECAR_FORMAT, load_sidecar)
 from planecal.formats.params import provenance, result_document
-from planecal.params import load_params
-from planecal.paths import data_path
-from planecal.robot import fk, load_robot
-from planecal.samples import read_samples
-from planecal.scene import load_scene
+from planecal.io.params import load_params
+from planecal.base.paths import data_path
+from planecal.model.robot import fk, load_robot
+from planecal.io.samples import read_samples
+from planecal.model.scene import load_scene
 from planecal.studies.planning import load_poses
 from test_schemas import POSES, SIDECAR
 
@@ -90,7 +90,7 @@ def _load_profile(path):
 
 def _profile_ok(prof):
     """What a twin does with it: the options, a world's geometry, all finite."""
-    from planecal.kinematics import fk as kin_fk
+    from planecal.model.kinematics import fk as kin_fk
     from planecal.twin.profile import draw_geometry
     prof.options().joint_errors(load_robot())
     kin = draw_geometry(load_robot(), prof, np.random.default_rng(0))

@@ -6,11 +6,11 @@ import pytest
 from conftest import SEED_DM, SEED_QE, TABLE10
 
 from planecal.cli import main
-from planecal.fit import FitOptions, Problem
-from planecal.samples import write_samples
-from planecal.scene import load_scene, nominal_params
+from planecal.estimation.fit import FitOptions, Problem
+from planecal.io.samples import write_samples
+from planecal.model.scene import load_scene, nominal_params
 from planecal.studies.bootstrap import BootstrapSettings, bootstrap, overlap
-from planecal.synthetic import synthetic_samples
+from planecal.twin.synthetic import synthetic_samples
 from planecal.twin.truth import draw_truth
 
 
@@ -100,7 +100,7 @@ def test_replay_seed_samples_in_the_twin():
 
 
 def test_replay_command(tmp_path, capsys):
-    from planecal.paths import data_path
+    from planecal.base.paths import data_path
     ex = data_path("examples")
     out = tmp_path / "R.json"
     assert main(["replay", str(ex / "seed_samples.tsv"), "--params",

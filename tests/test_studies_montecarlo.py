@@ -107,7 +107,7 @@ def test_three_planes_do_not_free_delta1_delta6():
 
 
 def test_plots_go_to_a_rerun_recording(tmp_path, capsys):
-    from planecal.rerun_log import is_recording
+    from planecal.present.rerun import is_recording
     rrd = tmp_path / "m.rrd"
     assert main(["montecarlo", "--mode", "synthetic", "--runs", "3", "--samples", "30",
                  "--jobs", "1", "--slope", "30,40", "--slope-runs", "2", "--rrd", str(rrd)]) == 0
@@ -118,8 +118,8 @@ def test_pose_draw_settings_reach_the_runs():
     """--ik-choice / --roll-deg set the sampling run's pose draw: nearest IK keeps the
     wrist in its branch (q5 sign never changes), wrist changes it; roll 0 keeps the sensor's
     x axis on the plate's x edge, so the last joint moves far less than at any roll."""
-    from planecal.encoder import counts_to_joints
-    from planecal.errors import InputError
+    from planecal.model.encoder import counts_to_joints
+    from planecal.base.errors import InputError
     scene = cached_scene("thesis_final")
 
     def q(**kw):

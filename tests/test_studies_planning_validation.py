@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
-from planecal.scene import load_scene
+from planecal.model.scene import load_scene
 from planecal.studies.planning import d_optimal
 from planecal.studies.validation import ValidationSettings, iso_points, validate
 
@@ -18,7 +18,7 @@ def scene():
 
 @pytest.fixture(scope="module")
 def world(scene):
-    from planecal.collision import CollisionWorld
+    from planecal.safety.collision import CollisionWorld
     return CollisionWorld(scene, clearance_m=0.01)
 
 
@@ -43,8 +43,8 @@ def test_plan_command_predicts_a_smaller_spread_than_random(tmp_path, capsys, sc
     for n in ("delta2", "delta3", "delta4", "delta5"):
         assert res["predicted_std_planned"][n] < res["predicted_std_random"][n]
     # every planned pose is collision-free and the run consumes the list
-    from planecal.encoder import counts_to_joints
-    from planecal.samples import read_samples
+    from planecal.model.encoder import counts_to_joints
+    from planecal.io.samples import read_samples
     from planecal.studies.planning import rehearse_planned
     from planecal.twin import Twin
     counts = np.array(res["counts"][:3])
@@ -74,7 +74,7 @@ def _rz(a):
 def equivalent_without_delta1_delta6(t):
     """What a perfect calibration finds when delta1, delta6 != 0: the same distances with
     delta1 = delta6 = 0, the sensor rolled by delta6 and the planes turned by -delta1."""
-    from planecal.cell import transform_n_tilde
+    from planecal.model.cell import transform_n_tilde
     cal = t.copy()
     d1, d6 = t.joint_offsets[0], t.joint_offsets[5]
     cal.joint_offsets[[0, 5]] = 0.0
@@ -87,8 +87,8 @@ def equivalent_without_delta1_delta6(t):
 
 
 def test_equivalent_parameters_predict_the_same_distances(scene):
-    from planecal.cell import predict
-    from planecal.synthetic import synthetic_samples
+    from planecal.model.cell import predict
+    from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import Tolerances, draw_truth
     t = draw_truth(scene, 4, Tolerances(offsets_all=True))
     qe, d, _ = synthetic_samples(scene, t, 10, np.random.default_rng(1))
@@ -97,7 +97,7 @@ def test_equivalent_parameters_predict_the_same_distances(scene):
 
 
 def test_validation_with_a_perfect_and_a_nominal_calibration(scene, world):
-    from planecal.synthetic import synthetic_samples
+    from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import Tolerances, draw_truth
     truth = draw_truth(scene, 4)
     qe, _, _ = synthetic_samples(scene, truth, 30, np.random.default_rng(0))

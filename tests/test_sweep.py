@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.studies import sweep as S
 
 TINY = """
@@ -59,7 +59,7 @@ def test_spec_checks_name_the_field(tmp_path, change, message):
 
 
 def test_spec_errors_file_is_relative_to_the_spec(tmp_path):
-    from planecal.scene import load_scene
+    from planecal.model.scene import load_scene
     src = load_scene("thesis_final").robot.source.parent / "errors" / "realistic.json"
     shutil.copy(src, tmp_path / "mine.json")
     spec = S.load_spec(_spec(tmp_path, TINY.replace('errors = "ideal"', 'errors = "mine.json"')))
@@ -151,7 +151,7 @@ def test_a_killed_sweep_resumes_to_the_same_table(tmp_path, capsys):
 
 def test_report_of_a_sweep(tmp_path):
     """planecal report draws a sweep.json: the figure and one table row per cell."""
-    from planecal.report import detect_kind, write_report
+    from planecal.present.report import detect_kind, write_report
     cell = {"scene": "thesis_final", "errors": "ideal", "level": "offsets", "runs": 3,
             "failed": 0, "names": ["delta2", "delta3"], "samples_taken": 20.0,
             "travel_per_sample_s": 10.0, "std_rad": {"delta2": 1e-4, "delta3": 2e-4}}

@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
-from planecal.encoder import counts_to_joints
+from planecal.model.encoder import counts_to_joints
 from planecal.sampling import tour as T
 from planecal.sampling.steps import step_path
 
@@ -43,8 +43,8 @@ def test_robot_ticks_sums_the_legs():
 
 @pytest.fixture(scope="module")
 def cell():
-    from planecal.collision import CollisionWorld
-    from planecal.scene import load_scene
+    from planecal.safety.collision import CollisionWorld
+    from planecal.model.scene import load_scene
     scene = load_scene("thesis_final")
     return scene, CollisionWorld(scene, clearance_m=0.01)
 
@@ -141,7 +141,7 @@ def test_checked_order_is_driven_as_planned_and_saves_robot_time(cell):
     """On a D-optimal plan: every move of the checked tour is clear, so ListPlanner visits
     the list exactly in that order, and it costs less than half the robot time of the
     design's own order or a random one."""
-    from planecal.encoder import joints_to_counts
+    from planecal.model.encoder import joints_to_counts
     from planecal.sampling.planner import ListPlanner
     from planecal.studies.planning import plan
 

@@ -6,12 +6,12 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from planecal.cell import point_normal_from_n_tilde, predict  # noqa: E402
-from planecal.encoder import counts_to_joints, joints_to_counts  # noqa: E402
-from planecal.errors import InputError  # noqa: E402
-from planecal.params import save_params  # noqa: E402
-from planecal.robot import fk, fk_frames, load_robot  # noqa: E402
-from planecal.scene import load_scene, nominal_params  # noqa: E402
+from planecal.model.cell import point_normal_from_n_tilde, predict  # noqa: E402
+from planecal.model.encoder import counts_to_joints, joints_to_counts  # noqa: E402
+from planecal.base.errors import InputError  # noqa: E402
+from planecal.io.params import save_params  # noqa: E402
+from planecal.model.robot import fk, fk_frames, load_robot  # noqa: E402
+from planecal.model.scene import load_scene, nominal_params  # noqa: E402
 from planecal.twin import EncoderJumpError, Tolerances, Twin, TwinOptions, draw_truth  # noqa: E402
 from twin_aim import aim_joints, beam_frame, random_aims  # noqa: E402
 from planecal.twin.mjcf import plate_geom_names, robot_xml, robot_xml_path  # noqa: E402

@@ -13,10 +13,10 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from planecal.cell import beam_direction, plane_distance  # noqa: E402
-from planecal.encoder import counts_to_joints  # noqa: E402
-from planecal.kinematics import fk as kin_fk  # noqa: E402
-from planecal.scene import load_scene  # noqa: E402
+from planecal.model.cell import beam_direction, plane_distance  # noqa: E402
+from planecal.model.encoder import counts_to_joints  # noqa: E402
+from planecal.model.kinematics import fk as kin_fk  # noqa: E402
+from planecal.model.scene import load_scene  # noqa: E402
 from planecal.twin import Twin, TwinOptions  # noqa: E402
 from planecal.twin import ticks as T  # noqa: E402
 from planecal.twin.profile import draw_world, load_profile  # noqa: E402

@@ -1,6 +1,6 @@
 """URDF export, read back by an independent URDF library (yourdfpy), not by planecal:
 its forward kinematics at planecal's joint angles q must give planecal's flange and sensor
-poses, nominal and calibrated, and its meshes must sit where planecal.geometry puts them."""
+poses, nominal and calibrated, and its meshes must sit where planecal.model.geometry puts them."""
 import numpy as np
 import pytest
 import trimesh
@@ -8,14 +8,14 @@ from scipy.spatial import cKDTree
 
 yourdfpy = pytest.importorskip("yourdfpy")
 
-from planecal.cell import CellParams, sensor_in_base  # noqa: E402
+from planecal.model.cell import CellParams, sensor_in_base  # noqa: E402
 from planecal.cli import main  # noqa: E402
-from planecal.geometry import robot_link_meshes, sensor_pose, tool_meshes  # noqa: E402
-from planecal.params import load_params  # noqa: E402
-from planecal.paths import data_path  # noqa: E402
-from planecal.robot import fk, fk_frames  # noqa: E402
-from planecal.scene import load_scene, nominal_params  # noqa: E402
-from planecal.urdf import urdf_text  # noqa: E402
+from planecal.model.geometry import robot_link_meshes, sensor_pose, tool_meshes  # noqa: E402
+from planecal.io.params import load_params  # noqa: E402
+from planecal.base.paths import data_path  # noqa: E402
+from planecal.model.robot import fk, fk_frames  # noqa: E402
+from planecal.model.scene import load_scene, nominal_params  # noqa: E402
+from planecal.io.urdf import urdf_text  # noqa: E402
 
 TABLE10 = str(data_path("examples", "table10_params.json"))
 

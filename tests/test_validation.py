@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.studies.validation import (breakdown_variants, calibrate_run, cannot_remove,
                                          summarize)
 
@@ -147,7 +147,7 @@ def test_summarize_even_count_and_failed_truths():
 
 
 def test_level_and_seed_errors(capsys):
-    from planecal.scene import load_scene
+    from planecal.model.scene import load_scene
     with pytest.raises(InputError, match="--level"):
         calibrate_run(load_scene("thesis_final"), np.zeros((0, 6)), np.zeros(0),
                       np.zeros(0, int), "level3")

@@ -6,8 +6,8 @@ import numpy as np
 from planecal.cli import main
 from planecal.commands.rehearse import make_twin
 from planecal.links.emulators import Emulators
-from planecal.samples import read_samples
-from planecal.scene import load_scene
+from planecal.io.samples import read_samples
+from planecal.model.scene import load_scene
 from wire import sample_argv
 
 

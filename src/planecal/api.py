@@ -6,7 +6,7 @@
     val = planecal.validate(cal, run)                    # ISO 9283 AP/RP, gauge block
     s = planecal.load_samples("RUN.tsv")                 # a sample file (mm on disk, m here)
 
-Each call wraps the code the commands use (``planecal.samples``, ``planecal.fit``,
+Each call wraps the code the commands use (``planecal.io.samples``, ``planecal.estimation.fit``,
 ``planecal.studies``); nothing is computed twice. Lengths are metres, angles radians;
 the results print a readable summary (``repr``). Imports are lazy: ``import planecal``
 loads none of this.
@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def _scene(scene):
     """A loaded scene from a name, a path or a Scene."""
-    from planecal.scene import DEFAULT_SCENE, load_scene
+    from planecal.model.scene import DEFAULT_SCENE, load_scene
 
     if scene is None:
         scene = DEFAULT_SCENE
@@ -62,9 +62,9 @@ class SampleSet:
 
 def load_samples(path, scene=None) -> SampleSet:
     """Read a sample file (the seed's format: six encoder counts, the distance in mm, an
-    optional plate number; ``planecal.samples.read_samples``). With ``scene`` the counts
+    optional plate number; ``planecal.io.samples.read_samples``). With ``scene`` the counts
     are checked against its robot. Distances are returned in metres."""
-    from planecal.samples import read_samples
+    from planecal.io.samples import read_samples
 
     s = read_samples(path, None if scene is None else _scene(scene))
     return SampleSet(np.asarray(s.qe, np.int64), np.asarray(s.d_mm, float) * 1e-3,
@@ -79,8 +79,8 @@ class Rehearsal:
     (``CellParams``: joint offsets, sensor pose, planes), the world's error profile, the
     rejected poses by kind, and the scene."""
     samples: SampleSet
-    truth: object  # planecal.cell.CellParams
-    scene: object  # planecal.scene.Scene
+    truth: object  # planecal.model.cell.CellParams
+    scene: object  # planecal.model.scene.Scene
     errors: str
     seed: int
     truth_seed: int
@@ -135,9 +135,9 @@ def rehearse(scene=None, samples: int = 30, seed: int = 0, *, truth_seed: int = 
 class Calibration:
     """An identified cell: ``params`` (``CellParams``, SI), per parameter ``values``,
     ``std`` (NaN where fixed or not identifiable) and ``units``; model error RMS before
-    and after [m]; ``result`` is the full ``planecal.fit.Result`` (covariance,
+    and after [m]; ``result`` is the full ``planecal.estimation.fit.Result`` (covariance,
     identifiability, history)."""
-    params: object  # planecal.cell.CellParams
+    params: object  # planecal.model.cell.CellParams
     values: dict
     std: dict
     units: dict
@@ -151,7 +151,7 @@ class Calibration:
     not_identifiable: list
     warnings: list
     scene: object
-    result: object  # planecal.fit.Result
+    result: object  # planecal.estimation.fit.Result
 
     def __repr__(self) -> str:
         lines = [f"Calibration on scene {self.scene.name}: "
@@ -173,12 +173,12 @@ class Calibration:
 def calibrate(samples, scene=None, *, initial=None, free=None, max_iter: int = 30,
               weighted: bool = False) -> Calibration:
     """Identify the cell from ``samples`` (a ``SampleSet``, a ``Rehearsal`` or a sample
-    file path) with ``planecal.fit.solve``, starting from ``initial`` (``CellParams``, a
+    file path) with ``planecal.estimation.fit.solve``, starting from ``initial`` (``CellParams``, a
     parameter file, or None: the scene's nominal values). ``free``: parameter names (or
     None: all but delta1 and delta6). ``weighted``: the weighted fit with the robot's
     repeatability noise model. ``scene`` defaults to the rehearsal's or the default."""
-    from planecal.fit import FitOptions, Problem, solve
-    from planecal.scene import nominal_params
+    from planecal.estimation.fit import FitOptions, Problem, solve
+    from planecal.model.scene import nominal_params
 
     if isinstance(samples, Rehearsal):
         scene = samples.scene if scene is None else scene
@@ -190,14 +190,14 @@ def calibrate(samples, scene=None, *, initial=None, free=None, max_iter: int = 3
         raise InputError(f"calibrate: samples must be a SampleSet, a Rehearsal or a file, "
                          f"got {type(samples).__name__}")
     if isinstance(initial, (str, Path)):
-        from planecal.params import load_params
+        from planecal.io.params import load_params
         initial = load_params(initial)
     initial = nominal_params(sc) if initial is None else initial
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise InputError(f"calibrate: max_iter must be a positive integer, got {max_iter!r}")
     opts = {"max_iter": int(max_iter)}
     if weighted:
-        from planecal.robot import repeatability_sigma
+        from planecal.model.robot import repeatability_sigma
         opts["joint_sigma_rad"] = repeatability_sigma(sc.robot, sc.robot.repeatability_m)
     try:
         problem = Problem.from_arrays(sc.robot, samples.counts, samples.distance_m, initial,
@@ -251,7 +251,7 @@ def validate(calibration: Calibration, rehearsal: Rehearsal, *, cycles: int = 30
     """Validate ``calibration`` on a twin whose cell is ``rehearsal``'s truth (robot.json's
     geometry, as ``planecal validate --calibrated``): ISO 9283 AP/RP in a cube placed by
     the rehearsal's samples, and the gauge block (``planecal.studies.validation``)."""
-    from planecal.collision import CollisionWorld
+    from planecal.safety.collision import CollisionWorld
     from planecal.studies.validation import ValidationSettings
     from planecal.studies.validation import validate as run_validation
 

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from planecal import __version__
-from planecal.errors import InputError, RunFailed
+from planecal.base.errors import InputError, RunFailed
 
 COMMANDS = {
     "demo": "rehearse on the default twin scene, calibrate, and compare with the twin's truth",
@@ -162,7 +162,7 @@ def parse(argv: list[str]) -> argparse.Namespace:
 
 
 def _logging(args) -> None:
-    from planecal.progress import set_quiet
+    from planecal.base.progress import set_quiet
     quiet = args.quiet
     level = (logging.ERROR if quiet else
              {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG))

@@ -16,13 +16,13 @@ B.runs.jsonl next to it); --resume fits only the subsets not in it yet.
 """
 from __future__ import annotations
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 FORMAT = "planecal-bootstrap/1"
 
 
 def add_arguments(p):
-    from planecal.scene import DEFAULT_SCENE
+    from planecal.model.scene import DEFAULT_SCENE
     p.add_argument("samples", nargs="+", help="sample file(s): the pool")
     p.add_argument("--sizes", default="30,50,100,150",
                    help="comma-separated subset sizes (default %(default)s)")
@@ -46,8 +46,8 @@ def add_arguments(p):
 
 def run(args) -> int:
     from planecal.commands.calibrate import build_problem, load_inputs
-    from planecal.fit import FitOptions
-    from planecal.params import save_json
+    from planecal.estimation.fit import FitOptions
+    from planecal.io.params import save_json
     from planecal.studies.bootstrap import (BootstrapSettings, bootstrap, check_settings,
                                             format_bootstrap)
     from planecal.studies.common import parse_int_list
@@ -56,7 +56,7 @@ def run(args) -> int:
                                                   results_path)
 
     from planecal.commands.report import write_command_report
-    from planecal.outputs import check_output
+    from planecal.io.outputs import check_output
 
     if args.out:
         check_output(args.out, args.samples + [args.initial], FORMAT, args.force)
@@ -80,6 +80,6 @@ def run(args) -> int:
         print(f"result written to {args.out}")
     write_command_report(args, res, scene=str(scene.path))
     if args.rrd:
-        from planecal.rerun_log.studies import log_bootstrap
+        from planecal.present.rerun.studies import log_bootstrap
         print(f"plots written to {log_bootstrap(args.rrd, res, scene, problem)}")
     return 0

@@ -4,9 +4,9 @@
 [--weighted [--repeatability-mm R] [--distance-sigma-um S]] [--rrd FILE]
 
 --level offsets (default) is the seed's level 1 (joint offsets, sensor, planes), as it
-always was. --level full calibrates the whole kinematic model (planecal.calibration):
+always was. --level full calibrates the whole kinematic model (planecal.estimation.calibrate):
 the parameters the samples can identify are chosen from their Jacobian (a pivoted QR,
-planecal.identify), the others stay at their initial values and the report and the
+planecal.estimation.identify), the others stay at their initial values and the report and the
 result file name each with its reason. --compliance adds the joint compliance of J2 and
 J3 (gravity torque from robot.json's link masses). --free overrides the candidates.
 
@@ -26,15 +26,15 @@ from dataclasses import asdict
 
 import numpy as np
 
-from planecal.calibration import LEVELS, Calibration, calibrate_samples
+from planecal.estimation.calibrate import LEVELS, Calibration, calibrate_samples
 from planecal.commands.report import add_report_argument, write_command_report
-from planecal.errors import InputError, RunFailed
-from planecal.fit import FitOptions, Problem, Result, solve
+from planecal.base.errors import InputError, RunFailed
+from planecal.estimation.fit import FitOptions, Problem, Result, solve
 from planecal.formats.params import RESULT_FORMAT, provenance, result_document
-from planecal.outputs import check_output
-from planecal.params import kinematics_to_dict, load_params, params_to_dict, save_json
-from planecal.samples import read_many
-from planecal.scene import DEFAULT_SCENE, load_scene, nominal_params
+from planecal.io.outputs import check_output
+from planecal.io.params import kinematics_to_dict, load_params, params_to_dict, save_json
+from planecal.io.samples import read_many
+from planecal.model.scene import DEFAULT_SCENE, load_scene, nominal_params
 
 
 def add_arguments(p):
@@ -76,7 +76,7 @@ def add_arguments(p):
     p.add_argument("--weighted", action="store_true",
                    help="weighted least squares with the robot's repeatability as the noise "
                         "model (each sample's variance from its pose): honest std on several "
-                        "plates; see planecal.fit")
+                        "plates; see planecal.estimation.fit")
     p.add_argument("--repeatability-mm", type=float, default=None,
                    help="with --weighted: the robot's repeatability, +- mm at the flange "
                         "(default: robot.json's)")
@@ -218,7 +218,7 @@ def weighting(args, robot) -> dict:
             if v is not None:
                 raise InputError(f"{flag} needs --weighted")
         return {}
-    from planecal.robot import repeatability_sigma
+    from planecal.model.robot import repeatability_sigma
     rep = args.repeatability_mm
     if rep is not None and not (np.isfinite(rep) and rep > 0):
         raise InputError(f"--repeatability-mm must be > 0, got {rep:g}")
@@ -316,7 +316,7 @@ def run(args) -> int:
         print(f"result written to {out}")
     write_command_report(args, out or doc, samples=args.samples, scene=str(scene.path))
     if args.rrd:
-        from planecal.rerun_log import log_fit_to_file
+        from planecal.present.rerun import log_fit_to_file
         path = log_fit_to_file(args.rrd, res, samples, scene)
         print(f"recording written to {path}")
     why = failure(res)

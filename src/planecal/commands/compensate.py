@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.errors import InputError, RunFailed
+from planecal.base.errors import InputError, RunFailed
 
 
 def add_arguments(p):
@@ -45,8 +45,8 @@ def add_arguments(p):
 def _region(args, doc, robot):
     from pathlib import Path
 
-    from planecal.compensate import Region, recorded_samples
-    from planecal.samples import read_samples
+    from planecal.estimation.compensate import Region, recorded_samples
+    from planecal.io.samples import read_samples
     paths = [Path(s) for s in args.samples] if args.samples else recorded_samples(doc, args.params)
     if not paths:
         raise InputError(f"{args.params}: records no sample files (no provenance): give the "
@@ -57,11 +57,11 @@ def _region(args, doc, robot):
 
 
 def run(args) -> int:
-    from planecal.compensate import (COMPENSATED_FORMAT, compensate, compensated_document,
+    from planecal.estimation.compensate import (COMPENSATED_FORMAT, compensate, compensated_document,
                                      load_calibrated, read_targets, write_counts_table)
-    from planecal.outputs import check_output
-    from planecal.params import save_json
-    from planecal.robot import load_robot
+    from planecal.io.outputs import check_output
+    from planecal.io.params import save_json
+    from planecal.model.robot import load_robot
 
     inputs = [args.targets, args.params] + list(args.samples or [])
     out = check_output(args.out, inputs, COMPENSATED_FORMAT, args.force)

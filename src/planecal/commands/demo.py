@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.errors import InputError, RunFailed
-from planecal.scene import DEFAULT_SCENE
+from planecal.base.errors import InputError, RunFailed
+from planecal.model.scene import DEFAULT_SCENE
 
 DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
 
@@ -48,7 +48,7 @@ def _check_outputs(out: Path, force: bool) -> tuple[Path, Path, Path]:
     the demo's own kind (its format field; the sample file: its run sidecar's)."""
     from planecal.formats.params import PARAMS_FORMAT, RESULT_FORMAT
     from planecal.formats.run import SIDECAR_FORMAT
-    from planecal.outputs import check_output, file_format
+    from planecal.io.outputs import check_output, file_format
     from planecal.sampling.runfiles import sidecar_path
 
     run_file, truth_file, result_file = out / "demo.tsv", out / "truth.json", out / "result.json"
@@ -72,15 +72,15 @@ WHY_OFF = (
 
 
 def run(args) -> int:
-    from planecal.collision import CollisionWorld
+    from planecal.safety.collision import CollisionWorld
     from planecal.commands import rehearse
     from planecal.commands.calibrate import (build_problem, failure, format_report,
                                              result_dict)
-    from planecal.fit import FitOptions, solve
+    from planecal.estimation.fit import FitOptions, solve
     from planecal.formats.params import provenance, result_document
-    from planecal.params import save_json
-    from planecal.samples import read_samples
-    from planecal.scene import load_scene, nominal_params
+    from planecal.io.params import save_json
+    from planecal.io.samples import read_samples
+    from planecal.model.scene import load_scene, nominal_params
     from planecal.studies.common import BUFFER_LEN
     from planecal.studies.montecarlo import MISMATCH, SHORT, sources_on
     from planecal.studies.validation import ValidationSettings, validate
@@ -115,7 +115,7 @@ def run(args) -> int:
         [("samples", run_file), ("scene", scene.path), ("robot", scene.robot.source)],
         scene.name, scene.robot.name)))
     if args.rrd:
-        from planecal.rerun_log import log_fit_to_file
+        from planecal.present.rerun import log_fit_to_file
         print(f"fit recording written to {log_fit_to_file(args.rrd, res, samples, scene)}")
     why = failure(res)
     if not res.converged:
@@ -177,8 +177,8 @@ def run(args) -> int:
 def _noise_rms_mm(scene, samples, res, opts, buffer_len) -> float:
     """The rms distance noise per sample of the twin's noise (repeatability, quantisation,
     the laser's buffer mean) on these samples (``studies.montecarlo.sample_variance``)."""
-    from planecal.cell import predict_with_jacobian
-    from planecal.robot import repeatability_sigma
+    from planecal.model.cell import predict_with_jacobian
+    from planecal.model.robot import repeatability_sigma
     from planecal.studies.montecarlo import sample_variance
 
     robot = scene.robot

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import argparse
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -90,7 +90,7 @@ def _faults(args):
 
 def _make_twin(args):
     from planecal.twin import Twin
-    from planecal.scene import load_scene
+    from planecal.model.scene import load_scene
     from planecal.twin.profile import DEFAULT_PROFILE, draw_world, load_profile, load_world
 
     seed = 0 if args.seed is None else args.seed

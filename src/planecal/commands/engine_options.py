@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 from typing import Any, Callable
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.studies.distributed import Engine
 
 RESULTS_SUFFIX = ".runs.jsonl"

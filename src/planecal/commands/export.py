@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 FORMAT = "planecal-fd11-offsets/1"
 
@@ -44,9 +44,9 @@ def _counts(text: str) -> np.ndarray:
 
 
 def run(args) -> int:
-    from planecal.encoder import counts_in_range, encoder_zero_counts
-    from planecal.params import load_params, save_json
-    from planecal.scene import load_scene
+    from planecal.model.encoder import counts_in_range, encoder_zero_counts
+    from planecal.io.params import load_params, save_json
+    from planecal.model.scene import load_scene
 
     scene = load_scene(args.scene)
     robot = scene.robot

@@ -9,7 +9,7 @@ sensor pose, planes); --level full: the whole kinematic model's (level 2).
 """
 from __future__ import annotations
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def add_arguments(p):
@@ -22,7 +22,7 @@ def add_arguments(p):
                         "calibration's default free set, delta1 and delta6 fixed)")
     p.add_argument("--level", choices=["offsets", "full"], default="offsets",
                    help="the model's parameters: level 1's (joint offsets, sensor, planes) or "
-                        "the whole kinematic model's (planecal.calibration, level 2)")
+                        "the whole kinematic model's (planecal.estimation.calibrate, level 2)")
     p.add_argument("--tol", type=float, default=1e-6,
                    help="rank threshold on the scaled singular values (default %(default)g)")
     p.add_argument("--out", help="write the study (JSON, planecal-layouts/1) here")
@@ -31,11 +31,11 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.collision import CollisionWorld
-    from planecal.layout import level1_layout
-    from planecal.outputs import check_output
-    from planecal.params import save_json
-    from planecal.scene import load_scene
+    from planecal.safety.collision import CollisionWorld
+    from planecal.model.layout import level1_layout
+    from planecal.io.outputs import check_output
+    from planecal.io.params import save_json
+    from planecal.model.scene import load_scene
     from planecal.studies.layouts import FORMAT, format_layouts, layout_study
 
     out = check_output(args.out, [], FORMAT, args.force) if args.out else None
@@ -58,8 +58,8 @@ def run(args) -> int:
 def _full_layouts(robot):
     """n_planes -> the whole model's layout (level 2's ``calibration.layout_for``)."""
     try:
-        from planecal.calibration import layout_for
+        from planecal.estimation.calibrate import layout_for
     except ModuleNotFoundError:
         raise InputError("--level full: this planecal has no whole-model calibration "
-                         "(planecal.calibration)") from None
+                         "(planecal.estimation.calibrate)") from None
     return lambda n: layout_for(robot, n, "full")

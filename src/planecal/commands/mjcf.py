@@ -9,7 +9,7 @@ from __future__ import annotations
 
 
 def add_arguments(p):
-    from planecal.scene import DEFAULT_SCENE
+    from planecal.model.scene import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE,
                    help="scene name (planecal scenes) or path (default %(default)s)")
     p.add_argument("--out", required=True, metavar="OUT.xml", help="MJCF file to write")
@@ -23,9 +23,9 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.errors import InputError
-    from planecal.outputs import check_output
-    from planecal.scene import load_scene
+    from planecal.base.errors import InputError
+    from planecal.io.outputs import check_output
+    from planecal.model.scene import load_scene
     from planecal.twin.export import export_scene
 
     if args.truth_seed is not None and args.truth_seed < 0:

@@ -9,7 +9,7 @@ Repeated rehearsals on the twin with fresh poses and noise, each calibrated from
 scene's nominal values: per parameter the bias, the empirical std, the Cramer-Rao bound
 (white-noise form sigma^2 (J^T J)^-1 and the heteroscedastic form (J^T V^-1 J)^-1), the
 sandwich covariance of the unweighted fit and the std the fit reports (unweighted, or
-with --weighted the weighted fit of planecal.fit, which should reach the CRB); the chi-square
+with --weighted the weighted fit of planecal.estimation.fit, which should reach the CRB); the chi-square
 consistency of the reported covariance; with --slope the spread vs the number of samples
 and its log-log slope. See planecal.studies.montecarlo for the modes and the noise model.
 
@@ -28,11 +28,11 @@ Cramer-Rao bound of the noise. The output says by how much; it is what a real ro
 """
 from __future__ import annotations
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def add_arguments(p):
-    from planecal.scene import DEFAULT_SCENE
+    from planecal.model.scene import DEFAULT_SCENE
     from planecal.sampling.poses import IK_CHOICES
     from planecal.studies.montecarlo import MODES
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
@@ -63,7 +63,7 @@ def add_arguments(p):
                    help="synthetic mode: add +-0.5 count encoder quantisation noise")
     p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
     p.add_argument("--weighted", action="store_true",
-                   help="fit by weighted least squares with the noise model (planecal.fit)")
+                   help="fit by weighted least squares with the noise model (planecal.estimation.fit)")
     p.add_argument("--roll-deg", type=float, default=None,
                    help="twin/rehearse modes: the pose draw's roll about the beam within "
                         "+-this (default: the sampling run's, 180)")
@@ -85,9 +85,9 @@ def run(args) -> int:
 
     from planecal.commands.engine_options import (check_results_path, engine_from_args,
                                                   results_path)
-    from planecal.outputs import check_output
-    from planecal.params import save_json
-    from planecal.scene import load_scene
+    from planecal.io.outputs import check_output
+    from planecal.io.params import save_json
+    from planecal.model.scene import load_scene
     from planecal.studies.common import parse_int_list
     from planecal.studies.distributed import warm_twin
     from planecal.studies.montecarlo import (FORMAT, MCSettings, analyze, format_montecarlo,
@@ -141,7 +141,7 @@ def run(args) -> int:
         save_json(args.out, res)
         print(f"result written to {args.out}")
     if args.rrd:
-        from planecal.rerun_log.studies import log_montecarlo, order_pose_set
+        from planecal.present.rerun.studies import log_montecarlo, order_pose_set
         from planecal.studies.montecarlo import twin_samples, world_for
         world, opts = world_for(st, 0)  # the 3D view: run 0's world, the twin mode's draw
         qe, d, plate, _ = twin_samples(scene, world, st, st.seed, opts)

@@ -19,11 +19,11 @@ in this process; default: a local Dask cluster; --scheduler: a cluster you run).
 """
 from __future__ import annotations
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def add_arguments(p):
-    from planecal.scene import DEFAULT_SCENE
+    from planecal.model.scene import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--samples", type=int, default=150,
                    help="poses to choose (default 150; with a target: the most it may choose)")
@@ -52,16 +52,16 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.collision import CollisionWorld
-    from planecal.params import save_json
-    from planecal.scene import load_scene
-    from planecal.layout import level1_layout
+    from planecal.safety.collision import CollisionWorld
+    from planecal.io.params import save_json
+    from planecal.model.scene import load_scene
+    from planecal.model.layout import level1_layout
     from planecal.studies.common import table
     from planecal.studies.planning import plan
 
     from planecal.commands.report import write_command_report
     from planecal.formats.poses import POSES_FORMAT
-    from planecal.outputs import check_output
+    from planecal.io.outputs import check_output
 
     check_output(args.out, [], POSES_FORMAT, args.force)
     scene = load_scene(args.scene)
@@ -72,7 +72,7 @@ def run(args) -> int:
     if args.candidates < args.samples:
         raise InputError(f"--candidates ({args.candidates}) must be at least --samples ({args.samples})")
     free = None if not args.free else tuple(s.strip() for s in args.free.split(",") if s.strip())
-    from planecal.progress import Progress
+    from planecal.base.progress import Progress
     from planecal.studies.planning import PLAN_STAGES
     bar = Progress("plan", PLAN_STAGES, unit=" stages")
     bar.update(done=0, note="collision model")

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import sys
 
-from planecal.cell import predict
-from planecal.errors import InputError
-from planecal.params import load_params
-from planecal.robot import load_robot
-from planecal.samples import read_samples
+from planecal.model.cell import predict
+from planecal.base.errors import InputError
+from planecal.io.params import load_params
+from planecal.model.robot import load_robot
+from planecal.io.samples import read_samples
 
 
 def add_arguments(p):

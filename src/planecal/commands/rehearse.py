@@ -6,9 +6,9 @@
 
 The same loop as ``planecal sample`` (``planecal.sampling.run``), with the twin as robot
 link and laser, on its virtual clock (no sleeps), and collision checking always on
-(``planecal.collision.CollisionWorld``). The twin's hidden truth is drawn from
+(``planecal.safety.collision.CollisionWorld``). The twin's hidden truth is drawn from
 ``--twin-seed`` (default: ``--seed``); ``--truth-out`` writes it in the parameter-file format
-(``planecal.params``) for comparison with a calibration. The twin starts at the scene's
+(``planecal.io.params``) for comparison with a calibration. The twin starts at the scene's
 calibration position.
 
 Writes the sample file, its sidecar ``RUN.tsv.json`` (with ``"twin": {"seed", "options"}``
@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -63,7 +63,7 @@ def make_twin(scene, seed: int, errors: str, exact: bool = False):
 
 
 def make_checker(scene, clearance_m: float):
-    from planecal.collision import CollisionWorld
+    from planecal.safety.collision import CollisionWorld
     return CollisionWorld(scene, clearance_m=clearance_m)
 
 

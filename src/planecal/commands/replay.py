@@ -17,7 +17,7 @@ REPLAY_FORMAT = "planecal-replay/1"
 
 
 def add_arguments(p):
-    from planecal.scene import DEFAULT_SCENE
+    from planecal.model.scene import DEFAULT_SCENE
     p.add_argument("samples", help="sample file, seed format (7.1.4)")
     p.add_argument("--params", required=True, help="parameter file: the twin's truth")
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
@@ -29,10 +29,10 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.outputs import check_output
-    from planecal.params import load_params, save_json
-    from planecal.samples import read_samples
-    from planecal.scene import load_scene
+    from planecal.io.outputs import check_output
+    from planecal.io.params import load_params, save_json
+    from planecal.io.samples import read_samples
+    from planecal.model.scene import load_scene
     from planecal.studies.montecarlo import sources_on
     from planecal.studies.replay import format_replay, replay, replay_world
     from planecal.twin.profile import load_profile

@@ -4,7 +4,7 @@ A report a person reads: DIR/index.html with PNG figures beside it, for a calibr
 result (calibrate --out, demo's result.json), a Monte Carlo, bootstrap, validate or plan
 result. The kind comes from the file (its format field, else its content). A calibration
 report recomputes the model error per sample from the sample files (--samples, or the
-inputs the result records). See planecal.report.
+inputs the result records). See planecal.present.report.
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.report import write_report
+    from planecal.present.report import write_report
     path = write_report(args.result, args.out, samples=args.samples, scene=args.scene)
     n = path.read_text(encoding="utf-8").count("<img ")
     print(f"report written to {path} ({n} figures)")
@@ -40,6 +40,6 @@ def write_command_report(args, result, samples=None, scene=None) -> None:
     """The report of a command's result (a dict or a file) into --report, if given."""
     if not getattr(args, "report", None):
         return
-    from planecal.report import write_report
+    from planecal.present.report import write_report
     path = write_report(result, args.report, samples=samples, scene=scene)
     print(f"report written to {path}")

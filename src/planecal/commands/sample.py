@@ -6,7 +6,7 @@
 The same loop as ``planecal rehearse`` (``planecal.sampling.run``) with the FD11 RT link
 over UDP (``planecal.links.fd11.FD11Link``) and the ZS-LD80 on a serial port
 (``planecal.links.zs_ld80.ZSLD80``), imported only when this command runs. Collision
-checking (``planecal.collision``) is always on; the operator still watches the robot
+checking (``planecal.safety.collision``) is always on; the operator still watches the robot
 (seed 7.3.1): the model knows only what the scene file describes.
 
 Dead-man switch: the PC cannot read the teach pendant's enabling device. The enable signal
@@ -46,7 +46,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from planecal.errors import InputError, RunFailed
+from planecal.base.errors import InputError, RunFailed
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -175,7 +175,7 @@ def _record_link(out: Path, real_cell: dict) -> None:
     """Put the session's link counters (``real_cell``'s ``link``, ``link_total``) in the
     sidecar once the session has ended. Best effort: a full disk keeps the last sidecar
     (the run has already said why it stopped)."""
-    from planecal.params import save_json
+    from planecal.io.params import save_json
     from planecal.sampling.runfiles import sidecar_path
 
     p = sidecar_path(out)

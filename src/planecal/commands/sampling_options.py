@@ -8,7 +8,7 @@ import math
 import sys
 from pathlib import Path
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.sampling.laserread import LaserSettings
 from planecal.sampling.observer import RecordingObserver
 from planecal.sampling.poses import IK_CHOICES, PLATE_CHOICES
@@ -144,10 +144,10 @@ def prepare(args, default_samples: int = 150, also_out: dict | None = None):
     overwrite an existing sample file without --resume or --force. The outputs (``--out``,
     its sidecar, and ``also_out``: flag -> path, e.g. rehearse's ``--truth``) are checked
     before anything runs: none is an input, a directory, or in a place that cannot be
-    written (``planecal.outputs.check_output``)."""
-    from planecal.outputs import check_output
-    from planecal.params import PARAMS_FORMAT
-    from planecal.scene import DEFAULT_SCENE, load_scene
+    written (``planecal.io.outputs.check_output``)."""
+    from planecal.io.outputs import check_output
+    from planecal.io.params import PARAMS_FORMAT
+    from planecal.model.scene import DEFAULT_SCENE, load_scene
 
     out = Path(args.out)
     inputs = _inputs(args)
@@ -188,8 +188,8 @@ def prepare(args, default_samples: int = 150, also_out: dict | None = None):
 
 
 def rerun_observer(path, scene, twin=None) -> RecordingObserver:
-    """The Rerun observer of a run (``planecal.rerun_log.sampling_observer``)."""
-    from planecal.rerun_log import sampling_observer
+    """The Rerun observer of a run (``planecal.present.rerun.sampling_observer``)."""
+    from planecal.present.rerun import sampling_observer
     return sampling_observer(path, scene=scene, twin=twin)
 
 
@@ -202,7 +202,7 @@ def pose_list_planner(args, scene, settings: RunSettings, checker, model=None):
         return None
     import numpy as np
 
-    from planecal.samples import read_samples
+    from planecal.io.samples import read_samples
     from planecal.sampling.planner import ListPlanner
     from planecal.studies.planning import load_poses
 
@@ -250,9 +250,9 @@ def command_model(args, scene, side=None):
     sidecar's record of it)."""
     import numpy as np
 
-    from planecal.params import load_json, load_params
+    from planecal.io.params import load_json, load_params
     from planecal.sampling.poses import CommandModel
-    from planecal.scene import nominal_params
+    from planecal.model.scene import nominal_params
 
     rec = (side or {}).get("command") or {}
     params_path = rec.get("params") if side is not None else args.params
@@ -292,7 +292,7 @@ def fixed_distance_summary(out, settings: RunSettings, command_record) -> dict:
     same kind of run (before or after calibration, fixed or random orientation)."""
     import numpy as np
 
-    from planecal.samples import read_samples
+    from planecal.io.samples import read_samples
     d = read_samples(out).d_mm
     pose = settings.pose
     orientation = "fixed" if pose.cone_deg == 0 and pose.roll_deg == 0 else "random"

@@ -10,8 +10,8 @@ def add_arguments(p):
 def run(args) -> int:
     import json
 
-    from planecal.paths import data_path
-    from planecal.scene import load_scene
+    from planecal.base.paths import data_path
+    from planecal.model.scene import load_scene
 
     rows = []
     for path in sorted(data_path("scenes").glob("*.json")):

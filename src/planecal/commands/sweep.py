@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 RESULTS = "results.jsonl"
 
@@ -33,9 +33,9 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.params import save_json
-    from planecal.progress import Progress as Bar
-    from planecal.report.sweep import fig_accuracy_vs_time
+    from planecal.io.params import save_json
+    from planecal.base.progress import Progress as Bar
+    from planecal.present.report.sweep import fig_accuracy_vs_time
     from planecal.studies.common import Progress
     from planecal.studies.distributed import Engine, warm_twin
     from planecal.studies.sweep import format_sweep, load_spec, plans_needed, run_sweep

@@ -5,20 +5,20 @@ The robot as URDF: base link ``base``, six revolute joints whose values are plan
 joint angles q, ``flange`` and the sensor frame ``laser`` (fixed children). Without
 --params: the nominal model (zero joint offsets, the scene's nominal sensor pose); with
 --params (a calibration result or parameter file): its joint offsets, folded into the
-joint origins, and its sensor pose. Visual and collision meshes (planecal.geometry's, as
+joint origins, and its sensor pose. Visual and collision meshes (planecal.model.geometry's, as
 the twin and the collision checker use them) go as STL files into FILE_meshes/ beside
 the URDF, referenced by a relative path, or by PREFIX + file name (e.g.
-package://mc70_description/meshes/). See planecal.urdf.
+package://mc70_description/meshes/). See planecal.io.urdf.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def add_arguments(p):
-    from planecal.scene import DEFAULT_SCENE
+    from planecal.model.scene import DEFAULT_SCENE
     p.add_argument("--params", metavar="RESULT.json",
                    help="calibration result or parameter file (default: the nominal model)")
     p.add_argument("--scene", default=DEFAULT_SCENE,
@@ -32,9 +32,9 @@ def add_arguments(p):
 
 
 def write_meshes(scene, params, mesh_dir: Path, prefix: str):
-    """STL files of the link and tool shapes (planecal.geometry) and their MeshRefs."""
-    from planecal.geometry import robot_link_meshes, tool_meshes
-    from planecal.urdf import MeshRef
+    """STL files of the link and tool shapes (planecal.model.geometry) and their MeshRefs."""
+    from planecal.model.geometry import robot_link_meshes, tool_meshes
+    from planecal.io.urdf import MeshRef
     mesh_dir.mkdir(parents=True, exist_ok=True)
     refs = []
     for kind in ("visual", "collision"):
@@ -47,9 +47,9 @@ def write_meshes(scene, params, mesh_dir: Path, prefix: str):
 
 
 def run(args) -> int:
-    from planecal.params import load_params
-    from planecal.scene import load_scene, nominal_params
-    from planecal.urdf import urdf_text
+    from planecal.io.params import load_params
+    from planecal.model.scene import load_scene, nominal_params
+    from planecal.io.urdf import urdf_text
 
     scene = load_scene(args.scene)
     out = Path(args.out)

@@ -35,11 +35,11 @@ import sys
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def add_arguments(p):
-    from planecal.scene import DEFAULT_SCENE
+    from planecal.model.scene import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--out", help="write the result (JSON) here")
     p.add_argument("--rrd", default=None, metavar="FILE",
@@ -103,9 +103,9 @@ CELL_FRAME_NOTE = (
 
 
 def run(args) -> int:
-    from planecal.outputs import check_output
-    from planecal.params import save_json
-    from planecal.scene import load_scene
+    from planecal.io.outputs import check_output
+    from planecal.io.params import save_json
+    from planecal.model.scene import load_scene
     from planecal.studies.common import parse_int_list
     from planecal.studies.validation import FORMAT, TruthJob, ValidationSettings
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile
@@ -195,11 +195,11 @@ def _truths(args, seeds, base, profile, scene, engine) -> dict:
 def _record(args, scene, st, doc) -> str:
     """The Rerun recording of the validation doc's detailed truth: its calibration run
     again (a pure function of the job) for the samples and the identified parameters."""
-    from planecal.rerun_log.studies import log_validate
+    from planecal.present.rerun.studies import log_validate
 
     if args.calibrated:
-        from planecal.params import load_params
-        from planecal.samples import read_samples
+        from planecal.io.params import load_params
+        from planecal.io.samples import read_samples
         run = read_samples(args.run)
         return log_validate(args.rrd, doc, scene, load_params(args.calibrated), run.qe,
                             run.d_mm * 1e-3, run.plate)
@@ -228,9 +228,9 @@ def _validate_given(args, scene, st) -> dict:
     """--calibrated/--truth/--run: one calibration in the world its truth file holds."""
     from pathlib import Path
 
-    from planecal.collision import CollisionWorld
-    from planecal.params import load_params
-    from planecal.samples import read_samples
+    from planecal.safety.collision import CollisionWorld
+    from planecal.io.params import load_params
+    from planecal.io.samples import read_samples
     from planecal.sampling.runfiles import sidecar_path
     from planecal.studies.montecarlo import sources_on
     from planecal.studies.validation import FORMAT, format_validation, truth_row, validate

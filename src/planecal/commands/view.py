@@ -20,7 +20,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 
 def add_arguments(p) -> None:
@@ -51,7 +51,7 @@ def has_display() -> bool:
 
 
 def run(args) -> int:
-    from planecal.rerun_log.common import is_recording
+    from planecal.present.rerun.common import is_recording
 
     path = Path(args.file)
     if path.is_dir():  # e.g. recordings/: the newest recording in it
@@ -64,7 +64,7 @@ def run(args) -> int:
     if not is_recording(path):
         raise InputError(f"{path}: not a Rerun recording (.rrd)")
     if args.summary:
-        from planecal.rerun_log.common import blueprint_views, summarize
+        from planecal.present.rerun.common import blueprint_views, summarize
         try:
             rows = summarize(path)
             views = blueprint_views(path)

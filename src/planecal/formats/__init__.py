@@ -3,16 +3,16 @@ bounded reader they share, and the JSON Schemas published in docs/schemas/.
 
 | format                | file                         | model                  | read by                     |
 |-----------------------|------------------------------|------------------------|-----------------------------|
-| planecal-robot/1      | models/<robot>/robot.json    | robot.RobotFile        | planecal.robot.load_robot   |
-| planecal-scene/1      | scenes/<name>.json           | scene.SceneFile        | planecal.scene.load_scene   |
-| planecal-params/1     | --initial, --truth, --params | params.ParamsFile      | planecal.params.load_params |
+| planecal-robot/1      | models/<robot>/robot.json    | robot.RobotFile        | planecal.model.robot.load_robot   |
+| planecal-scene/1      | scenes/<name>.json           | scene.SceneFile        | planecal.model.scene.load_scene   |
+| planecal-params/1     | --initial, --truth, --params | params.ParamsFile      | planecal.io.params.load_params |
 | planecal-result/1     | calibrate --out              | params.ResultFile      | (as a parameter file)       |
 | planecal-poses/1      | plan --out                   | poses.PosesFile        | studies.planning.load_poses |
 | planecal-run/1        | RUN.tsv.json (sidecar)       | run.SidecarFile        | load_sidecar below          |
 | planecal-errors/1     | models/<robot>/errors/*.json | errors.ErrorProfileFile | planecal.twin.profile       |
 
-Every error is one line, ``FILE: field.path: problem`` (``planecal.errors.InputError``).
-Sample files (TSV) are read by ``planecal.samples``, which shares the bounds.
+Every error is one line, ``FILE: field.path: problem`` (``planecal.base.errors.InputError``).
+Sample files (TSV) are read by ``planecal.io.samples``, which shares the bounds.
 
 Adding a format (the realistic twin's error profile is next): write its model in a module
 here (small typed fields, physical checks as ``problem(...)``), add it to ``MODELS``, run
@@ -26,7 +26,7 @@ from typing import Any
 from pydantic import BaseModel
 
 from planecal.formats.base import InputError, read_json, validate
-from planecal.formats.errors import ERRORS_FORMAT, ErrorProfileFile
+from planecal.formats.error_profile import ERRORS_FORMAT, ErrorProfileFile
 from planecal.formats.params import PARAMS_FORMAT, RESULT_FORMAT, ParamsFile, ResultFile
 from planecal.formats.poses import POSES_FORMAT, PosesFile
 from planecal.formats.robot import ROBOT_FORMAT, RobotFile

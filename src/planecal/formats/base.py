@@ -19,7 +19,7 @@ from typing import Annotated, Any, TypeVar
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, ValidationError
 from pydantic_core import PydanticCustomError
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 MAX_JSON_BYTES = 16 * 2**20  # planecal writes kB: a 14-pose plan is 5.6 kB, ~0.4 kB a pose
 MAX_DEPTH = 64  # planecal's formats nest at most 6 levels

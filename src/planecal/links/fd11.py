@@ -99,7 +99,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 if TYPE_CHECKING:
     from planecal.links.base import EnableSignal

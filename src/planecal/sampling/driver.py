@@ -14,13 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.encoder import counts_to_joints, joints_to_counts
+from planecal.model.encoder import counts_to_joints, joints_to_counts
 from planecal.links.base import EnableAhead, MoveLink
-from planecal.robot import Robot, within_limits
+from planecal.model.robot import Robot, within_limits
 from planecal.sampling.laserread import NO_READING_MM, LaserResult, LaserSettings, read_stable
 from planecal.sampling.observer import NullObserver, Observer
 from planecal.sampling.steps import COUNT_LIMIT, DWELL_TICKS, NOMINAL_STEP, max_step, step_path
-from planecal.scene import Scene
+from planecal.model.scene import Scene
 
 
 class EnableDropped(Exception):

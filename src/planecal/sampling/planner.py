@@ -23,11 +23,11 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from planecal.encoder import counts_in_range, counts_to_joints
-from planecal.robot import fk, ik_all
+from planecal.model.encoder import counts_in_range, counts_to_joints
+from planecal.model.robot import fk, ik_all
 from planecal.sampling.poses import CommandModel, PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.steps import COUNT_LIMIT
-from planecal.scene import Scene
+from planecal.model.scene import Scene
 
 RETRACT_M = (0.25, 0.45)  # how far a detour backs out along the beam (tried in turn)
 
@@ -38,7 +38,7 @@ class Verdict(Protocol):
 
 
 class Checker(Protocol):
-    """A collision checker (``planecal.collision.CollisionWorld``): stateless."""
+    """A collision checker (``planecal.safety.collision.CollisionWorld``): stateless."""
 
     def check_config(self, q: np.ndarray) -> Verdict: ...
 

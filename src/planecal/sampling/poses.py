@@ -47,12 +47,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.cell import CellParams, sensor_rotation
-from planecal.encoder import joints_to_counts
-from planecal.errors import InputError
+from planecal.model.cell import CellParams, sensor_rotation
+from planecal.model.encoder import joints_to_counts
+from planecal.base.errors import InputError
 from planecal.formats.run import IK_CHOICES, PLATE_CHOICES  # the sidecar's allowed values
-from planecal.robot import ik_all
-from planecal.scene import Scene
+from planecal.model.robot import ik_all
+from planecal.model.scene import Scene
 
 
 
@@ -106,7 +106,7 @@ class CommandModel:
 
     @classmethod
     def nominal(cls, scene: Scene) -> "CommandModel":
-        from planecal.scene import nominal_params
+        from planecal.model.scene import nominal_params
         return cls(nominal_params(scene), scene.robot.qe0.copy())
 
 

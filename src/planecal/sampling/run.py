@@ -45,10 +45,10 @@ from typing import Callable
 
 import numpy as np
 
-from planecal.encoder import counts_to_joints
-from planecal.errors import InputError
+from planecal.model.encoder import counts_to_joints
+from planecal.base.errors import InputError
 from planecal.formats.run import SIDECAR_FORMAT
-from planecal.params import save_json
+from planecal.io.params import save_json
 from planecal.sampling.collect import Cursor, DriveAcquirer, Tally, collect
 from planecal.sampling.driver import Driver, EnableDropped
 from planecal.sampling.laserread import LaserSettings
@@ -59,7 +59,7 @@ from planecal.sampling.runfiles import (RunLock, RunWriteError, count_samples, l
                                         sidecar_path)
 from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP
 from planecal.sampling.tour import Clock
-from planecal.scene import Scene
+from planecal.model.scene import Scene
 
 RECENT_REJECTIONS = 50  # kept in the sidecar with their reasons
 
@@ -270,7 +270,7 @@ class SamplingRun:
 
     # -- the loop
     def run(self) -> RunStats:
-        from planecal.samples import SampleWriter
+        from planecal.io.samples import SampleWriter
 
         st, s, drv = self.stats, self.settings, self.driver
         self._t_wall = time.perf_counter()

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from planecal.errors import InputError, RunFailed
+from planecal.base.errors import InputError, RunFailed
 from planecal.formats import load_sidecar as read_sidecar
 
 

@@ -8,8 +8,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from planecal.errors import InputError, RunFailed
-from planecal.progress import Progress as ProgressBar
+from planecal.base.errors import InputError, RunFailed
+from planecal.base.progress import Progress as ProgressBar
 from planecal.sampling.driver import (Driver, EnableDropped, PathBlocked, move_home,
                                       move_to_calibration)
 from planecal.sampling.observer import Observer
@@ -42,7 +42,7 @@ class Session:
 
 
 class Progress:
-    """The run's progress (``planecal.progress``): samples taken, rejections and robot time;
+    """The run's progress (``planecal.base.progress``): samples taken, rejections and robot time;
     at the end, why a run that did not complete stopped."""
 
     def __init__(self, total: int, stream=None, tty: bool | None = None):

@@ -364,7 +364,7 @@ class _EdgeChecker:
     detour of that many travel ticks, -1 blocked without a detour."""
 
     def __init__(self, scene, checker, nodes, D, blocked, nominal):
-        from planecal.encoder import counts_to_joints
+        from planecal.model.encoder import counts_to_joints
         from planecal.sampling.planner import ListPlanner
         self.checker, self.D, self.blocked, self.nominal = checker, D, blocked, nominal
         self.nodes = nodes

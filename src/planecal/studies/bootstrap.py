@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.errors import InputError
-from planecal.fit import Problem, solve
-from planecal.layout import ParamLayout
+from planecal.base.errors import InputError
+from planecal.estimation.fit import Problem, solve
+from planecal.model.layout import ParamLayout
 from planecal.studies.common import Progress, parallel_map, table
 
 OVERLAP_WARN = 0.3

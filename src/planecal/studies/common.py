@@ -23,8 +23,8 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from planecal.errors import InputError
-from planecal.progress import Progress as ProgressBar
+from planecal.base.errors import InputError
+from planecal.base.progress import Progress as ProgressBar
 from planecal.studies.distributed import Engine
 
 BUFFER_LEN = 100  # laser readings averaged into one sample (sampling.laserread)
@@ -45,7 +45,7 @@ def parse_int_list(text: str, what: str, minimum: int = 1) -> list[int]:
 
 
 class Progress:
-    """A study's progress (``planecal.progress``): runs done of ``total``."""
+    """A study's progress (``planecal.base.progress``): runs done of ``total``."""
 
     def __init__(self, label: str, total: int, stream=None, quiet: bool = False):
         self.bar = None if quiet else ProgressBar(label, total, stream)
@@ -127,7 +127,7 @@ _CACHE: dict = {}
 
 def cached_scene(name):
     """The scene ``name`` (``scene.load_scene``), loaded once per process."""
-    from planecal.scene import load_scene
+    from planecal.model.scene import load_scene
     key = ("scene", name)
     if key not in _CACHE:
         _CACHE[key] = load_scene(name)
@@ -138,7 +138,7 @@ def cached_world(name, clearance_m: float):
     """The collision world of scene ``name`` at ``clearance_m``, built once per process."""
     key = ("world", name, clearance_m)
     if key not in _CACHE:
-        from planecal.collision import CollisionWorld
+        from planecal.safety.collision import CollisionWorld
         _CACHE[key] = CollisionWorld(cached_scene(name), clearance_m=clearance_m)
     return _CACHE[key]
 

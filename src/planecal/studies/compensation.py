@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.compensate import CalibratedKinematics, Region, Targets, compensate
-from planecal.encoder import counts_to_joints
-from planecal.robot import fk, within_limits
+from planecal.estimation.compensate import CalibratedKinematics, Region, Targets, compensate
+from planecal.model.encoder import counts_to_joints
+from planecal.model.robot import fk, within_limits
 
 
 def draw_targets(robot, region: Region, n: int, rng, checker=None, max_draws: int = 100_000):

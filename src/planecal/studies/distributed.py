@@ -62,7 +62,7 @@ from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 
 RESULTS_FORMAT = "planecal-results/1"
 CONNECT_TIMEOUT_S = 10.0
@@ -539,7 +539,7 @@ def warm_twin(scene: str = "thesis_final") -> float:
     the on-disk cache); returns the seconds it took. A warm-up for studies on the twin."""
     import time
     t0 = time.perf_counter()
-    from planecal.scene import load_scene
+    from planecal.model.scene import load_scene
     from planecal.twin import Twin
     twin = Twin(load_scene(scene), truth="nominal", seed=0)
     hold = (twin.current_counts - twin.reference_counts)[None]

@@ -28,8 +28,8 @@ from itertools import combinations
 import numpy as np
 import scipy.linalg
 
-from planecal.cell import predict_with_jacobian
-from planecal.errors import InputError
+from planecal.model.cell import predict_with_jacobian
+from planecal.base.errors import InputError
 from planecal.studies.common import BUFFER_LEN
 
 FORMAT = "planecal-layouts/1"
@@ -94,7 +94,7 @@ def layout_study(scene, layout_for, free_names=None, samples: int = 150, seed: i
     subset: plates, samples, free, base (identifiable), excluded (with reason and
     combination), rank, predicted std of the base set (SI units) and its ratio to each
     parameter's ``practical_std``."""
-    from planecal.scene import nominal_params
+    from planecal.model.scene import nominal_params
     from planecal.studies.montecarlo import MCSettings, joint_sigma
     from planecal.studies.planning import candidates, predicted_std
 

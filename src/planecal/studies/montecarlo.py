@@ -15,7 +15,7 @@ the covariances of ``studies.common.covariances``. Sampling modes:
   it only skips simulating the ticks of each move (the servo always settles exactly on
   the commanded counts, so the sample is the same).
 * ``rehearse``: the full ``SamplingRun`` on the twin, tick by tick (slow; for checking).
-* ``synthetic``: the analytic model (``planecal.synthetic``'s poses, no collision check:
+* ``synthetic``: the analytic model (``planecal.twin.synthetic``'s poses, no collision check:
   a slightly different pose distribution) with the twin's noise model added in numpy:
   Gaussian joint repeatability, buffer-mean laser noise and, optionally, the encoder's
   quantisation (uniform +-0.5 count per actuator). For fast tests.
@@ -54,10 +54,10 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from planecal.cell import predict_with_jacobian
-from planecal.errors import InputError
-from planecal.fit import noise_variance
-from planecal.layout import ParamLayout, level1_layout
+from planecal.model.cell import predict_with_jacobian
+from planecal.base.errors import InputError
+from planecal.estimation.fit import noise_variance
+from planecal.model.layout import ParamLayout, level1_layout
 from planecal.studies.common import (BUFFER_LEN, Progress, cached_profile, cached_scene,
                                      cached_world, covariances, parallel_map, table)
 
@@ -173,7 +173,7 @@ MISMATCH = ("geometry", "compliance", "gear", "backlash", "laser_linearity", "th
 
 def sources_on(robot, world, options) -> list[str]:
     """The families of ``SOURCES`` present in a world (``Truth``, ``TwinOptions``)."""
-    from planecal.kinematics import from_robot
+    from planecal.model.kinematics import from_robot
     kin = getattr(world, "kinematics", None)
     nom = from_robot(robot)
     geometry = kin is not None and not all(
@@ -239,7 +239,7 @@ def truth_for(st: MCSettings, k: int):
 
 def joint_sigma(robot, st: MCSettings) -> float:
     """The repeatability's std per joint [rad] of the settings' world."""
-    from planecal.robot import repeatability_sigma
+    from planecal.model.robot import repeatability_sigma
     mm = mc_options(st).repeatability_mm
     rep = robot.repeatability_m if mm is None else mm * 1e-3
     return repeatability_sigma(robot, rep) if rep > 0 else 0.0
@@ -270,7 +270,7 @@ def _collect(scene, planner, twin, rs, seed: int):
     where the twin's joint errors depend on the path, driven there tick by tick
     (``DriveAcquirer``, as ``rehearse``): (qe, d_m, plate, rejected dict); RuntimeError
     when the run gives up."""
-    from planecal.encoder import counts_to_joints
+    from planecal.model.encoder import counts_to_joints
     from planecal.links.base import AlwaysEnabled
     from planecal.sampling.collect import (Cursor, DriveAcquirer, MemoryRecorder,
                                            RestAcquirer, Tally, collect)
@@ -320,7 +320,7 @@ def pose_list_samples(scene, world, st: MCSettings, seed: int, options=None):
 def rehearse_samples(scene, world, st: MCSettings, seed: int, options=None):
     """The full sampling run, tick by tick (``planecal rehearse`` without the CLI)."""
     from planecal.links.base import AlwaysEnabled
-    from planecal.samples import read_samples
+    from planecal.io.samples import read_samples
     from planecal.sampling.driver import Driver
     from planecal.sampling.run import SamplingRun
 
@@ -337,9 +337,9 @@ def rehearse_samples(scene, world, st: MCSettings, seed: int, options=None):
 
 def synthetic_noisy_samples(scene, truth, st: MCSettings, seed: int):
     """Analytic model with the twin's noise model (module docstring)."""
-    from planecal.cell import plane_distance, sensor_in_base
-    from planecal.encoder import counts_to_joints
-    from planecal.synthetic import synthetic_samples
+    from planecal.model.cell import plane_distance, sensor_in_base
+    from planecal.model.encoder import counts_to_joints
+    from planecal.twin.synthetic import synthetic_samples
 
     rng = np.random.default_rng(seed)
     robot = scene.robot
@@ -373,8 +373,8 @@ def sample_variance(robot, J_delta, joint_sigma_rad: float, distance_sigma_m: fl
 
 def run_one(job) -> dict:
     """One Monte Carlo run: job = (settings, k). Pure function of (settings, k)."""
-    from planecal.fit import FitOptions, Problem, solve, uncertainty
-    from planecal.scene import nominal_params
+    from planecal.estimation.fit import FitOptions, Problem, solve, uncertainty
+    from planecal.model.scene import nominal_params
 
     st, k = job
     scene = cached_scene(st.scene)

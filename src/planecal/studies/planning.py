@@ -48,10 +48,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.cell import predict_with_jacobian
-from planecal.encoder import counts_in_range, counts_to_joints, joints_to_counts
-from planecal.errors import InputError
-from planecal.fit import noise_variance
+from planecal.model.cell import predict_with_jacobian
+from planecal.model.encoder import counts_in_range, counts_to_joints, joints_to_counts
+from planecal.base.errors import InputError
+from planecal.estimation.fit import noise_variance
 from planecal.formats.base import read_json, validate
 from planecal.formats.poses import POSES_FORMAT, PosesFile
 from planecal.studies.common import BUFFER_LEN, covariances
@@ -174,7 +174,7 @@ def d_optimal(A: np.ndarray, n: int, max_passes: int = 20, tol: float = 1e-9):
 def scaled_rows(scene, qe, plate, layout, free):
     """The Jacobian (over ``layout``) at the scene's nominal parameters, and its free
     columns scaled to unit RMS."""
-    from planecal.scene import nominal_params
+    from planecal.model.scene import nominal_params
     nominal = nominal_params(scene)
     _, J = predict_with_jacobian(scene.robot, qe, nominal, plate, layout)
     Jf = J[:, free]
@@ -193,7 +193,7 @@ def predicted_std(J: np.ndarray, layout, free, joint_sigma: float, laser_sigma_m
 def position_rows(scene, q: np.ndarray, layout, free) -> np.ndarray:
     """The flange position's sensitivity to each free joint offset at the joint angles q:
     (k, 3, free offsets) [m/rad] (the geometric Jacobian's translation rows)."""
-    from planecal.robot import jacobian
+    from planecal.model.robot import jacobian
     offsets = layout.group("joint_offsets").names
     fn = layout.names_of(free)
     cols = [offsets.index(nm) for nm in fn if nm in offsets]
@@ -275,10 +275,10 @@ def plan(scene, n: int, m: int, seed: int = 0, free_names=None, checker=None,
     """The planning study (module docstring). Returns the planned pose list (ordered for
     robot time unless ``ordered=False``), the random set of equal size, both predictions
     and the robot times. With a target (``target_std_urad`` or ``target_ap_mm``) ``n`` is
-    the most samples it may choose. ``progress``: a ``planecal.progress.Progress`` of
+    the most samples it may choose. ``progress``: a ``planecal.base.progress.Progress`` of
     ``PLAN_STAGES`` steps, updated at each stage."""
-    from planecal.encoder import joints_to_counts
-    from planecal.layout import level1_layout
+    from planecal.model.encoder import joints_to_counts
+    from planecal.model.layout import level1_layout
     from planecal.sampling import tour
     from planecal.sampling.planner import ListPlanner
     from planecal.studies.montecarlo import MCSettings, joint_sigma

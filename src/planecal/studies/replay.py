@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.cell import CellParams, predict
-from planecal.errors import InputError
+from planecal.model.cell import CellParams, predict
+from planecal.base.errors import InputError
 
 
 def replay_world(scene, params: CellParams, profile, truth_seed: int = 0):
@@ -92,8 +92,8 @@ def replay(scene, params: CellParams, qe: np.ndarray, d_mm: np.ndarray,
 def edge_margins(scene, params: CellParams, qe, plate) -> np.ndarray:
     """Distance [m] of each analytic hit point from the nearest edge of its plate as the
     twin places it (negative: outside the plate)."""
-    from planecal.cell import plane_distance, sensor_in_base
-    from planecal.encoder import counts_to_joints
+    from planecal.model.cell import plane_distance, sensor_in_base
+    from planecal.model.encoder import counts_to_joints
 
     q = counts_to_joints(scene.robot, qe)
     o_b, z_b = sensor_in_base(scene.robot, q, params)

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.studies.common import cached_profile, cached_scene, cached_world, table
 
 FORMAT = "planecal-sweep/1"
@@ -251,9 +251,9 @@ def items(spec: SweepSpec, plans: dict) -> list[Item]:
 def run_one(item: Item) -> dict:
     """Rehearse in the twin, calibrate, measure (module docstring). Pure function of the
     item. A run that gives up returns {"failed": reason}."""
-    from planecal.encoder import counts_to_joints
-    from planecal.fit import Problem, solve
-    from planecal.layout import level1_layout
+    from planecal.model.encoder import counts_to_joints
+    from planecal.estimation.fit import Problem, solve
+    from planecal.model.layout import level1_layout
     from planecal.links.base import AlwaysEnabled
     from planecal.sampling.collect import (Cursor, DriveAcquirer, MemoryRecorder,
                                            RestAcquirer, Tally, collect)
@@ -261,7 +261,7 @@ def run_one(item: Item) -> dict:
     from planecal.sampling.planner import ListPlanner, Planner
     from planecal.sampling.run import RunSettings
     from planecal.sampling.tour import Clock
-    from planecal.scene import nominal_params
+    from planecal.model.scene import nominal_params
     from planecal.studies.montecarlo import path_dependent
     from planecal.twin import Twin
     from planecal.twin.profile import draw_world
@@ -331,7 +331,7 @@ def run_sweep(spec: SweepSpec, out, engine, resume: bool = False, progress=None,
     ``distributed.Engine``) into the results file ``out``, and summarise. A planned run
 whose laser gives up on some poses of its list takes fewer samples (as the sampling run
 would); the table says how many were taken on average (``taken``).
-    ``plan_progress``: a ``planecal.progress.Progress`` over ``plans_needed``."""
+    ``plan_progress``: a ``planecal.base.progress.Progress`` over ``plans_needed``."""
     plans = {}
     for scene, design, n in plans_needed(spec):
         if plan_progress:

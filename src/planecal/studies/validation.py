@@ -67,10 +67,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planecal.cell import CellParams, sensor_in_base, sensor_rotation
-from planecal.encoder import counts_to_joints, joints_to_counts
-from planecal.errors import InputError
-from planecal.robot import fk, ik_nearest
+from planecal.model.cell import CellParams, sensor_in_base, sensor_rotation
+from planecal.model.encoder import counts_to_joints, joints_to_counts
+from planecal.base.errors import InputError
+from planecal.model.robot import fk, ik_nearest
 from planecal.studies.common import BUFFER_LEN, table
 from planecal.studies.montecarlo import SOURCES
 
@@ -169,8 +169,8 @@ def robot_frame(robot, world) -> np.ndarray:
     """The frame ISO 9283 measures in, in the cell frame (module docstring): the true
     robot's frame of joint 1 at its zero, mapped onto the nominal one's. Identity in the
     ideal world with delta1 = 0."""
-    from planecal.compensate import registered_frame
-    from planecal.kinematics import from_robot
+    from planecal.estimation.compensate import registered_frame
+    from planecal.model.kinematics import from_robot
     kin = world.kinematics if world.kinematics is not None else from_robot(robot)
     return registered_frame(robot, kin.with_offsets(world.params.joint_offsets))
 
@@ -180,7 +180,7 @@ def _commanded_counts(robot, T, q_ref, model):
     (robot.json's model with them), or a level-2 ``CellParams`` (the whole calibrated
     model: its offsets' IK, then ``compensate.solve_poses`` on the full model)."""
     if isinstance(model, CellParams):
-        from planecal.compensate import FullModel, solve_poses
+        from planecal.estimation.compensate import FullModel, solve_poses
         q0 = ik_nearest(robot, T, q_ref, delta=model.joint_offsets, weights=np.abs(robot.gains))
         if q0 is None:
             return None, None
@@ -414,7 +414,7 @@ def predicted_spread(robot, meas, calibrated: CellParams, layout, covariance, po
     ``layout``) predicts (1 sigma) for the gauge-length error and for the TCP position
     error at the ISO poses (offsets' covariance through the flange Jacobian), by linear
     propagation."""
-    from planecal.robot import jacobian
+    from planecal.model.robot import jacobian
     cov = covariance.matrix
     x0 = calibrated.to_vector(layout)
     idx = layout.indices(covariance.names)
@@ -460,7 +460,7 @@ def validate(scene, world, calibrated: CellParams, sample_counts: np.ndarray,
     the ideal world's). ``sample_counts``: the calibration samples (they place the ISO
     cube); ``fit``: the calibration's ``fit.Result``, whose covariance predicts the spread
     (None: no prediction)."""
-    from planecal.scene import nominal_params
+    from planecal.model.scene import nominal_params
     from planecal.twin import Twin, TwinOptions
     from planecal.twin.laser import LaserNoise
     from planecal.twin.truth import Truth
@@ -535,7 +535,7 @@ def validate(scene, world, calibrated: CellParams, sample_counts: np.ndarray,
 
 # ----- over truths, and what each error source leaves -----------------------------------------
 
-LEVELS = ("offsets", "full")  # what ``calibrate_run`` fits (planecal.calibration)
+LEVELS = ("offsets", "full")  # what ``calibrate_run`` fits (planecal.estimation.calibrate)
 
 
 def calibrate_run(scene, qe: np.ndarray, d: np.ndarray, plate: np.ndarray,
@@ -544,8 +544,8 @@ def calibrate_run(scene, qe: np.ndarray, d: np.ndarray, plate: np.ndarray,
     values, at ``level`` (``LEVELS``) as ``planecal calibrate --level`` does (offsets: the
     joint offsets, the sensor pose and the planes; full: the whole kinematic model's
     identifiable base set, the arm's scale kept; ``compliance``: J2/J3's compliance too)."""
-    from planecal.calibration import calibrate
-    from planecal.scene import nominal_params
+    from planecal.estimation.calibrate import calibrate
+    from planecal.model.scene import nominal_params
     if level not in LEVELS:
         raise InputError(f"--level: one of {', '.join(LEVELS)}, got {level!r}")
     return calibrate(scene.robot, qe, d, nominal_params(scene), plate, level=level,

@@ -32,10 +32,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from planecal.cell import CellParams
-from planecal.encoder import counts_in_range, joints_to_counts
-from planecal.errors import InputError
-from planecal.scene import Scene, load_scene
+from planecal.model.cell import CellParams
+from planecal.model.encoder import counts_in_range, joints_to_counts
+from planecal.base.errors import InputError
+from planecal.model.scene import Scene, load_scene
 from planecal.twin import ticks as T
 from planecal.twin.beam import BeamCaster
 from planecal.twin.errors import EPS_BLOCK, JointErrors, gravity_model

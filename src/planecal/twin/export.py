@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from planecal.scene import Scene, load_scene
+from planecal.model.scene import Scene, load_scene
 from planecal.twin.mjcf import scene_spec, to_xml_exact
 from planecal.twin.truth import resolve_truth
 

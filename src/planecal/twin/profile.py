@@ -16,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.errors import InputError
+from planecal.base.errors import InputError
 from planecal.formats import read_json, validate
 from planecal.formats.base import Num, Record, Vector
-from planecal.formats.errors import N_JOINTS, ErrorProfileFile
-from planecal.kinematics import Kinematics, frame_error, from_robot, parallel_pairs
-from planecal.robot import Robot
-from planecal.scene import Scene
+from planecal.formats.error_profile import N_JOINTS, ErrorProfileFile
+from planecal.model.kinematics import Kinematics, frame_error, from_robot, parallel_pairs
+from planecal.model.robot import Robot
+from planecal.model.scene import Scene
 from planecal.twin.core import TwinOptions
 from planecal.twin.truth import Tolerances, Truth, draw_truth
 
@@ -125,7 +125,7 @@ def save_truth(path, twin) -> None:
     """The twin's hidden truth as a parameter file (``params``: what a level-1 calibration
     is compared with), plus the world it was drawn in: the robot's true geometry and the
     gear phases (``world``; extra keys a parameter-file reader keeps)."""
-    from planecal.params import PARAMS_FORMAT, params_to_dict, save_json
+    from planecal.io.params import PARAMS_FORMAT, params_to_dict, save_json
     doc = {"format": PARAMS_FORMAT, **params_to_dict(twin.truth)}
     kin = twin.true_kinematics
     world = {"gear_phases_rad": list(twin._world.gear_phases),

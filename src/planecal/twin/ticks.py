@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.gravity_kernel import gravity_torque  # the one formula (also the calibration's)
+from planecal.model.gravity_kernel import gravity_torque  # the one formula (also the calibration's)
 
 try:
     from numba import njit

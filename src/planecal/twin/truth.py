@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.cell import CellParams, n_tilde_from_point_normal, point_normal_from_n_tilde
-from planecal.errors import InputError
-from planecal.kinematics import Kinematics
-from planecal.params import load_params
-from planecal.scene import Scene, nominal_params
+from planecal.model.cell import CellParams, n_tilde_from_point_normal, point_normal_from_n_tilde
+from planecal.base.errors import InputError
+from planecal.model.kinematics import Kinematics
+from planecal.io.params import load_params
+from planecal.model.scene import Scene, nominal_params
 
 
 @dataclass(frozen=True)

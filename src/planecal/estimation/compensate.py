@@ -1,0 +1,573 @@
+"""Compensation ("filtering a program", RoboDK's term; issue 13 item 4): joint targets the
+controller can play so that the *calibrated* model puts the flange where the *nominal*
+model says it should be.
+
+The FD11 keeps robot.json's kinematics and its encoder offsets (qe0); it cannot take a new
+kinematic model. A program's target is a flange pose T in the base frame, or a joint target
+whose pose the nominal model gives (``robot.fk``). Its corrected target q_c solves
+
+    calibrated_flange(q_c) = T
+
+by Newton's method on the pose error (position [m], rotation vector [rad], both in the base
+frame) with the calibrated model's geometric Jacobian (central differences of the seam's
+``flange``: any model), started from the nominal solution (the closed-form IK nearest the
+previous target, or the joint target itself). The calibrated model differs from the
+nominal by milliradians: 2-3 steps, 5-6 near the elbow's stretched singularity (Jacobian
+condition ~6e3). Every target's convergence is checked (``Compensation.converged``). The corrected joints
+are written as counts with robot.json's encoder model (``encoder.joints_to_counts``): the
+controller is left as it is. Rounding to whole counts leaves a residual of its own
+(``rounded_residual_m``, tens of um at the MC70's ~2.3e-5 rad per count).
+
+The seam (``CalibratedKinematics``): anything with ``robot`` and ``flange(q) -> (N, 4, 4)``.
+``OffsetsModel`` is a level-1 result (joint offsets on robot.json's standard DH,
+``robot.fk``); ``FullModel`` a level-2 result (``planecal.model.model_full.flange_pose``: modified
+DH + Hayati, base frame, compliance), chosen by ``load_calibrated`` when the result file
+carries the level-2 ``kinematics`` key.
+
+Frames. A plane calibration cannot see where the robot stands among the plates nor J1's
+zero: a turn about J1 (delta1) or a shift of the base moves the plates with it. A level-1
+fit fixes delta1 at 0; a full model may carry that freedom in delta1 or its base frame
+(a 20 mrad delta1 seen on three plates). Targets are therefore registered, by default, in
+the robot's own frame: the model's frame of joint 1 at q = 0 mapped onto the nominal
+model's (``robot_frame``; ``planecal validate``'s AP frame), so ``calibrated_flange(q_c) =
+robot_frame T``. ``frame="cell"`` takes T in the calibration's base frame instead.
+
+The calibrated region (``Region``): the joint-space box of the calibration's samples (the
+range of each joint over them). A model fitted there is only known there; ``outside``
+says how far (rad per joint) a target's corrected joints lie outside it.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from planecal.model.cell import CellParams
+from planecal.model.encoder import counts_to_joints, joints_to_counts
+from planecal.base.errors import InputError
+from planecal.formats.base import MAX_JSON_BYTES, read_bounded, read_json
+from planecal.model.robot import Robot, fk, ik_nearest, within_limits
+
+TARGETS_FORMAT = "planecal-targets/1"
+COMPENSATED_FORMAT = "planecal-compensated/1"
+TOL_M = 1e-9  # a target is solved when the calibrated flange is within 1 nm ...
+TOL_RAD = 1e-9  # ... and 1 nrad of it
+MAX_ITER = 30
+MAX_TARGETS = 100_000
+COUNT_LIMIT = 1 << 24
+
+CARTESIAN = ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg")
+JOINTS_DEG = tuple(f"q{j}_deg" for j in range(1, 7))
+COUNTS = tuple(f"q{j}" for j in range(1, 7))
+
+
+# ----- the seam -------------------------------------------------------------------------------
+
+class CalibratedKinematics(Protocol):
+    """A calibrated robot: the flange pose the calibration predicts at joint angles q.
+
+    ``robot``: the description its nominal model comes from (robot.json: the controller's
+    kinematics and encoder model); ``level``: "offsets" or "full" (for reports);
+    ``flange(q)``: q (N, 6) rad (joint angles from the encoder model) -> (N, 4, 4) flange
+    (standard DH frame 6) in the base frame."""
+    robot: Robot
+    level: str
+
+    def flange(self, q: np.ndarray) -> np.ndarray: ...
+
+    def robot_frame(self) -> np.ndarray:
+        """4x4: the model's frame of joint 1 at q = 0 in its base frame, times the inverse
+        of the nominal model's (identity for the nominal model)."""
+        ...
+
+
+def registered_frame(robot: Robot, kin) -> np.ndarray:
+    """``kin``'s frame of joint 1 at q = 0 mapped onto robot.json's (``robot_frame``): how
+    a model's base frame sits in the frame a robot is measured in (ISO 9283's)."""
+    from planecal.model.kinematics import frames, from_robot
+    z = np.zeros(robot.n_joints)
+    return frames(kin, z)[1] @ np.linalg.inv(frames(from_robot(robot), z)[1])
+
+
+@dataclass(frozen=True)
+class OffsetsModel:
+    """A level-1 calibration: robot.json's standard DH with joint offsets ``delta``."""
+    robot: Robot
+    delta: np.ndarray
+    level: str = "offsets"
+
+    def flange(self, q: np.ndarray) -> np.ndarray:
+        return fk(self.robot, np.atleast_2d(q), self.delta)
+
+    def robot_frame(self) -> np.ndarray:
+        from planecal.model.kinematics import from_robot
+        return registered_frame(self.robot, from_robot(self.robot, self.delta))
+
+
+@dataclass(frozen=True)
+class FullModel:
+    """A level-2 calibration (``planecal.model.model_full``): the whole geometric model, base
+    frame and joint compliance that the parameters carry."""
+    robot: Robot
+    params: CellParams
+    level: str = "full"
+
+    def flange(self, q: np.ndarray) -> np.ndarray:
+        from planecal.model.model_full import flange_pose
+        return flange_pose(self.robot, np.atleast_2d(q), self.params)
+
+    def robot_frame(self) -> np.ndarray:
+        from planecal.model.model_full import kinematics_of
+        return registered_frame(self.robot, kinematics_of(self.robot, self.params))
+
+
+def load_calibrated(robot: Robot, path) -> tuple[CalibratedKinematics, dict]:
+    """The calibrated model of a result (or parameter) file, and the parsed file. A file
+    with the level-2 ``kinematics`` key is a full model; any other a level-1 one."""
+    from planecal.io.params import load_params
+    doc = read_json(path, "calibration result")
+    params = load_params(path)
+    if isinstance(doc, dict) and doc.get("kinematics") is not None:
+        return FullModel(robot, params), doc
+    return OffsetsModel(robot, params.joint_offsets.copy()), doc
+
+
+# ----- the calibrated region ------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Region:
+    """The joint-space box of a calibration's samples: per joint [lower, upper] rad."""
+    lower: np.ndarray
+    upper: np.ndarray
+    samples: int
+    source: str
+
+    @classmethod
+    def from_counts(cls, robot: Robot, qe: np.ndarray, source: str) -> "Region":
+        q = counts_to_joints(robot, np.asarray(qe))
+        if len(q) < 2:
+            raise InputError(f"{source}: a calibrated region needs at least 2 samples")
+        return cls(q.min(0), q.max(0), len(q), source)
+
+    def outside(self, q: np.ndarray) -> np.ndarray:
+        """How far (rad, >= 0) each joint of q (N, 6) lies outside the box: (N, 6)."""
+        q = np.atleast_2d(q)
+        return np.maximum(0.0, np.maximum(self.lower - q, q - self.upper))
+
+    def to_dict(self) -> dict:
+        return {"kind": "joint_box", "lower_deg": np.degrees(self.lower).tolist(),
+                "upper_deg": np.degrees(self.upper).tolist(), "samples": self.samples,
+                "source": self.source}
+
+
+def recorded_samples(doc: dict, result_path) -> list[Path]:
+    """The sample files a result's provenance records (role ``samples``), found here with
+    the recorded content (relative paths: from the working directory, then beside the
+    result). InputError for a recorded file that is missing or changed."""
+    prov = doc.get("provenance") if isinstance(doc, dict) else None
+    entries = prov.get("inputs") if isinstance(prov, dict) else None
+    found = []
+    for e in entries if isinstance(entries, list) else []:
+        if not isinstance(e, dict) or e.get("role") != "samples" or not e.get("path"):
+            continue
+        p = Path(str(e["path"]))
+        cands = [p] if p.is_absolute() else [p, Path(result_path).parent / p]
+        hit = next((c for c in cands if c.is_file()), None)
+        if hit is None:
+            raise InputError(f"{result_path}: its samples file {p} is not here; give the "
+                             "calibration's samples with --samples")
+        with open(hit, "rb") as f:
+            digest = hashlib.file_digest(f, "sha256").hexdigest()
+        if e.get("sha256") and digest != e["sha256"]:
+            raise InputError(f"{hit}: not the samples file {result_path} was made from (its "
+                             "SHA-256 differs); give the calibration's samples with --samples")
+        found.append(hit)
+    return found
+
+
+# ----- targets -----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Targets:
+    """Targets read from a file. ``pose`` (N, 4, 4) for Cartesian targets (NaN rows for
+    joint targets), ``q`` (N, 6) rad for joint targets (NaN rows for Cartesian ones);
+    ``where``: the line (CSV) or entry (JSON) of each, for messages."""
+    names: list
+    pose: np.ndarray
+    q: np.ndarray
+    where: list
+    source: str
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @property
+    def cartesian(self) -> np.ndarray:
+        return np.isfinite(self.pose[:, 0, 0])
+
+
+def pose_from(xyz_mm, rxyz_deg) -> np.ndarray:
+    """Flange pose from a position [mm] and fixed-axis angles rx, ry, rz [deg]:
+    R = Rz(rz) Ry(ry) Rx(rx) (scipy ``from_euler('xyz')``, extrinsic)."""
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("xyz", rxyz_deg, degrees=True).as_matrix()
+    T[:3, 3] = np.asarray(xyz_mm, float) * 1e-3
+    return T
+
+
+def angles_of(T: np.ndarray) -> np.ndarray:
+    """(rx, ry, rz) [deg] of ``pose_from``'s convention, (..., 3)."""
+    return Rotation.from_matrix(T[..., :3, :3]).as_euler("xyz", degrees=True)
+
+
+def _finite(v: str, where: str, col: str) -> float:
+    try:
+        x = float(v)
+    except ValueError:
+        raise InputError(f"{where}: {col}: not a number: {v!r}") from None
+    if not np.isfinite(x):
+        raise InputError(f"{where}: {col}: not a finite number: {v!r}")
+    return x
+
+
+def _counts(vals, where: str, cols) -> np.ndarray:
+    out = []
+    for v, c in zip(vals, cols):
+        if isinstance(v, str):
+            v = v.strip()
+            if not v.lstrip("+-").isdigit():
+                raise InputError(f"{where}: {c}: encoder counts are integers, got {v!r}")
+            v = int(v)
+        elif isinstance(v, bool) or not isinstance(v, int):
+            raise InputError(f"{where}: {c}: encoder counts are integers, got {v!r}")
+        if not 0 <= v < COUNT_LIMIT:
+            raise InputError(f"{where}: {c}: {v} outside the 24-bit encoder range")
+        out.append(v)
+    return np.array(out, np.int64)
+
+
+class _Builder:
+    def __init__(self, robot: Robot, source: str):
+        self.robot, self.source = robot, source
+        self.names, self.pose, self.q, self.where = [], [], [], []
+
+    def add(self, name, where, pose=None, q=None):
+        if len(self.names) >= MAX_TARGETS:
+            raise InputError(f"{self.source}: more than {MAX_TARGETS} targets")
+        if name and not name.isprintable():
+            raise InputError(f"{where}: name: holds a control character (tab, newline, ...)")
+        self.names.append(name if name else f"T{len(self.names) + 1}")
+        self.where.append(where)
+        self.pose.append(np.full((4, 4), np.nan) if pose is None else pose)
+        self.q.append(np.full(6, np.nan) if q is None else q)
+
+    def done(self) -> Targets:
+        if not self.names:
+            raise InputError(f"{self.source}: no targets")
+        return Targets(self.names, np.array(self.pose), np.array(self.q), self.where,
+                       self.source)
+
+
+def read_targets(path, robot: Robot) -> Targets:
+    """A targets file: JSON (``planecal-targets/1``) if it ends in .json, else CSV (comma,
+    semicolon or tab separated, a header naming the columns). docs/COMPENSATE.md."""
+    p = Path(path)
+    if p.suffix.lower() == ".json":
+        return _read_json_targets(p, robot)
+    return _read_csv_targets(p, robot)
+
+
+def _read_csv_targets(p: Path, robot: Robot) -> Targets:
+    raw = read_bounded(p, "targets file", MAX_JSON_BYTES)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise InputError(f"{p}: not UTF-8 text (byte {e.start}), not a targets file") from None
+    lines = text.splitlines()
+    first = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")),
+                 None)
+    if first is None:
+        raise InputError(f"{p}: no targets (an empty file)")
+    head = lines[first]
+    delim = "\t" if "\t" in head else (";" if ";" in head else ",")
+    rows = csv.reader(io.StringIO("\n".join(lines)), delimiter=delim)
+    cols = None
+    b = _Builder(robot, str(p))
+    for lineno, row in enumerate(rows, 1):
+        if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
+            continue
+        row = [c.strip() for c in row]
+        if cols is None:
+            cols = [c.lower() for c in row]
+            kinds = [k for k in (CARTESIAN, JOINTS_DEG, COUNTS) if set(k) <= set(cols)]
+            if len(kinds) != 1:
+                raise InputError(f"{p}:{lineno}: the header names the columns: "
+                                 f"{','.join(CARTESIAN)} (a flange pose), or "
+                                 f"{','.join(JOINTS_DEG)} (joints), or {','.join(COUNTS)} "
+                                 f"(encoder counts); optional 'name'. Got {','.join(row)}")
+            kind = kinds[0]
+            unknown = set(cols) - set(kind) - {"name"}
+            if unknown:
+                raise InputError(f"{p}:{lineno}: unknown column(s) {', '.join(sorted(unknown))}")
+            idx = [cols.index(c) for c in kind]
+            iname = cols.index("name") if "name" in cols else None
+            continue
+        where = f"{p}:{lineno}"
+        if len(row) != len(cols):
+            raise InputError(f"{where}: {len(row)} fields, the header has {len(cols)}")
+        vals = [row[i] for i in idx]
+        name = row[iname] if iname is not None else None
+        if kind is CARTESIAN:
+            v = [_finite(x, where, c) for x, c in zip(vals, kind)]
+            b.add(name, where, pose=pose_from(v[:3], v[3:]))
+        elif kind is JOINTS_DEG:
+            b.add(name, where, q=np.radians([_finite(x, where, c) for x, c in zip(vals, kind)]))
+        else:
+            b.add(name, where, q=counts_to_joints(robot, _counts(vals, where, kind)))
+    return b.done()
+
+
+def _read_json_targets(p: Path, robot: Robot) -> Targets:
+    doc = read_json(p, "targets file")
+    if not isinstance(doc, dict) or doc.get("format") != TARGETS_FORMAT:
+        raise InputError(f"{p}: format: a targets file carries \"format\": \"{TARGETS_FORMAT}\"")
+    ts = doc.get("targets")
+    if not isinstance(ts, list) or not ts:
+        raise InputError(f"{p}: targets: a non-empty list of targets")
+    unknown = set(doc) - {"format", "targets", "description"}
+    if unknown:
+        raise InputError(f"{p}: unknown key(s) {', '.join(sorted(unknown))}")
+    b = _Builder(robot, str(p))
+    keys = {"name", "position_mm", "rotation_deg", "joints_deg", "counts"}
+
+    def vec(t, k, n, where):
+        v = t.get(k)
+        if not isinstance(v, list) or len(v) != n or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            raise InputError(f"{where}.{k}: {n} numbers")
+        return [_finite(str(x), where, k) for x in v]
+
+    for i, t in enumerate(ts):
+        where = f"{p}: targets[{i}]"
+        if not isinstance(t, dict):
+            raise InputError(f"{where}: a target is an object {{...}}")
+        bad = set(t) - keys
+        if bad:
+            raise InputError(f"{where}: unknown key(s) {', '.join(sorted(bad))}")
+        name = t.get("name")
+        if name is not None and not isinstance(name, str):
+            raise InputError(f"{where}.name: a string")
+        given = [k for k in ("position_mm", "joints_deg", "counts") if k in t]
+        if len(given) != 1 or (("rotation_deg" in t) != (given == ["position_mm"])):
+            raise InputError(f"{where}: give position_mm with rotation_deg, or joints_deg, "
+                             "or counts")
+        if given[0] == "position_mm":
+            b.add(name, where, pose=pose_from(vec(t, "position_mm", 3, where),
+                                              vec(t, "rotation_deg", 3, where)))
+        elif given[0] == "joints_deg":
+            b.add(name, where, q=np.radians(vec(t, "joints_deg", 6, where)))
+        else:
+            c = t["counts"]
+            if not isinstance(c, list) or len(c) != 6:
+                raise InputError(f"{where}.counts: 6 integers")
+            b.add(name, where, q=counts_to_joints(robot, _counts(c, where, COUNTS)))
+    return b.done()
+
+
+# ----- the solve ---------------------------------------------------------------------------------
+
+def pose_error(T: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(N, 6): position T - F [m] and the rotation vector of R_T R_F^T [rad], base frame."""
+    dp = T[:, :3, 3] - F[:, :3, 3]
+    dw = Rotation.from_matrix(T[:, :3, :3] @ np.swapaxes(F[:, :3, :3], -1, -2)).as_rotvec()
+    return np.hstack([dp, dw])
+
+
+def flange_jacobian(model: CalibratedKinematics, q: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """The calibrated model's geometric Jacobian (N, 6, 6), rows (v, w) in the base frame,
+    by central differences of ``model.flange`` (any model behind the seam; at the MC70's
+    scale its error is ~1e-12 relative, see the tests against ``robot.jacobian``)."""
+    q = np.atleast_2d(q)
+    n, k = q.shape
+    steps = np.concatenate([np.eye(k) * h, -np.eye(k) * h])  # (2k, k)
+    F = model.flange((q[:, None, :] + steps[None]).reshape(-1, k)).reshape(n, 2 * k, 4, 4)
+    Fp, Fm = F[:, :k], F[:, k:]
+    dp = (Fp[..., :3, 3] - Fm[..., :3, 3]) / (2 * h)  # (n, k, 3)
+    dR = (Fp[..., :3, :3] - Fm[..., :3, :3]) / (2 * h)
+    W = dR @ np.swapaxes(model.flange(q)[:, None, :3, :3], -1, -2)  # [w]x
+    dw = np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
+    return np.swapaxes(np.concatenate([dp, dw], axis=-1), -1, -2)
+
+
+def solve_poses(model: CalibratedKinematics, T: np.ndarray, q0: np.ndarray,
+                tol_m: float = TOL_M, tol_rad: float = TOL_RAD, max_iter: int = MAX_ITER):
+    """Joint angles q (N, 6) with model.flange(q) = T (N, 4, 4), by Newton from q0 with the
+    model's own Jacobian (``flange_jacobian``): (q, iterations (N,), converged (N,),
+    position residual [m] (N,), rotation residual [rad] (N,))."""
+    q = np.array(q0, float, copy=True)
+    n = len(q)
+    its = np.zeros(n, int)
+    for _ in range(max_iter + 1):
+        e = pose_error(T, model.flange(q))
+        rp, rw = np.linalg.norm(e[:, :3], axis=1), np.linalg.norm(e[:, 3:], axis=1)
+        todo = ~((rp < tol_m) & (rw < tol_rad))
+        if not todo.any() or its.max() >= max_iter:
+            break
+        J = flange_jacobian(model, q[todo])
+        q[todo] += np.einsum("nij,nj->ni", np.linalg.pinv(J, rcond=1e-12), e[todo])
+        its[todo] += 1
+    return q, its, ~todo, rp, rw
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """Each target's nominal and corrected joints and counts, the solve's convergence and
+    residuals, and how far outside the calibrated region it lies (module docstring)."""
+    names: list
+    where: list
+    pose: np.ndarray  # (N, 4, 4) the flange pose the nominal model commands
+    q_nominal: np.ndarray  # (N, 6) rad
+    q_corrected: np.ndarray  # (N, 6) rad
+    counts_nominal: np.ndarray  # (N, 6) int64
+    counts_corrected: np.ndarray  # (N, 6) int64
+    iterations: np.ndarray
+    converged: np.ndarray
+    residual_m: np.ndarray  # the solve's, continuous joints
+    residual_rad: np.ndarray
+    rounded_residual_m: np.ndarray  # the calibrated flange at the integer counts
+    rounded_residual_rad: np.ndarray
+    outside_rad: np.ndarray  # (N, 6), 0 inside the region
+
+    @property
+    def correction_rad(self) -> np.ndarray:
+        return self.q_corrected - self.q_nominal
+
+    @property
+    def correction_counts(self) -> np.ndarray:
+        return self.counts_corrected - self.counts_nominal
+
+    @property
+    def outside(self) -> np.ndarray:
+        return self.outside_rad.max(1) > 0
+
+    def summary(self) -> dict:
+        out = self.outside_rad.max(1)
+        worst = int(np.argmax(out))
+        return {
+            "targets": len(self.names),
+            "converged": int(self.converged.sum()),
+            "max_iterations": int(self.iterations.max()),
+            "max_correction_counts": np.abs(self.correction_counts).max(0).tolist(),
+            "max_correction_mrad": (np.abs(self.correction_rad).max(0) * 1e3).tolist(),
+            "max_residual_mm": float(self.residual_m.max() * 1e3),
+            "max_residual_mrad": float(self.residual_rad.max() * 1e3),
+            "max_rounded_residual_mm": float(self.rounded_residual_m.max() * 1e3),
+            "max_rounded_residual_mrad": float(self.rounded_residual_rad.max() * 1e3),
+            "outside": int(self.outside.sum()),
+            "max_outside_deg": float(np.degrees(out[worst])),
+            "max_outside_target": self.names[worst] if out[worst] > 0 else None,
+            "max_outside_joint": int(np.argmax(self.outside_rad[worst]) + 1) if out[worst] > 0 else None,
+        }
+
+
+def nominal_solutions(robot: Robot, targets: Targets, q_start: np.ndarray):
+    """Each target's nominal joints and pose: a joint target's pose by ``robot.fk``; a
+    Cartesian target's joints by the closed-form IK nearest to the previous target's
+    (the first: nearest ``q_start``), as the controller would play the program.
+    InputError naming a target no solution within the joint limits reaches."""
+    q = targets.q.copy()
+    T = targets.pose.copy()
+    prev = np.asarray(q_start, float)
+    w = np.abs(robot.gains)
+    for i in range(len(targets)):
+        if np.isfinite(T[i, 0, 0]):
+            qi = ik_nearest(robot, T[i], prev, weights=w)
+            if qi is None:
+                raise InputError(f"{targets.where[i]}: target {targets.names[i]} is out of "
+                                 "reach of the nominal model (no IK solution within the "
+                                 "joint limits)")
+            q[i] = qi
+        else:
+            if not within_limits(robot, q[i]):
+                raise InputError(f"{targets.where[i]}: target {targets.names[i]} is outside "
+                                 "the joint limits")
+            T[i] = fk(robot, q[i])
+        prev = q[i]
+    return q, T
+
+
+FRAMES = ("robot", "cell")
+
+
+def compensate(model: CalibratedKinematics, targets: Targets, region: Region,
+               q_start: np.ndarray | None = None, frame: str = "robot") -> Compensation:
+    """Corrected joint targets (module docstring). ``q_start``: where the first Cartesian
+    target's IK branch is chosen (default: the region's centre). ``frame``: what the
+    targets' coordinates are relative to: ``robot`` (default) the robot's own frame, joint
+    1's axis and zero (the model's ``robot_frame``: a calibration's turn about J1 or shift
+    of the base that no plate sees stays out); ``cell`` the calibration's base frame (the
+    frame its planes are in)."""
+    if frame not in FRAMES:
+        raise InputError(f"--frame must be one of {', '.join(FRAMES)}, got {frame!r}")
+    robot = model.robot
+    q_start = (region.lower + region.upper) / 2 if q_start is None else q_start
+    q_nom, T = nominal_solutions(robot, targets, q_start)
+    Tm = model.robot_frame() @ T if frame == "robot" else T  # in the model's base frame
+    q_c, its, ok, rp, rw = solve_poses(model, Tm, q_nom)
+    bad = np.flatnonzero(ok & ~within_limits(robot, q_c))
+    if len(bad):
+        i = bad[0]
+        raise InputError(f"{targets.where[i]}: target {targets.names[i]}: the corrected "
+                         "joints leave the joint limits")
+    c_nom = joints_to_counts(robot, q_nom)
+    c_cor = joints_to_counts(robot, np.where(ok[:, None], q_c, q_nom))
+    e = pose_error(Tm, model.flange(counts_to_joints(robot, c_cor)))
+    return Compensation(list(targets.names), list(targets.where), T, q_nom, q_c, c_nom, c_cor,
+                        its, ok, rp, rw, np.linalg.norm(e[:, :3], axis=1),
+                        np.linalg.norm(e[:, 3:], axis=1), region.outside(q_c))
+
+
+def compensated_document(comp: Compensation, model: CalibratedKinematics, region: Region,
+                         inputs: dict, frame: str = "robot") -> dict:
+    """The JSON output (``planecal-compensated/1``, docs/COMPENSATE.md)."""
+    rows = []
+    for i, name in enumerate(comp.names):
+        rows.append({
+            "name": name,
+            "counts": comp.counts_corrected[i].tolist(),
+            "nominal_counts": comp.counts_nominal[i].tolist(),
+            "correction_counts": comp.correction_counts[i].tolist(),
+            "joints_deg": np.degrees(comp.q_corrected[i]).tolist(),
+            "nominal_joints_deg": np.degrees(comp.q_nominal[i]).tolist(),
+            "position_mm": (comp.pose[i, :3, 3] * 1e3).tolist(),
+            "rotation_deg": angles_of(comp.pose[i]).tolist(),
+            "iterations": int(comp.iterations[i]),
+            "converged": bool(comp.converged[i]),
+            "residual_mm": float(comp.residual_m[i] * 1e3),
+            "rounded_residual_mm": float(comp.rounded_residual_m[i] * 1e3),
+            "outside_deg": np.degrees(comp.outside_rad[i]).tolist(),
+        })
+    return {"format": COMPENSATED_FORMAT, "level": model.level, "frame": frame,
+            "robot_frame": model.robot_frame().tolist(), "inputs": inputs,
+            "region": region.to_dict(), "summary": comp.summary(), "targets": rows}
+
+
+def write_counts_table(path, comp: Compensation) -> None:
+    """The corrected targets as a tab-separated table: name, q1..q6 (counts)."""
+    lines = ["name\t" + "\t".join(COUNTS)]
+    for name, c in zip(comp.names, comp.counts_corrected):
+        lines.append(name + "\t" + "\t".join(str(int(v)) for v in c))
+    p = Path(path)
+    tmp = p.with_name(f"{p.name}.tmp")
+    try:
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        tmp.replace(p)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise

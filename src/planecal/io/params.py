@@ -1,0 +1,100 @@
+"""Parameter files (JSON), the format others script against:
+
+    {"format": "planecal-params/1",
+     "joint_offsets_rad": [6 numbers],
+     "planes": [{"n_tilde": [x, y, z]}, ...],
+     "sensor": {"origin_m": [x, y, z], "phi_y_rad": .., "phi_z_rad": ..}}
+
+Result files (``planecal-result/1``) hold the same keys plus ``std`` (same shape, null
+where not identifiable), ``residual_rms_mm``, ``iterations``, ``outliers``,
+``identifiability`` and ``provenance``. The models and their checks are in
+``planecal.formats.params``; files without ``format`` (older ones) are read alike.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from planecal.model.cell import CellParams
+from planecal.formats.base import read_json, validate
+from planecal.formats.params import PARAMS_FORMAT, ParamsFile
+
+
+def params_to_dict(p: CellParams) -> dict:
+    """The file's keys; ``kinematics`` (level 2's corrections) only where one is non-zero,
+    so a level-1 file is what it always was."""
+    out = {
+        "joint_offsets_rad": [float(v) for v in p.joint_offsets],
+        "planes": [{"n_tilde": [float(v) for v in n]} for n in p.planes],
+        "sensor": {"origin_m": [float(v) for v in p.sensor_origin],
+                   "phi_y_rad": float(p.phi_y), "phi_z_rad": float(p.phi_z)},
+    }
+    if not p.is_level1:
+        out["kinematics"] = kinematics_to_dict(p.geometry, p.base, p.compliance)
+    return out
+
+
+def kinematics_to_dict(geometry, base, compliance) -> dict:
+    """The ``kinematics`` object from (6, 4) geometry [alpha, a, beta, d], base (6,) and
+    compliance (6,) (values or std; None/NaN become null)."""
+    def row(v):
+        return [None if e is None or not np.isfinite(e) else float(e) for e in v]
+    g = np.asarray(geometry, float)
+    return {"alpha_rad": row(g[:, 0]), "a_m": row(g[:, 1]), "beta_rad": row(g[:, 2]),
+            "d_m": row(g[:, 3]), "base": row(np.asarray(base, float)),
+            "compliance_rad_per_nm": row(np.asarray(compliance, float))}
+
+
+def params_from_dict(d, path: str = "<params>") -> CellParams:
+    """CellParams from a parsed parameter (or result) file, validated by
+    ``planecal.formats.params.ParamsFile``; one-line InputError otherwise."""
+    pf = validate(ParamsFile, d, path, "parameter file")
+    s = pf.sensor
+    k = pf.kinematics
+    extra = {} if k is None else {
+        "geometry": np.array([k.alpha_rad, k.a_m, k.beta_rad, k.d_m], float).T,
+        "base": k.base, "compliance": k.compliance_rad_per_nm}
+    return CellParams(pf.joint_offsets_rad, s.origin_m, s.phi_y_rad, s.phi_z_rad,
+                      [p.n_tilde for p in pf.planes], **extra)
+
+
+def load_json(path: str | Path, what: str = "JSON file"):
+    """Parsed JSON, read within planecal's bounds (size, nesting, binary data); one-line
+    InputError otherwise. Validation is the caller's (``planecal.formats``)."""
+    return read_json(path, what)
+
+
+def load_params(path: str | Path) -> CellParams:
+    return params_from_dict(read_json(path, "parameter file"), str(path))
+
+
+def save_json(path: str | Path, data: dict, fsync: bool = False) -> None:
+    """Write JSON to a temp file and rename it over ``path``: a reader (or a resumed run)
+    sees the old or the new file, never a torn one."""
+    path = Path(path)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(json.dumps(data, indent=2, default=_jsonable) + "\n")
+            if fsync:
+                f.flush()
+                os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:  # disk full, a kill: no temp file left behind
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def save_params(path: str | Path, p: CellParams) -> None:
+    save_json(path, {"format": PARAMS_FORMAT, **params_to_dict(p)})
+
+
+def _jsonable(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    raise TypeError(f"not JSON serializable: {type(v).__name__}")

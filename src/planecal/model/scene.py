@@ -1,0 +1,137 @@
+"""Scenes: one JSON file per cell under scenes/ (robot, sensor, plates, obstacles).
+
+A scene holds *nominal* values (what the cell engineer measured). The twin draws its
+hidden truth around them; calibration starts from them (``nominal_params``).
+
+Plate geometry: the measured face lies in the plane n~ . p = 1. ``corner_m`` is projected
+onto that plane; the plate spans ``size_m`` along its in-plane x axis (``x_axis`` projected
+onto the plane) and y = facing x x. ``face`` (+1 or -1) says whether the measured side
+looks along +n~ or -n~ (the side the sensor is on); the plate's body (``thickness_m``)
+lies behind the face. A stand, if any, is a box from the floor to the plate's lowest point.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from planecal.model.cell import CellParams, point_normal_from_n_tilde
+from planecal.base.errors import InputError
+from planecal.formats.base import read_json, validate
+from planecal.formats.robot import reach_m
+from planecal.formats.scene import RobotBounds, SceneFile
+from planecal.base.paths import data_path
+from planecal.model.robot import DEFAULT_ROBOT, Robot, load_robot
+
+DEFAULT_SCENE = "thesis_final"
+
+
+@dataclass
+class Plate:
+    name: str
+    n_tilde: np.ndarray
+    corner: np.ndarray
+    x_hint: np.ndarray
+    size: np.ndarray  # (2,) m
+    thickness: float
+    face: int = 1
+    stand: bool = True
+
+    def frame(self, n_tilde: np.ndarray | None = None) -> np.ndarray:
+        """Plate frame (4x4) in the base frame: origin at the corner on the measured face,
+        z the facing normal, x and y along the plate's edges. With ``n_tilde`` the plate
+        is placed on that plane instead (the twin's hidden truth)."""
+        n_tilde = self.n_tilde if n_tilde is None else np.asarray(n_tilde, float)
+        _, nhat = point_normal_from_n_tilde(n_tilde)
+        z = self.face * nhat
+        corner = self.corner - (n_tilde @ self.corner - 1.0) / (n_tilde @ nhat) * nhat
+        x = self.x_hint - (self.x_hint @ z) * z
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        T = np.eye(4)
+        T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, corner
+        return T
+
+    def center(self, n_tilde: np.ndarray | None = None) -> np.ndarray:
+        T = self.frame(n_tilde)
+        return T[:3, 3] + T[:3, :2] @ (self.size / 2)
+
+
+@dataclass
+class Box:
+    name: str
+    center: np.ndarray
+    size: np.ndarray  # full extents (3,) m
+    rpy: np.ndarray  # (3,) rad, R = Rz(yaw) Ry(pitch) Rx(roll)
+
+
+@dataclass
+class Scene:
+    name: str
+    path: Path
+    description: str
+    robot: Robot
+    sensor_origin: np.ndarray
+    phi_y: float
+    phi_z: float
+    laser_range_mm: tuple[float, float]
+    plates: list[Plate]
+    obstacles: list[Box] = field(default_factory=list)
+    floor_z: float = 0.0
+    home_counts: np.ndarray | None = None
+    calibration_q: np.ndarray | None = None  # rad, a configuration near the plates
+    cone_deg: float = 30.0
+    distance_mm: tuple[float, float] = (70.0, 90.0)
+
+
+def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
+    p = Path(name_or_path)
+    try:
+        exists = p.exists()
+    except (OSError, ValueError):  # a NUL character, a name too long: reading will say so
+        exists = False
+    if p.suffix == ".json" or exists:
+        return p
+    return data_path("scenes") / f"{name_or_path}.json"
+
+
+def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
+    """A scene by name (scenes/<name>.json) or path, validated by
+    ``planecal.formats.scene.SceneFile`` against its robot (home counts within the
+    encoder's bits, plates within reach); one-line InputError otherwise."""
+    path = scene_path(name_or_path)
+    raw = read_json(path, "scene")
+    robot = bounds = None
+    ref = raw.get("robot", DEFAULT_ROBOT) if isinstance(raw, dict) else None
+    if isinstance(ref, str) and ref:  # otherwise validation names the problem
+        try:
+            robot = load_robot(ref)
+        except InputError as e:
+            raise InputError(f"{path}: robot: {e}") from None
+        bounds = RobotBounds(robot.name, reach_m(robot.d, robot.a), robot.encoder_bits)
+    sf = validate(SceneFile, raw, path, "scene", {"robot": bounds})
+    plates = [Plate(name=p.name or f"plate{i + 1}", n_tilde=np.array(p.n_tilde),
+                    corner=np.array(p.corner_m), x_hint=np.array(p.x_axis),
+                    size=np.array(p.size_m), thickness=p.thickness_m, face=p.face,
+                    stand=p.stand)
+              for i, p in enumerate(sf.plates)]
+    obstacles = [Box(o.name or f"obstacle{i + 1}", np.array(o.center_m), np.array(o.size_m),
+                     np.array(o.rpy_rad)) for i, o in enumerate(sf.obstacles)]
+    pos, s = sf.positions, sf.sensor
+    home = robot.home_counts if pos.home_counts is None else pos.home_counts
+    return Scene(
+        name=sf.name or path.stem, path=path, description=sf.description, robot=robot,
+        sensor_origin=np.array(s.origin_m), phi_y=s.phi_y_rad, phi_z=s.phi_z_rad,
+        laser_range_mm=tuple(s.range_mm), plates=plates, obstacles=obstacles,
+        floor_z=sf.floor_z_m, home_counts=np.asarray(home, np.int64),
+        calibration_q=(None if pos.calibration_deg is None
+                       else np.deg2rad(np.array(pos.calibration_deg))),
+        cone_deg=sf.sampling.cone_deg, distance_mm=tuple(sf.sampling.distance_mm),
+    )
+
+
+def nominal_params(scene: Scene) -> CellParams:
+    """The scene's nominal parameters: zero offsets, the measured sensor pose and planes."""
+    return CellParams(np.zeros(6), scene.sensor_origin, scene.phi_y, scene.phi_z,
+                      np.array([p.n_tilde for p in scene.plates]))
