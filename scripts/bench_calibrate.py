@@ -25,7 +25,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 from scipy.optimize import least_squares
 
-from planecal.model.cell import CellParams, predict
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import predict
 from planecal.estimation.fit import FitOptions, Problem, solve
 from planecal.model.scene import load_scene, nominal_params
 from planecal.twin.synthetic import synthetic_samples
@@ -83,7 +84,7 @@ def main():
 
 def level2():
     from planecal.estimation.calibrate import calibrate
-    from planecal.model.cell import predict_with_jacobian
+    from planecal.model.measurement import predict_with_jacobian
 
     scene = load_scene("three_plates")
     robot = scene.robot

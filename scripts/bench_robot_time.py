@@ -38,7 +38,8 @@ def main(argv=None) -> int:
     from planecal.base.progress import Progress as Bar
     from planecal.studies.common import Progress
     from planecal.studies.distributed import Engine, warm_twin
-    from planecal.studies.sweep import format_sweep, plans_needed, run_sweep, spec_from_dict
+    from planecal.present.sweep import format_sweep
+    from planecal.studies.sweep import plans_needed, run_sweep, spec_from_dict
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=50)

@@ -29,7 +29,8 @@ def main() -> int:
     from planecal.estimation.fit import Problem, solve
     from planecal.model.scene import nominal_params
     from planecal.studies.common import cached_scene
-    from planecal.studies.montecarlo import MCSettings, run_many, truth_for, twin_samples
+    from planecal.studies.montecarlo import MCSettings, run_many, truth_for
+    from planecal.studies.rehearsal import twin_samples
 
     jobs = args.jobs or (os.cpu_count() or 1)  # run_many: an Engine of this many jobs
     print(f"cpus {os.cpu_count()}, jobs {jobs}, load average {os.getloadavg()[0]:.1f}")

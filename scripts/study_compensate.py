@@ -4,7 +4,8 @@ robot frame (cell frame in brackets), nominal vs compensated, unseen targets and
 import sys
 import time
 from planecal.model.scene import load_scene, nominal_params
-from planecal.studies.montecarlo import MCSettings, twin_samples, world_for
+from planecal.studies.montecarlo import MCSettings, world_for
+from planecal.studies.rehearsal import twin_samples
 from planecal.estimation.fit import Problem, solve
 from planecal.estimation.compensate import OffsetsModel
 from planecal.safety.collision import CollisionWorld

@@ -60,7 +60,8 @@ def make_pool(path: str, n: int = 1000) -> None:
     """The bootstrap pool: one long twin rehearsal (twin mode, truth seed 0, seed 77)."""
     from planecal.io.samples import write_samples
     from planecal.studies.common import cached_scene
-    from planecal.studies.montecarlo import MCSettings, truth_for, twin_samples
+    from planecal.studies.montecarlo import MCSettings, truth_for
+    from planecal.studies.rehearsal import twin_samples
     st = MCSettings(samples=n)
     qe, d, plate, _ = twin_samples(cached_scene(st.scene), truth_for(st, 0), st, 77)
     write_samples(path, qe, d * 1e3)

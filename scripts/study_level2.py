@@ -31,11 +31,11 @@ from pathlib import Path
 import numpy as np
 
 from planecal.estimation.calibrate import calibrate_samples
-from planecal.model.cell import beam_direction, predict
+from planecal.model.measurement import beam_direction, predict
 from planecal.model.encoder import counts_to_joints
 from planecal.model.gravity import joint_torques
 from planecal.model.kinematics import fk as kin_fk
-from planecal.model.model_full import flange_pose
+from planecal.model.measurement import flange_pose
 from planecal.io.samples import read_samples
 from planecal.model.scene import load_scene, nominal_params
 from planecal.twin.profile import load_profile, load_world

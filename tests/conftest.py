@@ -8,9 +8,12 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "disable")
 
-from planecal.model.cell import CellParams, plane_distance, predict, sensor_in_base  # noqa: E402
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import plane_distance, predict, sensor_in_base  # noqa: E402
 from planecal.model.encoder import counts_to_joints, joints_to_counts  # noqa: E402
-from planecal.model.robot import fk, ik_nearest, load_robot  # noqa: E402
+from planecal.model.kinematics import fk
+from planecal.model.ik import ik_nearest
+from planecal.model.robot import load_robot  # noqa: E402
 
 # Seed 7.1.4: five real MC70 samples (counts, laser mm)
 SEED_QE = np.array([
@@ -63,7 +66,7 @@ def synthetic_counts(robot, params: CellParams, n: int, rng, plane: int = 0,
         if not 0.0 < d < 0.5:
             continue
         target = rng.uniform(*d_range)
-        T = fk(robot, q, params.joint_offsets)
+        T = fk(robot.kinematics.with_offsets(params.joint_offsets), q)
         T[:3, 3] += (d - target) * z_b
         q2 = ik_nearest(robot, T, q, params.joint_offsets)
         if q2 is None:
@@ -78,7 +81,7 @@ def synthetic_counts(robot, params: CellParams, n: int, rng, plane: int = 0,
 def perturbed(params: CellParams, rng, offsets=2e-3, length=0.005, angle=0.02) -> CellParams:
     """Truth near the nominal parameters: offsets within +-offsets rad (delta1 = delta6 = 0),
     sensor origin within +-length m, angles within +-angle rad, plane moved accordingly."""
-    from planecal.model.cell import n_tilde_from_point_normal, point_normal_from_n_tilde
+    from planecal.model.planes import n_tilde_from_point_normal, point_normal_from_n_tilde
     t = params.copy()
     t.joint_offsets = params.joint_offsets + rng.uniform(-offsets, offsets, 6) * [0, 1, 1, 1, 1, 0]
     t.sensor_origin = params.sensor_origin + rng.uniform(-length, length, 3)

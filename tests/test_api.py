@@ -77,15 +77,17 @@ def test_calibrate_recovers_the_truth_and_wraps_fit_solve(scene, synthetic, tmp_
     assert cal.values["delta3"] == res.params.joint_offsets[2]
     assert np.isnan(cal.std["delta1"]) and cal.units["o_x"] == "m"
     text = repr(cal)
-    assert "Calibration on scene thesis_final: converged" in text
-    assert f"model error RMS {cal.rms_before_m * 1e3:.4f} mm" in text
+    assert "Calibration on scene thesis_final, level offsets: converged" in text
+    # the terminal report of planecal calibrate (present.calibration.text)
+    assert (f"model error (predicted - measured) RMS  before {cal.rms_before_m * 1e3:.4f} mm"
+            in text)
     for name in res.names:
-        assert f"\n  {name} " in text
+        assert f"\n{name} " in text
     assert "fixed" in text
     # a file path works too; bad input is one InputError
     from planecal.io.samples import write_samples
     write_samples(tmp_path / "s.tsv", s.counts, s.distance_m * 1e3, s.plate)
-    assert planecal.calibrate(tmp_path / "s.tsv", scene).iterations >= 1
+    assert planecal.calibrate(tmp_path / "s.tsv", scene).result.iterations >= 1
     with pytest.raises(InputError, match="SampleSet"):
         planecal.calibrate([1, 2, 3], scene)
     with pytest.raises(InputError, match="max_iter"):
@@ -98,7 +100,7 @@ def rehearsal():
 
 
 def test_rehearse_gives_si_samples_that_match_the_model_at_the_truth(scene, rehearsal):
-    from planecal.model.cell import predict
+    from planecal.model.measurement import predict
     from planecal.model.scene import nominal_params
     s = rehearsal.samples
     assert len(s) == 30 and s.counts.shape == (30, 6) and s.counts.dtype == np.int64
@@ -128,6 +130,6 @@ def test_validate_compares_nominal_and_calibrated(rehearsal):
     assert val.ap_calibrated_m == d["ap_after_mm"] * 1e-3
     assert val.ap_calibrated_m < 0.5 * val.ap_nominal_m  # the calibration helps
     text = repr(val)
-    assert f"nominal {val.ap_nominal_m * 1e3:.4f} mm" in text and "2 cycles" in text
+    assert f"AP before {val.ap_nominal_m * 1e3:.4f} mm" in text and "2 cycles" in text
     with pytest.raises(InputError):
         planecal.validate(cal, rehearsal.samples)

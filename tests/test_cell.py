@@ -1,9 +1,9 @@
 import numpy as np
 
 from conftest import INITIAL, SEED_DM, SEED_QE, TABLE10
-from planecal.model.cell import (CellParams, beam_direction, n_tilde_from_point_normal,
-                           point_normal_from_n_tilde, predict, predict_with_jacobian,
-                           sensor_rotation, transform_n_tilde)
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import beam_direction, predict, predict_with_jacobian, sensor_rotation
+from planecal.model.planes import n_tilde_from_point_normal, point_normal_from_n_tilde, transform_n_tilde
 from planecal.model.layout import level1_layout
 
 

@@ -23,7 +23,7 @@ def test_predict_prints_index_measured_predicted_error(capsys):
     pred = [float(r[2]) for r in rows]
     np.testing.assert_allclose(pred, [89.776, 85.318, 68.221, 68.017, 71.580], atol=0.01)
     assert rows[0][0] == "0" and float(rows[0][1]) == 92.52
-    assert abs(float(rows[0][3]) - (92.52 - pred[0])) < 1e-3
+    assert abs(float(rows[0][3]) - (pred[0] - 92.52)) < 1e-3  # predicted - measured
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,8 @@ def test_calibrate_writes_result_json(run_file, tmp_path, capsys):
     out = tmp_path / "r.json"
     assert main(["calibrate", str(path), "--out", str(out), "--outlier-sigma", "4"]) == 0
     text = capsys.readouterr().out
-    assert "residual RMS" in text and "delta2" in text and "fixed" in text
+    assert "model error (predicted - measured) RMS" in text and "delta2" in text
+    assert "fixed" in text
     r = json.loads(out.read_text())
     for key in ("joint_offsets_rad", "planes", "sensor", "std", "residual_rms_mm",
                 "iterations", "outliers", "identifiability"):
@@ -59,15 +60,21 @@ def test_calibrate_result_holds_the_covariance_by_name(run_file, tmp_path, capsy
     # rows and columns of what is not identifiable are null
     path, _ = run_file
     out = tmp_path / "r.json"
-    # every parameter free: delta1 and delta6 are not identifiable (exit 1), the file is
-    # written all the same
-    assert main(["calibrate", str(path), "--out", str(out), "--free", "all"]) == 1
+    # every parameter a candidate: delta1 and delta6 are combinations of the planes and
+    # the sensor (the base set leaves them out, and says so); the 12 others are fitted
+    assert main(["calibrate", str(path), "--out", str(out), "--free", "all"]) == 0
+    text = capsys.readouterr().out
+    assert "EXCLUDED delta1: a combination of others" in text
+    assert "EXCLUDED delta6: a combination of others" in text
     r = json.loads(out.read_text())
+    assert len(r["candidates"]) == 14
+    assert {e["parameter"] for e in r["excluded"]} == {"delta1", "delta6"}
+    status = {p["name"]: p["status"] for p in r["parameters"]}
+    assert status["delta1"] == status["delta6"] == "excluded: combination"
     cov = r["covariance"]
-    assert cov["names"] == r["free"] == r["identifiability"]["free"]
-    assert len(cov["names"]) == 14 and all(len(row) == 14 for row in cov["matrix"])
+    assert cov["names"] == r["free"] == r["identifiability"]["free"] == r["base_set"]
+    assert len(cov["names"]) == 12 and all(len(row) == 12 for row in cov["matrix"])
     bad = set(r["identifiability"]["not_identifiable"])
-    assert {"delta1", "delta6"} <= bad
     for i, a in enumerate(cov["names"]):
         for j, b in enumerate(cov["names"]):
             v = cov["matrix"][i][j]
@@ -103,11 +110,11 @@ def test_calibrate_with_initial_file_and_free_list(run_file, tmp_path, capsys):
     p = tmp_path / "init.json"
     save_params(p, INITIAL)
     # 5 iterations from afar: not converged (exit 1); the report still names delta1 and
-    # delta6 as not identifiable on one plate
+    # delta6 as what one plate cannot tell from the planes and the sensor
     assert main(["calibrate", str(path), "--initial", str(p), "--free",
                  "all", "--max-iter", "5"]) == 1
     cap = capsys.readouterr()
-    assert "NOT IDENT." in cap.out and "WARNING not identifiable" in cap.out
+    assert "EXCLUDED delta1: a combination" in cap.out and "excluded" in cap.out
     assert cap.err.count("\n") == 1 and "did not converge in 5 iterations" in cap.err
 
 

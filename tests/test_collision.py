@@ -9,7 +9,7 @@ import trimesh
 from planecal.safety.collision import FLOOR_DEPTH_M, CollisionWorld
 from planecal.base.errors import InputError
 from planecal.model.geometry import LinkMesh, StaticMesh, box_mesh
-from planecal.model.robot import fk, fk_frames
+from planecal.model.kinematics import fk, link_frames
 from planecal.model.scene import load_scene
 
 C = 0.01  # clearance used throughout [m]
@@ -98,7 +98,7 @@ def test_wrong_gjk_distances_are_caught(scene):
 def test_moving_part_is_posed_by_nominal_fk(scene):
     # a 40 mm cube centred on the flange; a plate-like box 200 mm out along the flange z
     q = np.deg2rad([20, -10, -30, 40, 60, -70])
-    T = fk(scene.robot, q)
+    T = fk(scene.robot.kinematics, q)
     cube = LinkMesh("cube", 6, box_mesh([0.04] * 3))
     ob_pose = T @ _T(t=(0, 0, 0.2 + 0.005))  # 10 mm thick, its near face 0.2 m out
     ob = StaticMesh("ob", box_mesh([0.3, 0.3, 0.01], ob_pose), "obstacle")
@@ -138,7 +138,7 @@ def test_floor_is_solid_ground_and_its_distance_is_the_lowest_vertex(world, scen
     seen_above = seen_below = 0
     for _ in range(40):
         q = rng.uniform(lo, hi)
-        F = fk_frames(scene.robot, q)
+        F = link_frames(scene.robot.kinematics, q)
         d = world.distances(q)
         for n in floor_pairs:
             part = next(p for p in world.parts if p.name == world.pairs[n][0])
@@ -178,7 +178,7 @@ def test_adjacent_links_are_never_checked_nor_reported(world, scene):
                                                        if why == "bolted"}
     # the filter matters: adjacent pieces overlap at the joints (raw FCL contact) ...
     import fcl
-    F = fk_frames(scene.robot, scene.calibration_q)
+    F = link_frames(scene.robot.kinematics, scene.calibration_q)
     parts = {p.name: p for p in world.parts}
     for name in ("turret", "upper_arm"):
         p = parts[name]
@@ -251,7 +251,7 @@ def test_rate_bound_holds_along_random_paths(world, scene):
         # local steps from s = 0.3 for a gap of 5 cm, checked on the vertices
         dq = q1 - q0
         s0 = 0.3
-        F0 = fk_frames(scene.robot, q0 + s0 * dq)
+        F0 = link_frames(scene.robot.kinematics, q0 + s0 * dq)
         idx = np.arange(len(world.pairs))
         _, cu = world._lower_bounds(np.broadcast_to(F0, (len(idx),) + F0.shape), idx)
         gap = np.full(len(idx), 0.05)
@@ -263,7 +263,7 @@ def test_rate_bound_holds_along_random_paths(world, scene):
             other = j if up == i else i
             p, o = world.parts[up], world.parts[other]
             ss = np.linspace(s0, min(s0 + steps[n], 1.0), 60)
-            Fs = fk_frames(scene.robot, q0 + ss[:, None] * dq)
+            Fs = link_frames(scene.robot.kinematics, q0 + ss[:, None] * dq)
             ref = Fs[:, max(o.body, 0)]  # the other part's frame (base for static parts)
             rel = np.linalg.inv(ref) @ Fs[:, p.body]
             X = np.einsum("sab,vb->sva", rel[:, :3, :3], p.V) + rel[:, None, :3, 3]
@@ -300,7 +300,7 @@ def test_grazing_path_is_rejected_not_looped(scene):
     # whose face is tangent-ish to the motion: the checker must terminate either way
     q0 = np.deg2rad([0, 0, 0, 0, 0, 0])
     q1 = np.deg2rad([30, 0, 0, 0, 0, 0])
-    T = fk(scene.robot, q0 + 0.5 * (q1 - q0))
+    T = fk(scene.robot.kinematics, q0 + 0.5 * (q1 - q0))
     cube = LinkMesh("cube", 6, box_mesh([0.04] * 3))
     # obstacle whose near face is exactly clearance + 0.05 mm from the cube at s = 0.5
     ob = StaticMesh("ob", box_mesh([0.2, 0.2, 0.2], T @ _T(t=(0, 0, 0.02 + C + 5e-5 + 0.1))),

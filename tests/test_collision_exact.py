@@ -11,7 +11,7 @@ pytest.importorskip("mujoco")
 from mujoco_oracle import ExactOracle  # noqa: E402
 from planecal.safety.collision import CollisionWorld  # noqa: E402
 from planecal.model.geometry import COLLISION_MARGIN, scene_meshes  # noqa: E402
-from planecal.model.robot import ik_nearest  # noqa: E402
+from planecal.model.ik import ik_nearest  # noqa: E402
 from planecal.sampling.poses import PoseGenerator  # noqa: E402
 from planecal.model.scene import load_scene  # noqa: E402
 

@@ -34,7 +34,7 @@ mujoco = pytest.importorskip("mujoco")
 
 from mujoco_oracle import mujoco_contacts, mujoco_contacts_along_path  # noqa: E402
 from planecal.safety.collision import FLOOR_DEPTH_M, CollisionWorld  # noqa: E402
-from planecal.model.robot import fk  # noqa: E402
+from planecal.model.kinematics import fk  # noqa: E402
 from planecal.model.scene import load_scene  # noqa: E402
 
 C = 0.01
@@ -126,7 +126,7 @@ def _head_centre_track(scene, q0, q1, n=200):
     from planecal.model.geometry import HEAD_EXTENTS, sensor_pose
     T_fs = sensor_pose(scene.sensor_origin, scene.phi_y, scene.phi_z)
     S = np.linspace(0, 1, n)
-    T = fk(scene.robot, q0 + S[:, None] * (q1 - q0)) @ T_fs
+    T = fk(scene.robot.kinematics, q0 + S[:, None] * (q1 - q0)) @ T_fs
     return T[:, :3, :3] @ np.array([0, 0, -HEAD_EXTENTS[2] / 2]) + T[:, :3, 3]
 
 

@@ -7,12 +7,16 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
-from planecal.estimation.compensate import (COMPENSATED_FORMAT, OffsetsModel, Region, Targets,
-                                 compensate, flange_jacobian, load_calibrated, pose_from,
-                                 read_targets, solve_poses)
-from planecal.model.encoder import joints_to_counts, offsets_to_qe0
+from planecal.estimation.compensate import (COMPENSATED_FORMAT, CalibratedModel, Region,
+                                            Targets, compensate, load_calibrated, pose_from,
+                                            read_targets, solve_poses)
+from planecal.model.cell_params import CellParams
+from regions import joint_region
+from planecal.model.encoder import counts_to_joints, joints_to_counts, offsets_to_qe0
 from planecal.base.errors import InputError
-from planecal.model.robot import fk, ik_nearest, jacobian, load_robot
+from planecal.model.kinematics import fk, jacobian
+from planecal.model.ik import ik_nearest
+from planecal.model.robot import load_robot
 
 ROBOT = load_robot()
 DELTA = np.array([0.0, 2e-3, -1.5e-3, 1e-3, -2e-3, 0.0])
@@ -21,11 +25,16 @@ Q_CAL = np.radians([28.7, -15.2, -44.5, -66.1, 73.3, -92.5])
 
 def _poses(n=40, seed=0, spread=0.3):
     q = Q_CAL + np.random.default_rng(seed).uniform(-spread, spread, (n, 6))
-    return q, fk(ROBOT, q)
+    return q, fk(ROBOT.kinematics, q)
 
 
 def _region(q, margin=0.01):
-    return Region(q.min(0) - margin, q.max(0) + margin, len(q), "test")
+    return joint_region(q, margin)
+
+
+def OffsetsModel(robot, delta):
+    """The calibrated model of a level-1 result: robot.json's chain with joint offsets."""
+    return CalibratedModel(robot, CellParams(joint_offsets=delta))
 
 
 def test_level1_solution_is_the_closed_form_ik_with_the_offsets():
@@ -49,10 +58,29 @@ def test_level1_solution_is_the_closed_form_ik_with_the_offsets():
     assert s["max_correction_counts"][0] == 0 and 70 <= s["max_correction_counts"][1] <= 120
 
 
-def test_model_jacobian_matches_the_analytic_one():
+def test_model_jacobian_against_central_differences_of_its_flange():
+    # the model's Jacobian (Newton's) against central differences of its own flange, at
+    # level 1 and with geometry, base frame and compliance (whose own derivative, ~1e-4 of
+    # the Jacobian, the analytic one leaves out)
     q, _ = _poses(10, seed=3)
-    J = flange_jacobian(OffsetsModel(ROBOT, DELTA), q)
-    assert np.abs(J - jacobian(ROBOT, q, DELTA)).max() < 1e-8
+    full = CellParams(joint_offsets=DELTA, geometry=np.full((6, 4), 2e-4),
+                      base=np.array([1e-3, -2e-3, 5e-4, 1e-3, -1e-3, 2e-3]),
+                      compliance=np.array([0, 2e-7, 3e-7, 0, 0, 0]))
+    for params, tol in ((CellParams(joint_offsets=DELTA), 1e-8), (full, 1e-3)):
+        m = CalibratedModel(ROBOT, params)
+        J, h = m.jacobian(q), 1e-6
+        for j in range(6):
+            dq = np.zeros(6)
+            dq[j] = h
+            Fp, Fm, F = m.flange(q + dq), m.flange(q - dq), m.flange(q)
+            v = (Fp[:, :3, 3] - Fm[:, :3, 3]) / (2 * h)
+            W = (Fp[:, :3, :3] - Fm[:, :3, :3]) / (2 * h) @ np.swapaxes(F[:, :3, :3], 1, 2)
+            w = np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], -1)
+            scale = np.abs(J[:, :, j]).max()
+            assert np.abs(J[:, :3, j] - v).max() < tol * scale + 1e-9
+            assert np.abs(J[:, 3:, j] - w).max() < tol * scale + 1e-9
+    assert np.abs(CalibratedModel(ROBOT, CellParams(joint_offsets=DELTA)).jacobian(q)
+                  - jacobian(ROBOT.kinematics.with_offsets(DELTA), q)).max() == 0
 
 
 def test_newton_converges_near_the_elbow_singularity():
@@ -61,12 +89,12 @@ def test_newton_converges_near_the_elbow_singularity():
     q0 = np.radians([[129.2558242, -15.59006963, 81.31942904, 61.89651627, 85.84678861,
                       -326.45103647]])
     delta = np.array([0.0, -0.0013652, -0.00246441, -0.00308399, 0.00137508, 0.0])
-    assert np.linalg.cond(jacobian(ROBOT, q0)[0]) > 3e3
+    assert np.linalg.cond(jacobian(ROBOT.kinematics, q0)[0]) > 3e3
     m = OffsetsModel(ROBOT, delta)
-    q, its, ok, rp, rw = solve_poses(m, fk(ROBOT, q0), q0)
+    q, its, ok, rp, rw = solve_poses(m, fk(ROBOT.kinematics, q0), q0)
     assert ok.all() and its[0] <= 8 and rp[0] < 1e-9 and rw[0] < 1e-9
     # the joints to the closed form within what 1 nm means at condition 6e3
-    assert np.abs(q - ik_nearest(ROBOT, fk(ROBOT, q0)[0], q0[0], delta=delta)).max() < 1e-8
+    assert np.abs(q - ik_nearest(ROBOT, fk(ROBOT.kinematics, q0)[0], q0[0], delta=delta)).max() < 1e-8
 
 
 def test_zero_offsets_change_nothing():
@@ -77,9 +105,27 @@ def test_zero_offsets_change_nothing():
 
 
 def test_region_distance_outside():
-    r = Region(np.zeros(6), np.ones(6), 2, "x")
+    r = joint_region(np.array([np.zeros(6), np.ones(6)]), 0.0)
     d = r.outside(np.array([[0.5] * 6, [-0.2, 0.5, 1.3, 0.5, 0.5, 0.5]]))
     assert (d[0] == 0).all() and d[1, 0] == pytest.approx(0.2) and d[1, 2] == pytest.approx(0.3)
+
+
+def test_region_is_where_the_samples_are():
+    # the issue's case: the samples' first pose turned 90 deg about J1 lies inside the
+    # joint ranges the samples visited, but far from their flange positions: outside
+    q, _ = _poses(60, seed=4, spread=0.25)
+    r = Region.from_counts(ROBOT, joints_to_counts(ROBOT, q), "test")
+    assert r.margin_m == pytest.approx(0.05) and np.degrees(r.margin_rad) == pytest.approx(2.0)
+    inside = r.distance_m(q, ROBOT)
+    assert (inside == 0).all() and (r.outside(q) == 0).all()
+    turned = q[:1].copy()
+    turned[0, 0] += np.pi / 2
+    assert r.distance_m(turned, ROBOT)[0] > 0.5  # metres away from every sample
+    # a pose just beyond the hull: its distance grows with the step, the margin first
+    p = fk(ROBOT.kinematics, q)[:, :3, 3]
+    far = np.argmax(np.linalg.norm(p - p.mean(0), axis=1))
+    step = q[far] + 0.03 * (q[far] - q.mean(0))
+    assert r.distance_m(step[None], ROBOT)[0] < r.distance_m((q[far] + 0.3 * (q[far] - q.mean(0)))[None], ROBOT)[0]
 
 
 def test_pose_convention_is_fixed_axis_xyz():
@@ -96,7 +142,7 @@ def test_pose_convention_is_fixed_axis_xyz():
 
 def test_the_three_target_formats_agree(tmp_path):
     q = Q_CAL + 0.05
-    T = fk(ROBOT, q)
+    T = fk(ROBOT.kinematics, q)
     from scipy.spatial.transform import Rotation
     ang = Rotation.from_matrix(T[:3, :3]).as_euler("xyz", degrees=True)
     xyz = T[:3, 3] * 1e3
@@ -111,7 +157,7 @@ def test_the_three_target_formats_agree(tmp_path):
     (tmp_path / "t.json").write_text(json.dumps({"format": "planecal-targets/1", "targets": [
         {"name": "p", "position_mm": xyz.tolist(), "rotation_deg": ang.tolist()},
         {"joints_deg": np.degrees(q).tolist()}, {"counts": counts.tolist()}]}))
-    region = _region(q[None], 0.1)
+    region = joint_region(q[None], 0.1)
     m = OffsetsModel(ROBOT, DELTA)
     res = {f: compensate(m, read_targets(tmp_path / f, ROBOT), region)
            for f in ("cart.csv", "deg.tsv", "counts.csv", "t.json")}
@@ -195,12 +241,14 @@ def test_command_writes_counts_from_the_recorded_samples(calibrated, capsys):
     out = d / "c.tsv"
     assert main(["compensate", str(t), "--params", str(d / "res.json"), "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "joint box of 40 samples" in text and "converged in <= 2 iterations" in text
+    assert "flange positions and joint ranges of 40 samples" in text
+    assert "converged in <= 2 iterations" in text
     lines = out.read_text().splitlines()
     assert lines[0] == "name\tq1\tq2\tq3\tq4\tq5\tq6" and lines[1].startswith("a\t")
     model, _ = load_calibrated(ROBOT, d / "res.json")
     q = np.radians([[30, -15, -44, -66, 73, -92], [35, -12, -40, -60, 70, -90]])
-    want = joints_to_counts(ROBOT, [ik_nearest(ROBOT, fk(ROBOT, qi), qi, delta=model.delta)
+    delta = model.params.joint_offsets
+    want = joints_to_counts(ROBOT, [ik_nearest(ROBOT, fk(ROBOT.kinematics, qi), qi, delta=delta)
                                     for qi in q])
     got = np.array([[int(v) for v in ln.split("\t")[1:]] for ln in lines[1:]])
     assert (got == want).all()
@@ -227,11 +275,29 @@ def test_command_refuses_targets_outside_the_region(calibrated, capsys):
     out = d / "o.tsv"
     assert main(["compensate", str(t), "--params", str(d / "res.json"), "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "1 of 2 targets lie outside the calibrated region" in err and "out, by" in err
-    assert "on J2" in err and "--allow-outside" in err and not out.exists()
+    assert "1 of 2 targets lie outside the calibrated region" in err
+    assert "out 37.93 deg beyond J2's sampled range" in err
+    assert "beyond the samples' flange positions" in err
+    assert "--allow-outside" in err and not out.exists() and err.count("\n") == 1
     assert main(["compensate", str(t), "--params", str(d / "res.json"), "--out", str(out),
                  "--allow-outside"]) == 0
     assert "WARNING" in capsys.readouterr().out and out.exists()
+
+
+def test_command_refuses_a_target_turned_away_from_every_sample(calibrated, capsys):
+    # the issue's case: the samples' first pose turned 90 deg about J1 stays inside J1's
+    # sampled range but is far from every sample's flange: outside the region
+    from planecal.io.samples import read_samples
+    d = calibrated
+    qe = read_samples(d / "run.tsv").qe
+    q = counts_to_joints(ROBOT, qe)
+    turned = q[0] + [np.pi / 2, 0, 0, 0, 0, 0]
+    t = _targets(d, [("turned", np.degrees(turned).tolist())])
+    out = d / "turned.tsv"
+    assert main(["compensate", str(t), "--params", str(d / "res.json"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "turned" in err and "beyond the samples' flange positions" in err
+    assert not out.exists()
 
 
 def test_command_needs_the_region(calibrated, tmp_path, capsys):

@@ -1,13 +1,15 @@
-"""compensate behind the seam with level 2's whole model (``FullModel``: planecal.model.model_full)."""
+"""compensate with level 2's whole model (``CalibratedModel`` of a full result)."""
 import numpy as np
 
 
-from planecal.model.cell import CellParams  # noqa: E402
-from planecal.estimation.compensate import (FullModel, OffsetsModel, Region, Targets,  # noqa: E402
+from planecal.model.cell_params import CellParams  # noqa: E402
+from planecal.estimation.compensate import (CalibratedModel, Targets,  # noqa: E402
                                  compensate, load_calibrated)
 from planecal.model.kinematics import frame_error  # noqa: E402
 from planecal.io.params import save_params  # noqa: E402
-from planecal.model.robot import fk, load_robot  # noqa: E402
+from planecal.model.kinematics import fk
+from planecal.model.robot import load_robot  # noqa: E402
+from regions import joint_region  # noqa: E402
 
 ROBOT = load_robot()
 DELTA = np.array([0.0, 2e-3, -1.5e-3, 1e-3, -2e-3, 0.0])
@@ -22,15 +24,15 @@ def _params(geometry=None, base=None, compliance=None, delta=DELTA):
 
 def _targets(n=20, seed=0):
     q = Q_CAL + np.random.default_rng(seed).uniform(-0.3, 0.3, (n, 6))
-    T = fk(ROBOT, q)
+    T = fk(ROBOT.kinematics, q)
     return q, Targets([f"t{i}" for i in range(n)], T, np.full_like(q, np.nan), ["x"] * n, "x")
 
 
 def test_full_model_without_corrections_is_the_offsets_model():
     q, t = _targets()
-    region = Region(q.min(0) - 0.01, q.max(0) + 0.01, len(q), "x")
-    a = compensate(FullModel(ROBOT, _params()), t, region)
-    b = compensate(OffsetsModel(ROBOT, DELTA), t, region)
+    region = joint_region(q, 0.01)
+    a = compensate(CalibratedModel(ROBOT, _params()), t, region)
+    b = compensate(CalibratedModel(ROBOT, CellParams(joint_offsets=DELTA)), t, region)
     assert np.abs(a.q_corrected - b.q_corrected).max() < 1e-10
     assert (a.counts_corrected == b.counts_corrected).all()
 
@@ -41,9 +43,9 @@ def test_full_model_with_corrections_is_solved_and_registered():
     g[:, 2] = 0.0
     g[2, 2] = 1e-4  # beta3: J2 || J3
     base = np.array([1e-3, -2e-3, 0.5e-3, 1e-3, -1e-3, 0.02])
-    m = FullModel(ROBOT, _params(g, base, np.array([0, 2e-7, 3e-7, 0, 0, 0])))
+    m = CalibratedModel(ROBOT, _params(g, base, np.array([0, 2e-7, 3e-7, 0, 0, 0])))
     q, t = _targets(seed=2)
-    region = Region(q.min(0) - 0.05, q.max(0) + 0.05, len(q), "x")
+    region = joint_region(q, 0.05)
     c = compensate(m, t, region)
     assert c.converged.all() and c.iterations.max() <= 4
     assert c.residual_m.max() < 1e-9 and c.residual_rad.max() < 1e-9
@@ -64,7 +66,8 @@ def test_a_full_result_file_is_read_as_a_full_model(tmp_path):
     g[1, 1] = 2e-4
     save_params(p, _params(g))
     m, doc = load_calibrated(ROBOT, p)
-    assert isinstance(m, FullModel) and m.level == "full" and "kinematics" in doc
+    assert m.level == "full" and "kinematics" in doc
+    assert np.array_equal(m.params.geometry, g)
     save_params(tmp_path / "l1.json", _params())
     m1, _ = load_calibrated(ROBOT, tmp_path / "l1.json")
-    assert isinstance(m1, OffsetsModel)
+    assert m1.level == "offsets" and not m1.params.geometry.any()

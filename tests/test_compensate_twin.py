@@ -7,12 +7,13 @@ import numpy as np
 import pytest
 
 from planecal.safety.collision import CollisionWorld
-from planecal.estimation.compensate import OffsetsModel
-from planecal.estimation.fit import Problem, solve
+from planecal.estimation.calibrate import calibrate
+from planecal.estimation.compensate import CalibratedModel
+from planecal.model.cell_params import CellParams
 from planecal.model.scene import load_scene, nominal_params
 from planecal.studies.compensation import compensation_study
+from planecal.studies.rehearsal import RehearsalSettings, twin_samples
 from planecal.studies.validation import robot_frame
-from planecal.studies.montecarlo import MCSettings, twin_samples, world_for
 
 SCENE = "thesis_final"
 
@@ -24,11 +25,16 @@ def cell():
 
 
 def _calibrated(scene, errors, truth_seed=0):
-    st = MCSettings(scene=SCENE, samples=150, errors=errors, truth_seed=truth_seed)
-    world, opts = world_for(st, 0)
+    st = RehearsalSettings(scene=SCENE, samples=150, errors=errors, truth_seed=truth_seed)
+    world, opts = st.world(0)
     qe, d, plate, _ = twin_samples(scene, world, st, 100 + truth_seed, opts)
-    fit = solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
+    fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate).result
     return world, opts, qe, fit
+
+
+def OffsetsModel(robot, delta):
+    """The calibrated model of a level-1 result (robot.json's chain with joint offsets)."""
+    return CalibratedModel(robot, CellParams(joint_offsets=delta))
 
 
 def test_ideal_world_compensation_is_exact_up_to_noise(cell):

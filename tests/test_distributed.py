@@ -420,16 +420,15 @@ def test_engine_options_are_checked_before_any_run(capsys):
 def test_bootstrap_fits_are_the_same_on_a_local_cluster(cluster, tmp_path):
     """Subset r of size s is drawn from (seed, s, r) by the run itself: the same fits on 2
     workers as here, through a results file and resumed."""
-    from planecal.estimation.fit import FitOptions, Problem
+    from planecal.estimation.calibrate import CalibrationSettings
     from planecal.model.scene import load_scene, nominal_params
-    from planecal.studies.bootstrap import BootstrapSettings, bootstrap
+    from planecal.studies.bootstrap import BootstrapSettings, Pool, bootstrap
     from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import draw_truth
     scene = load_scene("thesis_final")
     qe, d, plate = synthetic_samples(scene, draw_truth(scene, 3), 120,
                                      np.random.default_rng(1), noise_m=20e-6)
-    problem = Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate,
-                                  options=FitOptions())
+    problem = Pool(scene.robot, qe, d, plate, nominal_params(scene), CalibrationSettings())
     st = BootstrapSettings((30, 60), 4, seed=5)
     here = bootstrap(problem, st, 1, quiet=True)
     out = tmp_path / "b.jsonl"

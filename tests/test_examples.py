@@ -18,7 +18,7 @@ def test_calibrate_on_the_twin_runs_and_prints_its_summaries():
     assert out.returncode == 0, out.stderr[-2000:]
     text = out.stdout
     for head in ("Rehearsal on scene thesis_final", "SampleSet: 60 samples",
-                 "Calibration on scene thesis_final: converged", "offset error [mrad]",
-                 "Validation (ISO 9283 on the twin, 5 cycles)"):
+                 "Calibration on scene thesis_final, level offsets: converged", "offset error [mrad]",
+                 "Validation on the twin, in the rehearsal's world", "5 cycles"):
         assert head in text, head
     assert "Traceback" not in out.stderr

@@ -7,7 +7,8 @@ import pytest
 
 from planecal.cli import main
 from planecal.model.encoder import counts_to_joints, encoder_zero_counts
-from planecal.model.robot import jacobian, load_robot
+from planecal.model.kinematics import jacobian
+from planecal.model.robot import load_robot
 
 ROBOT = load_robot()
 
@@ -25,7 +26,7 @@ def test_integer_offsets_realise_the_joint_offsets_to_their_rounding():
         # half a count per actuator at most, through the coupling
         bound = np.abs(ROBOT.coupling) @ (0.5 / np.abs(ROBOT.gains))
         assert np.all(np.abs(residual) <= bound + 1e-15)
-        assert tcp == pytest.approx(np.linalg.norm(jacobian(ROBOT, np.zeros(6))[:3] @ residual))
+        assert tcp == pytest.approx(np.linalg.norm(jacobian(ROBOT.kinematics, np.zeros(6))[:3] @ residual))
 
 
 def test_a_wrist_offset_moves_the_zero_of_q6_with_delta6_fixed():

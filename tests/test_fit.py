@@ -3,8 +3,10 @@ import pytest
 from scipy.optimize import least_squares
 
 from conftest import INITIAL, perturbed, synthetic_counts
-from planecal.model.cell import CellParams, predict
-from planecal.estimation.fit import FitOptions, Problem, analyze, solve
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import predict
+from planecal.estimation.fit import FitOptions, Problem, solve
+from planecal.estimation.identifiability import analyze
 from planecal.model.layout import level1_layout
 from planecal.model.scene import load_scene, nominal_params
 
@@ -183,7 +185,7 @@ def three_plate_design():
     joint std and the noise-free joint angles. The design of docs/STUDIES.md's three-plate
     study: any roll about the beam, IK nearest (pinned: the run's defaults changed)."""
     from planecal.model.encoder import counts_to_joints
-    from planecal.model.robot import repeatability_sigma
+    from planecal.estimation.noise import repeatability_sigma
     from planecal.sampling.poses import PoseSettings
     from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import draw_truth
@@ -198,7 +200,7 @@ def three_plate_design():
 
 def _measure(scene, truth, q0, plate, s, rng, laser_m=1e-7):
     """Distances with the robot's repeatability (joints ~ N(0, s^2) per sample) + laser."""
-    from planecal.model.cell import plane_distance, sensor_in_base
+    from planecal.model.measurement import plane_distance, sensor_in_base
     o, z = sensor_in_base(scene.robot, q0 + rng.normal(0.0, s, q0.shape), truth)
     return plane_distance(truth.planes[plate], o, z) + rng.normal(0.0, laser_m, len(q0))
 
@@ -206,15 +208,16 @@ def _measure(scene, truth, q0, plate, s, rng, laser_m=1e-7):
 def test_weighted_fit_is_the_fixed_point_of_scipy_with_its_weights(three_plate_design):
     # iteratively reweighted: at the solution, x minimises sum (w_i r_i)^2 with the w_i
     # of the solution; scipy's least_squares with those weights held finds the same x
-    from planecal.estimation.fit import row_weights
-    from planecal.model.cell import predict_with_jacobian
+    from planecal.estimation.noise import row_weights
+    from planecal.model.measurement import predict_with_jacobian
     scene, truth, qe, plate, s, q0 = three_plate_design
     d = _measure(scene, truth, q0, plate, s, np.random.default_rng(1))
     opts = FitOptions(joint_sigma_rad=s, distance_sigma_m=1e-7)
     init = nominal_params(scene)
     res = solve(Problem.from_arrays(scene.robot, qe, d, init, plate, options=opts))
     _, J = predict_with_jacobian(scene.robot, qe, res.params, plate)
-    w = row_weights(J, res.layout, opts)
+    w = row_weights(J[:, res.layout.slice("joint_offsets")], opts.joint_sigma_rad,
+                    opts.distance_sigma_m)
     free = res.free
     x0 = init.to_vector()
 
@@ -236,8 +239,8 @@ def test_weighted_fit_reports_honest_std_where_the_unweighted_does_not(three_pla
     # projected on the beam the noise is heteroscedastic: the unweighted fit's white-noise
     # covariance misjudges delta3 by ~20 %; the weighted one is honest, reaches the
     # Cramer-Rao bound and finds the noise level (variance factor ~1)
-    from planecal.model.cell import predict_with_jacobian
-    from planecal.estimation.fit import noise_variance
+    from planecal.model.measurement import predict_with_jacobian
+    from planecal.estimation.noise import noise_variance
     scene, truth, qe, plate, s, q0 = three_plate_design
     rng = np.random.default_rng(7)
     init = nominal_params(scene)
@@ -271,7 +274,7 @@ def test_sigma_counts_only_the_identifiable_directions(robot, problem):
     # everything free: two directions (delta1, delta6 with their partners) are not
     # identifiable, the fit moves rank = p - 2 directions, and sigma^2 = |r|^2/(m - rank);
     # analyze() with a known sigma predicts exactly sigma sqrt(diag((J^T J)^-1))
-    from planecal.model.cell import predict_with_jacobian
+    from planecal.model.measurement import predict_with_jacobian
     truth, qe, d = problem
     dn = d + np.random.default_rng(4).normal(0, 2e-6, len(d))
     everything = np.ones(len(INITIAL.to_vector()), bool)
@@ -317,7 +320,7 @@ def test_solve_matches_scipy_least_squares_by_name(two_plane_problem):
     # it (the predicted distances to 2e-9 of the noise: femtometres); bounds 1e-6 and 1e-7.
     # scipy's numeric Jacobian resolves the minimum to ~2e-6 of it (forward differences);
     # bound 1e-4.
-    from planecal.model.cell import predict_with_jacobian
+    from planecal.model.measurement import predict_with_jacobian
     pb = two_plane_problem
     L, free = pb.layout, pb.free
     x0 = pb.initial.to_vector(L)

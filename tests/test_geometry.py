@@ -4,7 +4,8 @@ import pytest
 from planecal.base.errors import InputError
 from planecal.model.geometry import (COLLISION_MARGIN, HEAD_EXTENTS, KINDS, LinkMesh, StaticMesh,
                                robot_link_meshes, scene_meshes, tool_meshes)
-from planecal.model.robot import fk_frames, load_robot
+from planecal.model.kinematics import link_frames
+from planecal.model.robot import load_robot
 from planecal.model.scene import load_scene
 
 ROBOT = load_robot()
@@ -74,10 +75,10 @@ def test_margin_covers_joint_offsets_of_the_seeds_size():
     parts = robot_link_meshes(ROBOT, "visual") + tool_meshes(scene, "visual")
     mag = np.array([0.0, 0.000762, 0.001237, 0.000731, 4.851769e-5, 0.0])
     Q = np.random.default_rng(0).uniform(*ROBOT.limits.T, (1500, 6))
-    F0 = fk_frames(ROBOT, Q)
+    F0 = link_frames(ROBOT.kinematics, Q)
     worst = 0.0
     for signs in itertools.product((1, -1), repeat=3):
-        F1 = fk_frames(ROBOT, Q, mag * np.array([0, 1, *signs, 0]))
+        F1 = link_frames(ROBOT.kinematics.with_offsets(mag * np.array([0, 1, *signs, 0])), Q)
         for p in parts:
             V = p.mesh.vertices
             X0 = np.einsum("nab,vb->nva", F0[:, p.body, :3, :3], V) + F0[:, p.body, None, :3, 3]
@@ -89,7 +90,7 @@ def test_margin_covers_joint_offsets_of_the_seeds_size():
 def test_envelope_matches_dh_dimensions():
     # at q = 0 the arm reaches the flange at x = 1.315 m, z = 1.65 m: the envelope covers
     # the flange and the arm's joints, and the base stands on the floor
-    F = fk_frames(ROBOT, np.zeros(6))
+    F = link_frames(ROBOT.kinematics, np.zeros(6))
     for kind in KINDS:
         pts = np.concatenate([lm.mesh.vertices @ F[lm.body, :3, :3].T + F[lm.body, :3, 3]
                               for lm in robot_link_meshes(ROBOT, kind)])
@@ -127,7 +128,7 @@ def test_wrist_clears_the_forearm_up_to_the_j5_limit(q5_deg):
     forearm along +y4), and fit between the prongs at any angle."""
     from planecal.model.geometry import FORK_CROTCH, FORK_INNER
     q = np.deg2rad([0, 0, 0, 0, q5_deg, 0])
-    F = fk_frames(ROBOT, q)
+    F = link_frames(ROBOT.kinematics, q)
     to4 = np.linalg.inv(F[4])
     for lm in robot_link_meshes(ROBOT, "visual"):
         if lm.body in (5, 6):

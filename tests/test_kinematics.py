@@ -4,12 +4,27 @@ product of 4x4 joint transforms, with every parameter moved."""
 import numpy as np
 import pytest
 
-from planecal.model.kinematics import (Kinematics, fk, frame_error, frames, from_robot,
-                                 parallel_pairs)
-from planecal.model.robot import fk as dh_fk
-from planecal.model.robot import fk_frames, load_robot
+from planecal.model.kinematics import (Kinematics, fk, fk_jacobian, frame_error, frames,
+                                       jacobian, link_frames, parallel_pairs)
+from planecal.model.robot import load_robot
 
 ROBOT = load_robot()
+
+
+def dh_frames(robot, q, delta):
+    """robot.json's standard DH frames 0..6, an independent 4x4 product:
+    T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i), theta_i = q_i + delta_i + theta0_i."""
+    T = np.eye(4)
+    out = [T]
+    for i in range(6):
+        th = q[i] + delta[i] + robot.theta0[i]
+        ct, st = np.cos(th), np.sin(th)
+        ca, sa = np.cos(robot.alpha[i]), np.sin(robot.alpha[i])
+        T = T @ np.array([[ct, -st * ca, st * sa, robot.a[i] * ct],
+                          [st, ct * ca, -ct * sa, robot.a[i] * st],
+                          [0.0, sa, ca, robot.d[i]], [0.0, 0.0, 0.0, 1.0]])
+        out.append(T)
+    return np.array(out)
 
 
 def product(kin, q):
@@ -25,10 +40,13 @@ def test_nominal_model_is_robot_json_standard_dh():
     rng = np.random.default_rng(0)
     q = rng.uniform(-2.5, 2.5, (200, 6))
     delta = rng.normal(0, 2e-3, 6)
-    kin = from_robot(ROBOT, delta)
-    assert np.abs(fk(kin, q) - dh_fk(ROBOT, q, delta)).max() < 1e-14
+    kin = ROBOT.kinematics.with_offsets(delta)
+    S = np.array([dh_frames(ROBOT, qi, delta) for qi in q])
+    assert np.abs(fk(kin, q) - S[:, -1]).max() < 1e-14
+    # each link's frame is its standard DH frame
+    assert np.abs(link_frames(kin, q) - S).max() < 1e-14
     # standard DH frame i = frame i x Tx(a_i^std) Rx(alpha_i^std); the axes of joint i
-    F, S = frames(kin, q), fk_frames(ROBOT, q, delta)
+    F = frames(kin, q)
     for i in range(1, 7):
         X = np.eye(4)
         c, s = np.cos(ROBOT.alpha[i - 1]), np.sin(ROBOT.alpha[i - 1])
@@ -43,7 +61,7 @@ def test_nominal_model_is_robot_json_standard_dh():
 
 def test_chain_equals_the_product_of_joint_transforms_with_every_parameter_moved():
     rng = np.random.default_rng(1)
-    nom = from_robot(ROBOT)
+    nom = ROBOT.kinematics
     kin = Kinematics(nom.alpha + rng.normal(0, 1e-3, 6), nom.a + rng.normal(0, 1e-3, 6),
                      rng.normal(0, 1e-3, 6), nom.theta + rng.normal(0, 1e-3, 6),
                      nom.d + rng.normal(0, 1e-3, 6),
@@ -72,3 +90,30 @@ def test_frame_error_small_rotation_and_translation(axis):
         W = T[:3, :3] - np.eye(3)  # skew of the small rotation
         k = axis - 3
         assert abs(W[(k + 2) % 3, (k + 1) % 3] - 1e-6) < 1e-15
+
+
+def test_geometric_jacobian_against_central_differences_with_every_parameter_moved():
+    # v: the flange origin's velocity; w: the angular velocity from dR R^T
+    rng = np.random.default_rng(4)
+    nom = ROBOT.kinematics
+    kin = Kinematics(nom.alpha + rng.normal(0, 1e-3, 6), nom.a + rng.normal(0, 1e-3, 6),
+                     rng.normal(0, 1e-3, 6), nom.theta, nom.d + rng.normal(0, 1e-3, 6),
+                     frame_error(rng.normal(0, 1e-2, 6)), nom.flange)
+    h = 1e-6
+    for q in rng.uniform(-2.5, 2.5, (10, 6)):
+        T, J = fk_jacobian(kin, q)
+        assert np.array_equal(T, fk(kin, q)) and np.array_equal(J, jacobian(kin, q))
+        for j in range(6):
+            dq = np.zeros(6)
+            dq[j] = h
+            Tp, Tm = fk(kin, q + dq), fk(kin, q - dq)
+            v = (Tp[:3, 3] - Tm[:3, 3]) / (2 * h)
+            W = (Tp[:3, :3] - Tm[:3, :3]) / (2 * h) @ T[:3, :3].T
+            w = np.array([W[2, 1], W[0, 2], W[1, 0]])
+            assert np.abs(J[:3, j] - v).max() < 1e-8
+            assert np.abs(J[3:, j] - w).max() < 1e-8
+    # batch shape and the same numbers as one pose at a time
+    Q = rng.uniform(-2, 2, (3, 4, 6))
+    Tb, Jb = fk_jacobian(kin, Q)
+    assert Tb.shape == (3, 4, 4, 4) and Jb.shape == (3, 4, 6, 6)
+    assert np.array_equal(Jb[1, 2], jacobian(kin, Q[1, 2]))

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from conftest import SEED_QE
-from planecal.model.cell import CellParams, predict, predict_with_jacobian
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import predict, predict_with_jacobian
 from planecal.base.errors import InputError
 from planecal.model.layout import (ParamLayout, joint_offsets_group, level1_layout, plane_group,
                              sensor_angles_group, sensor_origin_group)

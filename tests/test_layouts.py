@@ -1,20 +1,24 @@
-"""planecal layouts (issue 13 item 5): the rank test on known matrices and against an SVD
-of a finite-difference Jacobian of the distance model on 1 and 3 plates; the study's
-figures; the three-plate scene reachable by an MC70 from collision-free poses with the
-laser in its window (MuJoCo's own ray, not the model)."""
+"""planecal layouts (issue 13 item 5): the base-set selection (the calibration's own,
+``estimation.identifiability.select_base``) on known matrices and against an SVD of a
+finite-difference Jacobian of the distance model on 1 and 3 plates; the study's figures;
+the three-plate scene reachable by an MC70 from collision-free poses with the laser in its
+window (MuJoCo's own ray, not the model)."""
 import json
 
 import numpy as np
 import pytest
 
-from planecal.model.cell import CellParams, predict
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import predict
 from planecal.cli import main
 from planecal.safety.collision import CollisionWorld
 from planecal.model.encoder import joints_to_counts
 from planecal.model.layout import level1_layout
-from planecal.model.robot import ik_all
+from planecal.model.ik import ik_all
 from planecal.model.scene import load_scene, nominal_params
-from planecal.studies.layouts import layout_study, rank_test, subscene, subsets
+from planecal.estimation.calibrate import CalibrationSettings
+from planecal.estimation.identifiability import select_base
+from planecal.studies.layouts import layout_study, subscene, subsets
 from planecal.studies.planning import candidates
 
 
@@ -24,18 +28,26 @@ def three():
     return scene, CollisionWorld(scene)
 
 
-def test_rank_test_on_a_known_matrix():
+def test_base_set_on_a_known_matrix():
+    # five columns of a level-1 layout: scales must not matter; one a combination of two
+    # others, one zero
+    L = level1_layout(1)
+    names = ["delta2", "delta3", "delta4", "delta5", "o_x"]
     rng = np.random.default_rng(0)
-    A = rng.normal(size=(50, 3)) * [1.0, 1e3, 1e-3]  # scales must not matter
-    J = np.column_stack([A, 2 * A[:, 0] - 5e3 * A[:, 2], np.zeros(50)])
-    rt = rank_test(J, ["a", "b", "c", "d", "e"])
-    assert rt.rank == 3 and rt.excluded["e"] == "no_effect"
-    assert len(rt.base) == 3 and "b" in rt.base
-    # the excluded one of {a, c, d} is a stated combination of the other two
-    (x,) = [k for k, v in rt.excluded.items() if v == "combination"]
-    combo = rt.combinations[x]
-    col = {n: J[:, i] for i, n in enumerate("abcde")}
-    assert np.allclose(sum(c * col[k] for k, c in combo.items()), col[x], rtol=1e-9, atol=1e-12)
+    A = rng.normal(size=(50, 3)) * [1.0, 1e3, 1e-3]
+    J = np.zeros((50, len(L)))
+    for n, c in zip(names, [A[:, 0], A[:, 1], A[:, 2], 2 * A[:, 0] - 5e3 * A[:, 2],
+                            np.zeros(50)]):
+        J[:, L.index(n)] = c
+    bs = select_base(J, L, L.mask(names))
+    why = {e.parameter: e for e in bs.excluded}
+    assert bs.rank == 3 and why["o_x"].reason == "no_effect"
+    assert len(bs.base) == 3 and "delta3" in bs.base
+    # the excluded one of {delta2, delta4, delta5} is a stated combination of the other two
+    (x,) = [k for k, e in why.items() if e.reason == "combination"]
+    col = {n: J[:, L.index(n)] for n in names}
+    got = sum(c * col[k] for k, c in why[x].combination.items())
+    assert np.allclose(got, col[x], rtol=1e-9, atol=1e-12)
 
 
 def _fd_jacobian(robot, qe, params, plate, layout, h=1e-7):
@@ -62,33 +74,34 @@ def test_identifiable_set_agrees_with_an_svd_of_a_finite_difference_jacobian(thr
     qe, plate = np.vstack(qe), np.concatenate(plate)
     layout = level1_layout(len(plates))
     free = layout.free_from_names("all")
-    from planecal.model.cell import predict_with_jacobian
+    from planecal.model.measurement import predict_with_jacobian
     _, J = predict_with_jacobian(scene.robot, qe, nominal_params(sub), plate, layout)
-    rt = rank_test(J[:, free], layout.names_of(free))
+    bs = select_base(J, layout, free)
+    excluded = {e.parameter: e for e in bs.excluded}
     Jfd = _fd_jacobian(scene.robot, qe, nominal_params(sub), plate, layout)[:, free]
     A = Jfd / np.linalg.norm(Jfd, axis=0)
     s = np.linalg.svd(A, compute_uv=False)
     rank_fd = int(np.sum(s / s[0] > 1e-6))
     # the model loses exactly two directions on any plate layout: delta1 (a turn of the
     # plates about J1) and delta6 (a roll of the sensor, the same as phi_z and o_x, o_y)
-    assert rt.rank == rank_fd == len(layout.names) - 2
+    assert bs.rank == rank_fd == len(layout.names) - 2
     assert s[rank_fd - 1] / s[0] > 1e-4 and s[rank_fd] / s[0] < 1e-8
     names = layout.names_of(free)
-    base = [names.index(n) for n in rt.base]
+    base = [names.index(n) for n in bs.base]
     sb = np.linalg.svd(A[:, base], compute_uv=False)
     assert sb[-1] / sb[0] > 1e-4  # the base set's FD columns are independent
-    for name, why in rt.excluded.items():  # each excluded FD column is its combination
-        assert why == "combination"
+    for name, e in excluded.items():  # each excluded FD column is its combination
+        assert e.reason == "combination"
         col = Jfd[:, names.index(name)]
-        fit = sum(c * Jfd[:, names.index(k)] for k, c in rt.combinations[name].items())
+        fit = sum(c * Jfd[:, names.index(k)] for k, c in e.combination.items())
         assert np.linalg.norm(fit - col) < 1e-5 * np.linalg.norm(col)
-    for name in rt.excluded:  # each lost direction is delta1's or delta6's family
-        assert {"delta1", "delta6"} & ({name} | set(rt.combinations[name]))
+    for name, e in excluded.items():  # each lost direction is delta1's or delta6's family
+        assert {"delta1", "delta6"} & ({name} | set(e.combination))
 
 
 def test_layout_study_figures(three):
     scene, checker = three
-    res = layout_study(scene, level1_layout, None, samples=150, seed=0, checker=checker)
+    res = layout_study(scene, CalibrationSettings(), samples=150, seed=0, checker=checker)
     rows = {"+".join(r["plates"]): r for r in res["layouts"]}
     assert len(rows) == 7 and [len(r["plates"]) for r in res["layouts"]] == [1, 1, 1, 2, 2, 2, 3]
     for r in rows.values():  # the default free set (delta1, delta6 fixed) is identifiable

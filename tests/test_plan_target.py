@@ -51,7 +51,7 @@ def test_position_error_matches_finite_differences(cell):
     """predicted_position_mm propagates the offsets' covariance through the flange
     Jacobian: against a finite-difference Jacobian of the forward kinematics."""
     from planecal.model.layout import level1_layout
-    from planecal.model.robot import fk_frames
+    from planecal.model.kinematics import link_frames
     scene, _ = cell
     layout = level1_layout(len(scene.plates))
     free = layout.free_from_names(None)
@@ -62,8 +62,8 @@ def test_position_error_matches_finite_differences(cell):
     for j, name in enumerate(["delta2", "delta3", "delta4", "delta5"]):
         d = np.zeros(6)
         d[int(name[-1]) - 1] = h
-        fd = (fk_frames(scene.robot, q, d)[:, -1, :3, 3]
-              - fk_frames(scene.robot, q, np.zeros(6))[:, -1, :3, 3]) / h
+        fd = (link_frames(scene.robot.kinematics.with_offsets(d), q)[:, -1, :3, 3]
+              - link_frames(scene.robot.kinematics.with_offsets(np.zeros(6)), q)[:, -1, :3, 3]) / h
         assert np.allclose(Jp[:, :, j], fd, atol=1e-5)
     C = np.diag([1e-10, 4e-10, 9e-10, 1e-10])
     want = np.sqrt(np.mean([np.trace(J @ C @ J.T) for J in Jp])) * 1e3

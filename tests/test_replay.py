@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from conftest import SEED_DM, SEED_QE, TABLE10
 
-from planecal.model.cell import beam_direction, plane_distance
+from planecal.model.measurement import beam_direction, plane_distance
 from planecal.cli import main
 from planecal.model.encoder import counts_to_joints
 from planecal.model.kinematics import fk
 from planecal.model.scene import load_scene
-from planecal.studies.montecarlo import without
+from planecal.twin.world import without
 from planecal.studies.replay import replay, replay_world
 from planecal.twin.profile import load_profile
 

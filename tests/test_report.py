@@ -91,15 +91,15 @@ def _covariance_and_history(doc, tsv):
     """What the result file will hold (another engineer's change): the covariance of the
     free parameters by name, and the fit's iteration history. Made here from the fit's
     own formula at the solution (sigma^2 (J^T J)^-1), one parameter marked unidentifiable."""
-    from planecal.model.cell import predict_with_jacobian
+    from planecal.model.measurement import predict_with_jacobian
     from planecal.io.params import params_from_dict
-    from planecal.present.report.calibration import parameter_rows
+    from planecal.present.calibration import parameter_rows
     from planecal.io.samples import read_samples
     from planecal.model.scene import load_scene
     s = read_samples(tsv)
     robot = load_scene("thesis_final").robot
     _, J = predict_with_jacobian(robot, s.qe, params_from_dict(doc), s.plate)
-    names = [r[0] for r in parameter_rows(doc)]
+    names = [r.name for r in parameter_rows(doc)]
     idx = [names.index(n) for n in doc["free"]]
     C = (doc["identifiability"]["sigma_mm"] * 1e-3) ** 2 * np.linalg.inv(J[:, idx].T @ J[:, idx])
     M = [[float(v) for v in row] for row in C]

@@ -17,7 +17,7 @@ collision = pytest.importorskip("planecal.safety.collision")
 from rerun.chunk import RrdReader  # noqa: E402
 
 from planecal import cli  # noqa: E402
-from planecal.model.cell import predict  # noqa: E402
+from planecal.model.measurement import predict  # noqa: E402
 from planecal.base.errors import InputError  # noqa: E402
 from planecal.estimation.fit import Problem, solve  # noqa: E402
 from planecal.links.base import AlwaysEnabled  # noqa: E402
@@ -227,9 +227,11 @@ def test_real_replay_has_the_same_entity_tree(rehearsal, replayed):
 
 
 def test_fit_recording_histograms_match_the_optimizer(scene, rehearsal, tmp_path):
+    from planecal.estimation.calibrate import CalibrationSettings, calibrate_samples
     s = read_samples(rehearsal["out"])
-    res = solve(Problem.from_samples(scene.robot, s, nominal_params(scene)))
-    path = log_fit_to_file(tmp_path, res, s, scene)
+    cal = calibrate_samples(scene.robot, s, nominal_params(scene))
+    res = cal.result
+    path = log_fit_to_file(tmp_path, cal, s, scene)
     assert path.parent == tmp_path and path.name.startswith("calibrate-thesis_final-")
     data = read_rrd(path)
     for entity, values in (("/fit/hist/error_before", res.initial_residuals_m * 1e3),
@@ -257,13 +259,13 @@ def test_fit_recording_histograms_match_the_optimizer(scene, rehearsal, tmp_path
     assert len(last(data, "/samples/points", "Points3D:positions")) == len(s)
     # a weighted fit says so, with its variance factor
     from planecal.estimation.fit import FitOptions
+    from planecal.estimation.noise import repeatability_sigma
+    from planecal.present.calibration import document
     from planecal.present.rerun.fit import identifiability_markdown
-    from planecal.model.robot import repeatability_sigma
-    wres = solve(Problem.from_samples(
-        scene.robot, s, nominal_params(scene),
+    wcal = calibrate_samples(scene.robot, s, nominal_params(scene), CalibrationSettings(
         options=FitOptions(joint_sigma_rad=repeatability_sigma(scene.robot))))
-    f = wres.identifiability.variance_factor
-    assert f"variance factor {f:.3g}" in identifiability_markdown(wres)
+    f = wcal.result.identifiability.variance_factor
+    assert f"variance factor {f:.3g}" in identifiability_markdown(document(wcal))
 
 
 def test_cli_rehearse_and_calibrate_write_recordings_into_a_directory(tmp_path, capsys):
@@ -436,13 +438,12 @@ def test_logged_tool_frame_is_the_kinematics_at_that_tick(scene, rehearsal):
     from scipy.spatial.transform import Rotation
 
     from planecal.model.encoder import counts_to_joints
-    from planecal.model.robot import fk_frames
+    from planecal.model.kinematics import link_frames
 
     data = rehearsal["data"]
     tick = max(r["tick"] for r in data["/series/model_error_mm"]["rows"])
     cur = next(c for t, c in rehearsal["ticks"] if t == tick)
-    F = fk_frames(scene.robot, counts_to_joints(scene.robot, cur),
-                  rehearsal["twin"].truth.joint_offsets)[6]
+    F = link_frames(scene.robot.kinematics.with_offsets(rehearsal["twin"].truth.joint_offsets), counts_to_joints(scene.robot, cur))[6]
     row = next(r for r in data["/robot/tool"]["rows"] if r["tick"] == tick)
     np.testing.assert_allclose(np.ravel(row["Transform3D:translation"]), F[:3, 3], atol=1e-6)
     R = Rotation.from_quat(np.ravel(row["Transform3D:quaternion"])).as_matrix()

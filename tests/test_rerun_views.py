@@ -37,11 +37,12 @@ def truth(scene):
 @pytest.fixture(scope="module")
 def data(scene, truth):
     """40 noise-free samples of the analytic model at the truth, and their fit."""
-    from planecal.estimation.fit import Problem, solve
+    from planecal.estimation.calibrate import calibrate_samples
     qe, d, plate = synthetic_samples(scene, truth, 40, np.random.default_rng(5))
     s = Samples(qe, d * 1e3, plate, np.arange(1, len(d) + 1), 0)
-    res = solve(Problem.from_samples(scene.robot, s, nominal_params(scene)))
-    return {"samples": s, "fit": res, "qe": qe, "d_m": d, "plate": plate}
+    cal = calibrate_samples(scene.robot, s, nominal_params(scene))
+    return {"samples": s, "fit": cal.result, "calibration": cal, "qe": qe, "d_m": d,
+            "plate": plate}
 
 
 def entities(path) -> set[str]:
@@ -134,7 +135,7 @@ def test_calibration_blueprint_and_log_axis(scene, data, tmp_path):
     from test_rerun_log import read_rrd
 
     res, s = data["fit"], data["samples"]
-    path = log_fit_to_file(tmp_path / "cal.rrd", res, s, scene)
+    path = log_fit_to_file(tmp_path / "cal.rrd", data["calibration"], s, scene)
     views = check_views(path, {"3D": 1, "TimeSeries": 1, "BarChart": 3, "TextDocument": 3})
     tool = tool_point(scene, res.params, s.qe[pose_shown(res)])
     check_space_view(views, scene, path, tool=tool)
@@ -164,15 +165,15 @@ def test_montecarlo_blueprint_and_histograms(scene, tmp_path):
     from scipy import stats
 
     from planecal.present.rerun.studies import Z_BINS, log_montecarlo, order_pose_set
-    from planecal.studies.montecarlo import (MCSettings, analyze, run_many,
-                                             synthetic_noisy_samples, world_for)
+    from planecal.studies.montecarlo import MCSettings, analyze, run_many
+    from planecal.studies.rehearsal import synthetic_noisy_samples
     from test_rerun_log import read_rrd, tensor
 
     st = MCSettings(scene=str(scene.path), samples=30, runs=4, seed=10, mode="synthetic",
                     errors="ideal")
     res = analyze(run_many(st, 1, quiet=True), st)
     res["settings"]["scene"] = scene.name
-    world, _ = world_for(st, 0)
+    world, _ = st.world(0)
     qe, d, plate, _ = synthetic_noisy_samples(scene, world.params, st, st.seed)
     poses = order_pose_set(qe, d, plate, world.params, "run 0's samples")
     path = log_montecarlo(tmp_path / "mc.rrd", res, scene, poses)
@@ -193,11 +194,12 @@ def test_montecarlo_blueprint_and_histograms(scene, tmp_path):
 
 
 def test_bootstrap_blueprint_lays_out_every_parameter(scene, data, tmp_path):
-    from planecal.estimation.fit import Problem
+    from planecal.estimation.calibrate import CalibrationSettings
     from planecal.present.rerun.studies import log_bootstrap
-    from planecal.studies.bootstrap import BootstrapSettings, bootstrap
+    from planecal.studies.bootstrap import BootstrapSettings, Pool, bootstrap
 
-    problem = Problem.from_samples(scene.robot, data["samples"], nominal_params(scene))
+    problem = Pool(scene.robot, data["qe"], data["d_m"], data["plate"], nominal_params(scene),
+                   CalibrationSettings())
     res = bootstrap(problem, BootstrapSettings((20, 30), 3, 0), quiet=True)
     path = log_bootstrap(tmp_path / "boot.rrd", res, scene, problem)
     views = check_views(path, {"3D": 1, "TextDocument": 1, "TimeSeries": len(res["free"])})

@@ -4,13 +4,15 @@ import numpy as np
 import pytest
 
 from planecal.base.errors import InputError
-from planecal.model.robot import fk, fk_frames, ik_all, ik_nearest, jacobian, load_robot, within_limits
+from planecal.model.kinematics import fk, link_frames, jacobian
+from planecal.model.ik import ik_all, ik_nearest
+from planecal.model.robot import load_robot, within_limits
 
 HOME = np.array([[0, 0, 1, 1.315], [0, -1, 0, 0], [1, 0, 0, 1.65], [0, 0, 0, 1]])
 
 
 def test_home_pose_is_model_notes_matrix(robot):
-    np.testing.assert_allclose(fk(robot, np.zeros(6)), HOME, atol=1e-15)
+    np.testing.assert_allclose(fk(robot.kinematics, np.zeros(6)), HOME, atol=1e-15)
 
 
 def test_description_values(robot):
@@ -24,24 +26,24 @@ def test_description_values(robot):
 def test_fk_vectorized_matches_loop(robot):
     rng = np.random.default_rng(0)
     q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1], (50, 6))
-    T = fk(robot, q)
+    T = fk(robot.kinematics, q)
     for i in (0, 17, 49):
-        np.testing.assert_allclose(T[i], fk(robot, q[i]), atol=1e-15)
-    np.testing.assert_allclose(fk_frames(robot, q)[:, -1], T, atol=1e-14)
+        np.testing.assert_allclose(T[i], fk(robot.kinematics, q[i]), atol=1e-15)
+    np.testing.assert_allclose(link_frames(robot.kinematics, q)[:, -1], T, atol=1e-14)
 
 
 def test_jacobian_against_finite_differences(robot):
     rng = np.random.default_rng(1)
     for _ in range(20):
         q = rng.uniform(-2, 2, 6)
-        J = jacobian(robot, q)
+        J = jacobian(robot.kinematics, q)
         h = 1e-6
         for j in range(6):
             dq = np.zeros(6)
             dq[j] = h
-            Tp, Tm = fk(robot, q + dq), fk(robot, q - dq)
+            Tp, Tm = fk(robot.kinematics, q + dq), fk(robot.kinematics, q - dq)
             v = (Tp[:3, 3] - Tm[:3, 3]) / (2 * h)
-            dR = (Tp[:3, :3] - Tm[:3, :3]) / (2 * h) @ fk(robot, q)[:3, :3].T
+            dR = (Tp[:3, :3] - Tm[:3, :3]) / (2 * h) @ fk(robot.kinematics, q)[:3, :3].T
             w = np.array([dR[2, 1], dR[0, 2], dR[1, 0]])
             np.testing.assert_allclose(J[:3, j], v, atol=1e-8)
             np.testing.assert_allclose(J[3:, j], w, atol=1e-8)
@@ -52,10 +54,10 @@ def test_ik_round_trip_random_reachable_poses(robot):
     worst_pose, worst_q, n_sol = 0.0, 0.0, []
     for _ in range(300):
         q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1])
-        T = fk(robot, q)
+        T = fk(robot.kinematics, q)
         Q = ik_all(robot, T)
         n_sol.append(len(Q))
-        worst_pose = max(worst_pose, np.abs(fk(robot, Q) - T).max())
+        worst_pose = max(worst_pose, np.abs(fk(robot.kinematics, Q) - T).max())
         worst_q = max(worst_q, np.min(np.max(np.abs(Q - q), axis=1)))
         assert within_limits(robot, Q).all()
     assert worst_pose < 1e-9  # FK(IK(T)) = T
@@ -67,7 +69,7 @@ def test_ik_nearest_with_offsets(robot):
     rng = np.random.default_rng(3)
     delta = rng.uniform(-3e-3, 3e-3, 6)
     q = np.deg2rad([30, -20, -50, -40, 100, -120])
-    T = fk(robot, q, delta)
+    T = fk(robot.kinematics.with_offsets(delta), q)
     qn = ik_nearest(robot, T, q + 0.05, delta)
     np.testing.assert_allclose(qn, q, atol=1e-10)
 
@@ -82,7 +84,7 @@ def test_ik_unreachable_is_empty(robot):
 def test_ur5_is_described_by_data_only():
     ur5 = load_robot("ur5")
     assert np.allclose(ur5.coupling, np.eye(6))
-    T = fk(ur5, np.zeros(6))
+    T = fk(ur5.kinematics, np.zeros(6))
     # UR5 at zero: flange at x = a2 + a3 = -0.81725, y = -(d4 + d6), z = d1 - d5
     np.testing.assert_allclose(T[:3, 3], [-0.81725, -0.19145, -0.005491], atol=1e-12)
     with pytest.raises(InputError, match="no closed-form inverse kinematics"):

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.model.cell import CellParams, plane_distance, sensor_in_base
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import plane_distance, sensor_in_base
 from planecal.model.encoder import counts_to_joints
 from planecal.model.encoder import joints_to_counts
 from planecal.model.scene import Scene, nominal_params

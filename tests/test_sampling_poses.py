@@ -6,10 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from planecal.model.cell import predict, sensor_in_base
+from planecal.model.measurement import predict, sensor_in_base
 from planecal.model.encoder import joints_to_counts
 from planecal.base.errors import InputError
-from planecal.model.robot import fk, within_limits
+from planecal.model.kinematics import fk
+from planecal.model.robot import within_limits
 from planecal.sampling.poses import PoseGenerator, PoseSettings
 from planecal.model.scene import load_scene, nominal_params
 
@@ -91,7 +92,7 @@ def test_flange_pose_and_ik_meet_the_plate_at_the_drawn_distance(scene):
             continue
         n_ok += 1
         assert within_limits(scene.robot, qt)
-        assert np.allclose(fk(scene.robot, qt), p.T_flange, atol=1e-9)
+        assert np.allclose(fk(scene.robot.kinematics, qt), p.T_flange, atol=1e-9)
         o_b, z_b = sensor_in_base(scene.robot, qt, nom)
         assert np.allclose(o_b, p.T_sensor[:3, 3], atol=1e-9)
         assert np.allclose(z_b, p.beam, atol=1e-9)
@@ -103,7 +104,7 @@ def test_flange_pose_and_ik_meet_the_plate_at_the_drawn_distance(scene):
 
 def test_ik_nearest_prefers_short_moves(scene):
     """Among IK solutions the target needs the fewest ticks from the current configuration."""
-    from planecal.model.robot import ik_all
+    from planecal.model.ik import ik_all
     gen = PoseGenerator(scene)
     rng = np.random.default_rng(2)
     q = scene.calibration_q

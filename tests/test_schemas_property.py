@@ -33,7 +33,8 @@ from planecal.formats import (
 from planecal.formats.params import provenance, result_document
 from planecal.io.params import load_params
 from planecal.base.paths import data_path
-from planecal.model.robot import fk, load_robot
+from planecal.model.kinematics import fk
+from planecal.model.robot import load_robot
 from planecal.io.samples import read_samples
 from planecal.model.scene import load_scene
 from planecal.studies.planning import load_poses
@@ -52,7 +53,7 @@ atexit.register(shutil.rmtree, DIR, True)
 
 
 def _robot_ok(r):
-    assert np.all(np.isfinite(fk(r, np.zeros(6))))
+    assert np.all(np.isfinite(fk(r.kinematics, np.zeros(6))))
     assert np.all(np.isfinite(np.linalg.inv(r.coupling)))
 
 

@@ -6,10 +6,10 @@ import pytest
 from conftest import SEED_DM, SEED_QE, TABLE10
 
 from planecal.cli import main
-from planecal.estimation.fit import FitOptions, Problem
+from planecal.estimation.calibrate import CalibrationSettings
 from planecal.io.samples import write_samples
 from planecal.model.scene import load_scene, nominal_params
-from planecal.studies.bootstrap import BootstrapSettings, bootstrap, overlap
+from planecal.studies.bootstrap import BootstrapSettings, Pool, bootstrap, default_sizes, overlap
 from planecal.twin.synthetic import synthetic_samples
 from planecal.twin.truth import draw_truth
 
@@ -31,8 +31,8 @@ def test_overlap_formula():
 
 def test_bootstrap_spread_shrinks_and_brackets_the_truth(pool):
     scene, truth, qe, d, plate = pool
-    res = bootstrap(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate,
-                                        options=FitOptions()),
+    res = bootstrap(Pool(scene.robot, qe, d, plate, nominal_params(scene),
+                         CalibrationSettings()),
                     BootstrapSettings((30, 120), 8, seed=2), quiet=True)
     small, big = res["sizes"]
     assert small["fits"] == big["fits"] == 8
@@ -52,7 +52,7 @@ def test_subset_r_of_size_s_is_fixed_by_seed_size_and_r(pool):
     same whatever other sizes the study has (and whoever fits it: test_distributed)."""
     from planecal.studies.bootstrap import subset_indices
     scene, truth, qe, d, plate = pool
-    problem = Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate)
+    problem = Pool(scene.robot, qe, d, plate, nominal_params(scene), CalibrationSettings())
     both = bootstrap(problem, BootstrapSettings((30, 60), 3, seed=4), quiet=True)
     alone = bootstrap(problem, BootstrapSettings((60,), 3, seed=4), quiet=True)
     assert both["sizes"][1] == alone["sizes"][0]
@@ -77,9 +77,33 @@ def test_bootstrap_command(pool, tmp_path, capsys):
     data = json.loads(out.read_text())
     assert [e["size"] for e in data["sizes"]] == [40, 100]
     assert main(["bootstrap", str(f), "--sizes", "300"]) == 2
-    assert "exceeds the pool" in capsys.readouterr().err
+    assert "is not below the pool of 240 samples" in capsys.readouterr().err
+    # a subset as large as the pool: identical fits, no spread: refused too
+    assert main(["bootstrap", str(f), "--sizes", "240"]) == 2
+    assert "no spread" in capsys.readouterr().err
     assert main(["bootstrap", str(f), "--sizes", "5"]) == 2
     assert main(["bootstrap", str(f), "--sizes", "30", "--repeats", "1"]) == 2
+
+
+def test_default_sizes_stay_below_the_pool():
+    # the defaults 30, 50, 100, 150 where they fit strictly between the free parameters
+    # and the pool; a small pool gets 30/50/70 % of itself
+    assert default_sizes(240, 12) == (30, 50, 100, 150)
+    assert default_sizes(150, 12) == (30, 50, 100)
+    assert default_sizes(60, 12) == (30, 50)
+    assert default_sizes(40, 12) == (20, 28)  # fewer than two defaults fit: 30-70 %
+    assert default_sizes(14, 12) == (13,) or default_sizes(14, 12) == ()
+    for n in (40, 150, 151, 1000):
+        assert all(12 < s < n for s in default_sizes(n, 12))
+
+
+def test_bootstrap_command_on_a_150_sample_pool_has_no_size_150(pool, tmp_path, capsys):
+    scene, truth, qe, d, plate = pool
+    f = tmp_path / "pool150.tsv"
+    write_samples(f, qe[:150], d[:150] * 1e3)
+    out = tmp_path / "B.json"
+    assert main(["bootstrap", str(f), "--repeats", "2", "--jobs", "1", "--out", str(out)]) == 0
+    assert [e["size"] for e in json.loads(out.read_text())["sizes"]] == [30, 50, 100]
 
 
 def test_replay_seed_samples_in_the_twin():

@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
-from planecal.studies.common import covariances
+from planecal.estimation.identifiability import covariances
 from planecal.studies.common import cached_scene
-from planecal.studies.montecarlo import (MCSettings, analyze, format_montecarlo,
-                                         rehearse_samples, run_many, truth_for, twin_samples)
+from planecal.studies.montecarlo import MCSettings, analyze, run_many, truth_for
+from planecal.present.montecarlo import format_montecarlo
+from planecal.studies.rehearsal import rehearse_samples, twin_samples
 
 
 def test_covariance_forms_agree_for_white_noise_and_order_otherwise():

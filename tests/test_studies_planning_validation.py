@@ -74,7 +74,7 @@ def _rz(a):
 def equivalent_without_delta1_delta6(t):
     """What a perfect calibration finds when delta1, delta6 != 0: the same distances with
     delta1 = delta6 = 0, the sensor rolled by delta6 and the planes turned by -delta1."""
-    from planecal.model.cell import transform_n_tilde
+    from planecal.model.planes import transform_n_tilde
     cal = t.copy()
     d1, d6 = t.joint_offsets[0], t.joint_offsets[5]
     cal.joint_offsets[[0, 5]] = 0.0
@@ -87,7 +87,7 @@ def equivalent_without_delta1_delta6(t):
 
 
 def test_equivalent_parameters_predict_the_same_distances(scene):
-    from planecal.model.cell import predict
+    from planecal.model.measurement import predict
     from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import Tolerances, draw_truth
     t = draw_truth(scene, 4, Tolerances(offsets_all=True))

@@ -34,8 +34,8 @@ def _spec(tmp_path, text):
 
 @pytest.mark.parametrize("change, message", [
     ('level = ["offsets"]', None),
-    ('level = ["offsets", "full"]', "grid.level: 'full' is not available yet"),
-    ('level = ["fancy"]', "grid.level: 'fancy' is not a calibration level (offsets, full)"),
+    ('level = ["fancy"]', "grid.level: 'fancy': unknown level 'fancy': one of offsets, full"),
+    ('level = ["full+stiffness"]', "grid.level: 'full+stiffness': expected a level"),
     ('design = ["random", "smart"]', "grid.design: 'smart' is not a pose design"),
     ('samples = [20, 10]', "grid.samples: 10 is below 20"),
     ('errors = "nowhere.json"', "grid.errors: 'nowhere.json' is neither a profile"),

@@ -6,11 +6,13 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from planecal.model.cell import point_normal_from_n_tilde, predict  # noqa: E402
+from planecal.model.planes import point_normal_from_n_tilde
+from planecal.model.measurement import predict  # noqa: E402
 from planecal.model.encoder import counts_to_joints, joints_to_counts  # noqa: E402
 from planecal.base.errors import InputError  # noqa: E402
 from planecal.io.params import save_params  # noqa: E402
-from planecal.model.robot import fk, fk_frames, load_robot  # noqa: E402
+from planecal.model.kinematics import fk, link_frames
+from planecal.model.robot import load_robot  # noqa: E402
 from planecal.model.scene import load_scene, nominal_params  # noqa: E402
 from planecal.twin import EncoderJumpError, Tolerances, Twin, TwinOptions, draw_truth  # noqa: E402
 from twin_aim import aim_joints, beam_frame, random_aims  # noqa: E402
@@ -71,7 +73,7 @@ def test_mjcf_flange_equals_fk():
     frames = [m.site(f"frame{i}").id for i in range(1, 7)]
     rng = np.random.default_rng(0)
     Q = rng.uniform(ROBOT.limits[:, 0], ROBOT.limits[:, 1], (500, 6))
-    F = fk_frames(ROBOT, Q)
+    F = link_frames(ROBOT.kinematics, Q)
     worst = 0.0
     for q, Fq in zip(Q, F):
         d.qpos[:] = q
@@ -100,7 +102,7 @@ def test_twin_flange_includes_true_offsets(twins):
         twin.set_counts(c)
         q = counts_to_joints(ROBOT, c)
         assert np.abs(twin.qpos - (q + twin.truth.joint_offsets)).max() < 1e-14
-        assert np.abs(twin.flange_pose() - fk(ROBOT, q, twin.truth.joint_offsets)).max() < 1e-12
+        assert np.abs(twin.flange_pose() - fk(ROBOT.kinematics.with_offsets(twin.truth.joint_offsets), q)).max() < 1e-12
 
 
 def test_visual_geoms_never_collide(twins):

@@ -13,7 +13,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from planecal.model.cell import beam_direction, plane_distance  # noqa: E402
+from planecal.model.measurement import beam_direction, plane_distance  # noqa: E402
 from planecal.model.encoder import counts_to_joints  # noqa: E402
 from planecal.model.kinematics import fk as kin_fk  # noqa: E402
 from planecal.model.scene import load_scene  # noqa: E402

@@ -8,12 +8,13 @@ from scipy.spatial import cKDTree
 
 yourdfpy = pytest.importorskip("yourdfpy")
 
-from planecal.model.cell import CellParams, sensor_in_base  # noqa: E402
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import sensor_in_base  # noqa: E402
 from planecal.cli import main  # noqa: E402
 from planecal.model.geometry import robot_link_meshes, sensor_pose, tool_meshes  # noqa: E402
 from planecal.io.params import load_params  # noqa: E402
 from planecal.base.paths import data_path  # noqa: E402
-from planecal.model.robot import fk, fk_frames  # noqa: E402
+from planecal.model.kinematics import fk, link_frames  # noqa: E402
 from planecal.model.scene import load_scene, nominal_params  # noqa: E402
 from planecal.io.urdf import urdf_text  # noqa: E402
 
@@ -32,7 +33,7 @@ def _check_kinematics(urdf_path, robot, params, n=200, seed=0):
     for q in _random_q(robot, rng, n):
         u.update_cfg(q)
         T = u.get_transform("flange", "base")
-        T_ref = fk(robot, q, params.joint_offsets)
+        T_ref = fk(robot.kinematics.with_offsets(params.joint_offsets), q)
         worst_flange = max(worst_flange, float(np.abs(T - T_ref).max()))
         L = u.get_transform("laser", "base")
         o_b, z_b = sensor_in_base(robot, q[None], params)
@@ -72,7 +73,7 @@ def test_calibrated_urdf_matches_planecal(tmp_path, capsys):
     q = _random_q(robot, np.random.default_rng(2), 1)[0]
     u.update_cfg(q)
     gap = np.linalg.norm(u.get_transform("flange", "base")[:3, 3]
-                         - fk(robot, q, params.joint_offsets)[:3, 3])
+                         - fk(robot.kinematics.with_offsets(params.joint_offsets), q)[:3, 3])
     assert gap > 1e-4
 
 
@@ -95,7 +96,7 @@ def test_meshes_sit_where_geometry_puts_them(tmp_path, capsys):
     u = yourdfpy.URDF.load(str(out), build_scene_graph=True, load_meshes=True)
     q = _random_q(scene.robot, np.random.default_rng(5), 1)[0]
     u.update_cfg(q)
-    frames = fk_frames(scene.robot, q, params.joint_offsets)
+    frames = link_frames(scene.robot.kinematics.with_offsets(params.joint_offsets), q)
     checked = 0
     for kind in ("visual", "collision"):
         expected = {m.name: m for m in robot_link_meshes(scene.robot, kind)

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.model.cell import CellParams
+from planecal.model.cell_params import CellParams
 from planecal.model.encoder import joints_to_counts
 from planecal.model.geometry import sensor_pose
-from planecal.model.robot import Robot, ik_nearest
+from planecal.model.robot import Robot
+from planecal.model.ik import ik_nearest
 
 
 def beam_frame(target: np.ndarray, beam: np.ndarray, distance_m: float, roll: float) -> np.ndarray:

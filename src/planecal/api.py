@@ -75,17 +75,24 @@ def load_samples(path, scene=None) -> SampleSet:
 
 @dataclass(repr=False)
 class Rehearsal:
-    """A sampling run on the twin: its ``samples``, the twin's hidden ``truth``
-    (``CellParams``: joint offsets, sensor pose, planes), the world's error profile, the
-    rejected poses by kind, and the scene."""
+    """A sampling run on the twin: its ``samples``, the world it was made in (``world``: the
+    hidden truth, the robot's true geometry and phases; ``options``: the twin's error
+    sources), the cell's ``truth`` (``CellParams``: joint offsets, sensor pose, planes), the
+    error profile, the rejected poses by kind, and the scene."""
     samples: SampleSet
-    truth: object  # planecal.model.cell.CellParams
+    world: object  # planecal.twin.truth.Truth
+    options: object  # planecal.twin.core.TwinOptions
     scene: object  # planecal.model.scene.Scene
     errors: str
     seed: int
     truth_seed: int
     rejected: dict = field(default_factory=dict)
-    tick_by_tick: bool = False
+    tick_by_tick: bool = True
+
+    @property
+    def truth(self):
+        """The cell's truth (``CellParams``)."""
+        return self.world.params
 
     def __repr__(self) -> str:
         how = "driven tick by tick" if self.tick_by_tick else "set at rest at each pose"
@@ -98,34 +105,33 @@ class Rehearsal:
                 f"  true joint offsets [mrad]: {off}")
 
 
-def rehearse(scene=None, samples: int = 30, seed: int = 0, *, truth_seed: int = 0,
-             errors: str = "realistic", tick_by_tick: bool = False) -> Rehearsal:
-    """A sampling run on the twin, as ``planecal montecarlo`` runs one
-    (``planecal.studies.montecarlo``): the sampling run's planner with collision checks
-    draws ``samples`` poses (``seed``) on ``scene`` (default the default scene); the twin
-    (world: error profile ``errors`` "ideal", "realistic" or a profile file, truth drawn
-    with ``truth_seed``) is set at rest at each pose, or with ``tick_by_tick`` driven
-    there through the full tick loop (``planecal rehearse`` without the CLI; slower)."""
-    from planecal.studies.montecarlo import (MCSettings, rehearse_samples, twin_samples,
-                                             world_for)
+def rehearse(scene=None, samples: int = 30, seed: int = 0, *, truth_seed: int | None = None,
+             errors: str = "realistic", tick_by_tick: bool = True) -> Rehearsal:
+    """A sampling run on the twin (``planecal.studies.rehearsal``): the sampling run's
+    planner with collision checks draws ``samples`` poses (``seed``) on ``scene`` (default
+    the default scene) in the world of the error profile ``errors`` ("ideal", "realistic"
+    or a profile file) whose truth is drawn with ``truth_seed`` (default: ``seed``, as
+    ``planecal rehearse --seed`` does). The twin is driven through the full tick loop, as
+    ``planecal rehearse`` drives it (the same samples for the same seeds); with
+    ``tick_by_tick=False`` it is set at rest at each pose (faster; the same poses)."""
+    from planecal.studies.rehearsal import RehearsalSettings, sample_run
 
     sc = _scene(scene)
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 20:
-        raise InputError(f"rehearse: samples must be an integer >= 20, got {samples!r}")
-    # runs=2: the settings describe a study (check() wants 2 runs); only run 0 is drawn
-    st = MCSettings(scene=str(sc.path), samples=int(samples), runs=2, seed=int(seed),
-                    mode="rehearse" if tick_by_tick else "twin", truth_seed=int(truth_seed),
-                    errors=errors)
+    for name, v, lo in (("samples", samples, 20), ("seed", seed, 0)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise InputError(f"rehearse: {name} must be an integer >= {lo}, got {v!r}")
+    truth_seed = seed if truth_seed is None else truth_seed
+    st = RehearsalSettings(scene=str(sc.path), samples=int(samples), seed=int(seed),
+                           mode="rehearse" if tick_by_tick else "twin",
+                           truth_seed=int(truth_seed), errors=errors)
     st.check()
-    world, opts = world_for(st, 0)
-    run = rehearse_samples if tick_by_tick else twin_samples
     try:
-        qe, d_m, plate, rejected = run(sc, world, st, int(seed), opts)
+        qe, d_m, plate, rejected, world, opts = sample_run(st, 0)
     except RuntimeError as e:  # the run gave up
         raise InputError(f"rehearse: {e}") from None
     s = SampleSet(np.asarray(qe, np.int64), np.asarray(d_m, float), np.asarray(plate, int),
                   f"a rehearsal on {sc.name} (seed {seed})")
-    return Rehearsal(s, world.params, sc, errors, int(seed), int(truth_seed), dict(rejected),
+    return Rehearsal(s, world, opts, sc, errors, int(seed), int(truth_seed), dict(rejected),
                      tick_by_tick)
 
 
@@ -133,52 +139,53 @@ def rehearse(scene=None, samples: int = 30, seed: int = 0, *, truth_seed: int = 
 
 @dataclass(repr=False)
 class Calibration:
-    """An identified cell: ``params`` (``CellParams``, SI), per parameter ``values``,
-    ``std`` (NaN where fixed or not identifiable) and ``units``; model error RMS before
-    and after [m]; ``result`` is the full ``planecal.estimation.fit.Result`` (covariance,
-    identifiability, history)."""
-    params: object  # planecal.model.cell.CellParams
+    """An identified cell (``planecal.estimation.calibrate``): ``params`` (``CellParams``,
+    SI), per parameter ``values``, ``std`` (NaN where fixed, excluded or not identifiable)
+    and ``units``; model error RMS before and after [m] (predicted - measured);
+    ``calibration`` is the full ``estimation.calibrate.Calibration`` (result, base set,
+    settings) and ``document`` the result file's content (``planecal calibrate --out``)."""
+    params: object  # planecal.model.cell_params.CellParams
     values: dict
     std: dict
     units: dict
     rms_before_m: float
     rms_after_m: float
     max_error_m: float
-    iterations: int
     converged: bool
-    samples_used: int
-    outliers: list
-    not_identifiable: list
-    warnings: list
     scene: object
-    result: object  # planecal.estimation.fit.Result
+    calibration: object  # planecal.estimation.calibrate.Calibration
+    document: dict
+
+    @property
+    def result(self):
+        """The fit's ``planecal.estimation.fit.Result``."""
+        return self.calibration.result
+
+    @property
+    def level(self) -> str:
+        return self.calibration.settings.label
 
     def __repr__(self) -> str:
-        lines = [f"Calibration on scene {self.scene.name}: "
-                 f"{'converged' if self.converged else 'NOT converged'} in {self.iterations} "
-                 f"iterations; {self.samples_used} samples used"
-                 + (f", outliers {self.outliers}" if self.outliers else ""),
-                 f"  model error RMS {_mm(self.rms_before_m)} -> {_mm(self.rms_after_m)}; "
-                 f"max |error| after {_mm(self.max_error_m)}",
-                 f"  {'parameter':<10} {'value':>14} {'std':>11}  unit"]
-        for n, v in self.values.items():
-            sd = self.std[n]
-            sds = ("not ident." if n in self.not_identifiable else "fixed") \
-                if not np.isfinite(sd) else f"{sd:.3e}"
-            lines.append(f"  {n:<10} {v:>14.7g} {sds:>11}  {self.units[n]}")
-        lines += [f"  warning: {w}" for w in self.warnings]
-        return "\n".join(lines)
+        from planecal.present.calibration import text
+        return (f"Calibration on scene {self.scene.name}, level {self.level}: "
+                f"{'converged' if self.converged else 'NOT converged'}\n" + text(self.document))
 
 
-def calibrate(samples, scene=None, *, initial=None, free=None, max_iter: int = 30,
-              weighted: bool = False) -> Calibration:
+def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
+              compliance: bool = False, free=None, weighted: bool = False,
+              max_iter: int = 30) -> Calibration:
     """Identify the cell from ``samples`` (a ``SampleSet``, a ``Rehearsal`` or a sample
-    file path) with ``planecal.estimation.fit.solve``, starting from ``initial`` (``CellParams``, a
-    parameter file, or None: the scene's nominal values). ``free``: parameter names (or
-    None: all but delta1 and delta6). ``weighted``: the weighted fit with the robot's
-    repeatability noise model. ``scene`` defaults to the rehearsal's or the default."""
-    from planecal.estimation.fit import FitOptions, Problem, solve
+    file path) with the one calibration (``planecal.estimation.calibrate``, as ``planecal
+    calibrate``), starting from ``initial`` (``CellParams``, a parameter file, or None: the
+    scene's nominal values). ``level``: "offsets" or "full" (the seed's 1, 2);
+    ``compliance``: J2 and J3's too; ``free``: parameter names (None: the level's default);
+    ``weighted``: the weighted fit with the robot's repeatability noise model. ``scene``
+    defaults to the rehearsal's or the default."""
+    from planecal.estimation.calibrate import CalibrationSettings
+    from planecal.estimation.calibrate import calibrate as calibrate_cell
+    from planecal.estimation.fit import FitOptions
     from planecal.model.scene import nominal_params
+    from planecal.present.calibration import document
 
     if isinstance(samples, Rehearsal):
         scene = samples.scene if scene is None else scene
@@ -191,35 +198,30 @@ def calibrate(samples, scene=None, *, initial=None, free=None, max_iter: int = 3
                          f"got {type(samples).__name__}")
     if isinstance(initial, (str, Path)):
         from planecal.io.params import load_params
-        initial = load_params(initial)
+        initial = load_params(initial, sc.robot)
     initial = nominal_params(sc) if initial is None else initial
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise InputError(f"calibrate: max_iter must be a positive integer, got {max_iter!r}")
     opts = {"max_iter": int(max_iter)}
     if weighted:
-        from planecal.model.robot import repeatability_sigma
+        from planecal.estimation.noise import repeatability_sigma
         opts["joint_sigma_rad"] = repeatability_sigma(sc.robot, sc.robot.repeatability_m)
-    try:
-        problem = Problem.from_arrays(sc.robot, samples.counts, samples.distance_m, initial,
-                                      samples.plate, free=free, options=FitOptions(**opts))
-    except ValueError as e:
-        raise InputError(f"calibrate: {e}") from None
-    res = solve(problem)
+    settings = CalibrationSettings(level=level, compliance=compliance,
+                                   free=free if free is None or isinstance(free, str)
+                                   else tuple(free),
+                                   options=FitOptions(**opts))
+    cal = calibrate_cell(sc.robot, samples.counts, samples.distance_m, initial, samples.plate,
+                         settings)
+    res = cal.result
     layout = res.layout
     x, sd = res.params.to_vector(layout), res.std
-    ident = res.identifiability
-    warnings = ([f"not identifiable: {', '.join(ident.not_identifiable)} (fix them with "
-                 f"free=..., or sample more varied poses)"] if ident.not_identifiable else []) \
-        + [f"strongly correlated: {p.a} ~ {p.b} (rho {p.rho:+.3f})"
-           for p in ident.correlated_pairs] + list(res.notes)
     return Calibration(
         params=res.params, values=dict(zip(layout.names, map(float, x))),
         std=dict(zip(layout.names, map(float, sd))), units=dict(zip(layout.names, layout.units)),
         rms_before_m=res.rms_mm(True) * 1e-3, rms_after_m=res.rms_mm() * 1e-3,
         max_error_m=float(np.max(np.abs(res.residuals_m[res.used]))),
-        iterations=int(res.iterations), converged=bool(res.converged),
-        samples_used=int(np.sum(res.used)), outliers=list(res.outliers),
-        not_identifiable=list(ident.not_identifiable), warnings=warnings, scene=sc, result=res)
+        converged=bool(res.converged), scene=sc, calibration=cal,
+        document=document(cal, sc.robot))
 
 
 # ----- validation ----------------------------------------------------------------------------
@@ -237,20 +239,16 @@ class Validation:
     details: dict
 
     def __repr__(self) -> str:
-        ratio = self.ap_nominal_m / self.ap_calibrated_m if self.ap_calibrated_m > 0 else \
-            float("inf")
-        return (f"Validation (ISO 9283 on the twin, {self.details['settings']['cycles']} cycles)\n"
-                f"  AP: nominal {_mm(self.ap_nominal_m)}, calibrated {_mm(self.ap_calibrated_m)} "
-                f"({ratio:.1f}x better); RP {_mm(self.rp_m)}\n"
-                f"  gauge block error: nominal {self.gauge_error_nominal_m * 1e3:+.4f} mm, "
-                f"calibrated {self.gauge_error_calibrated_m * 1e3:+.4f} mm")
+        from planecal.present.validation import format_validation
+        return "Validation on the twin, in the rehearsal's world\n" + format_validation(self.details)
 
 
 def validate(calibration: Calibration, rehearsal: Rehearsal, *, cycles: int = 30,
              gauge_repeats: int = 10, seed: int = 0) -> Validation:
-    """Validate ``calibration`` on a twin whose cell is ``rehearsal``'s truth (robot.json's
-    geometry, as ``planecal validate --calibrated``): ISO 9283 AP/RP in a cube placed by
-    the rehearsal's samples, and the gauge block (``planecal.studies.validation``)."""
+    """Validate ``calibration`` on the twin of the world ``rehearsal`` was made in (its
+    truth, the robot's true geometry, the twin's error sources: as ``planecal validate
+    --calibrated --truth --run``): ISO 9283 AP/RP in a cube placed by the rehearsal's
+    samples, and the gauge block (``planecal.studies.validation``)."""
     from planecal.safety.collision import CollisionWorld
     from planecal.studies.validation import ValidationSettings
     from planecal.studies.validation import validate as run_validation
@@ -262,7 +260,7 @@ def validate(calibration: Calibration, rehearsal: Rehearsal, *, cycles: int = 30
     st.check()
     sc = rehearsal.scene
     checker = CollisionWorld(sc, clearance_m=st.clearance_m)
-    v = run_validation(sc, rehearsal.truth, calibration.params, rehearsal.samples.counts, st,
-                       checker, calibration.result)
+    v = run_validation(sc, rehearsal.world, calibration.params, rehearsal.samples.counts, st,
+                       checker, calibration.result, rehearsal.options)
     return Validation(v["ap_before_mm"] * 1e-3, v["ap_after_mm"] * 1e-3, v["rp_mm"] * 1e-3,
                       v["gauge_error_before_mm"] * 1e-3, v["gauge_error_after_mm"] * 1e-3, v)

@@ -1,5 +1,5 @@
-"""planecal bootstrap SAMPLES... [--sizes 30,50,100,150] [--repeats 10] [--seed K]
-[--initial P.json] [--scene S] [--free NAMES] [--out B.json]
+"""planecal bootstrap SAMPLES... [--sizes 30,50,100] [--repeats 10] [--seed K]
+[--initial P.json] [--scene S] [--level offsets|full] [--compliance] [--free NAMES] [--out B.json]
 [--jobs J | --scheduler tcp://HOST:PORT] [--results FILE.jsonl] [--resume]
 
 Seed 9.3's result analysis: random subsets of each size drawn from the pool of samples,
@@ -24,14 +24,17 @@ FORMAT = "planecal-bootstrap/1"
 def add_arguments(p):
     from planecal.model.scene import DEFAULT_SCENE
     p.add_argument("samples", nargs="+", help="sample file(s): the pool")
-    p.add_argument("--sizes", default="30,50,100,150",
-                   help="comma-separated subset sizes (default %(default)s)")
+    p.add_argument("--sizes", default=None,
+                   help="comma-separated subset sizes, each below the pool (default: those of "
+                        "30,50,100,150 below the pool)")
     p.add_argument("--repeats", type=int, default=10, help="subsets per size (default 10)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the subsets")
     p.add_argument("--initial", help="initial parameter file (default: the scene's nominal values)")
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values (default %(default)s)")
-    p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
-    p.add_argument("--max-iter", type=int, default=30)
+    from planecal.commands.calibration_options import (add_calibration_arguments,
+                                                       add_fit_arguments)
+    add_calibration_arguments(p)
+    add_fit_arguments(p)
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="also write the plots as a Rerun recording (planecal view FILE)")
     p.add_argument("--out", help="write the result (JSON) here")
@@ -40,46 +43,44 @@ def add_arguments(p):
     from planecal.commands.engine_options import add_engine_arguments, add_results_arguments
     add_engine_arguments(p)
     add_results_arguments(p)
-    from planecal.commands.report import add_report_argument
+    from planecal.commands.report_options import add_report_argument
     add_report_argument(p)
 
 
 def run(args) -> int:
-    from planecal.commands.calibrate import build_problem, load_inputs
-    from planecal.estimation.fit import FitOptions
+    from planecal.commands.calibration_options import (calibration_settings, fit_options,
+                                                       load_inputs)
     from planecal.io.params import save_json
-    from planecal.studies.bootstrap import (BootstrapSettings, bootstrap, check_settings,
-                                            format_bootstrap)
+    from planecal.studies.bootstrap import BootstrapSettings, Pool, bootstrap, check_settings
+    from planecal.present.bootstrap import format_bootstrap
     from planecal.studies.common import parse_int_list
 
     from planecal.commands.engine_options import (check_results_path, engine_from_args,
                                                   results_path)
 
-    from planecal.commands.report import write_command_report
+    from planecal.commands.report_options import write_command_report
     from planecal.io.outputs import check_output
 
     if args.out:
         check_output(args.out, args.samples + [args.initial], FORMAT, args.force)
-    sizes = parse_int_list(args.sizes, "--sizes")
+    sizes = None if args.sizes is None else tuple(parse_int_list(args.sizes, "--sizes"))
     if args.seed < 0:
         raise InputError(f"--seed must be >= 0, got {args.seed}")
-    if args.max_iter < 1:
-        raise InputError("--max-iter must be at least 1")
-    samples, scene, initial = load_inputs(args)
-    problem = build_problem(samples, scene, initial, args.free, FitOptions(max_iter=args.max_iter))
-    settings = BootstrapSettings(tuple(sizes), args.repeats, args.seed)
-    check_settings(problem, settings)  # before an engine starts
+    samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
+    cal = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
+    pool = Pool(scene.robot, samples.qe, samples.d_mm * 1e-3, samples.plate, initial, cal)
+    settings = check_settings(pool, BootstrapSettings(sizes, args.repeats, args.seed))
     results = results_path(args)
     check_results_path(results, args)
     with engine_from_args(args) as engine:
-        res = bootstrap(problem, settings, engine, results=results, resume=args.resume)
-    print(format_bootstrap(res, problem.layout))
+        res = bootstrap(pool, settings, engine, results=results, resume=args.resume)
+    print(format_bootstrap(res, pool.layout))
     res = {"format": FORMAT, **res}
     if args.out:
         save_json(args.out, res)
         print(f"result written to {args.out}")
-    write_command_report(args, res, scene=str(scene.path))
+    write_command_report(args.report, res, scene=str(scene.path))
     if args.rrd:
         from planecal.present.rerun.studies import log_bootstrap
-        print(f"plots written to {log_bootstrap(args.rrd, res, scene, problem)}")
+        print(f"plots written to {log_bootstrap(args.rrd, res, scene, pool)}")
     return 0

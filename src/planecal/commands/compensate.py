@@ -7,9 +7,10 @@ encoder model: the controller as it is) at which the calibrated model of RESULT.
 the flange where the nominal model says the target is. CORRECTED: a tab-separated table
 (name, q1..q6) or, ending in .json, the whole record (planecal-compensated/1).
 
-The calibrated region is the joint box of the calibration's samples: --samples, or the
-sample files the result's provenance records. Targets outside it are refused (exit 2),
-with how far outside; --allow-outside writes them and says so. A target whose solve does
+The calibrated region is where the calibration's samples are (--samples, or the sample
+files the result's provenance records): the convex hull of their flange positions grown by
+50 mm, and the range of each joint they visited grown by 2 deg. Targets outside it are
+refused (exit 2), with how far outside; --allow-outside writes them and says so. A target whose solve does
 not converge fails the run (exit 1) and nothing is written.
 """
 from __future__ import annotations
@@ -77,14 +78,21 @@ def run(args) -> int:
         raise RunFailed(f"the calibrated model's inverse did not converge for {len(bad)} "
                         f"target(s) ({', '.join(bad[:5])}); nothing written")
     if s["outside"]:
+        far = []
+        if s["max_outside_mm_target"] is not None:
+            far.append(f"{s['max_outside_mm_target']} {s['max_outside_mm']:.0f} mm beyond the "
+                       "samples' flange positions")
+        if s["max_outside_target"] is not None:
+            far.append(f"{s['max_outside_target']} {s['max_outside_deg']:.2f} deg beyond J"
+                       f"{s['max_outside_joint']}'s sampled range")
         what = (f"{s['outside']} of {s['targets']} targets lie outside the calibrated region "
-                f"(joint box of {region.samples} samples); the furthest, "
-                f"{s['max_outside_target']}, by {s['max_outside_deg']:.2f} deg on "
-                f"J{s['max_outside_joint']}")
+                f"of {region.samples} samples (the furthest: {'; '.join(far)})")
         if not args.allow_outside:
             raise InputError(f"{args.targets}: {what}: refused (--allow-outside writes them)")
     lines = [f"compensated {s['targets']} targets with the {model.level} model of {args.params}",
-             f"calibrated region: the joint box of {region.samples} samples ({region.source})",
+             f"calibrated region: the flange positions and joint ranges of {region.samples} "
+             f"samples, grown by {region.margin_m * 1e3:.0f} mm and "
+             f"{np.degrees(region.margin_rad):.0f} deg ({region.source})",
              "max |correction| per joint: counts " + " ".join(f"{v:d}" for v in
                                                                s["max_correction_counts"])
              + "; mrad " + " ".join(f"{v:.3f}" for v in s["max_correction_mrad"]),

@@ -74,15 +74,13 @@ WHY_OFF = (
 def run(args) -> int:
     from planecal.safety.collision import CollisionWorld
     from planecal.commands import rehearse
-    from planecal.commands.calibrate import (build_problem, failure, format_report,
-                                             result_dict)
-    from planecal.estimation.fit import FitOptions, solve
+    from planecal.estimation.calibrate import CalibrationSettings, calibrate_samples
     from planecal.formats.params import provenance, result_document
+    from planecal.present.calibration import document, text
     from planecal.io.params import save_json
     from planecal.io.samples import read_samples
     from planecal.model.scene import load_scene, nominal_params
-    from planecal.studies.common import BUFFER_LEN
-    from planecal.studies.montecarlo import MISMATCH, SHORT, sources_on
+    from planecal.twin.world import MISMATCH, SHORT, sources_on
     from planecal.studies.validation import ValidationSettings, validate
     from planecal.twin.profile import load_profile, load_world
 
@@ -109,15 +107,17 @@ def run(args) -> int:
     samples = read_samples(run_file)
     nominal = nominal_params(scene)
     print(f"\n== calibration from the scene's nominal values ({len(samples)} samples)")
-    res = solve(build_problem(samples, scene, nominal, None, FitOptions()))
-    print(format_report(res, samples.n_zero))
-    save_json(result_file, result_document(result_dict(res), provenance(
+    cal = calibrate_samples(scene.robot, samples, nominal, CalibrationSettings())
+    res = cal.result
+    doc = result_document(document(cal, scene.robot), provenance(
         [("samples", run_file), ("scene", scene.path), ("robot", scene.robot.source)],
-        scene.name, scene.robot.name)))
+        scene.name, scene.robot.name))
+    print(text(doc, samples.n_zero))
+    save_json(result_file, doc)
     if args.rrd:
         from planecal.present.rerun import log_fit_to_file
-        print(f"fit recording written to {log_fit_to_file(args.rrd, res, samples, scene)}")
-    why = failure(res)
+        print(f"fit recording written to {log_fit_to_file(args.rrd, cal, samples, scene)}")
+    why = cal.failure()
     if not res.converged:
         print(f"files: {run_file}, {truth_file}, {result_file}")
         raise RunFailed(why)
@@ -160,7 +160,7 @@ def run(args) -> int:
           f"(worst {worst:.2f} sigma); residual RMS {res.rms_mm(True):.3f} -> {res.rms_mm():.4f} mm")
     mismatch = [f for f in sources_on(scene.robot, world, opts) if f in MISMATCH]
     if mismatch:
-        noise = _noise_rms_mm(scene, samples, res, opts, BUFFER_LEN)
+        noise = _noise_rms_mm(scene, samples, res, opts)
         print()
         print(WHY_OFF.format(sources=", ".join(SHORT[f] for f in mismatch),
                              ratio=res.rms_mm() / noise if noise > 0 else float("inf")))
@@ -174,17 +174,16 @@ def run(args) -> int:
     return 0
 
 
-def _noise_rms_mm(scene, samples, res, opts, buffer_len) -> float:
+def _noise_rms_mm(scene, samples, res, opts) -> float:
     """The rms distance noise per sample of the twin's noise (repeatability, quantisation,
-    the laser's buffer mean) on these samples (``studies.montecarlo.sample_variance``)."""
-    from planecal.model.cell import predict_with_jacobian
-    from planecal.model.robot import repeatability_sigma
-    from planecal.studies.montecarlo import sample_variance
+    the laser's buffer mean) on these samples (``estimation.noise.sample_variance``)."""
+    from planecal.estimation.noise import repeatability_sigma, sample_sigma_m, sample_variance
+    from planecal.model.measurement import predict_with_jacobian
 
     robot = scene.robot
     rep = robot.repeatability_m if opts.repeatability_mm is None else opts.repeatability_mm * 1e-3
     s = repeatability_sigma(robot, rep) if rep > 0 else 0.0
     _, J = predict_with_jacobian(robot, samples.qe, res.params, samples.plate, res.layout)
     v = sample_variance(robot, J[:, res.layout.slice("joint_offsets")], s,
-                        opts.laser_noise_mm * 1e-3 / np.sqrt(buffer_len), opts.quantization)
+                        sample_sigma_m(opts.laser_noise_mm), opts.quantization)
     return float(np.sqrt(np.mean(v)) * 1e3)

@@ -10,6 +10,15 @@ flange in um (at the scene's calibration position). ``--out`` writes them as JSO
 
 The current values are the encoder offsets the samples were converted with: robot.json's
 (``offset_counts``), or ``--current-qe0`` when the controller already holds others.
+
+Only encoder offsets reach the file (``estimation.calibrate.encoder_offsets``): the joint
+offsets the calibration fitted; a joint it kept fixed (delta1 and delta6: no plane
+calibration can tell J1's zero from the plates' turn, nor J6's from the sensor's roll)
+keeps its current value, and the table says so. A result that fitted delta1 or delta6
+freely is refused (exit 2): its value is a combination of frames, not a joint zero. A
+whole-model result's geometry, base frame and compliance are no encoder offsets either:
+``planecal compensate`` corrects a program's targets with them. A result made for another
+robot than the scene's is refused.
 """
 from __future__ import annotations
 
@@ -43,7 +52,47 @@ def _counts(text: str) -> np.ndarray:
     return np.array(v, np.int64)
 
 
+def _controller_offsets(doc, params, where):
+    """(offsets (6,), calibrated names, kept names, level label) the controller may take
+    from a result (its ``encoder_offsets``, else its ``free``: a result of an older
+    planecal); a parameter file without either: its six offsets as given."""
+    from planecal.estimation.calibrate import encoder_offsets
+    from planecal.model.layout import level1_layout
+
+    label = (doc.get("level") or "offsets") + (" + compliance" if doc.get("compliance") else "")
+    eo = doc.get("encoder_offsets")
+    if isinstance(eo, dict):
+        if eo.get("reason"):
+            raise InputError(f"{where}: no encoder offsets for the controller: {eo['reason']}")
+        return (np.array(eo["joint_offsets_rad"], float), list(eo["calibrated"]),
+                list(eo["kept_initial"]), label)
+    names = [f"delta{j}" for j in range(1, 7)]
+    if not isinstance(doc.get("free"), list):
+        return params.joint_offsets.copy(), names, [], "parameter file"
+    from planecal.io.params import params_from_dict
+    layout = level1_layout(params.n_planes)
+    free = layout.mask([n for n in doc["free"] if n in names])
+    initial = params_from_dict(doc["initial"], where) if isinstance(doc.get("initial"), dict) \
+        else params.copy()
+    if not isinstance(doc.get("initial"), dict):
+        initial.joint_offsets = np.zeros(6)
+    try:
+        delta, fitted, kept = encoder_offsets(layout, free, params, initial)
+    except InputError as e:
+        raise InputError(f"{where}: no encoder offsets for the controller: {e}") from None
+    return delta, fitted, kept, label
+
+
+def _model_corrections(params) -> str:
+    """What else than joint offsets a result corrects, in words ('' for nothing)."""
+    parts = [what for what, on in (("the joint geometry", params.geometry.any()),
+                                   ("the base frame", params.base.any()),
+                                   ("the joint compliance", params.compliance.any())) if on]
+    return ", ".join(parts)
+
+
 def run(args) -> int:
+    from planecal.formats.base import read_json
     from planecal.model.encoder import counts_in_range, encoder_zero_counts
     from planecal.io.params import load_params, save_json
     from planecal.model.scene import load_scene
@@ -52,34 +101,39 @@ def run(args) -> int:
     robot = scene.robot
     if args.out and Path(args.out).resolve() == Path(args.result).resolve():
         raise InputError(f"--out {args.out}: that is the result file (an input)")
-    params = load_params(args.result)
+    doc = read_json(args.result, "calibration result")
+    params = load_params(args.result, robot)
+    delta, fitted, kept, label = _controller_offsets(doc, params, args.result)
     qe0 = robot.qe0.astype(np.int64) if args.current_qe0 is None else _counts(args.current_qe0)
     q_ref = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    new, residual, tcp = encoder_zero_counts(robot, params.joint_offsets, qe0, q_ref)
+    new, residual, tcp = encoder_zero_counts(robot, delta, qe0, q_ref)
     if not counts_in_range(robot, new):
         raise InputError(f"{args.result}: the offsets move an encoder zero outside the "
                          f"{robot.encoder_bits}-bit range: {new.tolist()}")
     change = new - qe0
-    print(f"FD11 encoder offsets for {robot.name} from {args.result}")
+    print(f"FD11 encoder offsets for {robot.name} from {args.result} (calibration level {label})")
     print(f"{'joint':<6} {'delta_urad':>11} {'current':>9} {'new':>9} {'change':>8} "
-          f"{'rounding_urad':>13}")
+          f"{'rounding_urad':>13}  offset")
     for j in range(6):
-        print(f"J{j + 1:<5} {params.joint_offsets[j] * 1e6:>11.1f} {qe0[j]:>9d} {new[j]:>9d} "
-              f"{change[j]:>+8d} {residual[j] * 1e6:>13.3f}")
+        name = f"delta{j + 1}"
+        how = "calibrated" if name in fitted else "kept: not fitted (current value)"
+        print(f"J{j + 1:<5} {delta[j] * 1e6:>11.1f} {qe0[j]:>9d} {new[j]:>9d} "
+              f"{change[j]:>+8d} {residual[j] * 1e6:>13.3f}  {how}")
     print(f"rounding to whole counts moves the flange by {tcp * 1e6:.2f} um at the "
           f"calibration position of {scene.name}")
-    if not params.is_level1:
-        print(f"note: {args.result} is a whole-model calibration (--level full); the FD11 "
-              "takes encoder offsets only, so its geometry and compliance corrections are "
-              "not in these counts: correct the program's targets with planecal compensate",
-              file=sys.stderr)
+    extra = _model_corrections(params)
+    if extra:
+        print(f"note: {args.result} also corrects {extra} (level {label}); the FD11 takes "
+              "encoder offsets only, so they are not in these counts: correct the program's "
+              "targets with planecal compensate", file=sys.stderr)
     if args.out:
         save_json(args.out, {
             "format": FORMAT, "robot": robot.name, "result": str(args.result),
             "qe0_counts": [int(v) for v in new],
             "current_qe0_counts": [int(v) for v in qe0],
             "change_counts": [int(v) for v in change],
-            "joint_offsets_rad": [float(v) for v in params.joint_offsets],
+            "joint_offsets_rad": [float(v) for v in delta],
+            "calibrated": fitted, "kept_current": kept, "level": label,
             "rounding_residual_urad": [float(v * 1e6) for v in residual],
             "rounding_flange_um": tcp * 1e6,
         })

@@ -2,7 +2,8 @@
 [--jobs J | --scheduler tcp://HOST:PORT] [--results FILE.jsonl] [--resume]
 [--mode twin|rehearse|synthetic] [--seed K] [--truth-seed T] [--vary-truth]
 [--offsets-all] [--laser-noise-mm X] [--repeatability-mm X] [--quantization]
-[--free NAMES] [--weighted] [--slope 50,100,200] [--slope-runs R]
+[--level offsets|full] [--compliance] [--free NAMES] [--weighted] [--slope 50,100,200]
+[--slope-runs R]
 [--roll-deg X] [--ik-choice wrist|nearest] [--errors ideal|realistic|FILE.json] [--force]
 
 Repeated rehearsals on the twin with fresh poses and noise, each calibrated from the
@@ -32,9 +33,10 @@ from planecal.base.errors import InputError
 
 
 def add_arguments(p):
+    from planecal.commands.calibration_options import add_calibration_arguments
     from planecal.model.scene import DEFAULT_SCENE
     from planecal.sampling.poses import IK_CHOICES
-    from planecal.studies.montecarlo import MODES
+    from planecal.studies.rehearsal import MODES
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--runs", type=int, default=50, help="Monte Carlo runs (default 50)")
     p.add_argument("--samples", type=int, default=150, help="samples per run (default 150)")
@@ -61,9 +63,8 @@ def add_arguments(p):
                         "the robot's 0.07, realistic 0.057; 0 = off)")
     p.add_argument("--quantization", action="store_true",
                    help="synthetic mode: add +-0.5 count encoder quantisation noise")
-    p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
-    p.add_argument("--weighted", action="store_true",
-                   help="fit by weighted least squares with the noise model (planecal.estimation.fit)")
+    add_calibration_arguments(p, weighted_help="fit by weighted least squares with the "
+                              "world's noise model (repeatability, laser)")
     p.add_argument("--roll-deg", type=float, default=None,
                    help="twin/rehearse modes: the pose draw's roll about the beam within "
                         "+-this (default: the sampling run's, 180)")
@@ -83,6 +84,7 @@ def run(args) -> int:
     import time
     from dataclasses import replace
 
+    from planecal.commands.calibration_options import calibration_settings
     from planecal.commands.engine_options import (check_results_path, engine_from_args,
                                                   results_path)
     from planecal.io.outputs import check_output
@@ -90,22 +92,23 @@ def run(args) -> int:
     from planecal.model.scene import load_scene
     from planecal.studies.common import parse_int_list
     from planecal.studies.distributed import warm_twin
-    from planecal.studies.montecarlo import (FORMAT, MCSettings, analyze, format_montecarlo,
-                                             format_slope, run_many, slope_study)
+    from planecal.studies.montecarlo import FORMAT, MCSettings, analyze, run_many, slope_study
+    from planecal.present.montecarlo import format_montecarlo, format_slope
     from planecal.twin.profile import DEFAULT_PROFILE
 
     if args.out:
         check_output(args.out, [], FORMAT, args.force)
     scene = load_scene(args.scene)  # InputError for a bad scene before any work
     errors = args.errors or ("ideal" if args.mode == "synthetic" else DEFAULT_PROFILE)
-    free = None if not args.free else tuple(s.strip() for s in args.free.split(",") if s.strip())
+    cal = calibration_settings(args)
     st = MCSettings(scene=str(scene.path), samples=args.samples, runs=args.runs, seed=args.seed,
                     mode=args.mode, truth_seed=args.truth_seed, vary_truth=args.vary_truth,
                     offsets_all=args.offsets_all, errors=errors,
                     laser_noise_mm=args.laser_noise_mm,
                     repeatability_mm=args.repeatability_mm, quantization=args.quantization,
-                    free=free, weighted=args.weighted, roll_deg=args.roll_deg,
-                    ik_choice=args.ik_choice)
+                    free=cal.free, weighted=args.weighted, roll_deg=args.roll_deg,
+                    ik_choice=args.ik_choice, level=cal.level, compliance=cal.compliance,
+                    geometry_prior=cal.geometry_prior, free_scale=cal.free_scale)
     st.check()
     slope_counts = parse_int_list(args.slope, "--slope", 20) if args.slope else None
     if slope_counts is not None and len(slope_counts) < 2:
@@ -142,8 +145,8 @@ def run(args) -> int:
         print(f"result written to {args.out}")
     if args.rrd:
         from planecal.present.rerun.studies import log_montecarlo, order_pose_set
-        from planecal.studies.montecarlo import twin_samples, world_for
-        world, opts = world_for(st, 0)  # the 3D view: run 0's world, the twin mode's draw
+        from planecal.studies.rehearsal import twin_samples
+        world, opts = st.world(0)  # the 3D view: run 0's world, the twin mode's draw
         qe, d, plate, _ = twin_samples(scene, world, st, st.seed, opts)
         poses = order_pose_set(qe, d, plate, world.params,
                                f"run 0's samples (twin mode draw, seed {st.seed})")

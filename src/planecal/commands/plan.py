@@ -1,6 +1,7 @@
 """planecal plan [--scene S] [--samples N] [--candidates M] [--seed K] --out POSES.json
 [--target-std-urad X | --target-ap-mm X] [--no-order]
-[--measure R [--jobs J | --scheduler tcp://HOST:PORT]] [--free NAMES]
+[--measure R [--jobs J | --scheduler tcp://HOST:PORT]] [--level offsets|full] [--compliance]
+[--free NAMES]
 
 D-optimal sample poses: N of M collision-free candidates (the sampling run's pose
 distribution) maximising det(J^T J) at the nominal parameters (greedy + Fedorov exchange),
@@ -40,14 +41,15 @@ def add_arguments(p):
     p.add_argument("--candidates", type=int, default=1500, help="candidate poses (default 1500)")
     p.add_argument("--seed", type=int, default=0, help="seed of the candidates")
     p.add_argument("--out", required=True, help="pose list to write (JSON)")
-    p.add_argument("--free", help="comma-separated parameters (default: all but delta1, delta6)")
+    from planecal.commands.calibration_options import add_calibration_arguments
+    add_calibration_arguments(p)
     p.add_argument("--measure", type=int, default=0, metavar="R",
                    help="measure planned vs random spread on the twin over R runs each")
     p.add_argument("--force", action="store_true",
                    help="replace --out even if it is not an earlier pose list")
     from planecal.commands.engine_options import add_engine_arguments
     add_engine_arguments(p)
-    from planecal.commands.report import add_report_argument
+    from planecal.commands.report_options import add_report_argument
     add_report_argument(p)
 
 
@@ -55,11 +57,12 @@ def run(args) -> int:
     from planecal.safety.collision import CollisionWorld
     from planecal.io.params import save_json
     from planecal.model.scene import load_scene
-    from planecal.model.layout import level1_layout
-    from planecal.studies.common import table
+    from planecal.commands.calibration_options import calibration_settings
+    from planecal.model.layout import display_of
+    from planecal.present.tables import table
     from planecal.studies.planning import plan
 
-    from planecal.commands.report import write_command_report
+    from planecal.commands.report_options import write_command_report
     from planecal.formats.poses import POSES_FORMAT
     from planecal.io.outputs import check_output
 
@@ -71,13 +74,13 @@ def run(args) -> int:
         raise InputError(f"--samples must be at least 13, got {args.samples}")
     if args.candidates < args.samples:
         raise InputError(f"--candidates ({args.candidates}) must be at least --samples ({args.samples})")
-    free = None if not args.free else tuple(s.strip() for s in args.free.split(",") if s.strip())
+    settings = calibration_settings(args, scene.robot)
     from planecal.base.progress import Progress
     from planecal.studies.planning import PLAN_STAGES
     bar = Progress("plan", PLAN_STAGES, unit=" stages")
     bar.update(done=0, note="collision model")
     try:
-        res = plan(scene, args.samples, args.candidates, args.seed, free,
+        res = plan(scene, args.samples, args.candidates, args.seed, settings,
                    CollisionWorld(scene, clearance_m=0.01), target_std_urad=args.target_std_urad,
                    target_ap_mm=args.target_ap_mm, ordered=not args.no_order, progress=bar)
     finally:
@@ -89,11 +92,10 @@ def run(args) -> int:
         from planecal.studies.distributed import warm_twin
         with engine_from_args(args, warmup=functools.partial(warm_twin, str(scene.path))) \
                 as engine:
-            res["measured"] = measure(scene, res, args.measure, engine)
+            res["measured"] = measure(scene, res, args.measure, engine, settings)
     rows = []
-    layout = level1_layout(len(scene.plates))
     for n in res["free"]:
-        k, unit = layout.display(n)
+        k, unit = display_of(n)
         row = [n, unit, f"{res['predicted_std_random'][n] * k:.4g}",
                f"{res['predicted_std_planned'][n] * k:.4g}",
                f"{res['predicted_std_random'][n] / res['predicted_std_planned'][n]:.2f}"]
@@ -115,7 +117,7 @@ def run(args) -> int:
         print(f"measured: {args.measure} twin runs each (std of the estimates over the runs)")
     save_json(args.out, res)
     print(f"pose list written to {args.out}")
-    write_command_report(args, args.out, scene=str(scene.path))
+    write_command_report(args.report, args.out, scene=str(scene.path))
     return 0
 
 
@@ -142,13 +144,16 @@ def format_robot_time(res: dict) -> str:
     return "\n".join(out)
 
 
-def measure(scene, res: dict, runs: int, engine) -> dict:
+def measure(scene, res: dict, runs: int, engine, settings) -> dict:
+    from dataclasses import replace
+
     from planecal.studies.montecarlo import MCSettings, analyze, run_many
     free = tuple(res["free"])
-    base = MCSettings(scene=str(scene.path), samples=res["samples"], runs=runs, free=free)
+    base = MCSettings(scene=str(scene.path), samples=res["samples"], runs=runs, free=free,
+                      level=settings.level, compliance=settings.compliance,
+                      geometry_prior=settings.geometry_prior, free_scale=settings.free_scale)
     poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(res["counts"], res["plates"]))
-    planned = analyze(run_many(MCSettings(**{**base.__dict__, "poses": poses}), engine,
-                               label="planned poses"), base)
+    planned = analyze(run_many(replace(base, poses=poses), engine, label="planned poses"), base)
     rand = analyze(run_many(base, engine, label="random poses"), base)
     out = {"runs": runs}
     for name, a in (("planned", planned), ("random", rand)):

@@ -1,14 +1,15 @@
 """planecal predict SAMPLES --params P.json
 
 Prints one tab-separated line per sample: index, measured_mm, predicted_mm, error_mm
-(error = measured - predicted). Index is 0-based over the samples kept (laser zeros are
-skipped, as in calibrate).
+(the model error, predicted - measured: the one sign of planecal, docs/FORMATS.md). Index
+is 0-based over the samples kept (laser zeros are skipped, as in calibrate). A result made
+for another robot than --robot is refused.
 """
 from __future__ import annotations
 
 import sys
 
-from planecal.model.cell import predict
+from planecal.model.measurement import predict
 from planecal.base.errors import InputError
 from planecal.io.params import load_params
 from planecal.model.robot import load_robot
@@ -23,12 +24,13 @@ def add_arguments(p):
 
 def run(args) -> int:
     s = read_samples(args.samples)
-    params = load_params(args.params)
+    robot = load_robot(args.robot)
+    params = load_params(args.params, robot)
     if s.plate.max() >= params.n_planes:
         raise InputError(f"{args.samples}: samples refer to plate {s.plate.max() + 1}, "
                          f"{args.params} holds {params.n_planes} plane(s)")
-    d = predict(load_robot(args.robot), s.qe, params, s.plate) * 1e3
+    d = predict(robot, s.qe, params, s.plate) * 1e3
     out = sys.stdout
     for i, (m, p) in enumerate(zip(s.d_mm, d)):
-        out.write(f"{i}\t{m:.4f}\t{p:.4f}\t{m - p:.4f}\n")
+        out.write(f"{i}\t{m:.4f}\t{p:.4f}\t{p - m:.4f}\n")
     return 0

@@ -33,8 +33,9 @@ def run(args) -> int:
     from planecal.io.params import load_params, save_json
     from planecal.io.samples import read_samples
     from planecal.model.scene import load_scene
-    from planecal.studies.montecarlo import sources_on
-    from planecal.studies.replay import format_replay, replay, replay_world
+    from planecal.twin.world import sources_on
+    from planecal.present.replay import format_replay
+    from planecal.studies.replay import replay, replay_world
     from planecal.twin.profile import load_profile
 
     if args.out:  # checked before any work (issue 16): never an input, never a directory

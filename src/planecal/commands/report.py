@@ -28,18 +28,3 @@ def run(args) -> int:
     n = path.read_text(encoding="utf-8").count("<img ")
     print(f"report written to {path} ({n} figures)")
     return 0
-
-
-def add_report_argument(p) -> None:
-    """``--report DIR`` for a command whose result ``planecal report`` reads."""
-    p.add_argument("--report", metavar="DIR", default=None,
-                   help="also write a report (index.html and PNG figures) into DIR")
-
-
-def write_command_report(args, result, samples=None, scene=None) -> None:
-    """The report of a command's result (a dict or a file) into --report, if given."""
-    if not getattr(args, "report", None):
-        return
-    from planecal.present.report import write_report
-    path = write_report(result, args.report, samples=samples, scene=scene)
-    print(f"report written to {path}")

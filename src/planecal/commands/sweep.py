@@ -38,7 +38,8 @@ def run(args) -> int:
     from planecal.present.report.sweep import fig_accuracy_vs_time
     from planecal.studies.common import Progress
     from planecal.studies.distributed import Engine, warm_twin
-    from planecal.studies.sweep import format_sweep, load_spec, plans_needed, run_sweep
+    from planecal.present.sweep import format_sweep
+    from planecal.studies.sweep import load_spec, plans_needed, run_sweep
 
     spec = load_spec(args.spec)
     out = Path(args.out)

@@ -1,21 +1,22 @@
 """planecal validate [--scene S] [--out V.json] [--errors ideal|realistic|FILE.json]
 [--truth-seeds 0,1,2,3,4] [--samples N] [--seed K] [--offsets-all] [--cycles 30]
 [--cube-mm E] [--tcp-mm X,Y,Z] [--block-mm L] [--poses POSES.json]
-[--breakdown alone|off|none] [--breakdown-truth T] [--jobs J] [--level offsets]
-[--calibrated R.json --truth T.json --run RUN.tsv]
+[--breakdown alone|off|none] [--breakdown-truth T] [--jobs J] [--level offsets|full]
+[--compliance] [--free NAMES] [--calibrated R.json --truth T.json --run RUN.tsv]
 
 ISO 9283 pose accuracy AP and repeatability RP (P1..P5 in a cube over the calibrated
 region, 30 cycles) and the gauge-block test (seed 9.3) on the twin, with the nominal and
 the calibrated model, in the world of an error profile (--errors, default realistic).
 
 With no calibration given: for each truth seed, draw that world, rehearse a calibration
-set on its twin (the sampling run's planner with collision checks), calibrate offsets-only
-from the nominal values (--level offsets; ``studies.validation.calibrate_run``), and
-validate on the same world; the truths run on ``studies.distributed.Engine`` (--jobs 1: in
-this process). Prints the per-truth figures with the median and the worst truth, then
-(--breakdown, default alone) the first truth again with each error source of the profile
-on alone (off: switched off in turn): what an offsets-only calibration leaves of each,
-and which sources it cannot remove (docs/ERRORS.md).
+set on its twin (the sampling run's planner with collision checks), calibrate it from the
+nominal values with the options every calibrating command takes (--level, --compliance,
+--free, ...: the one calibration, ``estimation.calibrate``), and validate on the same
+world; the truths run on ``studies.distributed.Engine`` (--jobs 1: in this process).
+Prints the per-truth figures with the median and the worst truth, then (--breakdown,
+default alone) the first truth again with each error source of the profile on alone (off:
+switched off in turn): what the calibration leaves of each, and which sources it cannot
+remove (docs/ERRORS.md).
 AP is measured in the robot's frame (ISO 9283's base coordinate system, registered to the
 robot's first axis and its zero); the cell frame adds the robot's placement and delta1,
 which no plane calibration sees (both are printed).
@@ -71,12 +72,8 @@ def add_arguments(p):
                         "(default alone)")
     p.add_argument("--breakdown-truth", type=int, default=None,
                    help="the truth seed of the breakdown (default: the first truth seed)")
-    p.add_argument("--level", default="offsets", choices=("offsets", "full"),
-                   help="what the calibration fits, as planecal calibrate --level: offsets "
-                        "(the joint offsets, the sensor pose and the planes) or full (the "
-                        "whole kinematic model's identifiable base set; default %(default)s)")
-    p.add_argument("--compliance", action="store_true",
-                   help="the calibration also fits J2's and J3's compliance (seed 5.4)")
+    from planecal.commands.calibration_options import add_calibration_arguments
+    add_calibration_arguments(p)
     from planecal.commands.engine_options import add_engine_arguments
     add_engine_arguments(p)
     p.add_argument("--calibrated", help="calibration result to validate (with --truth and --run)")
@@ -110,12 +107,15 @@ def run(args) -> int:
     from planecal.studies.validation import FORMAT, TruthJob, ValidationSettings
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile
 
+    from planecal.commands.calibration_options import calibration_settings
+
     given = [a for a in (args.calibrated, args.truth, args.run) if a]
     if given and len(given) != 3:
         raise InputError("--calibrated, --truth and --run go together")
     if args.out:
         check_output(args.out, given, FORMAT, args.force)
     scene = load_scene(args.scene)
+    cal = calibration_settings(args, scene.robot)
     st = ValidationSettings(cycles=args.cycles,
                             cube_edge_m=None if args.cube_mm is None else args.cube_mm * 1e-3,
                             tcp_m=_tcp(args.tcp_mm), block_length_m=args.block_mm * 1e-3,
@@ -143,11 +143,11 @@ def run(args) -> int:
             poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
         base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
                         samples=args.samples, seed=args.seed, offsets_all=args.offsets_all,
-                        poses=poses, settings=st, level=args.level,
-                        compliance=args.compliance)
+                        poses=poses, settings=st, calibration=cal)
         what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
         print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): rehearse "
-              f"{what} (seed {args.seed}), calibrate, validate...", file=sys.stderr, flush=True)
+              f"{what} (seed {args.seed}), calibrate (level {cal.label}), validate...",
+              file=sys.stderr, flush=True)
         from planecal.commands.engine_options import engine_from_args
         from planecal.studies.distributed import warm_twin
         with engine_from_args(args, warmup=warm_twin) as engine:
@@ -156,7 +156,7 @@ def run(args) -> int:
         save_json(args.out, doc)
         print(f"result written to {args.out}")
     if args.rrd:
-        print(f"recording written to {_record(args, scene, st, doc)}")
+        print(f"recording written to {_record(args, scene, st, doc, cal)}")
     return 0
 
 
@@ -164,17 +164,17 @@ def _truths(args, seeds, base, profile, scene, engine) -> dict:
     """Validation over the truth seeds (and the breakdown) on ``engine``: the document."""
     from dataclasses import replace
 
-    from planecal.studies.validation import (ANCHORS, FORMAT, breakdown, cannot_remove,
-                                             format_breakdown, format_truths, run_jobs,
-                                             summarize, validate_truth)
+    from planecal.studies.validation import ANCHORS, FORMAT, breakdown, cannot_remove, run_jobs, summarize, validate_truth
+    from planecal.present.validation import format_breakdown, format_truths
     results = run_jobs(validate_truth, [replace(base, truth_seed=t) for t in seeds],
                        engine, "validate", args.quiet)
     summary, med, worst = summarize(results)
     doc = {"format": FORMAT, "scene": scene.name, "errors": profile.name,
-           "profile": str(profile.path), "level": args.level,
-           "compliance": args.compliance, "truth_seeds": seeds,
+           "profile": str(profile.path), "level": base.calibration.level,
+           "compliance": base.calibration.compliance,
+           "calibration_settings": base.calibration.to_dict(), "truth_seeds": seeds,
            **summary, **_detail(med), "detail_truth_seed": med["truth_seed"]}
-    print(format_truths(summary, profile.name))
+    print(format_truths(summary, profile.name, base.calibration.label))
     print()
     print(CELL_FRAME_NOTE)
     if args.breakdown != "none":
@@ -186,13 +186,13 @@ def _truths(args, seeds, base, profile, scene, engine) -> dict:
         bd["cannot_remove"] = cannot_remove(bd)
         doc["breakdown"] = bd
         print()
-        print(format_breakdown(bd))
+        print(format_breakdown(bd, base.calibration.label))
     print()
     print(ANCHORS)
     return doc
 
 
-def _record(args, scene, st, doc) -> str:
+def _record(args, scene, st, doc, cal) -> str:
     """The Rerun recording of the validation doc's detailed truth: its calibration run
     again (a pure function of the job) for the samples and the identified parameters."""
     from planecal.present.rerun.studies import log_validate
@@ -210,8 +210,7 @@ def _record(args, scene, st, doc) -> str:
         pq, pp, _ = load_poses(args.poses)
         poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
     job = TruthJob(scene=str(scene.path), errors=doc["profile"], truth_seed=doc["detail_truth_seed"], samples=args.samples, seed=args.seed,
-                   offsets_all=args.offsets_all, poses=poses, settings=st, level=args.level,
-                   compliance=args.compliance)
+                   offsets_all=args.offsets_all, poses=poses, settings=st, calibration=cal)
     v, fit, run = truth_run(job)
     if fit is None:
         raise InputError(f"--rrd: truth {job.truth_seed}'s run gave up: {v['failed']}")
@@ -232,8 +231,9 @@ def _validate_given(args, scene, st) -> dict:
     from planecal.io.params import load_params
     from planecal.io.samples import read_samples
     from planecal.sampling.runfiles import sidecar_path
-    from planecal.studies.montecarlo import sources_on
-    from planecal.studies.validation import FORMAT, format_validation, truth_row, validate
+    from planecal.twin.world import sources_on
+    from planecal.studies.validation import FORMAT, truth_row, validate
+    from planecal.present.validation import format_validation
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile, load_world
 
     calibrated = load_params(args.calibrated)

@@ -1,146 +1,211 @@
-"""The calibration as a library call, at a chosen level (seed chapter 5; issue 13):
+"""The calibration: one entry, every caller (the CLI's commands, the Python API, the demo
+and every study) calibrates through ``calibrate``.
 
-    level="offsets"  level 1: joint offsets, sensor, planes (today's ``fit.solve``, bit for bit)
-    level="full"     level 2: the whole kinematic model (``model_full``): per joint
-                     modified-DH alpha, a, beta (where axes are parallel), d; the base
-                     frame; the sensor; the planes
-    compliance=True  level 3's joint compliance of J2 and J3 (gravity torque from
-                     robot.json's link masses), at either level
+    settings = CalibrationSettings(level="full", compliance=True)
+    cal = calibrate(robot, qe, d_m, initial, plate, settings)
+    cal.params        # CellParams at the solution
+    cal.result        # fit.Result (covariance over the base set, identifiability, history)
+    cal.base_set      # identifiability.BaseSet: the identifiable parameters, and the
+                      # candidates left at their initial values, each with its reason
 
-At level 2 the parameters the data can identify are chosen from the data: the Jacobian at
-the initial parameters, column-scaled, through a pivoted QR (``identify.select_base``)
-gives the base set; the fit frees it only and leaves the rest at their initial values,
-each with its reason (``Calibration.excluded``).
+What is free is a layout (``planecal.model.levels.layout_for``: the level and the
+compliance) and a choice of names (``free``), never a branch here. The parameters the data
+can identify are chosen from the data: the Jacobian at the initial parameters, column-scaled,
+through a pivoted QR (``identifiability.select_base``); the fit frees the base set only.
+The arm's scale (``levels.scale_lengths``) stays at robot.json's unless ``free_scale`` or
+``free`` names it. A geometry prior (length std [m], angle std [rad]) pulls the joint
+geometry towards robot.json's: a maximum a posteriori fit.
 
-    cal = calibrate(robot, qe, d_m, initial, plate, level="full")
-    cal.params        # CellParams with the geometry corrections
-    cal.result        # fit.Result (covariance over the base set, identifiability, ...)
-    cal.excluded      # [identify.Excluded(parameter, reason, combination)]
+Results in robot terms (``encoder_offsets``): a joint offset is an encoder offset the
+controller can take only where the calibration fixed it and a plane can see it; delta1
+(the plates' turn about the base z axis) and delta6 (the sensor's roll) never are.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from planecal.model.cell import CellParams, predict_with_jacobian
-from planecal.estimation.fit import FitOptions, Problem, Result, free_mask, row_weights, solve
-from planecal.estimation.identify import DEFAULT_TOL, BaseSet, Excluded, select_base
-from planecal.model.kinematics import from_robot, parallel_pairs
-from planecal.model.layout import ParamLayout, compliance_group, level1_layout, level2_layout
+from planecal.base.errors import InputError
+from planecal.estimation.fit import FitOptions, Problem, Result, solve
+from planecal.estimation.identifiability import DEFAULT_TOL, BaseSet, Excluded, select_base
+from planecal.estimation.noise import row_weights
+from planecal.model.cell_params import CellParams
+from planecal.model.layout import ParamLayout
+from planecal.model.levels import (LEVELS, PLANE_BLIND_OFFSETS, layout_for, level_name,
+                                   pinned_scale)
+from planecal.model.measurement import predict_with_jacobian
 from planecal.model.robot import Robot
-from planecal.io.samples import Samples
-
-LEVELS = ("offsets", "full")
 
 
-def layout_for(robot: Robot, n_planes: int, level: str = "offsets",
-               compliance: bool = False) -> ParamLayout:
-    """The parameter layout of a level: ``level1_layout`` for offsets (plus the compliance
-    group with ``compliance``), ``level2_layout`` with the robot's parallel axes for full."""
-    if level not in LEVELS:
-        raise ValueError(f"unknown level {level!r} (offsets or full)")
-    if level == "offsets":
-        base = level1_layout(n_planes)
-        return base if not compliance else ParamLayout(list(base.groups) + [compliance_group()])
-    parallel = tuple(i + 1 for i in parallel_pairs(from_robot(robot)))
-    return level2_layout(n_planes, parallel, compliance)
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """How to calibrate: the ``level`` (``levels.LEVELS`` or the seed's number), J2/J3
+    ``compliance``, the candidates ``free`` (names, a comma string, "all"; None: the
+    layout's default), a ``geometry_prior`` (m, rad), ``free_scale``, the fit's
+    ``options`` and the base set's tolerance."""
+    level: str = "offsets"
+    compliance: bool = False
+    free: tuple | str | None = None
+    geometry_prior: tuple[float, float] | None = None
+    free_scale: bool = False
+    options: FitOptions = field(default_factory=FitOptions)
+    base_tolerance: float = DEFAULT_TOL
 
+    def __post_init__(self):
+        object.__setattr__(self, "level", level_name(self.level))
+        if isinstance(self.free, list):
+            object.__setattr__(self, "free", tuple(self.free))
 
-def scale_lengths(robot: Robot, k: int = 2) -> list[str]:
-    """The ``k`` longest link lengths of the robot's model (``a{j}``/``d{j}`` names; the
-    MC70: a3 = 0.9 m, d4 = 0.99 m). Together with the planes' distances they set the arm's
-    scale, which 65-95 mm laser readings see only through the sensor's own gain: a gain
-    error of 0.1 % (the ZS-LD80's linearity class) makes a free-scale fit put the tool up
-    to 2 mm off over a 2 m reach (docs/STUDIES.md, "Level 2")."""
-    kin = from_robot(robot)
-    lengths = [(abs(v), f"a{j + 1}") for j, v in enumerate(kin.a)]
-    lengths += [(abs(v), f"d{j + 1}") for j, v in enumerate(kin.d)]
-    return [name for _, name in sorted(lengths, reverse=True)[:k]]
+    def check(self) -> None:
+        """InputError naming the option for a combination that cannot be calibrated."""
+        if self.geometry_prior is not None:
+            if self.level != "full":
+                raise InputError("--geometry-prior needs --level full")
+            if not all(np.isfinite(v) and v > 0 for v in self.geometry_prior):
+                raise InputError(f"--geometry-prior: both stds must be > 0, got "
+                                 f"{self.geometry_prior}")
+        if self.free_scale and self.level != "full":
+            raise InputError("--free-scale needs --level full")
+
+    @property
+    def label(self) -> str:
+        """'offsets', 'full + compliance', ...: what the result says it is."""
+        return self.level + (" + compliance" if self.compliance else "")
+
+    def to_dict(self) -> dict:
+        return {"level": self.level, "compliance": self.compliance,
+                "free": None if self.free is None else (
+                    self.free if isinstance(self.free, str) else list(self.free)),
+                "geometry_prior_m_rad": None if self.geometry_prior is None
+                else list(self.geometry_prior),
+                "free_scale": self.free_scale, "base_set_tolerance": self.base_tolerance,
+                "weighted": self.options.joint_sigma_rad is not None}
 
 
 def geometry_prior(layout: ParamLayout, length_m: float, angle_rad: float) -> tuple:
     """``FitOptions.prior`` for the joint geometry (alpha, a, beta, d of every joint): a
-    std of ``length_m`` for lengths and ``angle_rad`` for angles about the nominal values
-    (machining and assembly tolerances), a maximum a posteriori fit."""
-    if not (length_m > 0 and angle_rad > 0):
-        raise ValueError("a geometry prior needs a length and an angle std > 0")
+    std of ``length_m`` for lengths and ``angle_rad`` for angles about the initial values
+    (machining and assembly tolerances)."""
     return tuple((p.name, length_m if p.unit == "m" else angle_rad)
                  for g in layout.groups_of("joint_geometry") for p in g.params)
 
 
 @dataclass(frozen=True, eq=False)
 class Calibration:
-    level: str
-    compliance: bool
+    settings: CalibrationSettings
     result: Result
-    base_set: BaseSet | None  # None where no selection ran (offsets without compliance)
-    prior: tuple[float, float] | None = None  # the geometry prior (m, rad), if any
+    base_set: BaseSet
 
     @property
     def params(self) -> CellParams:
         return self.result.params
 
     @property
+    def level(self) -> str:
+        return self.settings.level
+
+    @property
+    def compliance(self) -> bool:
+        return self.settings.compliance
+
+    @property
     def excluded(self) -> list[Excluded]:
-        return [] if self.base_set is None else list(self.base_set.excluded)
+        return list(self.base_set.excluded)
 
-    def to_dict(self) -> dict:
-        """The result file's level-2 keys: ``level``, ``compliance``, ``base_set`` (names)
-        and ``excluded`` (parameter, reason, combination)."""
-        bs = self.base_set
-        return {"level": self.level, "compliance": self.compliance,
-                "base_set": None if bs is None else list(bs.base),
-                "excluded": [] if bs is None else [
-                    {"parameter": e.parameter, "reason": e.reason,
-                     "combination": dict(e.combination)} for e in bs.excluded],
-                "base_set_tolerance": None if bs is None else bs.tol,
-                "geometry_prior_m_rad": None if self.prior is None else list(self.prior)}
+    def failure(self) -> str | None:
+        """Why the fit did not do its job (not converged, a free parameter not
+        identifiable), or None."""
+        res = self.result
+        if not res.converged:
+            return (f"the fit did not converge in {res.iterations} iterations (--max-iter); "
+                    "its parameters are not a calibration")
+        bad = res.identifiability.not_identifiable
+        if bad:
+            return (f"the samples cannot identify {', '.join(bad)}: fix them (--free) or "
+                    "sample more varied poses")
+        return None
 
 
-def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
-              level: str = "offsets", compliance: bool = False, free=None,
-              options: FitOptions | None = None, tol: float = DEFAULT_TOL,
-              prior: tuple[float, float] | None = None,
-              free_scale: bool = False) -> Calibration:
-    """Calibrate at ``level`` (module docstring) from encoder counts ``qe`` (N, 6), measured
-    distances ``d_m`` (N,) [m] and 0-based ``plate`` (N,) (default all 0), starting at
-    ``initial``. ``free``: names (list, comma string, "all") or a mask over the level's
-    layout, overriding its default free set; at level full the base set is selected among
-    them. ``prior`` (level full): (length std [m], angle std [rad]) of the joint geometry
-    about robot.json's (``geometry_prior``; a MAP fit: the base set's weakly determined
-    geometry stays near the nominal instead of taking up model errors the parameters do
-    not describe). At level full the arm's scale (``scale_lengths``: its two longest link
-    lengths) stays at robot.json's unless ``free_scale`` or ``free`` names them: a plane
-    and a laser do not measure it (each is listed in ``excluded`` with reason "scale").
-    ValueError for a problem that cannot be solved (too few samples, ...)."""
-    options = options or FitOptions()
-    if prior is not None and level != "full":
-        raise ValueError("a geometry prior needs level full")
-    if level == "offsets" and not compliance:
-        pb = Problem.from_arrays(robot, qe, d_m, initial, plate, free=free, options=options)
-        return Calibration(level, False, solve(pb), None)
-    layout = layout_for(robot, initial.n_planes, level, compliance)
-    if prior is not None:
-        options = replace(options, prior=geometry_prior(layout, *prior))
-    mask = free_mask(layout, free)
-    pinned = []
-    if level == "full" and free is None and not free_scale:
-        pinned = [n for n in scale_lengths(robot) if n in layout.names]
-        mask = mask & ~layout.mask(pinned)
-    n = len(np.asarray(d_m))
-    pidx = np.zeros(n, int) if plate is None else np.asarray(plate, int)
-    _, J = predict_with_jacobian(robot, np.asarray(qe, np.int64), initial, pidx, layout)
-    bs = select_base(J, layout, mask, tol, row_weights(J, layout, options))
+def encoder_offsets(layout: ParamLayout, free: np.ndarray, params: CellParams,
+                    initial: CellParams) -> tuple[np.ndarray, list[str], list[str]]:
+    """The joint offsets a controller can take from a calibration (module docstring):
+    (offsets (6,) [rad], the joints calibrated, the joints kept at their initial values).
+    InputError when delta1 or delta6 was fitted: a combination of the plates' or the
+    sensor's frame with the joint's zero, not an encoder offset."""
+    names = layout.group("joint_offsets").names
+    fitted = set(layout.names_of(free))
+    blind = [n for n in PLANE_BLIND_OFFSETS if n in fitted]
+    if blind:
+        raise InputError(f"{', '.join(blind)} fitted freely: a plane calibration cannot tell "
+                         "J1's zero from the plates' turn about the base z axis, nor J6's "
+                         "from the sensor's roll; recalibrate with them fixed (the default)")
+    out = np.where([n in fitted for n in names], params.joint_offsets, initial.joint_offsets)
+    return (out, [n for n in names if n in fitted], [n for n in names if n not in fitted])
+
+
+def candidates(robot: Robot, layout: ParamLayout, settings: CalibrationSettings):
+    """The parameters a calibration may fit (a mask over ``layout``) and the scale lengths
+    it keeps (module docstring): the settings' ``free`` or the layout's default, without
+    the arm's scale unless ``free`` names it or ``free_scale``."""
+    mask = layout.free_mask(settings.free)
+    pinned = ([] if (settings.free is not None or settings.free_scale)
+              else pinned_scale(robot, layout))
+    return mask & ~layout.mask(pinned), pinned
+
+
+def base_set(robot: Robot, qe, initial: CellParams, plate, settings: CalibrationSettings,
+             options: FitOptions | None = None) -> tuple[ParamLayout, BaseSet]:
+    """The layout of the settings' level and the base set of the parameters these poses
+    (counts ``qe``, 0-based ``plate``) can identify, at ``initial`` (module docstring):
+    what ``calibrate`` fits, and what ``planecal layouts`` and ``plan`` predict."""
+    st = settings
+    layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
+    options = options or st.options
+    mask, pinned = candidates(robot, layout, st)
+    _, J = predict_with_jacobian(robot, np.asarray(qe, np.int64), initial, plate, layout)
+    w = row_weights(J[:, layout.slice("joint_offsets")], options.joint_sigma_rad,
+                    options.distance_sigma_m)
+    bs = select_base(J, layout, mask, st.base_tolerance, w)
     if pinned:
         bs = replace(bs, excluded=sorted(
-            list(bs.excluded) + [Excluded(n, "scale") for n in pinned],
+            list(bs.excluded) + [Excluded(name, "scale") for name in pinned],
             key=lambda e: layout.index(e.parameter)))
-    pb = Problem.from_arrays(robot, qe, d_m, initial, pidx, free=bs.mask(layout),
-                             options=options, layout=layout)
-    return Calibration(level, compliance, solve(pb), bs, prior)
+    return layout, bs
 
 
-def calibrate_samples(robot: Robot, samples: Samples, initial: CellParams, **kw) -> Calibration:
+def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
+              settings: CalibrationSettings = CalibrationSettings()) -> Calibration:
+    """Calibrate (module docstring) from encoder counts ``qe`` (N, 6), measured distances
+    ``d_m`` (N,) [m] and 0-based ``plate`` (N,) (default all 0), starting at ``initial``.
+    InputError for a problem that cannot be solved (too few samples, unknown names, ...)."""
+    st = settings
+    st.check()
+    options = st.options
+    layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
+    if st.geometry_prior is not None:
+        options = replace(options, prior=geometry_prior(layout, *st.geometry_prior))
+    n = len(np.asarray(d_m))
+    pidx = np.zeros(n, int) if plate is None else np.asarray(plate, int)
+    try:
+        # the samples checked (shapes, plates) before the Jacobian; the free set after
+        probe = Problem(robot, qe, d_m, pidx, initial, layout, np.zeros(len(layout), bool),
+                        options)
+        n_cand = int(candidates(robot, layout, st)[0].sum())
+        if n <= n_cand:
+            raise ValueError(f"{n} samples cannot determine {n_cand} free parameters")
+        _, bs = base_set(robot, probe.qe, initial, pidx, st, options)
+        problem = replace(probe, free=bs.mask(layout))
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    return Calibration(st, solve(problem), bs)
+
+
+def calibrate_samples(robot: Robot, samples, initial: CellParams,
+                      settings: CalibrationSettings = CalibrationSettings()) -> Calibration:
     """``calibrate`` on a sample file's ``Samples`` (mm -> m here)."""
-    return calibrate(robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate, **kw)
+    return calibrate(robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate, settings)
+
+
+__all__ = ["LEVELS", "Calibration", "CalibrationSettings", "base_set", "calibrate", "candidates",
+           "calibrate_samples", "encoder_offsets", "geometry_prior"]

@@ -9,20 +9,19 @@ whose pose the nominal model gives (``robot.fk``). Its corrected target q_c solv
     calibrated_flange(q_c) = T
 
 by Newton's method on the pose error (position [m], rotation vector [rad], both in the base
-frame) with the calibrated model's geometric Jacobian (central differences of the seam's
-``flange``: any model), started from the nominal solution (the closed-form IK nearest the
-previous target, or the joint target itself). The calibrated model differs from the
+frame) with the calibrated model's geometric Jacobian (``CalibratedModel.jacobian``),
+started from the nominal solution (the closed-form IK nearest the previous target, or the
+joint target itself). The calibrated model differs from the
 nominal by milliradians: 2-3 steps, 5-6 near the elbow's stretched singularity (Jacobian
 condition ~6e3). Every target's convergence is checked (``Compensation.converged``). The corrected joints
 are written as counts with robot.json's encoder model (``encoder.joints_to_counts``): the
 controller is left as it is. Rounding to whole counts leaves a residual of its own
 (``rounded_residual_m``, tens of um at the MC70's ~2.3e-5 rad per count).
 
-The seam (``CalibratedKinematics``): anything with ``robot`` and ``flange(q) -> (N, 4, 4)``.
-``OffsetsModel`` is a level-1 result (joint offsets on robot.json's standard DH,
-``robot.fk``); ``FullModel`` a level-2 result (``planecal.model.model_full.flange_pose``: modified
-DH + Hayati, base frame, compliance), chosen by ``load_calibrated`` when the result file
-carries the level-2 ``kinematics`` key.
+The calibrated model (``CalibratedModel``) is the one model of every level
+(``planecal.model.measurement``: robot.json's chain with the result's joint offsets and, at
+level full, its geometry, base frame and compliance); ``load_calibrated`` reads it from a
+result made for the same robot.
 
 Frames. A plane calibration cannot see where the robot stands among the plates nor J1's
 zero: a turn about J1 (delta1) or a shift of the base moves the plates with it. A level-1
@@ -32,9 +31,10 @@ the robot's own frame: the model's frame of joint 1 at q = 0 mapped onto the nom
 model's (``robot_frame``; ``planecal validate``'s AP frame), so ``calibrated_flange(q_c) =
 robot_frame T``. ``frame="cell"`` takes T in the calibration's base frame instead.
 
-The calibrated region (``Region``): the joint-space box of the calibration's samples (the
-range of each joint over them). A model fitted there is only known there; ``outside``
-says how far (rad per joint) a target's corrected joints lie outside it.
+The calibrated region (``Region``): where the calibration's samples are, the convex hull of
+their flange positions grown by 50 mm and the range of each joint they visited grown by 2
+deg. A model fitted there is only known there; a target beyond either is outside, by how
+far (mm from the hull, rad per joint).
 """
 from __future__ import annotations
 
@@ -43,16 +43,17 @@ import hashlib
 import io
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from planecal.model.cell import CellParams
+from planecal.model.cell_params import CellParams
 from planecal.model.encoder import counts_to_joints, joints_to_counts
 from planecal.base.errors import InputError
 from planecal.formats.base import MAX_JSON_BYTES, read_bounded, read_json
-from planecal.model.robot import Robot, fk, ik_nearest, within_limits
+from planecal.model.robot import Robot, within_limits
+from planecal.model.kinematics import fk
+from planecal.model.ik import ik_nearest
 
 TARGETS_FORMAT = "planecal-targets/1"
 COMPENSATED_FORMAT = "planecal-compensated/1"
@@ -67,103 +68,115 @@ JOINTS_DEG = tuple(f"q{j}_deg" for j in range(1, 7))
 COUNTS = tuple(f"q{j}" for j in range(1, 7))
 
 
-# ----- the seam -------------------------------------------------------------------------------
-
-class CalibratedKinematics(Protocol):
-    """A calibrated robot: the flange pose the calibration predicts at joint angles q.
-
-    ``robot``: the description its nominal model comes from (robot.json: the controller's
-    kinematics and encoder model); ``level``: "offsets" or "full" (for reports);
-    ``flange(q)``: q (N, 6) rad (joint angles from the encoder model) -> (N, 4, 4) flange
-    (standard DH frame 6) in the base frame."""
-    robot: Robot
-    level: str
-
-    def flange(self, q: np.ndarray) -> np.ndarray: ...
-
-    def robot_frame(self) -> np.ndarray:
-        """4x4: the model's frame of joint 1 at q = 0 in its base frame, times the inverse
-        of the nominal model's (identity for the nominal model)."""
-        ...
-
+# ----- the calibrated model ---------------------------------------------------------------------
 
 def registered_frame(robot: Robot, kin) -> np.ndarray:
     """``kin``'s frame of joint 1 at q = 0 mapped onto robot.json's (``robot_frame``): how
     a model's base frame sits in the frame a robot is measured in (ISO 9283's)."""
-    from planecal.model.kinematics import frames, from_robot
+    from planecal.model.kinematics import frames
     z = np.zeros(robot.n_joints)
-    return frames(kin, z)[1] @ np.linalg.inv(frames(from_robot(robot), z)[1])
+    return frames(kin, z)[1] @ np.linalg.inv(frames(robot.kinematics, z)[1])
 
 
-@dataclass(frozen=True)
-class OffsetsModel:
-    """A level-1 calibration: robot.json's standard DH with joint offsets ``delta``."""
+@dataclass(frozen=True, eq=False)
+class CalibratedModel:
+    """A calibration at any level: robot.json's chain with the parameters' joint offsets,
+    geometry, base frame and joint compliance (``planecal.model.measurement``), the one
+    model every level is. ``level`` labels the result it came from (reports)."""
     robot: Robot
-    delta: np.ndarray
+    params: CellParams
     level: str = "offsets"
 
     def flange(self, q: np.ndarray) -> np.ndarray:
-        return fk(self.robot, np.atleast_2d(q), self.delta)
-
-    def robot_frame(self) -> np.ndarray:
-        from planecal.model.kinematics import from_robot
-        return registered_frame(self.robot, from_robot(self.robot, self.delta))
-
-
-@dataclass(frozen=True)
-class FullModel:
-    """A level-2 calibration (``planecal.model.model_full``): the whole geometric model, base
-    frame and joint compliance that the parameters carry."""
-    robot: Robot
-    params: CellParams
-    level: str = "full"
-
-    def flange(self, q: np.ndarray) -> np.ndarray:
-        from planecal.model.model_full import flange_pose
+        """q (N, 6) rad (joint angles from the encoder model) -> (N, 4, 4) flange (standard
+        DH frame 6) in the base frame."""
+        from planecal.model.measurement import flange_pose
         return flange_pose(self.robot, np.atleast_2d(q), self.params)
 
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """The geometric Jacobian (N, 6, 6) of the flange at q, rows (v, w) in the base
+        frame (the gravity deflection's own derivative, ~1e-4 of it, left out: Newton's
+        steps converge all the same)."""
+        from planecal.model.kinematics import jacobian
+        from planecal.model.measurement import effective_joints, kinematics_of
+        qd, _ = effective_joints(self.robot, np.atleast_2d(q), self.params)
+        return jacobian(kinematics_of(self.robot, self.params), qd)
+
     def robot_frame(self) -> np.ndarray:
-        from planecal.model.model_full import kinematics_of
+        """4x4: the model's frame of joint 1 at q = 0 in its base frame, times the inverse
+        of the nominal model's (identity for the nominal model)."""
+        from planecal.model.measurement import kinematics_of
         return registered_frame(self.robot, kinematics_of(self.robot, self.params))
 
 
-def load_calibrated(robot: Robot, path) -> tuple[CalibratedKinematics, dict]:
-    """The calibrated model of a result (or parameter) file, and the parsed file. A file
-    with the level-2 ``kinematics`` key is a full model; any other a level-1 one."""
-    from planecal.io.params import load_params
+def load_calibrated(robot: Robot, path) -> tuple[CalibratedModel, dict]:
+    """The calibrated model of a result (or parameter) file, and the parsed file; the
+    result must have been made for ``robot`` (``io.params.check_robot``)."""
+    from planecal.io.params import check_robot, load_params
     doc = read_json(path, "calibration result")
+    check_robot(doc, robot, path)
     params = load_params(path)
-    if isinstance(doc, dict) and doc.get("kinematics") is not None:
-        return FullModel(robot, params), doc
-    return OffsetsModel(robot, params.joint_offsets.copy()), doc
+    level = doc.get("level") if isinstance(doc, dict) and isinstance(doc.get("level"), str) \
+        else ("full" if isinstance(doc, dict) and doc.get("kinematics") is not None
+              else "offsets")
+    return CalibratedModel(robot, params, level), doc
 
 
 # ----- the calibrated region ------------------------------------------------------------------
 
-@dataclass(frozen=True)
+REGION_MARGIN_M = 0.05  # how far beyond the samples' flange positions a target may lie
+REGION_MARGIN_RAD = np.radians(2.0)  # ... and beyond the joint ranges they visited
+
+
+@dataclass(frozen=True, eq=False)
 class Region:
-    """The joint-space box of a calibration's samples: per joint [lower, upper] rad."""
-    lower: np.ndarray
+    """Where a calibration's samples are: the convex hull of their flange positions
+    (nominal model, base frame) grown by ``margin_m``, and the range of each joint they
+    visited grown by ``margin_rad``. A model fitted there is only known there."""
+    lower: np.ndarray  # (6,) rad
     upper: np.ndarray
+    facets: np.ndarray  # (F, 4): unit outward normals n and offsets b, n . p + b <= 0 inside
     samples: int
     source: str
+    margin_m: float = REGION_MARGIN_M
+    margin_rad: float = REGION_MARGIN_RAD
 
     @classmethod
-    def from_counts(cls, robot: Robot, qe: np.ndarray, source: str) -> "Region":
+    def from_counts(cls, robot: Robot, qe: np.ndarray, source: str,
+                    margin_m: float = REGION_MARGIN_M,
+                    margin_rad: float = REGION_MARGIN_RAD) -> "Region":
+        from scipy.spatial import ConvexHull, QhullError
         q = counts_to_joints(robot, np.asarray(qe))
-        if len(q) < 2:
-            raise InputError(f"{source}: a calibrated region needs at least 2 samples")
-        return cls(q.min(0), q.max(0), len(q), source)
+        if len(q) < 5:
+            raise InputError(f"{source}: a calibrated region needs at least 5 samples")
+        p = fk(robot.kinematics, q)[:, :3, 3]
+        try:
+            hull = ConvexHull(p, qhull_options="QJ")
+        except QhullError:
+            raise InputError(f"{source}: the samples' flange positions span no volume: no "
+                             "calibrated region") from None
+        return cls(q.min(0), q.max(0), hull.equations, len(q), source, margin_m, margin_rad)
+
+    def distance_m(self, q: np.ndarray, robot: Robot) -> np.ndarray:
+        """How far (m, >= 0) the nominal flange at q (N, 6) lies outside the hull grown by
+        the margin (the largest facet distance beyond it)."""
+        p = fk(robot.kinematics, np.atleast_2d(q))[:, :3, 3]
+        d = p @ self.facets[:, :3].T + self.facets[:, 3]
+        return np.maximum(0.0, d.max(1) - self.margin_m)
 
     def outside(self, q: np.ndarray) -> np.ndarray:
-        """How far (rad, >= 0) each joint of q (N, 6) lies outside the box: (N, 6)."""
+        """How far (rad, >= 0) each joint of q (N, 6) lies outside its range grown by the
+        margin: (N, 6)."""
         q = np.atleast_2d(q)
-        return np.maximum(0.0, np.maximum(self.lower - q, q - self.upper))
+        m = self.margin_rad
+        return np.maximum(0.0, np.maximum(self.lower - m - q, q - self.upper - m))
 
     def to_dict(self) -> dict:
-        return {"kind": "joint_box", "lower_deg": np.degrees(self.lower).tolist(),
-                "upper_deg": np.degrees(self.upper).tolist(), "samples": self.samples,
-                "source": self.source}
+        return {"kind": "flange_hull_and_joint_ranges", "margin_mm": self.margin_m * 1e3,
+                "margin_deg": float(np.degrees(self.margin_rad)),
+                "lower_deg": np.degrees(self.lower).tolist(),
+                "upper_deg": np.degrees(self.upper).tolist(), "hull_facets": len(self.facets),
+                "samples": self.samples, "source": self.source}
 
 
 def recorded_samples(doc: dict, result_path) -> list[Path]:
@@ -389,27 +402,11 @@ def pose_error(T: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.hstack([dp, dw])
 
 
-def flange_jacobian(model: CalibratedKinematics, q: np.ndarray, h: float = 1e-6) -> np.ndarray:
-    """The calibrated model's geometric Jacobian (N, 6, 6), rows (v, w) in the base frame,
-    by central differences of ``model.flange`` (any model behind the seam; at the MC70's
-    scale its error is ~1e-12 relative, see the tests against ``robot.jacobian``)."""
-    q = np.atleast_2d(q)
-    n, k = q.shape
-    steps = np.concatenate([np.eye(k) * h, -np.eye(k) * h])  # (2k, k)
-    F = model.flange((q[:, None, :] + steps[None]).reshape(-1, k)).reshape(n, 2 * k, 4, 4)
-    Fp, Fm = F[:, :k], F[:, k:]
-    dp = (Fp[..., :3, 3] - Fm[..., :3, 3]) / (2 * h)  # (n, k, 3)
-    dR = (Fp[..., :3, :3] - Fm[..., :3, :3]) / (2 * h)
-    W = dR @ np.swapaxes(model.flange(q)[:, None, :3, :3], -1, -2)  # [w]x
-    dw = np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
-    return np.swapaxes(np.concatenate([dp, dw], axis=-1), -1, -2)
-
-
-def solve_poses(model: CalibratedKinematics, T: np.ndarray, q0: np.ndarray,
+def solve_poses(model: CalibratedModel, T: np.ndarray, q0: np.ndarray,
                 tol_m: float = TOL_M, tol_rad: float = TOL_RAD, max_iter: int = MAX_ITER):
     """Joint angles q (N, 6) with model.flange(q) = T (N, 4, 4), by Newton from q0 with the
-    model's own Jacobian (``flange_jacobian``): (q, iterations (N,), converged (N,),
-    position residual [m] (N,), rotation residual [rad] (N,))."""
+    model's own Jacobian (``CalibratedModel.jacobian``): (q, iterations (N,), converged
+    (N,), position residual [m] (N,), rotation residual [rad] (N,))."""
     q = np.array(q0, float, copy=True)
     n = len(q)
     its = np.zeros(n, int)
@@ -419,7 +416,7 @@ def solve_poses(model: CalibratedKinematics, T: np.ndarray, q0: np.ndarray,
         todo = ~((rp < tol_m) & (rw < tol_rad))
         if not todo.any() or its.max() >= max_iter:
             break
-        J = flange_jacobian(model, q[todo])
+        J = model.jacobian(q[todo])
         q[todo] += np.einsum("nij,nj->ni", np.linalg.pinv(J, rcond=1e-12), e[todo])
         its[todo] += 1
     return q, its, ~todo, rp, rw
@@ -442,7 +439,8 @@ class Compensation:
     residual_rad: np.ndarray
     rounded_residual_m: np.ndarray  # the calibrated flange at the integer counts
     rounded_residual_rad: np.ndarray
-    outside_rad: np.ndarray  # (N, 6), 0 inside the region
+    outside_rad: np.ndarray  # (N, 6), 0 within the region's joint ranges
+    outside_m: np.ndarray  # (N,), 0 within the region's flange hull
 
     @property
     def correction_rad(self) -> np.ndarray:
@@ -454,11 +452,12 @@ class Compensation:
 
     @property
     def outside(self) -> np.ndarray:
-        return self.outside_rad.max(1) > 0
+        return (self.outside_rad.max(1) > 0) | (self.outside_m > 0)
 
     def summary(self) -> dict:
         out = self.outside_rad.max(1)
         worst = int(np.argmax(out))
+        far = int(np.argmax(self.outside_m))
         return {
             "targets": len(self.names),
             "converged": int(self.converged.sum()),
@@ -473,6 +472,8 @@ class Compensation:
             "max_outside_deg": float(np.degrees(out[worst])),
             "max_outside_target": self.names[worst] if out[worst] > 0 else None,
             "max_outside_joint": int(np.argmax(self.outside_rad[worst]) + 1) if out[worst] > 0 else None,
+            "max_outside_mm": float(self.outside_m[far] * 1e3),
+            "max_outside_mm_target": self.names[far] if self.outside_m[far] > 0 else None,
         }
 
 
@@ -497,7 +498,7 @@ def nominal_solutions(robot: Robot, targets: Targets, q_start: np.ndarray):
             if not within_limits(robot, q[i]):
                 raise InputError(f"{targets.where[i]}: target {targets.names[i]} is outside "
                                  "the joint limits")
-            T[i] = fk(robot, q[i])
+            T[i] = fk(robot.kinematics, q[i])
         prev = q[i]
     return q, T
 
@@ -505,7 +506,7 @@ def nominal_solutions(robot: Robot, targets: Targets, q_start: np.ndarray):
 FRAMES = ("robot", "cell")
 
 
-def compensate(model: CalibratedKinematics, targets: Targets, region: Region,
+def compensate(model: CalibratedModel, targets: Targets, region: Region,
                q_start: np.ndarray | None = None, frame: str = "robot") -> Compensation:
     """Corrected joint targets (module docstring). ``q_start``: where the first Cartesian
     target's IK branch is chosen (default: the region's centre). ``frame``: what the
@@ -530,10 +531,11 @@ def compensate(model: CalibratedKinematics, targets: Targets, region: Region,
     e = pose_error(Tm, model.flange(counts_to_joints(robot, c_cor)))
     return Compensation(list(targets.names), list(targets.where), T, q_nom, q_c, c_nom, c_cor,
                         its, ok, rp, rw, np.linalg.norm(e[:, :3], axis=1),
-                        np.linalg.norm(e[:, 3:], axis=1), region.outside(q_c))
+                        np.linalg.norm(e[:, 3:], axis=1), region.outside(q_c),
+                        region.distance_m(q_c, robot))
 
 
-def compensated_document(comp: Compensation, model: CalibratedKinematics, region: Region,
+def compensated_document(comp: Compensation, model: CalibratedModel, region: Region,
                          inputs: dict, frame: str = "robot") -> dict:
     """The JSON output (``planecal-compensated/1``, docs/COMPENSATE.md)."""
     rows = []
@@ -552,6 +554,7 @@ def compensated_document(comp: Compensation, model: CalibratedKinematics, region
             "residual_mm": float(comp.residual_m[i] * 1e3),
             "rounded_residual_mm": float(comp.rounded_residual_m[i] * 1e3),
             "outside_deg": np.degrees(comp.outside_rad[i]).tolist(),
+            "outside_mm": float(comp.outside_m[i] * 1e3),
         })
     return {"format": COMPENSATED_FORMAT, "level": model.level, "frame": frame,
             "robot_frame": model.robot_frame().tolist(), "inputs": inputs,

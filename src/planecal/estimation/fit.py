@@ -1,45 +1,37 @@
-"""Identification: Gauss-Newton with an SVD pseudo-inverse (seed 6.2.1, 7.2), optional
-Levenberg-Marquardt damping and column scaling, k-sigma outlier elimination, a mask of
-free parameters, and an honest account of what the data can and cannot identify.
+"""Identification: a typed problem in, a typed result out. ``Problem`` (the robot, the
+samples in SI, the initial parameters, the parameter layout, the free mask, ``FitOptions``)
+built once from arrays or from a ``Samples`` file; ``solve(problem) -> Result`` (params,
+residuals, history, status, ``Covariance`` over the free parameters by name,
+``Identifiability``). Parameters are addressed by name through the problem's
+``planecal.model.layout.ParamLayout``. ``solve`` is called by one caller,
+``planecal.estimation.calibrate``: every command, study and the API calibrate through it.
 
-A typed problem in, a typed result out: ``Problem`` (the robot, the samples in SI, the
-initial parameters, the parameter layout, the free mask, ``FitOptions``), built once from
-arrays or from a ``Samples`` file; ``solve(problem) -> Result`` (params, residuals, history,
-``Covariance`` over the free parameters by name, ``Identifiability``). Parameters are
-addressed by name through the problem's ``planecal.model.layout.ParamLayout``.
+The residual is r = d_model - d_measured [m] (docs/FORMATS.md: "model error", one sign
+everywhere). The least squares are ``planecal.estimation.solver``'s (Gauss-Newton with an
+SVD pseudo-inverse, seed 6.2.1 and 7.2, or Levenberg-Marquardt; outlier elimination; prior
+rows); the measurement model is ``planecal.model.measurement``'s; the uncertainty and the
+identifiability report are ``planecal.estimation.identifiability``'s.
 
-Residual r = d_model - d_measured [m]. One iteration: J dx = -r solved in the least-squares
-sense on the free columns. Iteration stops after ``max_iter`` corrections or when the mean
-absolute correction falls below ``improvement_limit`` (the seed's end condition, 7.2).
-
-Uncertainty (at the solution, on the samples used):
-  sigma^2 = |r|^2 / (m - rank),  cov = sigma^2 (J^T J)^-1   (on the identifiable subspace;
-  rank = p unless some direction is not identifiable)
-That assumes white distance noise. A robot's is not: its repeatability, projected on the
-beam, gives sample i a variance v_i = s^2 |dd/dq_i|^2 + s_d^2 that depends on the pose
-(docs/STUDIES.md measures the effect: on three plates the reported std is ~20 % off).
-``FitOptions(joint_sigma_rad=s)`` fits by weighted least squares instead, rows weighted
-by 1/sqrt(v_i) with v_i re-evaluated at each iterate (``noise_variance``), and reports
-  f = |W r|^2 / (m - rank) (the variance factor, ~1 when s is right),  cov = f (J^T W^2 J)^-1
-which is the Cramer-Rao bound of the noise model, scaled by what the residuals show (the
-singular values, condition number and observability indices are then those of W J).
-Identifiability is judged on the column-scaled Jacobian (unit-norm columns, so units do not
-matter): a scaled singular value below ``unidentifiable_ratio`` x the largest is a direction
-the data cannot see; the parameters that make up that direction are named, and their
-standard deviations are reported as missing (NaN / null), not as numbers; a parameter whose
-Jacobian column vanishes is listed under ``no_effect`` as well. Directions below
-``weak_ratio`` are reported as weakly identifiable. Observability indices (Sun & Hollerbach
-1997) O1 = (s_1...s_p)^(1/p) / sqrt(m), O2 = s_min/s_max, O3 = s_min, O4 = s_min^2/s_max, on
-the scaled Jacobian.
+A robot's noise is not white: its repeatability, projected on the beam, gives sample i a
+variance v_i that depends on the pose (``planecal.estimation.noise``; docs/STUDIES.md
+measures the effect: on three plates the reported std is ~20 % off).
+``FitOptions(joint_sigma_rad=s)`` fits by weighted least squares instead, rows weighted by
+1/sqrt(v_i) with v_i re-evaluated at each iterate, and reports the variance factor and the
+Cramer-Rao bound of the noise model scaled by it.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from planecal.model.cell import CellParams, predict, predict_with_jacobian
+from planecal.estimation.identifiability import Covariance, Identifiability, uncertainty
+from planecal.estimation.noise import row_weights
+from planecal.estimation.solver import Iteration, Prior, SolverOptions, Status, least_squares
+from planecal.model.cell_params import CellParams
+from planecal.model.encoder import counts_to_joints
 from planecal.model.layout import ParamLayout, level1_layout
+from planecal.model.measurement import predict, predict_joints_with_jacobian
 from planecal.model.robot import Robot
 from planecal.io.samples import Samples
 
@@ -66,6 +58,10 @@ class FitOptions:
     # prior_sigma_m: rows (x - x0) * prior_sigma_m / std join the distance rows (gn only)
     prior: tuple = ()
     prior_sigma_m: float = 3e-5
+
+    def solver_options(self) -> SolverOptions:
+        return SolverOptions(self.max_iter, self.improvement_limit, self.outlier_sigma,
+                             self.method, self.scale, self.rcond, self.lm_lambda0)
 
 
 # ----- the problem --------------------------------------------------------------------------
@@ -127,7 +123,7 @@ class Problem:
         layout = layout or level1_layout(initial.n_planes)
         n = len(np.asarray(d_m))
         plate = np.zeros(n, int) if plate is None else plate
-        return cls(robot, qe, d_m, plate, initial, layout, free_mask(layout, free),
+        return cls(robot, qe, d_m, plate, initial, layout, layout.free_mask(free),
                    options or FitOptions())
 
     @classmethod
@@ -150,124 +146,7 @@ class Problem:
         return replace(self, qe=self.qe[idx], d_m=self.d_m[idx], plate=self.plate[idx])
 
 
-def free_mask(layout: ParamLayout, free) -> np.ndarray:
-    """A free mask from a bool mask, parameter names (list or comma string) or None."""
-    if free is None:
-        return layout.default_free
-    if isinstance(free, str):
-        return layout.free_from_names(free)
-    arr = np.asarray(free)
-    if arr.dtype == bool:
-        return arr.copy()
-    return layout.free_from_names(list(free))
-
-
 # ----- the result -----------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Iteration:
-    iteration: int
-    rms_m: float  # of the samples used
-    max_m: float
-    samples: int  # used
-    mean_abs_correction: float | None = None  # None for iteration 0
-
-
-@dataclass(frozen=True)
-class CorrelatedPair:
-    a: str
-    b: str
-    rho: float
-
-
-@dataclass(frozen=True)
-class PoorlyDetermined:
-    parameter: str
-    std: float
-    limit: float
-
-
-@dataclass(frozen=True)
-class WeakDirection:
-    scaled_singular_ratio: float
-    direction: dict  # parameter name -> component of the unit direction
-
-
-@dataclass(frozen=True)
-class Observability:
-    O1: float
-    O2: float
-    O3: float
-    O4: float
-
-
-@dataclass(frozen=True)
-class Identifiability:
-    """What the data can and cannot identify (module docstring); ``dataclasses.asdict``
-    gives the result file's ``identifiability`` object."""
-    free: list[str]
-    not_identifiable: list[str]
-    no_effect: list[str]
-    poorly_determined: list[PoorlyDetermined]
-    unidentifiable_directions: list[dict]  # each: parameter name -> component
-    weak_directions: list[WeakDirection]
-    correlated_pairs: list[CorrelatedPair]
-    singular_values: list[float]
-    scaled_singular_values: list[float]
-    condition_number_scaled: float
-    observability: Observability
-    sigma_mm: float
-    samples: int
-    rank: int
-    identifiable_min_scaled_ratio: float
-    weighted: bool = False
-    variance_factor: float | None = None  # weighted fit only
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-@dataclass(frozen=True, eq=False)
-class Covariance:
-    """Covariance of the free parameters, by name; NaN rows and columns for a parameter
-    that is not identifiable (in theory or in practice)."""
-    names: tuple[str, ...]
-    matrix: np.ndarray  # (p, p), SI units
-
-    def index(self, name: str) -> int:
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise KeyError(f"{name!r} is not a free parameter "
-                           f"(free: {', '.join(self.names)})") from None
-
-    def std(self, name: str) -> float:
-        return float(self.stds[self.index(name)])
-
-    @property
-    def stds(self) -> np.ndarray:
-        """Standard deviations in ``names`` order (NaN where not identifiable)."""
-        return np.sqrt(np.maximum(np.diag(self.matrix), 0.0))
-
-    def correlation(self) -> np.ndarray:
-        s = self.stds
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return self.matrix / np.outer(s, s)
-
-    def correlated_pairs(self, threshold: float) -> list[CorrelatedPair]:
-        """The pairs whose |correlation| exceeds ``threshold``, rho rounded to 5 digits."""
-        c = self.correlation()
-        p = len(self.names)
-        return [CorrelatedPair(self.names[i], self.names[j], round(float(c[i, j]), 5))
-                for i in range(p) for j in range(i + 1, p)
-                if np.isfinite(c[i, j]) and abs(c[i, j]) > threshold]
-
-    def to_dict(self) -> dict:
-        """{"names": [...], "matrix": [[...]]} with null where not identifiable."""
-        return {"names": list(self.names),
-                "matrix": [[float(v) if np.isfinite(v) else None for v in row]
-                           for row in self.matrix]}
-
 
 @dataclass(frozen=True, eq=False)
 class Result:
@@ -286,6 +165,7 @@ class Result:
     covariance: Covariance
     identifiability: Identifiability
     notes: list[str] = field(default_factory=list)
+    status: Status = Status.CONVERGED
 
     @property
     def layout(self) -> ParamLayout:
@@ -319,247 +199,64 @@ class Result:
         return float(np.sqrt(np.mean(r[self.used] ** 2)) * 1e3)
 
 
-# ----- the solver ---------------------------------------------------------------------------
+# ----- the fit -----------------------------------------------------------------------------
 
-def noise_variance(J_delta: np.ndarray, joint_sigma: float, distance_sigma_m: float) -> np.ndarray:
-    """Per-sample distance noise variance [m^2]: J_delta (N, 6) the Jacobian columns of the
-    six joint offsets (= dd/dq), joint_sigma the joint-angle std of the robot's
-    repeatability [rad], distance_sigma_m the std of a sample from the sensor [m]."""
-    return joint_sigma ** 2 * np.sum(J_delta ** 2, axis=1) + distance_sigma_m ** 2
+def _residuals(pb: Problem):
+    """The solver's residual function over the free parameters: (r, J of the free columns,
+    row weights) at the samples ``rows``; the counts turned into joint angles once."""
+    opt, layout, free = pb.options, pb.layout, pb.free
+    q = counts_to_joints(pb.robot, pb.qe)
+    x_all = pb.initial.to_vector(layout)
+    weighted = opt.joint_sigma_rad is not None
+    offsets = layout.mask(layout.group("joint_offsets").names)
+    need = free | offsets if weighted else free
+    cols_f = np.flatnonzero(free[need])
+    cols_o = np.flatnonzero(offsets[need])
+
+    def fun(xf, rows):
+        x = x_all.copy()
+        x[free] = xf
+        d, J = predict_joints_with_jacobian(pb.robot, q[rows], CellParams.from_vector(x, layout),
+                                            pb.plate[rows], layout, need)
+        if not weighted:
+            return d - pb.d_m[rows], J, None
+        w = row_weights(J[:, cols_o], opt.joint_sigma_rad, opt.distance_sigma_m)
+        return d - pb.d_m[rows], J[:, cols_f], w
+
+    return fun
 
 
-def row_weights(J: np.ndarray, layout: ParamLayout, opt: FitOptions) -> np.ndarray | None:
-    """Row weights 1/sqrt(v_i) from the full Jacobian J, or None for an unweighted fit."""
-    if opt.joint_sigma_rad is None:
+def _prior(pb: Problem) -> Prior | None:
+    """``FitOptions.prior`` as the solver's prior rows over the free parameters."""
+    names = pb.layout.names_of(pb.free)
+    given = [(names.index(n), sd) for n, sd in pb.options.prior if n in names]
+    if not given:
         return None
-    return 1.0 / np.sqrt(noise_variance(J[:, layout.slice("joint_offsets")],
-                                        opt.joint_sigma_rad, opt.distance_sigma_m))
-
-
-def _solve_step(A: np.ndarray, r: np.ndarray, rcond: float) -> np.ndarray:
-    """Minimum-norm least-squares solution of A dx = -r by the SVD pseudo-inverse, with
-    singular values below rcond x the largest cut off. The right singular vectors and
-    singular values come from the eigen-decomposition of the (column-scaled) Gram matrix
-    A^T A, 30x cheaper than an SVD of the tall A; rcond >= 1e-7 keeps the cut above the
-    Gram matrix's rounding floor (1e-16 relative in s^2)."""
-    lam, V = np.linalg.eigh(A.T @ A)
-    keep = lam > (rcond ** 2) * lam[-1]
-    return -(V[:, keep] @ ((V[:, keep].T @ (A.T @ r)) / lam[keep]))
-
-
-def _scales(J: np.ndarray, on: bool) -> np.ndarray:
-    if not on:
-        return np.ones(J.shape[1])
-    norms = np.linalg.norm(J, axis=0)
-    return np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
+    idx = np.array([i for i, _ in given], int)
+    x0 = pb.initial.to_vector(pb.layout)[pb.free]
+    return Prior(idx, np.array([pb.options.prior_sigma_m / sd for _, sd in given]), x0[idx])
 
 
 def solve(problem: Problem) -> Result:
     """Fit the cell parameters to the problem's samples (module docstring)."""
     pb = problem
     opt, layout, free = pb.options, pb.layout, pb.free
-    robot, qe, d_m, pidx = pb.robot, pb.qe, pb.d_m, pb.plate
-    N, p = len(d_m), int(free.sum())
+    prior = _prior(pb)
+    sol = least_squares(_residuals(pb), pb.initial.to_vector(layout)[free], len(pb),
+                        opt.solver_options(), prior)
     x = pb.initial.to_vector(layout)
-    used = np.ones(N, bool)
-    history: list[Iteration] = []
-    outliers: list[int] = []
-    lam = opt.lm_lambda0
-    iterations = 0
-    converged = False
-
-    def evaluate(xv, mask):
-        """Residuals, free Jacobian columns and row weights (None: unweighted) at xv."""
-        d, J = predict_with_jacobian(robot, qe[mask], CellParams.from_vector(xv, layout),
-                                     pidx[mask], layout)
-        return d - d_m[mask], J[:, free], row_weights(J, layout, opt)
-
-    def cost(r, w):
-        rw = r if w is None else r * w
-        return 0.5 * float(rw @ rw)
-
-    # prior rows (FitOptions.prior): positions among the free columns and their weights
-    free_names = layout.names_of(free)
-    pj = np.array([free_names.index(n) for n, _ in opt.prior if n in free_names], int)
-    pw = np.array([opt.prior_sigma_m / sd for n, sd in opt.prior if n in free_names], float)
-    if pj.size and opt.method != "gn":
-        raise ValueError("a prior needs method 'gn'")
-    x_prior = x[free][pj].copy()
-
-    def with_prior(Jw, rw, xv):
-        if not pj.size:
-            return Jw, rw
-        P = np.zeros((pj.size, Jw.shape[1]))
-        P[np.arange(pj.size), pj] = pw
-        return np.vstack([Jw, P]), np.concatenate([rw, pw * (xv[free][pj] - x_prior)])
-
-    r, Jf, w = evaluate(x, used)
-    initial_r = r.copy()
-    initial_cost = cost(r, w)
-    history.append(Iteration(0, float(np.sqrt(np.mean(r ** 2))), float(np.max(np.abs(r))),
-                             int(used.sum())))
-    for it in range(1, opt.max_iter + 1):
-        # weighted: rows scaled by w (held for this iteration, re-evaluated at the next)
-        Jw, rw = (Jf, r) if w is None else (Jf * w[:, None], r * w)
-        Jw, rw = with_prior(Jw, rw, x)
-        S = _scales(Jw, opt.scale)
-        A = Jw * S
-        if opt.method == "gn":
-            dx = S * _solve_step(A, rw, opt.rcond)
-        elif opt.method == "lm":
-            c0 = rw @ rw
-            H = A.T @ A
-            g = A.T @ rw
-            for _ in range(30):
-                step = np.linalg.lstsq(H + lam * np.diag(np.maximum(np.diag(H), 1e-30)), -g,
-                                       rcond=None)[0]
-                xt = x.copy()
-                xt[free] += S * step
-                rt = evaluate(xt, used)[0]
-                if w is not None:
-                    rt = rt * w
-                if rt @ rt <= c0:
-                    lam = max(lam / 10, 1e-12)
-                    break
-                lam *= 10
-            else:
-                step = np.zeros(p)
-            dx = S * step
-        else:
-            raise ValueError(f"unknown method {opt.method!r} (gn or lm)")
-        x[free] += dx
-        iterations = it
-        mean_dx = float(np.mean(np.abs(dx)))
-        if mean_dx < opt.improvement_limit and opt.outlier_sigma is None:
-            # converged: r and J at x - dx describe x to O(|dx|), below the limit
-            last = history[-1]
-            history.append(Iteration(it, last.rms_m, last.max_m, int(used.sum()), mean_dx))
-            converged = True
-            break
-        r, Jf, w = evaluate(x, used)
-        if opt.outlier_sigma is not None:
-            e = r if w is None else r * w  # weighted: standardised residuals
-            dev = np.abs(e - e.mean())
-            bad = dev > opt.outlier_sigma * e.std()
-            if bad.any() and used.sum() - bad.sum() > p + 1:
-                idx = np.flatnonzero(used)[bad]
-                outliers.extend(int(i) for i in idx)
-                used[idx] = False
-                r, Jf, w = evaluate(x, used)
-        history.append(Iteration(it, float(np.sqrt(np.mean(r ** 2))), float(np.max(np.abs(r))),
-                                 int(used.sum()), mean_dx))
-        if mean_dx < opt.improvement_limit:
-            converged = True
-            break
+    x[free] = sol.x
     params = CellParams.from_vector(x, layout)
+    r, J, w = sol.r, sol.J, sol.w
     # residuals over all samples (outliers included), for reporting
-    final_r = r if used.all() else predict(robot, qe, params, pidx) - d_m
-    if pj.size:  # the posterior covariance: the prior rows join the data's
-        Jp, rp = with_prior(Jf if w is None else Jf * w[:, None], r if w is None else r * w, x)
-        ident, cov, sigma = uncertainty(Jp, rp, layout, free, opt)
+    final_r = r if sol.used.all() else predict(pb.robot, pb.qe, params, pb.plate) - pb.d_m
+    if prior is not None:  # the posterior covariance: the prior rows join the data's
+        P, rp = prior.rows(sol.x, J.shape[1])
+        Jw, rw = (J, r) if w is None else (J * w[:, None], r * w)
+        ident, cov, sigma = uncertainty(np.vstack([Jw, P]), np.concatenate([rw, rp]), layout,
+                                        free, opt)
     else:
-        ident, cov, sigma = uncertainty(Jf, r, layout, free, opt, weights=w)
-    notes = []
-    if not converged:
-        notes.append(f"stopped after {iterations} iterations (max_iter) before the mean "
-                     f"correction fell below {opt.improvement_limit:g}")
-    return Result(pb, params, converged, iterations, initial_cost, cost(r, w), history,
-                  final_r, initial_r, used, sorted(outliers), sigma, cov, ident, notes)
-
-
-def analyze(robot: Robot, qe: np.ndarray, params: CellParams, plane_index=None,
-            free=None, sigma_m: float = 2e-6, options: FitOptions | None = None,
-            layout: ParamLayout | None = None) -> tuple[Identifiability, Covariance]:
-    """Identifiability and predicted covariance of a pose set *before* fitting: the
-    Jacobian at ``params`` (e.g. the nominal values) and an assumed distance noise
-    ``sigma_m`` (white: the weighted fit's options are not used here). ``free`` as for
-    ``Problem.from_arrays``."""
-    opt = options or FitOptions()
-    layout = layout or level1_layout(params.n_planes)
-    free = free_mask(layout, free)
-    _, J = predict_with_jacobian(robot, qe, params, plane_index, layout)
-    Jf = J[:, free]
-    ident, cov, _ = uncertainty(Jf, np.zeros(len(Jf)), layout, free, opt, known_sigma_m=sigma_m)
-    return ident, cov
-
-
-def uncertainty(Jf: np.ndarray, r: np.ndarray, layout: ParamLayout, free: np.ndarray,
-                opt: FitOptions | None = None, weights: np.ndarray | None = None,
-                known_sigma_m: float | None = None):
-    """Covariance and the identifiability report at a solution, for the free columns Jf of
-    the Jacobian and the residuals r; ``weights`` (row weights 1/sqrt(v_i)): of the weighted
-    fit (module docstring); ``known_sigma_m``: a known white noise std instead of the
-    residuals' estimate (``analyze``). Returns (Identifiability, Covariance, sigma_m =
-    sqrt(|r|^2 / (m - rank)) of the unweighted residuals, or the known sigma)."""
-    opt = opt or FitOptions()
-    m, p = Jf.shape
-    rr = float(r @ r)  # the unweighted residuals' (sigma_m)
-    if weights is not None:
-        Jf, r = Jf * weights[:, None], r * weights
-    free_names = layout.names_of(free)
-    norms = np.linalg.norm(Jf, axis=0)
-    no_effect = [free_names[j] for j in np.flatnonzero(norms <= 1e-10 * norms.max())]
-    S = _scales(Jf, True)
-    A = Jf * S
-    # A = Q R: the singular values and right singular vectors of A are those of the small
-    # triangular R (QR is backward stable, unlike forming A^T A), at a fraction of the cost
-    R = np.linalg.qr(A, mode="r")
-    _, s, Vt = np.linalg.svd(R)
-    ratio = s / s[0]
-    null = ratio < opt.unidentifiable_ratio
-    weak = (~null) & (ratio < opt.weak_ratio)
-    keep = ~null
-    dof = max(m - int(keep.sum()), 1)  # the fit moves only the identifiable directions
-    sigma2 = float(r @ r) / dof
-    sigma_m = float(np.sqrt(rr / dof))
-    if known_sigma_m is not None:
-        sigma2 = sigma_m = float(known_sigma_m)
-        sigma2 *= sigma2
-    cov_scaled = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
-    cov_scaled = 0.5 * (cov_scaled + cov_scaled.T)  # symmetric to the last bit
-    cov = sigma2 * cov_scaled * np.outer(S, S)
-
-    def direction(v):
-        big = np.abs(v) >= 0.1 * np.abs(v).max()
-        order = np.argsort(-np.abs(v))
-        return {free_names[j]: round(float(v[j]), 4) for j in order if big[j]}
-
-    unidentifiable = [direction(Vt[i]) for i in np.flatnonzero(null)]
-    weak_dirs = [WeakDirection(float(ratio[i]), direction(Vt[i])) for i in np.flatnonzero(weak)]
-    not_ident = sorted({k for d in unidentifiable for k in d}, key=free_names.index)
-    bad = np.array([n in not_ident for n in free_names])
-    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    # identifiable in theory but not in practice: the data barely depends on it
-    limits = layout.practical_std(free_names)
-    poorly = [PoorlyDetermined(name, float(std[j]), float(limits[j]))
-              for j, name in enumerate(free_names) if not bad[j] and std[j] > limits[j]]
-    not_ident = sorted(set(not_ident) | {pd.parameter for pd in poorly}, key=free_names.index)
-    bad = np.array([n in not_ident for n in free_names])
-    cov[bad, :] = np.nan
-    cov[:, bad] = np.nan
-    covariance = Covariance(tuple(free_names), cov)
-    sk = s[keep]
-    ident = Identifiability(
-        free=free_names,
-        not_identifiable=not_ident,
-        no_effect=no_effect,
-        poorly_determined=poorly,
-        unidentifiable_directions=unidentifiable,
-        weak_directions=weak_dirs,
-        correlated_pairs=covariance.correlated_pairs(opt.correlation_limit),
-        singular_values=[float(v) for v in np.linalg.svd(R / S, compute_uv=False)],
-        scaled_singular_values=[float(v) for v in s],
-        condition_number_scaled=float(s[0] / s[-1]) if s[-1] > 0 else float("inf"),
-        observability=Observability(
-            O1=float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))) / np.sqrt(m)),
-            O2=float(s[-1] / s[0]),
-            O3=float(s[-1]),
-            O4=float(s[-1] ** 2 / s[0])),
-        sigma_mm=sigma_m * 1e3,
-        samples=int(m),
-        rank=int(keep.sum()),
-        identifiable_min_scaled_ratio=float(sk[-1] / s[0]) if len(sk) else 0.0,
-        weighted=weights is not None,
-        variance_factor=sigma2 if weights is not None else None,
-    )
-    return ident, covariance, sigma_m
+        ident, cov, sigma = uncertainty(J, r, layout, free, opt, weights=w)
+    return Result(pb, params, sol.converged, sol.iterations, sol.initial_cost,
+                  sol.final_cost, sol.history, final_r, sol.initial_r, sol.used,
+                  sol.outliers, sigma, cov, ident, sol.notes, sol.status)

@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.model.cell import CellParams
+from planecal.base.errors import InputError
+from planecal.model.cell_params import CellParams
 from planecal.formats.base import read_json, validate
 from planecal.formats.params import PARAMS_FORMAT, ParamsFile
 
@@ -32,7 +33,7 @@ def params_to_dict(p: CellParams) -> dict:
         "sensor": {"origin_m": [float(v) for v in p.sensor_origin],
                    "phi_y_rad": float(p.phi_y), "phi_z_rad": float(p.phi_z)},
     }
-    if not p.is_level1:
+    if p.has_corrections:
         out["kinematics"] = kinematics_to_dict(p.geometry, p.base, p.compliance)
     return out
 
@@ -67,8 +68,35 @@ def load_json(path: str | Path, what: str = "JSON file"):
     return read_json(path, what)
 
 
-def load_params(path: str | Path) -> CellParams:
-    return params_from_dict(read_json(path, "parameter file"), str(path))
+def load_params(path: str | Path, robot=None) -> CellParams:
+    """The parameters of a parameter or result file; with ``robot``, a result made for
+    another robot is refused (``check_robot``)."""
+    doc = read_json(path, "parameter file")
+    if robot is not None:
+        check_robot(doc, robot, path)
+    return params_from_dict(doc, str(path))
+
+
+def check_robot(doc, robot, path) -> None:
+    """InputError (one line) where the parameter or result document ``doc`` records that it
+    was made for another robot than ``robot``: another name, or the same name with another
+    description (its SHA-256, ``model.robot.description_digest``). A file that records no
+    robot (a hand-written parameter file, older results: the provenance's name only) is
+    checked by what it records."""
+    if not isinstance(doc, dict):
+        return
+    rec = doc.get("robot")
+    prov = doc.get("provenance")
+    name = rec.get("name") if isinstance(rec, dict) else (
+        prov.get("robot") if isinstance(prov, dict) else None)
+    digest = rec.get("sha256") if isinstance(rec, dict) else None
+    if isinstance(name, str) and name != robot.name:
+        raise InputError(f"{path}: made for the robot {name!r}, not {robot.name!r} "
+                         "(give the robot it was made for, or recalibrate)")
+    if isinstance(digest, str) and robot.digest and digest != robot.digest:
+        raise InputError(f"{path}: made for another description of {robot.name!r} "
+                         f"(SHA-256 {digest[:12]}..., this one {robot.digest[:12]}...): its "
+                         "parameters belong to that robot model; recalibrate")
 
 
 def save_json(path: str | Path, data: dict, fsync: bool = False) -> None:

@@ -5,7 +5,7 @@ links ``link1`` .. ``link6``) -> ``flange`` (fixed, DH frame 6) -> ``laser`` (fi
 sensor frame: origin o in the flange frame, rotation Rz(phi_z) Ry(phi_y), z = the beam).
 
 A URDF joint's value is planecal's joint angle q (what ``encoder.counts_to_joints``
-gives), so a URDF consumer's forward kinematics at q is ``robot.fk(robot, q, delta)``.
+gives), so a URDF consumer's forward kinematics at q is ``kinematics.fk(robot.kinematics.with_offsets(delta), q)``.
 Standard DH, ``T_i = Rz(q_i + c_i) Tz(d_i) Tx(a_i) Rx(alpha_i)`` with
 ``c_i = theta0_i + delta_i``. A URDF joint turns its child about an axis after a fixed
 origin; since Rz(q + c) = Rz(q) Rz(c), joint i turns by q_i about z and the constant part
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.model.cell import CellParams
+from planecal.model.cell_params import CellParams
 from planecal.model.robot import Robot
 
 LINKS = ("base", "link1", "link2", "link3", "link4", "link5", "link6", "flange", "laser")

@@ -1,7 +1,8 @@
 """The cell's parameters (``CellParams``): the joint offsets, the sensor pose on the flange,
-the planes, and level 2's corrections of the nominal model; their vector goes through a
-``planecal.model.layout.ParamLayout`` by group, so no code knows an offset. The distance model
-that reads them is ``planecal.model.cell`` (level 1) and ``planecal.model.model_full`` (level 2)."""
+the planes, and the corrections of the nominal model (joint geometry, base frame,
+compliance); their vector goes through a ``planecal.model.layout.ParamLayout`` by group,
+so no code knows an offset. The distance model that reads them is
+``planecal.model.measurement``, one for every layout."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -18,7 +19,7 @@ class CellParams:
     phi_y: float = 0.0
     phi_z: float = 0.0
     planes: np.ndarray = field(default_factory=lambda: np.zeros((1, 3)))
-    # level 2 (issue 13; model_full.py): corrections of the nominal model, zero by default
+    # corrections of the nominal model (planecal.model.measurement), zero by default
     geometry: np.ndarray | None = None  # (6, 4) per joint: modified-DH alpha, a, beta, d
     base: np.ndarray | None = None  # (6,) base frame error x, y, z [m], rx, ry, rz [rad]
     compliance: np.ndarray | None = None  # (6,) c_j = 1/k_j [rad/(N m)]
@@ -40,9 +41,10 @@ class CellParams:
         return len(self.planes)
 
     @property
-    def is_level1(self) -> bool:
-        """No geometry, base or compliance correction: robot.json's model with offsets."""
-        return not (self.geometry.any() or self.base.any() or self.compliance.any())
+    def has_corrections(self) -> bool:
+        """Whether any geometry, base frame or compliance correction is non-zero (else the
+        model is robot.json's chain with joint offsets)."""
+        return bool(self.geometry.any() or self.base.any() or self.compliance.any())
 
     def to_vector(self, layout: ParamLayout | None = None) -> np.ndarray:
         """The values in ``layout``'s order (default: the level-1 layout of this many planes)."""

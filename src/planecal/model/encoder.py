@@ -49,12 +49,12 @@ def encoder_zero_counts(robot: Robot, delta: np.ndarray, qe0: np.ndarray | None 
     Returns (qe0' int64 (6,), residual (6,) [rad]: the joint offsets the integers realise
     minus ``delta``, flange displacement [m] of that residual at joint angles ``q_ref``
     (default all zero): |J_v residual|)."""
-    from planecal.model.robot import jacobian
+    from planecal.model.kinematics import jacobian
     qe0 = robot.qe0 if qe0 is None else np.asarray(qe0, float)
     exact = offsets_to_qe0(robot, delta, qe0)
     counts = np.rint(exact).astype(np.int64)
     realised = (qe0 - counts) / robot.gains @ robot.coupling.T  # C (qe0 - qe0') / g
     residual = realised - np.asarray(delta, float)
     q_ref = np.zeros(robot.n_joints) if q_ref is None else np.asarray(q_ref, float)
-    tcp = float(np.linalg.norm(jacobian(robot, q_ref)[:3] @ residual))
+    tcp = float(np.linalg.norm(jacobian(robot.kinematics, q_ref)[:3] @ residual))
     return counts, residual, tcp

@@ -77,7 +77,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planecal.model.cell import CellParams, sensor_rotation
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import sensor_rotation
 from planecal.base.errors import InputError
 from planecal.model.mesh import Mesh, box, convex_hull
 

@@ -22,7 +22,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from planecal.model.kinematics import from_robot
 from planecal.model.robot import Robot
 
 GRAVITY = np.array([0.0, 0.0, -9.81])  # the twin's (twin.errors.GRAVITY)
@@ -39,7 +38,7 @@ def gravity_world(robot: Robot, payload=None) -> tuple:
     """The tick's world tuple (harmonics unused, base, body poses (n,4,4), mass bodies,
     centres of mass in their bodies (m,3), masses (m,), gravity) of robot.json's nominal
     model; ``payload`` = (mass kg, centre of mass (3,) in the flange frame) or None."""
-    kin = from_robot(robot)
+    kin = robot.kinematics
     P = np.array([kin.joint_transform(i) for i in range(robot.n_joints)])
     body, com, kg = [], [], []
     for frame, c, m in robot.masses:

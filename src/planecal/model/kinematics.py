@@ -1,21 +1,27 @@
-"""The robot's whole geometric model: per joint modified DH (Craig) with Hayati's beta, a
-base frame and a flange frame. The twin's true robot is one of these (its errors drawn
-from an error profile); level-2 calibration identifies its parameters.
+"""The robot's one kinematic chain: per joint modified DH (Craig) with Hayati's beta, a
+base frame and a flange frame. The nominal robot (robot.json), a calibration's model at
+any level and the twin's true robot are all one of these; what differs is the values.
 
     T_flange(q) = B  prod_i [ Rx(alpha_i) Tx(a_i) Ry(beta_i) Rz(theta_i + q_i) Tz(d_i) ]  F
 
 ``theta_i`` is the joint's zero (``theta0_i + delta_i``: the joint offsets that level-1
 calibration identifies), q the joint angles from the encoder model. Frame i (after joint
 i) has joint i's axis as its z axis, through its origin. Standard DH, which robot.json
-holds, turns into this form exactly: alpha_i = alpha_{i-1}^std, a_i = a_{i-1}^std (0 for
-joint 1), theta and d unchanged, F = Tx(a_6^std) Rx(alpha_6^std), beta = 0, B = I; and
-the standard DH frame i is frame i times Tx(a_i^std) Rx(alpha_i^std) (``dh_frame``).
+holds, turns into this form exactly (``from_standard_dh``): alpha_i = alpha_{i-1}^std,
+a_i = a_{i-1}^std (0 for joint 1), theta and d unchanged, F = Tx(a_n^std) Rx(alpha_n^std),
+beta = 0, B = I. A link's own frame (``link_frames``: where its shapes hang) is frame i
+times the fixed part of the next joint, Rx(alpha_{i+1}) Tx(a_{i+1}): the standard DH frame
+i of the nominal robot.
 
 Why modified DH and beta: where consecutive axes are parallel (J2-J3 on the MC70,
 alpha_3 = 0), standard DH's common normal is ill-defined under a small misalignment (a tiny
 tilt moves d by metres); modified DH puts the twist and length before the joint, and
 Hayati's beta (a rotation about y) carries the tilt within the plane of the parallel
 axes, so every small geometric error has a small parameter.
+
+The chain is computed by compiled kernels (``planecal.model.chain``): one pose's flange and
+geometric Jacobian in a few microseconds (IK, planning and compensation pay it per pose),
+N poses in one call. Every function here takes q of shape (n,) or (N, n).
 """
 from __future__ import annotations
 
@@ -23,7 +29,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from planecal.model.robot import Robot
+from planecal.model import chain as _chain
 
 JOINT_PARAMS = ("alpha", "a", "beta", "theta", "d")  # per joint, in the product's order
 FRAME_PARAMS = ("x", "y", "z", "rx", "ry", "rz")  # a frame error: translation, small rotation
@@ -47,10 +53,11 @@ def frame_error(e) -> np.ndarray:
     return T
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Kinematics:
     """The geometric model (module docstring). Arrays (n,) per joint; ``base`` and
-    ``flange`` 4x4."""
+    ``flange`` 4x4. ``packed`` (n, 5): alpha, a, beta, theta, d per joint, contiguous, for
+    the kernels."""
     alpha: np.ndarray
     a: np.ndarray
     beta: np.ndarray
@@ -58,6 +65,17 @@ class Kinematics:
     d: np.ndarray
     base: np.ndarray = field(default_factory=lambda: np.eye(4))
     flange: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    def __post_init__(self):
+        for name in JOINT_PARAMS:
+            object.__setattr__(self, name, np.asarray(getattr(self, name), float).reshape(-1))
+        for name in ("base", "flange"):
+            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), float))
+        packed = np.ascontiguousarray(np.stack(
+            [getattr(self, k) for k in JOINT_PARAMS] + [np.cos(self.alpha), np.sin(self.alpha),
+                                                        np.cos(self.beta), np.sin(self.beta)], -1))
+        packed.flags.writeable = False
+        object.__setattr__(self, "packed", packed)
 
     @property
     def n_joints(self) -> int:
@@ -71,21 +89,22 @@ class Kinematics:
         return T
 
     def with_offsets(self, delta) -> "Kinematics":
-        """The model with joint offsets delta added to the joint zeros."""
+        """The model with joint offsets delta added to the joint zeros (None: itself)."""
+        if delta is None:
+            return self
         return replace(self, theta=self.theta + np.asarray(delta, float))
 
 
-def from_robot(robot: Robot, delta=None) -> "Kinematics":
-    """The nominal model of robot.json's standard DH (module docstring), with joint offsets
-    ``delta`` (default none)."""
-    n = robot.n_joints
-    alpha = np.concatenate([[0.0], robot.alpha[:-1]])
-    a = np.concatenate([[0.0], robot.a[:-1]])
-    theta = robot.theta0.copy() if delta is None else robot.theta0 + np.asarray(delta, float)
+def from_standard_dh(theta0, d, a, alpha) -> Kinematics:
+    """The chain of a standard DH table (``T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``,
+    robot.json's convention; module docstring)."""
+    theta0, d, a, alpha = (np.asarray(v, float) for v in (theta0, d, a, alpha))
+    n = len(d)
     F = np.eye(4)
-    F[:3, :3] = rot(0, robot.alpha[-1])
-    F[:3, 3] = [robot.a[-1], 0.0, 0.0]
-    return Kinematics(alpha, a, np.zeros(n), theta, robot.d.copy(), np.eye(4), F)
+    F[:3, :3] = rot(0, alpha[-1])
+    F[:3, 3] = [a[-1], 0.0, 0.0]
+    return Kinematics(np.concatenate([[0.0], alpha[:-1]]), np.concatenate([[0.0], a[:-1]]),
+                      np.zeros(n), theta0.copy(), d.copy(), np.eye(4), F)
 
 
 def parallel_pairs(kin: Kinematics, tol: float = 1e-9) -> list[int]:
@@ -94,63 +113,56 @@ def parallel_pairs(kin: Kinematics, tol: float = 1e-9) -> list[int]:
     return [i for i in range(1, kin.n_joints) if abs(np.sin(kin.alpha[i])) < tol]
 
 
-def chain(kin: Kinematics, q: np.ndarray):
-    """Frames 0..n, component first: lists x, y, z, p of (3, ...) arrays (axes and origin
-    of each frame in the cell frame; frame 0 is the base, frame i is after joint i), and
-    the flange frame (x, y, z, p). Vectorized over the leading axes of q; each elementary
-    rotation is skipped where its angle is zero for the whole model."""
+def _rows(kin: Kinematics, q) -> tuple[np.ndarray, tuple]:
     q = np.asarray(q, float)
-    theta = np.moveaxis(q + kin.theta, -1, 0)  # (n, ...)
-    ct, st = np.cos(theta), np.sin(theta)
-    shape = (3,) + theta.shape[1:]
-    B = kin.base
-
-    def col(v):
-        return np.broadcast_to(np.asarray(v, float).reshape((3,) + (1,) * (len(shape) - 1)), shape)
-
-    x, y, z, p = col(B[:3, 0]), col(B[:3, 1]), col(B[:3, 2]), col(B[:3, 3])
-    xs, ys, zs, ps = [x], [y], [z], [p]
-    for i in range(kin.n_joints):
-        al, be = kin.alpha[i], kin.beta[i]
-        if al != 0.0:  # Rx(alpha)
-            ca, sa = np.cos(al), np.sin(al)
-            y, z = ca * y + sa * z, ca * z - sa * y
-        if kin.a[i] != 0.0:  # Tx(a)
-            p = p + kin.a[i] * x
-        if be != 0.0:  # Ry(beta)
-            cb, sb = np.cos(be), np.sin(be)
-            x, z = cb * x - sb * z, sb * x + cb * z
-        c, s_ = ct[i], st[i]  # Rz(theta + q)
-        x, y = x * c + y * s_, y * c - x * s_
-        if kin.d[i] != 0.0:  # Tz(d)
-            p = p + kin.d[i] * z
-        xs.append(x)
-        ys.append(y)
-        zs.append(z)
-        ps.append(p)
-    F = kin.flange
-    fx = x * F[0, 0] + y * F[1, 0] + z * F[2, 0]
-    fy = x * F[0, 1] + y * F[1, 1] + z * F[2, 1]
-    fz = x * F[0, 2] + y * F[1, 2] + z * F[2, 2]
-    fp = p + x * F[0, 3] + y * F[1, 3] + z * F[2, 3]
-    return xs, ys, zs, ps, (fx, fy, fz, fp)
+    if q.shape[-1] != kin.n_joints:
+        raise ValueError(f"joint angles of shape {q.shape} for a {kin.n_joints}-joint chain")
+    lead = q.shape[:-1]
+    return np.ascontiguousarray(q.reshape(-1, kin.n_joints)), lead
 
 
-def _stack(x, y, z, p) -> np.ndarray:
-    lead = x.shape[1:]
-    T = np.zeros(lead + (4, 4))
-    for c, v in enumerate((x, y, z, p)):
-        T[..., :3, c] = np.moveaxis(v, 0, -1)
+def _homogeneous(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    T = np.zeros(R.shape[:-2] + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = p
     T[..., 3, 3] = 1.0
     return T
 
 
-def frames(kin: Kinematics, q: np.ndarray) -> np.ndarray:
-    """Frames 0..n (base, after joint 1, ..., after joint n) in the cell frame: (..., n+1, 4, 4)."""
-    xs, ys, zs, ps, _ = chain(kin, q)
-    return np.stack([_stack(*v) for v in zip(xs, ys, zs, ps)], axis=-3)
+def frames(kin: Kinematics, q) -> np.ndarray:
+    """Frames 0..n (base, after joint 1, ..., after joint n) in the cell frame:
+    (..., n+1, 4, 4)."""
+    Q, lead = _rows(kin, q)
+    R, p = _chain.frames(kin.packed, kin.base, Q)
+    return _homogeneous(R, p).reshape(lead + (kin.n_joints + 1, 4, 4))
 
 
-def fk(kin: Kinematics, q: np.ndarray) -> np.ndarray:
+def link_frames(kin: Kinematics, q) -> np.ndarray:
+    """Each link's own frame, base to flange (..., n+1, 4, 4): frame i times the next
+    joint's fixed Rx(alpha) Tx(a), and the flange last; robot.json's standard DH frames
+    0..n for the nominal robot. The link shapes (``planecal.model.geometry``) hang off these."""
+    Q, lead = _rows(kin, q)
+    R, p = _chain.link_frames(kin.packed, kin.base, kin.flange, Q)
+    return _homogeneous(R, p).reshape(lead + (kin.n_joints + 1, 4, 4))
+
+
+def fk(kin: Kinematics, q) -> np.ndarray:
     """Flange pose in the cell frame, (..., 4, 4)."""
-    return _stack(*chain(kin, q)[4])
+    Q, lead = _rows(kin, q)
+    T = np.empty((len(Q), 4, 4))
+    _chain.flange(kin.packed, kin.base, kin.flange, Q, T)
+    return T.reshape(lead + (4, 4))
+
+
+def jacobian(kin: Kinematics, q) -> np.ndarray:
+    """Geometric Jacobian of the flange in the cell frame, rows (v, w): (..., 6, n)."""
+    return fk_jacobian(kin, q)[1]
+
+
+def fk_jacobian(kin: Kinematics, q) -> tuple[np.ndarray, np.ndarray]:
+    """The flange pose (..., 4, 4) and its geometric Jacobian (..., 6, n) in one pass."""
+    Q, lead = _rows(kin, q)
+    T = np.empty((len(Q), 4, 4))
+    J = np.empty((len(Q), 6, kin.n_joints))
+    _chain.flange_jacobian(kin.packed, kin.base, kin.flange, Q, T, J)
+    return T.reshape(lead + (4, 4)), J.reshape(lead + (6, kin.n_joints))

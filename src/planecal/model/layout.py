@@ -194,6 +194,20 @@ class ParamLayout:
         axis (seed 6.2); freeing them gives directions the data cannot see."""
         return np.array([p.free_by_default for p in self._params], bool)
 
+    def free_mask(self, free) -> np.ndarray:
+        """A free mask from a bool mask, parameter names (a list or the --free comma
+        string, "all") or None (``default_free``)."""
+        if free is None:
+            return self.default_free
+        if isinstance(free, str):
+            return self.free_from_names(free)
+        arr = np.asarray(free)
+        if arr.dtype == bool:
+            if arr.shape != (len(self),):
+                raise ValueError(f"free mask of {arr.shape} over {len(self)} parameters")
+            return arr.copy()
+        return self.free_from_names(list(free))
+
     def free_from_names(self, spec) -> np.ndarray:
         """The --free option: parameter names as a comma-separated string or a list; "all"
         frees everything; None or empty gives ``default_free``. InputError names an
@@ -304,19 +318,39 @@ def level2_layout(n_planes: int, parallel: tuple[int, ...] = (3,),
                   compliance: bool = False) -> ParamLayout:
     """The whole kinematic model (seed chapter 5, level 2; level 3's joint compliance with
     ``compliance``): level 1's groups in level 1's order, then joint1..joint6 (modified-DH
-    corrections), the base frame and the compliance. Every joint offset is free by default
-    here: which parameters the data can separate is decided from the data
-    (``planecal.estimation.identify.select_base``), not assumed."""
-    lv1 = level1_layout(n_planes)
-    first = []
-    for g in lv1.groups:
-        if g.kind == "joint_offsets":
-            g = Group(g.name, g.kind, g.index, tuple(
-                Param(p.name, p.unit, p.group, p.display_scale, p.display_unit,
-                      p.practical_std, True) for p in g.params))
-        first.append(g)
-    groups = first + [joint_geometry_group(j, tuple(parallel)) for j in range(1, 7)]
+    corrections), the base frame and the compliance. delta1 and delta6 stay fixed by
+    default, as in level 1: no plane calibration can tell J1's zero from the plates' turn
+    about the base z axis, nor J6's from the sensor's roll, whatever else is free; which of
+    the other parameters the data can separate is decided from the data
+    (``planecal.estimation.identifiability.select_base``), not assumed."""
+    groups = list(level1_layout(n_planes).groups)
+    groups += [joint_geometry_group(j, tuple(parallel)) for j in range(1, 7)]
     groups.append(base_frame_group())
     if compliance:
         groups.append(compliance_group())
     return ParamLayout(groups)
+
+
+_KIND_OF_NAME = (  # a parameter's name -> its quantity (the groups above name them so)
+    (r"delta\d+|phi_[yz]|alpha\d+|beta\d+|base_r[xyz]", RAD),
+    (r"o_[xyz]|a\d+|d\d+|base_[xyz]", METRE),
+    (r"n\d+_[xyz]", PER_METRE),
+    (r"c\d+", COMPLIANCE),
+)
+
+
+def quantity_of(name: str) -> dict:
+    """The unit, display scale and unit and practical std of a parameter named as the
+    groups above name them (for files that hold names only: study results); KeyError for
+    a name no group gives."""
+    import re
+    for pattern, q in _KIND_OF_NAME:
+        if re.fullmatch(pattern, name):
+            return dict(q)
+    raise KeyError(f"no parameter group names a parameter {name!r}")
+
+
+def display_of(name: str) -> tuple[float, str]:
+    """(scale, unit) to print a value or std of the parameter ``name`` (``quantity_of``)."""
+    q = quantity_of(name)
+    return q["display_scale"], q["display_unit"]

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.model.cell import CellParams, point_normal_from_n_tilde
+from planecal.model.cell_params import CellParams
+from planecal.model.planes import point_normal_from_n_tilde
 from planecal.base.errors import InputError
 from planecal.formats.base import read_json, validate
 from planecal.formats.robot import reach_m

@@ -106,7 +106,8 @@ from planecal.safety.collision_joint import (HULL_SECTIONS, SafeSet, axis_coordi
                                       axis_distance_max, hull_of_revolution, sweep)
 from planecal.base.errors import InputError
 from planecal.model.mesh import Mesh, box, prism
-from planecal.model.robot import Robot, fk_frames, within_limits
+from planecal.model.robot import Robot, within_limits
+from planecal.model.kinematics import link_frames
 
 FLOOR_DEPTH_M = 10.0  # the floor box reaches this far below the floor's top face
 REASONS = ("limits", "self", "environment", "undecided")
@@ -458,7 +459,7 @@ class CollisionWorld:
     # ----- distances -----
 
     def _frames(self, Q: np.ndarray) -> np.ndarray:
-        return fk_frames(self.robot, Q)
+        return link_frames(self.robot.kinematics, Q)
 
     def _lower_bounds(self, F: np.ndarray, idx: np.ndarray, rows: np.ndarray | None = None):
         """Cheap lower bounds of the distances of pairs idx, pair idx[e] with the frames

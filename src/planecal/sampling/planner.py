@@ -24,7 +24,8 @@ from typing import Callable, Protocol
 import numpy as np
 
 from planecal.model.encoder import counts_in_range, counts_to_joints
-from planecal.model.robot import fk, ik_all
+from planecal.model.kinematics import fk
+from planecal.model.ik import ik_all
 from planecal.sampling.poses import CommandModel, PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.steps import COUNT_LIMIT
 from planecal.model.scene import Scene
@@ -122,7 +123,7 @@ class Detour:
 
     def _retract(self, q: np.ndarray, d: float):
         """(joint angles, counts) of the sensor backed out by d from where q puts it."""
-        T = fk(self.robot, q, self.poses.delta) @ self.T_fs
+        T = fk(self.robot.kinematics.with_offsets(self.poses.delta), q) @ self.T_fs
         T[:3, 3] -= d * T[:3, 2]
         Q = ik_all(self.robot, T @ self.T_sf, self.poses.delta)
         if len(Q) == 0:

@@ -47,11 +47,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.model.cell import CellParams, sensor_rotation
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import sensor_rotation
 from planecal.model.encoder import joints_to_counts
 from planecal.base.errors import InputError
 from planecal.formats.run import IK_CHOICES, PLATE_CHOICES  # the sidecar's allowed values
-from planecal.model.robot import ik_all
+from planecal.model.ik import ik_all
 from planecal.model.scene import Scene
 
 

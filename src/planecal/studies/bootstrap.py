@@ -15,9 +15,14 @@ independent sets of size s would show); above ``overlap_warn`` (0.3) the size is
 
 Reproducible wherever it runs: subset r of size s is drawn, by the run itself, from the
 random stream ``default_rng([seed, s, r])``: fixed by its cell (the size) and r, whatever
-worker fits it and whatever other sizes the study has. The fits go through
+worker fits it and whatever other sizes the study has. Each subset is calibrated by the one
+calibration (``estimation.calibrate``) with the study's ``CalibrationSettings`` (any level;
+at level full each subset chooses its own base set). The fits go through
 ``studies.distributed.Engine`` (``studies.common.parallel_map``), each one a pure function
 of its item; with a results file each fit is written as it completes (key ``[s, r]``).
+
+Sizes: by default those of (30, 50, 100, 150) strictly between the free parameters and the
+pool (a subset as large as the pool is the pool: every fit the same, no spread).
 """
 from __future__ import annotations
 
@@ -27,19 +32,61 @@ from dataclasses import dataclass
 import numpy as np
 
 from planecal.base.errors import InputError
-from planecal.estimation.fit import Problem, solve
+from planecal.estimation.calibrate import CalibrationSettings, calibrate
+from planecal.model.cell_params import CellParams
 from planecal.model.layout import ParamLayout
-from planecal.studies.common import Progress, parallel_map, table
+from planecal.model.levels import layout_for
+from planecal.model.robot import Robot
+from planecal.studies.common import Progress, parallel_map
 
 OVERLAP_WARN = 0.3
+DEFAULT_SIZES = (30, 50, 100, 150)
 
 
 @dataclass
 class BootstrapSettings:
-    sizes: tuple = (30, 50, 100, 150)
+    sizes: tuple | None = None  # None: DEFAULT_SIZES below the pool (``default_sizes``)
     repeats: int = 10
     seed: int = 0
     overlap_warn: float = OVERLAP_WARN
+
+
+@dataclass(frozen=True, eq=False)
+class Pool:
+    """The samples every subset is drawn from, the initial parameters and how to calibrate."""
+    robot: Robot
+    qe: np.ndarray
+    d_m: np.ndarray
+    plate: np.ndarray
+    initial: CellParams
+    calibration: CalibrationSettings
+
+    def __len__(self) -> int:
+        return len(self.d_m)
+
+    @property
+    def layout(self) -> ParamLayout:
+        return layout_for(self.robot, self.initial.n_planes, self.calibration.level,
+                          self.calibration.compliance)
+
+    @property
+    def free(self) -> np.ndarray:
+        """The candidates (the base set of each fit is among them)."""
+        return self.layout.free_mask(self.calibration.free)
+
+    def subset(self, idx) -> "Pool":
+        return Pool(self.robot, self.qe[idx], self.d_m[idx], self.plate[idx], self.initial,
+                    self.calibration)
+
+
+def default_sizes(n: int, p: int) -> tuple:
+    """DEFAULT_SIZES strictly between p free parameters and a pool of n; where fewer than
+    two remain, 30 %, 50 % and 70 % of the pool."""
+    sizes = [s for s in DEFAULT_SIZES if p < s < n]
+    if len(sizes) < 2:
+        sizes = sorted({int(round(f * n)) for f in (0.3, 0.5, 0.7)} - {n})
+        sizes = [s for s in sizes if p < s < n]
+    return tuple(sizes)
 
 
 def subset_indices(n: int, size: int, r: int, seed: int) -> np.ndarray:
@@ -49,35 +96,35 @@ def subset_indices(n: int, size: int, r: int, seed: int) -> np.ndarray:
 
 
 def fit_subset(item) -> dict:
-    """One run of the study: item = (pool problem, size, r, seed)."""
-    problem, size, r, seed = item
-    return _fit_one(problem.subset(subset_indices(len(problem), size, r, seed)))
+    """One run of the study: item = (pool, size, r, seed)."""
+    pool, size, r, seed = item
+    return _fit_one(pool.subset(subset_indices(len(pool), size, r, seed)))
 
 
 def _item_key(item) -> list:
     return [item[1], item[2]]
 
 
-def pool_digest(problem: Problem) -> str:
-    """sha256 of what the fits depend on (samples, initial parameters, free set, options):
-    a results file written for another pool is refused."""
+def pool_digest(pool: Pool) -> str:
+    """sha256 of what the fits depend on (samples, initial parameters, calibration
+    settings): a results file written for another pool is refused."""
     h = hashlib.sha256()
-    for a in (problem.qe, problem.d_m, problem.plate, problem.free,
-              problem.initial.to_vector(problem.layout)):
+    for a in (pool.qe, pool.d_m, pool.plate, pool.free, pool.initial.to_vector(pool.layout)):
         a = np.ascontiguousarray(a)
         h.update(f"{a.dtype.str}{a.shape}".encode())
         h.update(a.tobytes())
-    h.update(repr(problem.options).encode())
-    h.update(",".join(problem.layout.names).encode())
+    h.update(repr(pool.calibration).encode())
+    h.update(",".join(pool.layout.names).encode())
     return h.hexdigest()
 
 
-def _fit_one(problem: Problem):
+def _fit_one(pool: Pool):
     try:
-        res = solve(problem)
-    except (ValueError, np.linalg.LinAlgError) as e:
+        res = calibrate(pool.robot, pool.qe, pool.d_m, pool.initial, pool.plate,
+                        pool.calibration).result
+    except (InputError, np.linalg.LinAlgError) as e:
         return {"ok": False, "error": str(e)}
-    return {"ok": True, "x": res.params.to_vector(problem.layout), "std": res.std,
+    return {"ok": True, "x": res.params.to_vector(res.layout), "std": res.std,
             "converged": res.converged, "rms_mm": res.rms_mm(),
             "not_identifiable": res.identifiability.not_identifiable}
 
@@ -90,44 +137,51 @@ def overlap(s: int, n: int) -> dict:
             "finite_population_factor": float(fpc)}
 
 
-def check_settings(problem: Problem, st: BootstrapSettings) -> None:
-    """InputError for settings the pool cannot serve (before any fit)."""
-    n = len(problem)
-    p = int(problem.free.sum())
+def check_settings(pool: Pool, st: BootstrapSettings) -> BootstrapSettings:
+    """The settings with their sizes (default: ``default_sizes``); InputError for settings
+    the pool cannot serve (before any fit)."""
+    n = len(pool)
+    p = int(pool.free.sum())
     if st.repeats < 2:
         raise InputError(f"--repeats must be at least 2 to measure a spread, got {st.repeats}")
+    if st.sizes is None:
+        st = BootstrapSettings(default_sizes(n, p), st.repeats, st.seed, st.overlap_warn)
+        if not st.sizes:
+            raise InputError(f"a pool of {n} samples leaves no subset size between the "
+                             f"{p} free parameters and the pool: give --sizes or more samples")
     for s in st.sizes:
-        if s > n:
-            raise InputError(f"--sizes: subset size {s} exceeds the pool of {n} samples")
+        if s >= n:
+            raise InputError(f"--sizes: subset size {s} is not below the pool of {n} samples "
+                             "(a subset as large as the pool is the pool: no spread)")
         if s <= p:
             raise InputError(f"--sizes: subset size {s} cannot determine {p} free parameters")
     if len(set(st.sizes)) != len(st.sizes):
         raise InputError(f"--sizes: a size given twice ({', '.join(map(str, st.sizes))})")
+    return st
 
 
-def bootstrap(problem: Problem, settings: BootstrapSettings | None = None, engine=1,
+def bootstrap(pool: Pool, settings: BootstrapSettings | None = None, engine=1,
               quiet: bool = False, results=None, resume: bool = False) -> dict:
-    """The study (module docstring) on ``problem``'s samples (the pool), its initial
-    parameters, free set and options; a pure function of its inputs. ``engine``: an open
+    """The study (module docstring) on ``pool``'s samples, its initial parameters and
+    calibration settings; a pure function of its inputs. ``engine``: an open
     ``Engine`` or a job count (``studies.common.engine_for``); ``results``/``resume``: the
     JSON-lines file of the fits (``parallel_map``). Returns a dict with
     ``pool``, ``names``, ``free``, ``sizes``: one entry per size with per-parameter
     ``mean``, ``std``, ``std_independent``, ``min``, ``max``, ``reported_std``,
     ``overlap`` and ``warning``."""
-    st = settings or BootstrapSettings()
-    check_settings(problem, st)
-    n = len(problem)
-    names, free = problem.layout.names, problem.free
-    items = [(problem, s, r, st.seed) for s in st.sizes for r in range(st.repeats)]
+    st = check_settings(pool, settings or BootstrapSettings())
+    n = len(pool)
+    names, free = pool.layout.names, pool.free
+    items = [(pool, s, r, st.seed) for s in st.sizes for r in range(st.repeats)]
     where = [s for _, s, _, _ in items]
     prog = Progress("bootstrap fits", len(items), quiet=quiet)
     header = {"study": "bootstrap", "seed": st.seed, "pool": n,
-              "pool_sha256": pool_digest(problem)}
+              "pool_sha256": pool_digest(pool)}
     fits = parallel_map(fit_subset, items, engine, prog, key=_item_key, results=results,
                         resume=resume, header=header)
-    full = _fit_one(problem)
-    out = {"pool": n, "names": names, "free": problem.free_names,
-           "repeats": st.repeats, "seed": st.seed,
+    full = _fit_one(pool)
+    out = {"pool": n, "names": names, "free": pool.layout.names_of(free),
+           "repeats": st.repeats, "seed": st.seed, "calibration": pool.calibration.to_dict(),
            "pool_fit": {"x": full.get("x"), "std": full.get("std")} if full["ok"] else None,
            "sizes": []}
     for s in st.sizes:
@@ -162,35 +216,3 @@ def bootstrap(problem: Problem, settings: BootstrapSettings | None = None, engin
                     "reported_std": None if not np.isfinite(rep[i]) else float(rep[i])}
         out["sizes"].append(entry)
     return out
-
-
-def format_bootstrap(res: dict, layout: ParamLayout) -> str:
-    """Terminal report: per size a table of the free parameters' spread (display units of
-    the study's parameter ``layout``)."""
-    lines = [f"pool: {res['pool']} samples; {res['repeats']} random subsets per size "
-             f"(seed {res['seed']})"]
-    for e in res["sizes"]:
-        ov = e["overlap"]
-        lines.append("")
-        lines.append(f"subset size {e['size']}: {e['fits']} fits"
-                     + (f", {e['failed']} failed" if e['failed'] else "")
-                     + (f", {e['not_converged']} not converged" if e['not_converged'] else "")
-                     + f"; share of pool {ov['share']:.0%}, two subsets share "
-                     f"{ov['expected_common_samples']:.1f} samples on average")
-        rows = []
-        for nm, v in e["params"].items():
-            k, unit = layout.display(nm)
-
-            def f(x):
-                return "-" if x is None or not np.isfinite(x) else f"{x * k:.4g}"
-            ratio = (v["std_independent"] / v["reported_std"]
-                     if v["reported_std"] else float("nan"))
-            rows.append([nm, unit, f"{v['mean']:.7g}", f(v["std"]), f(v["std_independent"]),
-                         f(v["min"] - v["mean"]), f(v["max"] - v["mean"]), f(v["reported_std"]),
-                         "-" if not np.isfinite(ratio) else f"{ratio:.2f}"])
-        if rows:
-            lines.append(table(["param", "spread in", "mean (SI)", "std", "std_indep", "min-mean", "max-mean",
-                                "fit_std", "indep/fit"], rows))
-        if e["warning"]:
-            lines.append(f"WARNING {e['warning']}")
-    return "\n".join(lines)

@@ -21,13 +21,11 @@ from __future__ import annotations
 from contextlib import contextmanager
 from typing import Callable, Iterable, Iterator
 
-import numpy as np
 
 from planecal.base.errors import InputError
 from planecal.base.progress import Progress as ProgressBar
 from planecal.studies.distributed import Engine
 
-BUFFER_LEN = 100  # laser readings averaged into one sample (sampling.laserread)
 
 
 def parse_int_list(text: str, what: str, minimum: int = 1) -> list[int]:
@@ -82,42 +80,6 @@ def parallel_map(fn: Callable, items: Iterable, engine: Engine | int | None = 1,
     with engine_for(engine) as eng:
         return eng.map(fn, items, key=key, out=results, resume=resume, header=header,
                        progress=progress)
-
-
-def table(headers: list[str], rows: list[list], aligns: str | None = None) -> str:
-    """A plain text table; numbers should come pre-formatted as strings."""
-    cells = [[str(c) for c in r] for r in rows]
-    w = [max(len(h), *(len(r[i]) for r in cells)) if cells else len(h)
-         for i, h in enumerate(headers)]
-    aligns = aligns or ("l" + "r" * (len(headers) - 1))
-
-    def fmt(r):
-        return "  ".join(c.ljust(w[i]) if aligns[i] == "l" else c.rjust(w[i])
-                         for i, c in enumerate(r))
-    return "\n".join([fmt(headers), "  ".join("-" * x for x in w)] + [fmt(r) for r in cells])
-
-
-def covariances(Jf: np.ndarray, v: np.ndarray) -> dict:
-    """For the free-column Jacobian Jf (N, p) and per-sample noise variances v (N,):
-    'white': mean(v) (J^T J)^-1 (the white-noise CR bound with the mean variance),
-    'sandwich': the covariance of the unweighted LS estimate, 'crb': (J^T V^-1 J)^-1.
-    Computed on column-scaled Jf; pseudo-inverse on the identifiable subspace."""
-    S = np.linalg.norm(Jf, axis=0)
-    S = np.where(S > 0, 1.0 / np.where(S > 0, S, 1.0), 1.0)
-    A = Jf * S
-    G = A.T @ A
-    Gi = _pinv_sym(G)
-    white = np.mean(v) * Gi
-    sand = Gi @ (A.T @ (A * v[:, None])) @ Gi
-    crb = _pinv_sym(A.T @ (A / v[:, None]))
-    s2 = np.outer(S, S)
-    return {"white": white * s2, "sandwich": sand * s2, "crb": crb * s2}
-
-
-def _pinv_sym(G: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
-    lam, V = np.linalg.eigh(G)
-    keep = lam > rcond * lam[-1]
-    return (V[:, keep] / lam[keep]) @ V[:, keep].T
 
 
 # ----- per-process caches of what every run of a study rebuilds otherwise -------------------

@@ -30,18 +30,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.estimation.compensate import CalibratedKinematics, Region, Targets, compensate
+from planecal.estimation.compensate import CalibratedModel, Region, Targets, compensate
 from planecal.model.encoder import counts_to_joints
-from planecal.model.robot import fk, within_limits
+from planecal.model.kinematics import fk
+from planecal.model.robot import within_limits
 
 
 def draw_targets(robot, region: Region, n: int, rng, checker=None, max_draws: int = 100_000):
-    """``n`` joint configurations uniform in the region's box, within the joint limits and
-    (with ``checker``) collision-free: (n, 6) rad."""
+    """``n`` joint configurations uniform in the region's joint ranges whose flange is
+    within its hull (``Region.distance_m``), within the joint limits and (with ``checker``)
+    collision-free: (n, 6) rad."""
     out = []
     for _ in range(max_draws):
         q = rng.uniform(region.lower, region.upper)
-        if not within_limits(robot, q):
+        if not within_limits(robot, q) or region.distance_m(q, robot)[0] > 0:
             continue
         if checker is not None and not checker.check_config(q).ok:
             continue
@@ -87,7 +89,7 @@ def _stats(ap: dict, prefix: str) -> dict:
     return out
 
 
-def compensation_study(scene, world, options, model: CalibratedKinematics, sample_counts,
+def compensation_study(scene, world, options, model: CalibratedModel, sample_counts,
                        n_targets: int = 30, cycles: int = 10, seed: int = 0,
                        checker=None) -> dict:
     """Nominal vs compensated AP on unseen targets and on ISO 9283's P1..P5 in ``world``
@@ -103,10 +105,10 @@ def compensation_study(scene, world, options, model: CalibratedKinematics, sampl
     q = draw_targets(robot, region, n_targets, rng, checker)
     val = Targets([f"V{i + 1}" for i in range(n_targets)], np.full((n_targets, 4, 4), np.nan),
                   q, ["validation"] * n_targets, "validation set")
-    flanges = fk(robot, counts_to_joints(robot, sample_counts))[:, :3, 3]
+    flanges = fk(robot.kinematics, counts_to_joints(robot, sample_counts))[:, :3, 3]
     center, edge = cube_from_flanges(flanges, None)
     q_cal = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    T_iso = np.repeat(fk(robot, q_cal)[None], 5, axis=0)
+    T_iso = np.repeat(fk(robot.kinematics, q_cal)[None], 5, axis=0)
     T_iso[:, :3, 3] = iso_points(center, edge)
     iso = Targets([f"P{i + 1}" for i in range(5)], T_iso, np.full((5, 6), np.nan),
                   ["ISO 9283"] * 5, "ISO 9283 P1..P5")

@@ -48,13 +48,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.model.cell import predict_with_jacobian
+from planecal.model.measurement import predict_with_jacobian
 from planecal.model.encoder import counts_in_range, counts_to_joints, joints_to_counts
 from planecal.base.errors import InputError
-from planecal.estimation.fit import noise_variance
+from planecal.estimation.noise import noise_variance
 from planecal.formats.base import read_json, validate
 from planecal.formats.poses import POSES_FORMAT, PosesFile
-from planecal.studies.common import BUFFER_LEN, covariances
+from planecal.estimation.identifiability import covariances
 
 
 def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = None):
@@ -193,11 +193,11 @@ def predicted_std(J: np.ndarray, layout, free, joint_sigma: float, laser_sigma_m
 def position_rows(scene, q: np.ndarray, layout, free) -> np.ndarray:
     """The flange position's sensitivity to each free joint offset at the joint angles q:
     (k, 3, free offsets) [m/rad] (the geometric Jacobian's translation rows)."""
-    from planecal.model.robot import jacobian
+    from planecal.model.kinematics import jacobian
     offsets = layout.group("joint_offsets").names
     fn = layout.names_of(free)
     cols = [offsets.index(nm) for nm in fn if nm in offsets]
-    return jacobian(scene.robot, q)[..., :3, :][..., cols]
+    return jacobian(scene.robot.kinematics, q)[..., :3, :][..., cols]
 
 
 def predicted_position_mm(Jpos: np.ndarray, cov_offsets: np.ndarray) -> float:
@@ -268,20 +268,24 @@ def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
 PLAN_STAGES = 6  # progress steps of ``plan``
 
 
-def plan(scene, n: int, m: int, seed: int = 0, free_names=None, checker=None,
+def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
          repeatability_mm: float | None = None, laser_noise_mm: float = 0.001,
          target_std_urad: float | None = None, target_ap_mm: float | None = None,
          ordered: bool = True, progress=None) -> dict:
     """The planning study (module docstring). Returns the planned pose list (ordered for
     robot time unless ``ordered=False``), the random set of equal size, both predictions
     and the robot times. With a target (``target_std_urad`` or ``target_ap_mm``) ``n`` is
-    the most samples it may choose. ``progress``: a ``planecal.base.progress.Progress`` of
-    ``PLAN_STAGES`` steps, updated at each stage."""
+    the most samples it may choose. ``settings``: how the poses will be calibrated
+    (``estimation.calibrate.CalibrationSettings``; default level offsets): the design is
+    D-optimal for the base set the candidates can identify (``calibrate.base_set``).
+    ``progress``: a ``planecal.base.progress.Progress`` of ``PLAN_STAGES`` steps, updated
+    at each stage."""
+    from planecal.estimation.calibrate import CalibrationSettings, base_set
+    from planecal.estimation.noise import repeatability_sigma, sample_sigma_m
     from planecal.model.encoder import joints_to_counts
-    from planecal.model.layout import level1_layout
+    from planecal.model.scene import nominal_params
     from planecal.sampling import tour
     from planecal.sampling.planner import ListPlanner
-    from planecal.studies.montecarlo import MCSettings, joint_sigma
 
     def say(note):
         if progress is not None:
@@ -295,15 +299,17 @@ def plan(scene, n: int, m: int, seed: int = 0, free_names=None, checker=None,
     for name, t in (("--target-std-urad", target_std_urad), ("--target-ap-mm", target_ap_mm)):
         if t is not None and not t > 0:
             raise InputError(f"{name} must be > 0, got {t}")
-    layout = level1_layout(len(scene.plates))
-    free = layout.free_from_names(free_names)
+    settings = settings or CalibrationSettings()
     say(f"drawing {m} candidate poses")
     qe, q, plate = candidate_pool(scene, m, seed, checker)
     if len(qe) < n:
         raise InputError(f"only {len(qe)} collision-free candidates for {n} samples")
+    layout, bs = base_set(scene.robot, qe, nominal_params(scene), plate, settings)
+    free = bs.mask(layout)
     J, A = scaled_rows(scene, qe, plate, layout, free)
-    s = joint_sigma(scene.robot, MCSettings(repeatability_mm=repeatability_mm))
-    sig_l = laser_noise_mm * 1e-3 / np.sqrt(BUFFER_LEN)
+    rep = scene.robot.repeatability_m if repeatability_mm is None else repeatability_mm * 1e-3
+    s = repeatability_sigma(scene.robot, rep) if rep > 0 else 0.0
+    sig_l = sample_sigma_m(laser_noise_mm)
     predictor = Predictor(scene, J, layout, free, s, sig_l, position_rows(scene, q, layout, free))
     p = int(free.sum())
     target = None

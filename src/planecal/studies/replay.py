@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.model.cell import CellParams, predict
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import predict
 from planecal.base.errors import InputError
 
 
@@ -92,7 +93,7 @@ def replay(scene, params: CellParams, qe: np.ndarray, d_mm: np.ndarray,
 def edge_margins(scene, params: CellParams, qe, plate) -> np.ndarray:
     """Distance [m] of each analytic hit point from the nearest edge of its plate as the
     twin places it (negative: outside the plate)."""
-    from planecal.model.cell import plane_distance, sensor_in_base
+    from planecal.model.measurement import plane_distance, sensor_in_base
     from planecal.model.encoder import counts_to_joints
 
     q = counts_to_joints(scene.robot, qe)
@@ -107,26 +108,3 @@ def edge_margins(scene, params: CellParams, qe, plate) -> np.ndarray:
         u, v = (p[i] - F[:3, 3]) @ F[:3, 0], (p[i] - F[:3, 3]) @ F[:3, 1]
         out[i] = min(u, pl.size[0] - u, v, pl.size[1] - v)
     return out
-
-
-def format_replay(res: dict) -> str:
-    from planecal.studies.common import table
-
-    def f(x, nd=4):
-        return "-" if x is None else f"{x:.{nd}f}"
-    rows = [[r["index"], f(r["measured_mm"]), f(r["twin_mm"]), f(r["analytic_mm"]),
-             f(r["measured_minus_twin_mm"]), f(r["edge_margin_mm"], 1), r["hit"]]
-            for r in res["rows"]]
-    s = res["summary"]
-    out = [table(["#", "measured_mm", "twin_mm", "analytic_mm", "meas-twin_mm", "edge_mm",
-                  "ray hit"], rows, "rrrrrrl"), ""]
-    if s["plate_hits"]:
-        out.append(f"{s['plate_hits']} of {s['samples']} rays hit their plate: measured - twin "
-                   f"mean {s['mean_diff_mm']:+.4f} mm, std {f(s['std_diff_mm'])} mm, max |diff| "
-                   f"{s['max_abs_diff_mm']:.4f} mm, rms {s['rms_diff_mm']:.4f} mm; twin vs "
-                   f"analytic model max |diff| {s['max_abs_twin_minus_analytic_mm']:.2e} mm; hit points "
-                   f"at least {s['min_edge_margin_mm']:.1f} mm inside the plate's edges")
-    if s["misses"]:
-        out.append(f"WARNING {s['misses']} ray(s) miss their plate in the twin (see 'ray hit'): "
-                   f"the scene's plate is too small or placed elsewhere for these poses")
-    return "\n".join(out)

@@ -14,8 +14,10 @@ measures:
   errors depend on the path (backlash, thermal), driven there tick by tick
   (``DriveAcquirer``, as ``planecal rehearse``). A ``tour.Clock`` counts the robot's ticks
   (travel, dwell, laser reads): the robot time;
-* calibration at the cell's ``level`` (``offsets``: the joint offsets delta2..delta5,
-  sensor pose and planes from the scene's nominal parameters; the only level so far);
+* calibration at the cell's ``level`` by the one calibration (``estimation.calibrate``)
+  from the scene's nominal parameters: ``offsets`` or ``full`` (the seed's ``1``, ``2``),
+  either with ``+compliance`` (J2 and J3's joint compliance), e.g. ``full+compliance``;
+  the planned designs are planned for level offsets;
 * measurement: each free joint offset's error against the truth.
 
 Seeds: run k of a cell has the world seed ``seed(spec seed, scene, errors, k)`` -- the same
@@ -43,12 +45,10 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError
-from planecal.studies.common import cached_profile, cached_scene, cached_world, table
+from planecal.studies.common import cached_profile, cached_scene, cached_world
 
 FORMAT = "planecal-sweep/1"
 DESIGNS = ("random", "planned", "planned+ordered")
-LEVELS = ("offsets",)  # "full" comes with the level-2 calibration
-KNOWN_LEVELS = ("offsets", "full")
 AXES = ("scene", "errors", "design", "samples", "level")
 
 
@@ -143,12 +143,10 @@ def spec_from_dict(doc: dict, path: Path | None = None) -> SweepSpec:
                              "at least 20 samples)")
     kw["level"] = _list(grid.get("level", list(d.level)), f"{where}: grid.level", str)
     for x in kw["level"]:
-        if x not in KNOWN_LEVELS:
-            raise InputError(f"{where}: grid.level: {x!r} is not a calibration level "
-                             f"({', '.join(KNOWN_LEVELS)})")
-        if x not in LEVELS:
-            raise InputError(f"{where}: grid.level: {x!r} is not available yet (this planecal "
-                             f"calibrates at level {', '.join(LEVELS)} only)")
+        try:
+            calibration_of(x)
+        except InputError as e:
+            raise InputError(f"{where}: grid.level: {x!r}: {e}") from None
     for k, kind, lo in (("runs", int, 2), ("seed", int, 0), ("plan_candidates", int, 20),
                         ("plan_seed", int, 0), ("clearance_m", float, 0.0)):
         if k in sw:
@@ -169,6 +167,17 @@ def spec_from_dict(doc: dict, path: Path | None = None) -> SweepSpec:
     for s, e in itertools.product(spec.scene, spec.errors):
         cached_profile(s, e)
     return spec
+
+
+def calibration_of(level: str):
+    """The ``CalibrationSettings`` of a grid level: a level (``model.levels``) with an
+    optional ``+compliance``."""
+    from planecal.estimation.calibrate import CalibrationSettings
+    name, plus, extra = level.partition("+")
+    if plus and extra != "compliance":
+        raise InputError(f"expected a level (offsets, full, 1, 2) with an optional "
+                         f"'+compliance', got {level!r}")
+    return CalibrationSettings(level=name, compliance=bool(plus))
 
 
 def _resolve_errors(e: str, path: Path | None, where: str) -> str:
@@ -251,9 +260,8 @@ def items(spec: SweepSpec, plans: dict) -> list[Item]:
 def run_one(item: Item) -> dict:
     """Rehearse in the twin, calibrate, measure (module docstring). Pure function of the
     item. A run that gives up returns {"failed": reason}."""
+    from planecal.estimation.calibrate import calibrate
     from planecal.model.encoder import counts_to_joints
-    from planecal.estimation.fit import Problem, solve
-    from planecal.model.layout import level1_layout
     from planecal.links.base import AlwaysEnabled
     from planecal.sampling.collect import (Cursor, DriveAcquirer, MemoryRecorder,
                                            RestAcquirer, Tally, collect)
@@ -262,7 +270,7 @@ def run_one(item: Item) -> dict:
     from planecal.sampling.run import RunSettings
     from planecal.sampling.tour import Clock
     from planecal.model.scene import nominal_params
-    from planecal.studies.montecarlo import path_dependent
+    from planecal.twin.world import path_dependent
     from planecal.twin import Twin
     from planecal.twin.profile import draw_world
 
@@ -302,8 +310,12 @@ def run_one(item: Item) -> dict:
         return {"failed": f"sampling gave up after {tally.samples} of {rs.samples} samples "
                           f"(rejected: {rej or 'none'}): {tally.reason}"}
     qe, d, plate = rec.arrays()
-    layout = level1_layout(len(scene.plates))  # level "offsets"
-    fit = solve(Problem.from_arrays(robot, qe, d, nominal_params(scene), plate, layout=layout))
+    try:
+        fit = calibrate(robot, qe, d, nominal_params(scene), plate,
+                        calibration_of(cell["level"])).result
+    except InputError as e:
+        return {"failed": f"calibration refused: {e}"}
+    layout = fit.layout
     offsets = layout.group("joint_offsets").names
     names = [n for n in layout.names_of(fit.free) if n in offsets]
     est = fit.params.to_vector(layout)
@@ -378,28 +390,3 @@ def summarize(spec: SweepSpec, its: list[Item], results: list[dict]) -> dict:
             })
         rows.append(row)
     return {"format": FORMAT, "spec": spec.header(), "cells": rows}
-
-
-def format_sweep(res: dict) -> str:
-    """The sweep's table: one row per cell."""
-    cells = res["cells"]
-    names = next((c["names"] for c in cells if c.get("names")), [])
-    heads = ["scene", "errors", "design", "N", "taken", "level", "runs", "robot min", "s/sample",
-             "travel s/sample"] + [f"std {n}" for n in names] + ["offset std", "offset rms"]
-    rows = []
-    for c in cells:
-        err = Path(c["errors"]).stem if "/" in c["errors"] else c["errors"]
-        row = [c["scene"], err, c["design"], str(c["samples"]),
-               f"{c['samples_taken']:.1f}" if c["runs"] else "-", c["level"],
-               str(c["runs"]) + (f" ({c['failed']} failed)" if c["failed"] else "")]
-        if c["runs"]:
-            row += [f"{c['robot_time_min']:.2f}", f"{c['robot_time_per_sample_s']:.2f}",
-                    f"{c['travel_per_sample_s']:.2f}"]
-            row += [f"{c['std_rad'].get(n, float('nan')) * 1e6:.3g}" for n in names]
-            row += [f"{c['offset_std_rad'] * 1e6:.3g}", f"{c['offset_rms_rad'] * 1e6:.3g}"]
-        else:
-            row += ["-"] * (3 + len(names) + 2)
-        rows.append(row)
-    return ("sweep: accuracy against robot time; offset errors vs the truth over the runs "
-            "[urad] (std: ddof 1; offset std/rms: RMS over the free offsets)\n"
-            + table(heads, rows))

@@ -32,7 +32,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from planecal.model.cell import CellParams
+from planecal.model.cell_params import CellParams
 from planecal.model.encoder import counts_in_range, joints_to_counts
 from planecal.base.errors import InputError
 from planecal.model.scene import Scene, load_scene

@@ -23,7 +23,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from planecal.model.robot import Robot, repeatability_sigma
+from planecal.model.robot import Robot
+from planecal.estimation.noise import repeatability_sigma
 from planecal.twin import ticks
 
 GRAVITY = np.array([0.0, 0.0, -9.81])

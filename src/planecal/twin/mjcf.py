@@ -36,9 +36,9 @@ import xml.etree.ElementTree as ET
 import mujoco
 import numpy as np
 
-from planecal.model.cell import CellParams
+from planecal.model.cell_params import CellParams
 from planecal.model.geometry import robot_link_meshes, scene_meshes, sensor_pose, tool_meshes
-from planecal.model.kinematics import Kinematics, from_robot
+from planecal.model.kinematics import Kinematics
 from planecal.model.robot import Robot
 
 GROUP_ENV = 0  # plates, stands, floor, obstacles: visible and seen by the laser
@@ -144,7 +144,7 @@ def _set_collision_flags(g, kind):
 def robot_spec(robot: Robot, kin: Kinematics | None = None) -> mujoco.MjSpec:
     """The robot alone (see the module docstring for the body/joint/geom layout), built
     from ``kin`` (default: robot.json's nominal model)."""
-    kin = from_robot(robot) if kin is None else kin
+    kin = robot.kinematics if kin is None else kin
     spec = mujoco.MjSpec()
     spec.modelname = robot.name.replace(" ", "_")
     spec.compiler.degree = False
@@ -191,7 +191,7 @@ def add_tool(spec: mujoco.MjSpec, robot: Robot, scene, sensor: CellParams | None
     ``sensor`` (a CellParams) places the head and the site (the twin's truth); default:
     the scene's nominal sensor pose."""
     n = robot.n_joints
-    kin = from_robot(robot) if kin is None else kin
+    kin = robot.kinematics if kin is None else kin
     flange_body = spec.body(link_body_name(n))
     tool = flange_body.add_body(name=TOOL_BODY, **_pose_kwargs(_clean(kin.flange)))
     set_inertial(tool, [] if payload is None else [(payload[1], payload[0])])

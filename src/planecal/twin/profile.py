@@ -20,7 +20,7 @@ from planecal.base.errors import InputError
 from planecal.formats import read_json, validate
 from planecal.formats.base import Num, Record, Vector
 from planecal.formats.error_profile import N_JOINTS, ErrorProfileFile
-from planecal.model.kinematics import Kinematics, frame_error, from_robot, parallel_pairs
+from planecal.model.kinematics import Kinematics, frame_error, parallel_pairs
 from planecal.model.robot import Robot
 from planecal.model.scene import Scene
 from planecal.twin.core import TwinOptions
@@ -90,7 +90,7 @@ def draw_geometry(robot: Robot, profile: ErrorProfile, rng: np.random.Generator)
     """The robot's true geometry: robot.json's, every parameter moved by a normal draw of
     the profile's std (beta only where consecutive axes are parallel), the base and
     flange frames by a translation and a small rotation."""
-    nom = from_robot(robot)
+    nom = robot.kinematics
     g = profile.doc.geometry
     if g is None:
         return nom

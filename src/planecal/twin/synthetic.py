@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.model.cell import CellParams, predict
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import predict
 from planecal.sampling.collect import Acquired, Cursor, MemoryRecorder, Tally, collect
 from planecal.sampling.laserread import LaserResult
 from planecal.sampling.planner import NoCollisionChecks, Plan, Planner

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planecal.model.cell import CellParams, n_tilde_from_point_normal, point_normal_from_n_tilde
+from planecal.model.cell_params import CellParams
+from planecal.model.planes import n_tilde_from_point_normal, point_normal_from_n_tilde
 from planecal.base.errors import InputError
 from planecal.model.kinematics import Kinematics
 from planecal.io.params import load_params

@@ -21,42 +21,16 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.present.calibration import MODEL_ERROR, findings, parameter_rows
+from planecal.present.calibration import label as result_label
 from planecal.present.report.figures import (AFTER, BEFORE, COLORS, TABLE_UNITS, display_scale, label,
-                                     integer_y, log_ticks, new_figure, num, parameter_unit, save)
+                                     integer_y, log_ticks, new_figure, num, save)
 from planecal.present.report.inputs import Context, load_scene_for, recorded_inputs
 from planecal.present.report.page import Page
 
 # the recomputed RMS must match the file's to this (relative; the fit's own last step
 # below the improvement limit is far smaller)
 RMS_MATCH = 1e-3
-
-
-def parameter_rows(doc: dict) -> list[tuple[str, float, float | None]]:
-    """(name, value, std or None) in the result file's order, from its named keys."""
-    std = doc.get("std") if isinstance(doc.get("std"), dict) else {}
-
-    def sd(*keys):
-        v = std
-        for k in keys:
-            if isinstance(v, dict):
-                v = v.get(k)
-            elif isinstance(v, list) and isinstance(k, int) and k < len(v):
-                v = v[k]
-            else:
-                return None
-        return None if v is None or isinstance(v, (dict, list)) else float(v)
-
-    rows = [(f"delta{i + 1}", float(v), sd("joint_offsets_rad", i))
-            for i, v in enumerate(doc["joint_offsets_rad"])]
-    s = doc["sensor"]
-    rows += [(f"o_{c}", float(v), sd("sensor", "origin_m", i))
-             for i, (c, v) in enumerate(zip("xyz", s["origin_m"]))]
-    rows += [("phi_y", float(s["phi_y_rad"]), sd("sensor", "phi_y_rad")),
-             ("phi_z", float(s["phi_z_rad"]), sd("sensor", "phi_z_rad"))]
-    for k, p in enumerate(doc["planes"]):
-        rows += [(f"n{k + 1}_{c}", float(v), sd("planes", k, "n_tilde", i))
-                 for i, (c, v) in enumerate(zip("xyz", p["n_tilde"]))]
-    return rows
 
 
 def _fmt(v: float | None, scale: float = 1.0, digits: int = 4) -> str:
@@ -239,10 +213,11 @@ def fig_error_per_sample(out, r0, r1, s, used, plates):
 
 
 def fig_offsets(out, rows, initial, free):
-    names = [r[0] for r in rows[:6]]
-    x = np.arange(6)
-    val = np.array([r[1] for r in rows[:6]])
-    std = np.array([np.nan if r[2] is None else r[2] for r in rows[:6]])
+    rows = [r for r in rows if r.name.startswith("delta")]
+    names = [r.name for r in rows]
+    x = np.arange(len(rows))
+    val = np.array([r.value for r in rows])
+    std = np.array([np.nan if r.std is None else r.std for r in rows])
     scale, unit = display_scale("rad", np.concatenate([val, std[np.isfinite(std)]]))
     fig, ax = new_figure(7, 4)
     ax = ax[0, 0]
@@ -339,46 +314,8 @@ def fig_correlation(out, cov: dict):
 
 # ----- the page ----------------------------------------------------------------------------------
 
-def identifiability_lines(ident: dict) -> list[tuple[str, bool]]:
-    """(text, is_warning) lines of the identifiability report, as the CLI prints them."""
-    out = []
-    if ident.get("weighted"):
-        out.append((f"Weighted by the repeatability noise model: variance factor "
-                    f"{ident.get('variance_factor', float('nan')):.3g} (1: the model's noise "
-                    f"level fits the residuals; the std include it).", False))
-    obs = ident.get("observability") or {}
-    bits = []
-    if "sigma_mm" in ident:
-        bits.append(f"sigma {ident['sigma_mm'] * 1e3:.3g} µm")
-    if "condition_number_scaled" in ident:
-        bits.append(f"scaled condition number {ident['condition_number_scaled']:.4g}")
-    for k in ("O1", "O2"):
-        if k in obs:
-            bits.append(f"{k} {obs[k]:.3g}")
-    if "rank" in ident and "free" in ident:
-        bits.append(f"rank {ident['rank']} of {len(ident['free'])} free parameters")
-    if bits:
-        out.append(("; ".join(bits) + ".", False))
-    for name in ident.get("no_effect", []):
-        out.append((f"No effect: {name} does not change any distance in this data.", True))
-    for pd in ident.get("poorly_determined", []):
-        out.append((f"Not identifiable in practice: {pd['parameter']} (std {pd['std']:.3g} "
-                    f"above {pd['limit']:g}): the data barely depends on it.", True))
-    for d in ident.get("unidentifiable_directions", []):
-        mix = " ".join(f"{v:+.3f}·{k}" for k, v in d.items())
-        out.append((f"Not identifiable: {', '.join(d)} move together without changing any "
-                    f"distance (direction {mix}).", True))
-    for w in ident.get("weak_directions", []):
-        mix = " ".join(f"{v:+.3f}·{k}" for k, v in w["direction"].items())
-        out.append((f"Weakly identifiable (scaled singular value ratio "
-                    f"{w['scaled_singular_ratio']:.2e}): {mix}.", True))
-    for pr in ident.get("correlated_pairs", []):
-        out.append((f"Strongly correlated: {pr['a']} and {pr['b']} (ρ {pr['rho']:+.4f}).", True))
-    return out
-
-
 def build(ctx: Context) -> Page:
-    from planecal.model.cell import predict
+    from planecal.model.measurement import predict
     from planecal.io.params import params_from_dict
 
     doc = ctx.doc
@@ -391,8 +328,10 @@ def build(ctx: Context) -> Page:
     out = ctx.out_dir
 
     page = Page("Calibration report",
-                f"{ctx.source.name if ctx.source else 'calibration result'}: "
-                f"{doc.get('samples_used', '?')} samples used, residual RMS "
+                f"{ctx.source.name if ctx.source else 'calibration result'} (level "
+                f"{result_label(doc)}): "
+                f"{doc.get('samples_used', '?')} samples used, model error "
+                f"({MODEL_ERROR}) RMS "
                 f"{_fmt(doc.get('residual_rms_initial_mm'))} mm before, "
                 f"{_fmt(doc.get('residual_rms_mm'))} mm after; "
                 f"{doc.get('iterations', '?')} iterations"
@@ -467,19 +406,17 @@ def build(ctx: Context) -> Page:
     # ---- parameters
     sec = page.section("Parameters")
     sec.figure(fig_offsets(out, rows, initial, free))
-    x0 = dict(zip([r[0] for r in parameter_rows(_as_doc(initial))], [r[1] for r in
-                  parameter_rows(_as_doc(initial))])) if initial is not None else {}
-    not_ident = set(ident.get("not_identifiable", []))
+    x0 = {r.name: r.value for r in parameter_rows(_as_doc(initial))} \
+        if initial is not None else {}
     table = []
-    for name, v, sd in rows:
-        unit = parameter_unit(name)
-        scale, dunit = TABLE_UNITS[unit]
-        corr = v - x0[name] if name in x0 else None
-        status = ("fixed" if free and name not in free else
-                  "NOT IDENTIFIABLE" if name in not_ident else "")
+    for r in rows:
+        scale, dunit = TABLE_UNITS[r.unit]
+        x_init = r.initial if r.initial is not None else x0.get(r.name)
+        corr = None if x_init is None else r.value - x_init
+        sd = r.std
         ratio = "–" if corr is None or sd is None or sd == 0 else f"{abs(corr) / sd:.3g}"
-        table.append([name, f"{v:.7g}", unit, _fmt(sd, scale), _fmt(corr, scale), dunit, ratio,
-                      status])
+        table.append([r.name, f"{r.value:.7g}", r.unit, _fmt(sd, scale), _fmt(corr, scale),
+                      dunit, ratio, "" if r.status == "fitted" else r.status])
     sec.table(["parameter", "value", "unit", "std", "correction", "unit (std, correction)",
                "|correction| / std", ""], table, left=1)
     sec.text("std: the fit's standard deviation (null in the file where a parameter is fixed "
@@ -494,8 +431,8 @@ def build(ctx: Context) -> Page:
 
     # ---- identifiability
     sec = page.section("Identifiability")
-    lines = identifiability_lines(ident)
-    if not lines:
+    lines = [(f.text, f.warning) for f in findings(doc)]
+    if not ident:
         sec.note("The result file holds no identifiability report.")
     warned = False
     for text, warn in lines:

@@ -26,7 +26,8 @@ _PREFIXES = {
 }
 
 # fixed display units for spreads in tables (one unit per column, not per row)
-TABLE_UNITS = {"rad": (1e6, "µrad"), "m": (1e6, "µm"), "1/m": (1e3, "10⁻³/m")}
+TABLE_UNITS = {"rad": (1e6, "µrad"), "m": (1e6, "µm"), "1/m": (1e3, "10⁻³/m"),
+               "rad/(N m)": (1e9, "µrad/kNm")}
 
 
 @dataclass(frozen=True)
@@ -123,22 +124,27 @@ def hide_unused(axes, n: int) -> None:
 # ----- parameters of a result file -----------------------------------------------------------
 
 def parameter_unit(name: str) -> str:
-    """SI unit of a calibration parameter, from its name in result files."""
-    if name.startswith("delta") or name.startswith("phi"):
-        return "rad"
-    if name.startswith("o_"):
-        return "m"
-    return "1/m"
+    """SI unit of a calibration parameter, from its name in result files
+    (``planecal.model.layout.quantity_of``)."""
+    from planecal.model.layout import quantity_of
+    return quantity_of(name)["unit"]
 
 
 def parameter_group(name: str) -> str:
-    """The figure group a parameter goes to: joint offsets, sensor pose, or its plane."""
+    """The figure group a parameter goes to: joint offsets, sensor pose, its plane, joint
+    geometry, base frame or compliance."""
+    import re
     if name.startswith("delta"):
         return "joint offsets"
     if name.startswith("o_") or name.startswith("phi"):
         return "sensor pose"
-    k = name[1:].split("_")[0]
-    return f"plane {k}"
+    if name.startswith("base_"):
+        return "base frame"
+    if re.fullmatch(r"n\d+_[xyz]", name):
+        return f"plane {name[1:].split('_')[0]}"
+    if re.fullmatch(r"c\d+", name):
+        return "compliance"
+    return "joint geometry"
 
 
 def groups(names) -> dict[str, list[str]]:

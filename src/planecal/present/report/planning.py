@@ -89,7 +89,7 @@ def fig_joints(out, robot, qe_p, qe_r):
 
 
 def fig_spots(out, scene, qe_p, pl_p, qe_r, pl_r):
-    from planecal.model.cell import plane_distance, sensor_in_base
+    from planecal.model.measurement import plane_distance, sensor_in_base
     from planecal.model.encoder import counts_to_joints
     from planecal.model.scene import nominal_params
     params = nominal_params(scene)

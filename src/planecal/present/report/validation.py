@@ -143,7 +143,7 @@ def fig_offset_error(out, v):
                 "identifiable from plane distances; their error stays.")
 
 
-def fig_truths(out, truths, world):
+def fig_truths(out, truths, world, level):
     seeds = [str(t["truth_seed"]) for t in truths]
     before = np.array([t["ap_before_mm"] for t in truths], float)
     after = np.array([t["ap_after_mm"] for t in truths], float)
@@ -163,11 +163,11 @@ def fig_truths(out, truths, world):
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=8)
     return save(fig, out, "truths", "AP over truths",
-                "Pose accuracy before and after an offsets-only calibration, one world per "
+                f"Pose accuracy before and after a calibration at level {level}, one world per "
                 "truth seed (logarithmic axis).")
 
 
-def fig_breakdown(out, bd):
+def fig_breakdown(out, bd, level):
     rows = [r for r in bd["variants"] if "failed" not in r]
     names = [r["variant"] for r in rows]
     after = np.array([r["ap_after_mm"] for r in rows], float)
@@ -187,7 +187,7 @@ def fig_breakdown(out, bd):
                  fontsize=10)
     ax.grid(True, axis="x", alpha=0.3)
     return save(fig, out, "breakdown", "Error sources",
-                "AP after an offsets-only calibration in the truth's world with the error "
+                f"AP after a calibration at level {level} in the truth's world with the error "
                 "sources of the profile switched on one at a time (or off in turn); 'none' "
                 "is the cell alone.")
 
@@ -212,7 +212,7 @@ def build(ctx: Context) -> Page:
                 f"mm before, {v['gauge_error_after_mm']:+.4g} mm after.")
     if len(truths) > 1:
         sec = page.section("Over the truths")
-        sec.figure(fig_truths(out, truths, world))
+        sec.figure(fig_truths(out, truths, world, _level(v)))
         sec.table(["truth", "AP before [mm]", "AP after [mm]", "AP after, cell frame [mm]",
                    "RP after [mm]", "gauge after [mm]", "max model error [mm]"],
                   [[str(t["truth_seed"]), num(t["ap_before_mm"]), num(t["ap_after_mm"]),
@@ -222,13 +222,13 @@ def build(ctx: Context) -> Page:
     bd = v.get("breakdown")
     if bd and bd.get("variants"):
         sec = page.section("What each error source leaves")
-        sec.figure(fig_breakdown(out, bd))
+        sec.figure(fig_breakdown(out, bd, _level(v)))
         cr = bd.get("cannot_remove") or []
         if cr:
             sec.table(["source", "what", "AP after with it [mm]", "its share [mm]"],
                       [[c["source"], c["what"], num(c["ap_after_variant_mm"]),
                         num(c["ap_after_share_mm"])] for c in cr], left=2)
-            sec.text("An offsets-only calibration cannot remove these: none is in the fit's "
+            sec.text(f"A calibration at level {_level(v)} cannot remove these: none is in the fit's "
                      "model; the offsets absorb only the part that looks like a joint zero "
                      "in the calibrated region. See docs/ERRORS.md.")
     sec = page.section("ISO 9283 pose accuracy and repeatability")
@@ -264,3 +264,8 @@ def build(ctx: Context) -> Page:
         sec.text(f"Calibration on the twin: {cal.get('samples', '?')} samples, fit RMS "
                  f"{cal.get('fit_rms_mm', float('nan')) * 1e3:.3g} µm.")
     return page
+
+
+def _level(doc: dict) -> str:
+    """The calibration's level as the validation result records it."""
+    return (doc.get("level") or "offsets") + (" + compliance" if doc.get("compliance") else "")

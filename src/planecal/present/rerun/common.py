@@ -279,15 +279,15 @@ def log_robot_pose(rec, scene, params, qe, d_m=None, *, with_meshes: bool = True
     direction to the hit ``d_m`` metres away (grey to the end of the laser window when
     ``d_m`` is None or NaN). For recordings without a run (fit, studies): the pose of one
     sample. Entity paths as in a sampling recording."""
-    from planecal.model.cell import beam_direction
+    from planecal.model.measurement import beam_direction
     from planecal.model.encoder import counts_to_joints
-    from planecal.model.robot import fk_frames
+    from planecal.model.kinematics import link_frames
 
     rr = _rr()
     if with_meshes:
         log_robot_meshes(rec, scene, params)
     q = counts_to_joints(scene.robot, np.asarray(qe, np.int64).reshape(1, -1))
-    F = fk_frames(scene.robot, q, params.joint_offsets)[0]
+    F = link_frames(scene.robot.kinematics.with_offsets(params.joint_offsets), q)[0]
     for b in range(1, F.shape[0]):
         rec.log(f"/robot/link_{b}", rr.Transform3D(translation=F[b, :3, 3],
                                                    mat3x3=F[b, :3, :3]), static=True)
@@ -313,7 +313,7 @@ SAMPLE_RADIUS_M = 0.004
 def sample_points(scene, params, qe, d_m, plate):
     """Hit points (N,3) of samples with ``params`` and the face normals of their plates
     (on ``params``' planes when it has one per plate of the scene)."""
-    from planecal.model.cell import sensor_in_base
+    from planecal.model.measurement import sensor_in_base
     from planecal.model.encoder import counts_to_joints
 
     qe = np.asarray(qe, np.int64).reshape(-1, 6)
@@ -348,7 +348,7 @@ def log_pose_set(rec, scene, params, qe, d_m, plate, colors, *, shown: int = 0,
 def tool_point(scene, params, qe) -> np.ndarray:
     """The sensor origin at encoder counts ``qe`` (6,) with ``params`` (the camera's
     second target)."""
-    from planecal.model.cell import sensor_in_base
+    from planecal.model.measurement import sensor_in_base
     from planecal.model.encoder import counts_to_joints
 
     q = counts_to_joints(scene.robot, np.asarray(qe, np.int64).reshape(1, 6))
@@ -359,10 +359,10 @@ def pose_eye(scene, params, qe):
     """The starting camera for a recording that shows the robot at counts ``qe``: on the
     plate and the tool, from the side away from the arm (frames 2..4)."""
     from planecal.model.encoder import counts_to_joints
-    from planecal.model.robot import fk_frames
+    from planecal.model.kinematics import link_frames
 
     q = counts_to_joints(scene.robot, np.asarray(qe, np.int64).reshape(1, 6))
-    F = fk_frames(scene.robot, q, params.joint_offsets)[0]
+    F = link_frames(scene.robot.kinematics.with_offsets(params.joint_offsets), q)[0]
     return eye_controls(scene, tool_point(scene, params, qe), arm=F[2:5, :3, 3].mean(0))
 
 

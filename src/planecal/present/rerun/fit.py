@@ -4,8 +4,6 @@ standard deviations and the identifiability warnings; plus the cell on the ident
 planes and the sample hit points coloured by their final model error."""
 from __future__ import annotations
 
-from dataclasses import asdict
-
 import numpy as np
 
 from planecal.present.rerun.common import (_rr, close_recording, diverging_colors, error_legend,
@@ -87,63 +85,49 @@ def _fmt(v: float) -> str:
     return "" if not np.isfinite(v) else f"{v:.7g}"
 
 
-def parameter_markdown(res) -> str:
-    """The parameter table: initial value, identified value, std, correction, unit."""
-    ident = res.identifiability
-    layout = res.layout
-    x0, x = res.initial.to_vector(layout), res.params.to_vector(layout)
-    sd = res.std
+def parameter_markdown(doc: dict) -> str:
+    """The parameter table of a result document (``present.calibration.parameter_rows``):
+    initial value, identified value, std or status, correction, unit."""
+    from planecal.present.calibration import parameter_rows
     lines = ["# Identified parameters", "",
              "| parameter | initial | identified | std | correction | unit |",
              "|---|---:|---:|---:|---:|---|"]
-    for i, (name, unit) in enumerate(zip(layout.names, layout.units)):
-        if not res.free[i]:
-            std = "fixed"
-        elif name in ident.not_identifiable:
-            std = "NOT IDENT."
-        else:
-            std = f"{sd[i]:.3e}"
-        lines.append(f"| {name} | {_fmt(x0[i])} | {_fmt(x[i])} | {std} | "
-                     f"{x[i] - x0[i]:.4e} | {unit} |")
-    used = res.used
+    for r in parameter_rows(doc):
+        std = (f"{r.std:.3e}" if r.std is not None else "n/a") if r.status == "fitted" \
+            else r.status
+        x0 = "" if r.initial is None else _fmt(r.initial)
+        corr = "" if r.initial is None else f"{r.value - r.initial:.4e}"
+        lines.append(f"| {r.name} | {x0} | {_fmt(r.value)} | {std} | {corr} | {r.unit} |")
+    used, outl = doc.get("samples_used", 0), doc.get("outliers") or []
     lines += ["",
-              f"* samples used: {int(used.sum())} of {len(used)}; outliers: "
-              + (", ".join(str(i) for i in res.outliers) if res.outliers else "none"),
-              f"* model error RMS: before {res.rms_mm(True):.4f} mm, after {res.rms_mm():.4f} mm; "
-              f"max |error| after {np.max(np.abs(res.residuals_m[used])) * 1e3:.4f} mm",
-              f"* iterations: {res.iterations}" + ("" if res.converged else " (not converged)")]
+              f"* samples used: {used} of {used + len(outl)}; outliers: "
+              + (", ".join(str(i) for i in outl) if outl else "none"),
+              f"* model error RMS: before {doc['residual_rms_initial_mm']:.4f} mm, after "
+              f"{doc['residual_rms_mm']:.4f} mm; max |error| after "
+              f"{doc['residual_max_mm']:.4f} mm",
+              f"* iterations: {doc['iterations']}"
+              + ("" if doc.get("converged") else " (not converged)")]
     return "\n".join(lines) + "\n"
 
 
-def identifiability_markdown(res) -> str:
-    ident = res.identifiability
+def identifiability_markdown(doc: dict) -> str:
+    """The findings of a result document (``present.calibration.findings``)."""
+    from planecal.present.calibration import findings
     lines = ["# Identifiability", ""]
-    obs = asdict(ident.observability)
-    lines.append(f"* sigma {ident.sigma_mm:.4g} mm, scaled condition number "
-                 f"{ident.condition_number_scaled:.4g}, "
-                 + ", ".join(f"{k} {v:.3g}" for k, v in obs.items()))
-    if ident.weighted:
-        lines.append(f"* weighted by the repeatability noise model, variance factor "
-                     f"{ident.variance_factor:.3g}")
-    warnings = []
-    for d in ident.unidentifiable_directions:
-        mix = " ".join(f"{v:+.3f}*{k}" for k, v in d.items())
-        warnings.append(f"**not identifiable**: {', '.join(d)} move together without "
-                        f"changing any distance (direction {mix})")
-    for w in ident.weak_directions:
-        mix = " ".join(f"{v:+.3f}*{k}" for k, v in w.direction.items())
-        warnings.append(f"**weakly identifiable** (scaled singular value ratio "
-                        f"{w.scaled_singular_ratio:.2e}): {mix}")
-    for pr in ident.correlated_pairs:
-        warnings.append(f"**strongly correlated**: {pr.a} ~ {pr.b} (rho {pr.rho:+.4f})")
-    warnings += [f"note: {n}" for n in res.notes]
-    lines += [""] + ([f"* WARNING {w}" for w in warnings] if warnings else ["No warnings."])
+    fs = findings(doc)
+    lines += [("* WARNING " if f.warning else "* ") + f.text for f in fs]
+    if not any(f.warning for f in fs):
+        lines.append("No warnings.")
     return "\n".join(lines) + "\n"
 
 
-def log_fit(rec, res, samples, scene) -> None:
-    """Log a ``fit.Result`` and its data set (``Samples``: qe, d_mm, plate) to ``rec``."""
+def log_fit(rec, cal, samples, scene) -> None:
+    """Log a calibration (``estimation.calibrate.Calibration``) and its data set
+    (``Samples``: qe, d_mm, plate) to ``rec``."""
+    from planecal.present.calibration import document
     rr = _rr()
+    res = cal.result
+    doc = document(cal)
     # convergence (timeline "iteration"): RMS and max |model error| of the samples used
     it = np.array([h.iteration for h in res.history], np.int64)
     idx = [rr.TimeColumn("iteration", sequence=it)]
@@ -168,9 +152,9 @@ def log_fit(rec, res, samples, scene) -> None:
         rec.log(path, rr.BarChart(counts.astype(np.int64), abscissa=0.5 * (edges[:-1] + edges[1:]),
                                   widths=np.diff(edges).astype(np.float32), color=colors[key]),
                 rr.AnyValues(bin_edges_mm=edges), static=True)
-    rec.log("/fit/parameters", rr.TextDocument(parameter_markdown(res), media_type="text/markdown"),
+    rec.log("/fit/parameters", rr.TextDocument(parameter_markdown(doc), media_type="text/markdown"),
             static=True)
-    rec.log("/fit/identifiability", rr.TextDocument(identifiability_markdown(res),
+    rec.log("/fit/identifiability", rr.TextDocument(identifiability_markdown(doc),
                                                     media_type="text/markdown"), static=True)
     # the cell on the identified planes, hit points with the identified parameters, the
     # robot at the first sample used, its beam to the hit
@@ -212,16 +196,17 @@ def fit_info_markdown(res, scale_mm: float, shown: int) -> str:
             "(-2 = 0.01 mm); histograms: 20 equal bins, x = value [mm], y = samples\n")
 
 
-def log_fit_to_file(arg, res, samples, scene):
-    """Write the fit's recording; ``arg`` as for ``recording_path`` (command "calibrate").
-    Returns the path written."""
+def log_fit_to_file(arg, cal, samples, scene):
+    """Write a calibration's recording; ``arg`` as for ``recording_path`` (command
+    "calibrate"). Returns the path written."""
+    res = cal.result
     path = recording_path(arg, "calibrate", scene.name)
     rec = open_recording(path, fit_blueprint(
         scene, pose_eye(scene, res.params, np.asarray(samples.qe)[pose_shown(res)]),
         hist_ranges(res, samples)),
                          name=f"calibrate {scene.name}")
     try:
-        log_fit(rec, res, samples, scene)
+        log_fit(rec, cal, samples, scene)
     finally:
         close_recording(rec)
     return path

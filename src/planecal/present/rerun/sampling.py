@@ -27,10 +27,11 @@ import threading
 
 import numpy as np
 
-from planecal.model.cell import CellParams, beam_direction, predict, sensor_in_base
+from planecal.model.cell_params import CellParams
+from planecal.model.measurement import beam_direction, predict, sensor_in_base
 from planecal.model.encoder import counts_to_joints
 from planecal.base.errors import InputError
-from planecal.model.robot import fk_frames
+from planecal.model.kinematics import link_frames
 from planecal.present.rerun.common import (BEAM_NONE_RGBA, BEAM_RADIUS_M, BEAM_RGBA, HIT_RADIUS_M,
                                        HIT_RGBA, REJECT_RGBA, _rr, close_recording,
                                        eye_controls, hidden, hit_columns, lifted, log_cell,
@@ -405,7 +406,7 @@ class SamplingObserver(NullObserver):
         rr, rec = self.rr, self.rec
         self.ticks_logged += len(t)
         q = counts_to_joints(self.robot, cur)
-        F = fk_frames(self.robot, q, self.kin.joint_offsets)
+        F = link_frames(self.robot.kinematics.with_offsets(self.kin.joint_offsets), q)
         idx = self._indexes(t)
         # quaternions (x, y, z, w): rerun converts them 80x faster than 3x3 matrices
         quat = matrix_to_quaternion(F[:, 1:, :3, :3])

@@ -186,24 +186,25 @@ def bootstrap_blueprint(names, scene=None, eye=None):
         collapse_panels=False)
 
 
-def log_bootstrap(path_arg, res: dict, scene=None, problem=None):
+def log_bootstrap(path_arg, res: dict, scene=None, pool=None):
     """The bootstrap recording: per free parameter the subset spread (corrected to
     independent sets) and the fits' reported std on a ``subset_size`` timeline, one chart
-    each; the pool (``problem``'s samples) in 3D, coloured by the model error with the
+    each; the pool (``studies.bootstrap.Pool``) in 3D, coloured by the model error with the
     parameters of the whole pool's fit (``res["pool_fit"]``)."""
     import rerun as rr
 
-    from planecal.model.cell import CellParams, predict
+    from planecal.model.cell_params import CellParams
+    from planecal.model.measurement import predict
 
     path = recording_path(path_arg, "bootstrap", "pool" if scene is None else scene.name)
     names = list(res["free"])
     poses = None
-    pool = res.get("pool_fit")
-    if problem is not None and scene is not None and pool and pool.get("x") is not None:
-        params = CellParams.from_vector(np.asarray(pool["x"], float), problem.layout)
-        e = (predict(problem.robot, problem.qe, params, problem.plate) - problem.d_m) * 1e3
+    fit = res.get("pool_fit")
+    if pool is not None and scene is not None and fit and fit.get("x") is not None:
+        params = CellParams.from_vector(np.asarray(fit["x"], float), pool.layout)
+        e = (predict(pool.robot, pool.qe, params, pool.plate) - pool.d_m) * 1e3
         scale = max(float(np.max(np.abs(e))), 1e-3)
-        poses = PoseSet(problem.qe, problem.d_m, problem.plate, params,
+        poses = PoseSet(pool.qe, pool.d_m, pool.plate, params,
                         diverging_colors(e, scale),
                         error_legend(scale, "model error with the parameters of a fit of "
                                             "the whole pool"))

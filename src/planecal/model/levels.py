@@ -1,0 +1,61 @@
+"""What a calibration level is, in one place: a parameter layout (which parameters the model
+has and which are free by default), never a branch in the code that fits or uses it
+(seed chapter 5).
+
+    offsets (level 1)  the joint offsets, the sensor, one plane per plate
+    full    (level 2)  the whole kinematic model: per joint modified-DH alpha, a, beta
+                       (where axes are parallel), d; the base frame; the sensor; the planes
+    compliance         J2 and J3's joint compliance (gravity torque from robot.json's link
+                       masses; seed 5.4), at either level
+
+The seed's names "1" and "2" are accepted for offsets and full. The arm's scale (its two
+longest link lengths, ``scale_lengths``) is in the whole model's layout but is kept fixed
+unless a length reference fixes the scale (a plane and a laser see it only through the
+laser's gain).
+"""
+from __future__ import annotations
+
+from planecal.base.errors import InputError
+from planecal.model.kinematics import parallel_pairs
+from planecal.model.layout import ParamLayout, compliance_group, level1_layout, level2_layout
+from planecal.model.robot import Robot
+
+LEVELS = ("offsets", "full")
+ALIASES = {"1": "offsets", "2": "full"}
+PLANE_BLIND_OFFSETS = ("delta1", "delta6")  # turns of the plates / the sensor's roll
+
+
+def level_name(level: str) -> str:
+    """"offsets" or "full" from a level or the seed's number; InputError otherwise."""
+    name = ALIASES.get(str(level), str(level))
+    if name not in LEVELS:
+        raise InputError(f"unknown level {level!r}: one of {', '.join(LEVELS)} "
+                         f"(the seed's {', '.join(ALIASES)})")
+    return name
+
+
+def layout_for(robot: Robot, n_planes: int, level: str = "offsets",
+               compliance: bool = False) -> ParamLayout:
+    """The parameter layout of a level (module docstring)."""
+    if level_name(level) == "offsets":
+        base = level1_layout(n_planes)
+        return base if not compliance else ParamLayout(list(base.groups) + [compliance_group()])
+    parallel = tuple(i + 1 for i in parallel_pairs(robot.kinematics))
+    return level2_layout(n_planes, parallel, compliance)
+
+
+def scale_lengths(robot: Robot, k: int = 2) -> list[str]:
+    """The ``k`` longest link lengths of the robot's model (``a{j}``/``d{j}`` names; the
+    MC70: a3 = 0.9 m, d4 = 0.99 m). Together with the planes' distances they set the arm's
+    scale, which 65-95 mm laser readings see only through the sensor's own gain: a gain
+    error of 0.1 % (the ZS-LD80's linearity class) makes a free-scale fit put the tool up
+    to 2 mm off over a 2 m reach (docs/STUDIES.md, "Level 2")."""
+    kin = robot.kinematics
+    lengths = [(abs(v), f"a{j + 1}") for j, v in enumerate(kin.a)]
+    lengths += [(abs(v), f"d{j + 1}") for j, v in enumerate(kin.d)]
+    return [name for _, name in sorted(lengths, reverse=True)[:k]]
+
+
+def pinned_scale(robot: Robot, layout: ParamLayout) -> list[str]:
+    """The scale lengths a layout holds (fixed unless a length reference frees them)."""
+    return [n for n in scale_lengths(robot) if n in layout.names]

@@ -1,0 +1,225 @@
+"""The measurement model: the laser's distance to a plate from the encoder counts and the
+cell's parameters (seed 6.14), and its analytic Jacobian, for every parameter layout.
+
+    q       = encoder model (counts -> joint angles; ``planecal.model.encoder``)
+    q'      = q + c tau(q)                   gravity deflection (compliance c, torque tau)
+    chain   = robot.json's nominal chain with the parameters' corrections
+              (``kinematics_of``): theta_j += delta_j (joint offsets), alpha_j, a_j,
+              beta_j, d_j += geometry[j], base = frame_error(base) nominal base
+    o_b,z_b = the beam's origin and direction in the cell frame: the flange pose at q'
+              times the sensor origin o and z_f = Rz(phi_z) Ry(phi_y) e_z (flange frame)
+    d       = (1 - n~ . o_b) / (n~ . z_b)     for the sample's plate n~ (n~ . p = 1)
+
+Which parameters are free is a layout (``planecal.model.layout``), never a branch here: the
+same chain and kernel serve the joint offsets alone (level 1) and the whole model.
+Jacobian: every parameter moves the part of the chain after it rigidly, by a rotation
+about a line (axis w through c) or a translation t; with p_m = o_b + d z_b the hit point
+and s = n~ . z_b,
+
+    rotation:     dd = -(p_m - c) . (n~ x w) / s
+    translation:  dd = -n~ . t / s
+    n~:           dd = -p_m / s
+    o:            dd = -(R^T n~) / s
+    phi:          dd = -d (R^T n~) . dz_f/dphi / s
+    c_j:          the theta_j column times tau_j(q)
+
+(``planecal.model.chain.distance``; checked against central differences in the tests.)
+The laser does not see a roll about its own beam, so o, phi_y, phi_z are the whole
+flange-to-sensor frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import numpy as np
+
+from planecal.model import chain as _chain
+from planecal.model.cell_params import CellParams
+from planecal.model.encoder import counts_to_joints
+from planecal.model.gravity import joint_torques
+from planecal.model.kinematics import Kinematics, fk, frame_error, rot
+from planecal.model.layout import ParamLayout, level1_layout
+from planecal.model.robot import Robot
+
+def beam_direction(phi_y: float, phi_z: float) -> np.ndarray:
+    sy, cy, sz, cz = np.sin(phi_y), np.cos(phi_y), np.sin(phi_z), np.cos(phi_z)
+    return np.array([cz * sy, sz * sy, cy])
+
+
+def beam_direction_derivative(phi_y: float, phi_z: float) -> np.ndarray:
+    """d z_f / d(phi_y, phi_z): (3, 2)."""
+    sy, cy, sz, cz = np.sin(phi_y), np.cos(phi_y), np.sin(phi_z), np.cos(phi_z)
+    return np.array([[cz * cy, -sz * sy], [sz * cy, cz * sy], [-sy, 0.0]])
+
+
+def sensor_rotation(phi_y: float, phi_z: float) -> np.ndarray:
+    """Flange->sensor rotation Rz(phi_z) Ry(phi_y) (seed 6.7); its z column is the beam."""
+    sy, cy, sz, cz = np.sin(phi_y), np.cos(phi_y), np.sin(phi_z), np.cos(phi_z)
+    return np.array([[cz * cy, -sz, cz * sy], [sz * cy, cz, sz * sy], [-sy, 0.0, cy]])
+
+
+def kinematics_of(robot: Robot, params: CellParams) -> Kinematics:
+    """robot.json's nominal chain with params' joint offsets, geometry and base frame
+    (compliance is pose-dependent: ``effective_joints``)."""
+    nom = robot.kinematics
+    g = params.geometry
+    return Kinematics(nom.alpha + g[:, 0], nom.a + g[:, 1], nom.beta + g[:, 2],
+                      nom.theta + params.joint_offsets, nom.d + g[:, 3],
+                      frame_error(params.base) @ nom.base, nom.flange)
+
+
+def base_error_axes(base: np.ndarray) -> np.ndarray:
+    """The rotation axes (rows rx, ry, rz) of a base frame error (x, y, z, rx, ry, rz;
+    ``kinematics.frame_error``: T(t) Rz Ry Rx): rx about Rz Ry e_x, ry about Rz e_y, rz about
+    e_z, each through t."""
+    Rz, Ry = rot(2, base[5]), rot(1, base[4])
+    return np.array([Rz @ Ry[:, 0], Rz[:, 1], [0.0, 0.0, 1.0]])
+
+
+def effective_joints(robot: Robot, q: np.ndarray, params: CellParams):
+    """(q + c tau(q), tau (N, 6) or None): the joint angles with the gravity deflection."""
+    q = np.atleast_2d(np.asarray(q, float))
+    if not params.compliance.any():
+        return q, None
+    tau = joint_torques(robot, q)
+    return q + params.compliance * tau, tau
+
+
+def flange_pose(robot: Robot, q: np.ndarray, params: CellParams) -> np.ndarray:
+    """The model's flange (robot.json's standard DH frame 6) in the cell frame at joint
+    angles q (N, 6) or (6,), gravity deflection included: (N, 4, 4) or (4, 4)."""
+    qd, _ = effective_joints(robot, q, params)
+    T = fk(kinematics_of(robot, params), qd)
+    return T[0] if np.ndim(q) == 1 else T
+
+
+def sensor_in_base(robot: Robot, q: np.ndarray, params: CellParams):
+    """Beam origin o_b and direction z_b in the cell frame, (N, 3) each ((3,) for one pose)."""
+    T = flange_pose(robot, q, params)
+    R, p = T[..., :3, :3], T[..., :3, 3]
+    return R @ params.sensor_origin + p, R @ beam_direction(params.phi_y, params.phi_z)
+
+
+def plane_distance(n_tilde: np.ndarray, o_b: np.ndarray, z_b: np.ndarray) -> np.ndarray:
+    """Distance along the beam from o_b to the plane n~ . p = 1 (seed 6.14)."""
+    return (1.0 - np.sum(n_tilde * o_b, -1)) / np.sum(n_tilde * z_b, -1)
+
+
+def predict(robot: Robot, qe: np.ndarray, params: CellParams,
+            plane_index: np.ndarray | None = None) -> np.ndarray:
+    """Model distance [m] for encoder counts qe (N, 6) (or (6,)) on plane_index (default 0):
+    ``predict_with_jacobian``'s distance, bit for bit, without the Jacobian."""
+    one = np.ndim(qe) == 1
+    d, _ = _evaluate(robot, counts_to_joints(robot, np.atleast_2d(qe)), params,
+                     0 if plane_index is None else plane_index, None)
+    return d[0] if one else d
+
+
+def predict_with_jacobian(robot: Robot, qe: np.ndarray, params: CellParams,
+                          plane_index: np.ndarray | None = None,
+                          layout: ParamLayout | None = None, free: np.ndarray | None = None):
+    """Model distance d (N,) [m] and its Jacobian w.r.t. the parameters in ``layout``'s
+    order (default: the level-1 layout of ``params``' planes): (N, len(layout)), or only
+    the columns of the ``free`` mask (N, free.sum()) in their order."""
+    layout = layout or level1_layout(params.n_planes)
+    q = counts_to_joints(robot, np.atleast_2d(qe))
+    return _evaluate(robot, q, params, 0 if plane_index is None else plane_index,
+                     column_map(layout, robot.n_joints, free))
+
+
+def predict_joints_with_jacobian(robot: Robot, q: np.ndarray, params: CellParams,
+                                 plane_index, layout: ParamLayout, free=None):
+    """``predict_with_jacobian`` at joint angles q (N, 6) instead of counts (the fit
+    converts its counts once)."""
+    return _evaluate(robot, np.atleast_2d(q), params, plane_index,
+                     column_map(layout, robot.n_joints, free))
+
+
+@dataclass(frozen=True, eq=False)
+class ColumnMap:
+    """Where each elementary derivative goes in the Jacobian (-1: not wanted); built once
+    per (layout, free) by ``column_map``."""
+    width: int
+    joint: np.ndarray  # (n, 5): alpha, a, beta, theta, d of each joint
+    base: np.ndarray  # (6,)
+    origin: np.ndarray  # (3,)
+    angles: np.ndarray  # (2,)
+    plane: np.ndarray  # (k, 3)
+    extra_joint: np.ndarray  # (m,): joint of a theta-scaled column
+    extra_col: np.ndarray  # (m,)
+    extra_kind: tuple  # (m,) what scales it: "compliance"
+
+
+_JOINT_SLOT = {"alpha": 0, "a": 1, "beta": 2, "d": 4}
+
+
+@lru_cache(maxsize=256)
+def _column_map(layout: ParamLayout, n: int, free_key: bytes | None) -> ColumnMap:
+    free = (np.ones(len(layout), bool) if free_key is None
+            else np.frombuffer(free_key, bool))
+    pos = np.where(free, np.cumsum(free) - 1, -1)
+    joint = np.full((n, 5), -1, np.int64)
+    base, origin, angles = (np.full(k, -1, np.int64) for k in (6, 3, 2))
+    plane = np.full((layout.n_planes, 3), -1, np.int64)
+    ej, ec, ek = [], [], []
+    for g in layout.groups:
+        cols = pos[layout.slice(g.name)]
+        if g.kind == "joint_offsets":
+            joint[:, 3] = cols
+        elif g.kind == "joint_geometry":
+            for p, c in zip(g.params, cols):
+                joint[g.index, _JOINT_SLOT[p.name.rstrip("0123456789")]] = c
+        elif g.kind == "base_frame":
+            base[:] = cols
+        elif g.kind == "sensor_origin":
+            origin[:] = cols
+        elif g.kind == "sensor_angles":
+            angles[:] = cols
+        elif g.kind == "plane":
+            plane[g.index] = cols
+        elif g.kind == "compliance":
+            for j, c in enumerate(cols):
+                if c >= 0:
+                    ej.append(j), ec.append(c), ek.append(g.kind)
+        else:
+            raise ValueError(f"the measurement model has no parameters of kind {g.kind!r}")
+    return ColumnMap(int(free.sum()), joint, base, origin, angles, plane,
+                     np.array(ej, np.int64), np.array(ec, np.int64), tuple(ek))
+
+
+def column_map(layout: ParamLayout, n_joints: int, free=None) -> ColumnMap:
+    """The Jacobian's column map of a layout (every column, or the ``free`` mask's)."""
+    key = None if free is None else np.ascontiguousarray(free, bool).tobytes()
+    return _column_map(layout, n_joints, key)
+
+
+_NO_COLUMNS = ColumnMap(0, np.full((6, 5), -1, np.int64), *(np.full(k, -1, np.int64)
+                                                             for k in (6, 3, 2)),
+                        np.full((0, 3), -1, np.int64), np.zeros(0, np.int64),
+                        np.zeros(0, np.int64), ())
+
+
+def _evaluate(robot: Robot, q: np.ndarray, params: CellParams, plane_index,
+              cmap: ColumnMap | None):
+    """The distances at joint angles q (N, 6) and, with a column map, the Jacobian."""
+    qd, tau = effective_joints(robot, q, params)
+    kin = kinematics_of(robot, params)
+    N = len(qd)
+    cm = cmap or _NO_COLUMNS
+    if cm.joint.shape[0] != qd.shape[1]:
+        cm = replace(cm, joint=np.full((qd.shape[1], 5), -1, np.int64))
+    factor = np.empty((N, len(cm.extra_col)))
+    if len(cm.extra_col):
+        tau = joint_torques(robot, q) if tau is None else tau
+        factor[:] = tau[:, cm.extra_joint]
+    d, hit = np.empty(N), np.empty((N, 3))
+    J = np.zeros((N if cmap is not None else 0, cm.width))
+    pidx = np.ascontiguousarray(np.broadcast_to(np.asarray(plane_index, np.int64), (N,)))
+    _chain.distance(kin.packed, kin.base, kin.flange, np.ascontiguousarray(qd),
+                    params.sensor_origin, beam_direction(params.phi_y, params.phi_z),
+                    beam_direction_derivative(params.phi_y, params.phi_z),
+                    np.ascontiguousarray(params.planes), pidx, base_error_axes(params.base),
+                    params.base[:3].copy(), d, hit, J, cm.joint, cm.base, cm.origin,
+                    cm.angles, cm.plane, cm.extra_joint, cm.extra_col, factor)
+    return d, (J if cmap is not None else None)

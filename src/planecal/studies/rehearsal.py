@@ -1,0 +1,248 @@
+"""A rehearsal on the twin as the studies run one: its settings (scene, samples, seeds,
+world, noise overrides, pose draw) and the sampling modes. Monte Carlo runs many of them
+(``studies.montecarlo``); the Python API's ``rehearse`` runs one; validation, planning and
+the sweep sample through them.
+
+Sampling modes:
+
+* ``twin`` (default): the rehearsal machinery without the tick-by-tick motion: the
+  sampling run's own ``Planner`` (pose draw, IK, collision check of the target and of the
+  straight joint path from the previous pose, with the run's random stream), the twin put
+  at rest at the planned counts (``Twin.set_counts``: a repeatability draw, as when the
+  robot settles at the end of a move) and the laser read through ``read_stable`` (100
+  readings). Poses, rejections, counts and readings are those of ``planecal rehearse``
+  with the same seeds (tests/test_studies_montecarlo.py checks it sample for sample);
+  it only skips simulating the ticks of each move (the servo always settles exactly on
+  the commanded counts, so the sample is the same). In a world whose joint errors depend
+  on the path (backlash, thermal growth) it drives the ticks of each move
+  (``sampling.collect.DriveAcquirer``, as ``rehearse``): a jump to rest would leave every
+  joint's backlash on the flank it started on.
+* ``rehearse``: the full ``SamplingRun`` on the twin, tick by tick (slow; for checking).
+* ``synthetic``: the analytic model (``planecal.twin.synthetic``'s poses, no collision
+  check: a slightly different pose distribution) with the twin's noise model added in
+  numpy (``estimation.noise``): Gaussian joint repeatability, buffer-mean laser noise and,
+  optionally, the encoder's quantisation (uniform +-0.5 count per actuator). For fast tests.
+
+World: the twin's error profile (``errors``: ``ideal`` or ``realistic`` or a profile file)
+and a seed make a world (``twin.world.study_world``). The settings' noise fields override
+the profile's (None: the profile's). By default one world for every run k, drawn from
+``truth_seed``; ``vary_truth`` draws one per run (seed + k). Run k uses seed ``seed + k``
+for its poses and noise.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+
+import numpy as np
+
+from planecal.base.errors import InputError
+from planecal.estimation.noise import repeatability_sigma, sample_sigma_m
+from planecal.studies.common import cached_profile, cached_scene, cached_world
+from planecal.twin.world import path_dependent, study_world, with_noise
+
+MODES = ("twin", "rehearse", "synthetic")
+
+
+@dataclass(frozen=True)
+class RehearsalSettings:
+    scene: str = "thesis_final"
+    samples: int = 150
+    seed: int = 1000
+    mode: str = "twin"
+    truth_seed: int = 0
+    vary_truth: bool = False
+    offsets_all: bool = False  # truth with delta1, delta6 != 0 too
+    errors: str = "ideal"  # the twin's error profile (the commands' default: realistic)
+    laser_noise_mm: float | None = None  # None: the profile's (0.001 mm in both)
+    repeatability_mm: float | None = None  # None: the profile's (ideal: the robot's 0.07 mm)
+    quantization: bool = False  # synthetic mode: add quantisation (a profile's: its own)
+    clearance_m: float = 0.01
+    poses: tuple | None = None  # fixed encoder counts (planning study): replayed in order
+    roll_deg: float | None = None  # the pose draw's roll about the beam; None: the default
+    ik_choice: str | None = None  # the pose draw's IK branch choice; None: the default
+
+    def check(self) -> None:
+        if self.mode not in MODES:
+            raise InputError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if self.samples < 20:
+            raise InputError(f"--samples must be at least 20, got {self.samples}")
+        if self.seed < 0 or self.truth_seed < 0:
+            raise InputError("seeds must be >= 0")
+        if (self.laser_noise_mm or 0) < 0 or (self.repeatability_mm or 0) < 0:
+            raise InputError("noise levels must be >= 0")
+        if self.mode == "synthetic" and self.errors != "ideal":
+            raise InputError(f"--errors {self.errors}: the synthetic mode is the analytic "
+                             "model with the ideal world's noise; the other worlds need the "
+                             "twin (--mode twin or rehearse), or give --errors ideal")
+        opts = self.options()  # the profile, read (InputError if it cannot be)
+        if opts.laser_noise_mm == 0 and self.joint_sigma() == 0 \
+                and not (opts.quantization or self.quantization):
+            raise InputError("laser noise and repeatability are both 0: no noise to study")
+        if self.roll_deg is not None and not 0.0 <= self.roll_deg <= 180.0:
+            raise InputError(f"--roll-deg must be in [0, 180], got {self.roll_deg}")
+        if (self.roll_deg is not None or self.ik_choice is not None) \
+                and self.mode == "synthetic":
+            raise InputError("--roll-deg and --ik-choice set the sampling run's pose draw; "
+                             "the synthetic mode draws its own poses")
+        if self.quantization and self.mode != "synthetic":
+            raise InputError("--quantization adds encoder quantisation to the synthetic mode; "
+                             "the twin's comes from its error profile (realistic has it)")
+
+    def options(self, base=None):
+        """The twin's options: ``base`` (default: the profile's) with the noise overrides."""
+        opts = cached_profile(self.scene, self.errors).options() if base is None else base
+        return with_noise(opts, self.laser_noise_mm, self.repeatability_mm)
+
+    def world(self, k: int):
+        """Run k's world: (``twin.truth.Truth``, ``TwinOptions``) (module docstring)."""
+        seed = self.seed + k if self.vary_truth else self.truth_seed
+        world, opts = study_world(cached_scene(self.scene), cached_profile(self.scene, self.errors),
+                                  seed, self.offsets_all)
+        return world, self.options(opts)
+
+    def joint_sigma(self) -> float:
+        """The repeatability's std per joint [rad] of the settings' world."""
+        robot = cached_scene(self.scene).robot
+        mm = self.options().repeatability_mm
+        rep = robot.repeatability_m if mm is None else mm * 1e-3
+        return repeatability_sigma(robot, rep) if rep > 0 else 0.0
+
+    def sample_sigma_m(self) -> float:
+        """A sample's distance noise from the laser alone [m] (the buffer mean)."""
+        return sample_sigma_m(self.options().laser_noise_mm)
+
+    def quantized(self) -> bool:
+        """Whether the samples carry the encoder's quantisation."""
+        return bool(self.quantization or (self.options().quantization
+                                          and self.mode != "synthetic"))
+
+
+def sample_run(st: RehearsalSettings, k: int):
+    """Run k of the settings: (qe, d_m, plate, rejected dict, world, options); RuntimeError
+    when the run gives up (e.g. 500 poses rejected in a row)."""
+    scene = cached_scene(st.scene)
+    seed = st.seed + k
+    world, opts = st.world(k)
+    if st.poses is not None:
+        out = pose_list_samples(scene, world, st, seed, opts)
+    elif st.mode == "twin":
+        out = twin_samples(scene, world, st, seed, opts)
+    elif st.mode == "rehearse":
+        out = rehearse_samples(scene, world, st, seed, opts)
+    else:
+        out = synthetic_noisy_samples(scene, world.params, st, seed)
+    return (*out, world, opts)
+
+
+# ----- sampling -----------------------------------------------------------------------------
+
+def _twin_and_settings(scene, world, st: RehearsalSettings, seed: int, options=None):
+    """The run's twin in ``world`` (a ``Truth``, or a ``CellParams``: robot.json's
+    geometry) with ``options`` (default: the settings' profile and noise), and its
+    sampling settings."""
+    from planecal.sampling.run import RunSettings
+    from planecal.twin import Twin
+
+    twin = Twin(scene, truth=world, seed=seed,
+                options=st.options() if options is None else options)
+    rs = RunSettings.for_scene(scene, samples=st.samples, seed=seed)
+    rs.clearance_m = st.clearance_m
+    if st.roll_deg is not None:
+        rs.pose.roll_deg = st.roll_deg
+    if st.ik_choice is not None:
+        rs.pose.ik_choice = st.ik_choice
+    return twin, rs
+
+
+def _collect(scene, planner, twin, rs, seed: int):
+    """The collect core with the twin set at rest at each target (``RestAcquirer``), or,
+    where the twin's joint errors depend on the path, driven there tick by tick
+    (``DriveAcquirer``, as ``rehearse``): (qe, d_m, plate, rejected dict); RuntimeError
+    when the run gives up."""
+    from planecal.model.encoder import counts_to_joints
+    from planecal.links.base import AlwaysEnabled
+    from planecal.sampling.collect import (Cursor, DriveAcquirer, MemoryRecorder,
+                                           RestAcquirer, Tally, collect)
+    from planecal.sampling.driver import Driver
+
+    rec, tally = MemoryRecorder(), Tally()
+    cursor = Cursor(counts_to_joints(scene.robot, twin.current_counts),
+                    np.random.default_rng(seed).bit_generator.state)
+    if path_dependent(twin.options):
+        drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
+        drv.start()
+        acq = DriveAcquirer(drv, rs.laser, rs.nominal_step_counts, rs.dwell_ticks)
+    else:
+        acq = RestAcquirer(twin, rs.laser)
+    collect(planner, acq, rec, rs.samples, cursor, tally, rs.max_attempts)
+    if tally.status != "complete":
+        raise RuntimeError(f"run with seed {seed}: {tally.reason}")
+    qe, d, plate = rec.arrays()
+    return qe, d, plate, dict(tally.rejected)
+
+
+def twin_samples(scene, world, st: RehearsalSettings, seed: int, options=None):
+    """The ``twin`` mode (module docstring) in ``world`` (a ``Truth`` from ``world_for`` or
+    ``twin.profile.draw_world``, or a ``CellParams``) with ``options`` (default: the
+    settings' profile and noise): (qe, d_m, plate, rejected dict)."""
+    from planecal.sampling.planner import Planner
+
+    twin, rs = _twin_and_settings(scene, world, st, seed, options)
+    return _collect(scene, Planner(scene, rs.pose, cached_world(st.scene, st.clearance_m)), twin,
+                    rs, seed)
+
+
+def pose_list_samples(scene, world, st: RehearsalSettings, seed: int, options=None):
+    """A planned pose list measured on the twin as ``rehearse --poses`` visits it (each
+    pose checked from the last; a blocked one later), set at rest at each pose (driven
+    there where the joint errors depend on the path)."""
+    from planecal.sampling.planner import ListPlanner
+
+    twin, rs = _twin_and_settings(scene, world, st, seed, options)
+    counts = np.array([c for c, _ in st.poses], np.int64)
+    plates = np.array([k for _, k in st.poses], int)
+    rs.samples = len(counts)
+    planner = ListPlanner(scene, counts, plates, cached_world(st.scene, st.clearance_m))
+    return _collect(scene, planner, twin, rs, seed)
+
+
+def rehearse_samples(scene, world, st: RehearsalSettings, seed: int, options=None):
+    """The full sampling run, tick by tick (``planecal rehearse`` without the CLI)."""
+    from planecal.links.base import AlwaysEnabled
+    from planecal.io.samples import read_samples
+    from planecal.sampling.driver import Driver
+    from planecal.sampling.run import SamplingRun
+
+    twin, rs = _twin_and_settings(scene, world, st, seed, options)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "run.tsv")
+        drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
+        stats = SamplingRun(drv, scene, rs, out, cached_world(st.scene, st.clearance_m)).run()
+        if stats.status != "complete":
+            raise RuntimeError(f"rehearsal with seed {seed}: {stats.status} ({stats.reason})")
+        s = read_samples(out)
+    return s.qe, s.d_mm * 1e-3, s.plate, dict(stats.rejected)
+
+
+def synthetic_noisy_samples(scene, truth, st: RehearsalSettings, seed: int):
+    """Analytic model with the twin's noise model (module docstring)."""
+    from planecal.model.measurement import plane_distance, sensor_in_base
+    from planecal.model.encoder import counts_to_joints
+    from planecal.twin.synthetic import synthetic_samples
+
+    rng = np.random.default_rng(seed)
+    robot = scene.robot
+    qe, _, plate = synthetic_samples(scene, truth, st.samples, rng)
+    q = counts_to_joints(robot, qe)
+    s = st.joint_sigma()
+    if s > 0:
+        q = q + rng.normal(0.0, s, q.shape)
+    if st.quantization:
+        x = rng.uniform(-0.5, 0.5, q.shape) / robot.gains
+        q = q + x @ robot.coupling.T
+    o_b, z_b = sensor_in_base(robot, q, truth)
+    d = plane_distance(truth.planes[plate], o_b, z_b)
+    d = d + rng.normal(0.0, sample_sigma_m(st.options().laser_noise_mm), len(d))
+    return qe, d, plate, {"collision": 0, "laser": 0, "unreachable": 0}

@@ -1,0 +1,198 @@
+"""Validation over truths, and what each error source leaves (``breakdown``)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planecal.base.errors import InputError
+from planecal.estimation.calibrate import CalibrationSettings
+from planecal.studies.validation.run import validate
+from planecal.studies.validation.settings import ValidationSettings
+from planecal.twin.world import SOURCES
+
+
+def run_jobs(fn, items: list, engine=1, label: str = "validate", quiet: bool = True) -> list:
+    """``[fn(item) for item in items]`` on ``engine`` (an open ``studies.distributed.Engine``
+    or a job count: ``studies.common.parallel_map``)."""
+    from planecal.studies.common import Progress, parallel_map
+    items = list(items)
+    return parallel_map(fn, items, engine, Progress(label, len(items), quiet=quiet))
+
+
+@dataclass(frozen=True)
+class TruthJob:
+    """One truth of ``validate_truth``: the world (scene, error profile, truth seed, the
+    error families switched ``off``), the calibration set (rehearsal ``samples`` and
+    ``seed``, or a planned pose list ``poses``), how it is calibrated and the validation
+    settings."""
+    scene: str
+    errors: str
+    truth_seed: int
+    samples: int = 150
+    seed: int = 0
+    offsets_all: bool = False
+    poses: tuple | None = None
+    settings: ValidationSettings = field(default_factory=ValidationSettings)
+    off: tuple = ()
+    calibration: CalibrationSettings = field(default_factory=CalibrationSettings)
+
+    def rehearsal(self):
+        """The calibration set's rehearsal (``studies.rehearsal``): run 0 of these settings."""
+        from planecal.studies.rehearsal import RehearsalSettings
+        return RehearsalSettings(scene=self.scene, seed=self.seed, errors=self.errors,
+                                 samples=len(self.poses) if self.poses else self.samples,
+                                 truth_seed=self.truth_seed, offsets_all=self.offsets_all,
+                                 poses=self.poses, clearance_m=self.settings.clearance_m)
+
+
+def validate_truth(job: TruthJob) -> dict:
+    """Draw the world, sample a calibration set on its twin, calibrate it from the nominal
+    values (the one calibration, at the job's level), validate on the same world (package
+    docstring). A set the sampling run gives up on: ``{"truth_seed", "failed"}``."""
+    return truth_run(job)[0]
+
+
+def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
+    """``validate_truth``'s result, the calibration (``fit.Result``, None if the sampling
+    gave up) and its samples ``(qe, d_m, plate)``: what a recording of the run draws."""
+    from planecal.estimation.calibrate import calibrate
+    from planecal.model.scene import nominal_params
+    from planecal.studies.common import cached_scene, cached_world
+    from planecal.studies.rehearsal import pose_list_samples, twin_samples
+    from planecal.twin.world import sources_on, without
+
+    st = job.settings
+    reh = job.rehearsal()
+    scene = cached_scene(job.scene)
+    world, opts = without(*reh.world(0), job.off)
+    try:
+        sample = pose_list_samples if job.poses else twin_samples
+        qe, d, plate, rejected = sample(scene, world, reh, job.seed, opts)
+    except RuntimeError as e:
+        return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
+    fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate, job.calibration).result
+    v = validate(scene, world, fit.params, qe, st, cached_world(job.scene, st.clearance_m), fit,
+                 opts)
+    v["truth_seed"] = job.truth_seed
+    v["level"] = job.calibration.level
+    v["compliance"] = job.calibration.compliance
+    v["calibration_settings"] = job.calibration.to_dict()
+    v["off"] = list(job.off)
+    v["sources"] = sources_on(scene.robot, world, opts)
+    v["calibration"] = {"samples": len(d), "rejected": rejected, "fit_rms_mm": fit.rms_mm(),
+                        "max_model_error_mm": float(np.abs(fit.residuals_m).max() * 1e3),
+                        "converged": bool(fit.converged),
+                        "offsets_std_rad": fit.std[fit.layout.slice("joint_offsets")]}
+    v["truth_offsets_rad"] = world.params.joint_offsets
+    v["calibrated_offsets_rad"] = fit.params.joint_offsets
+    return v, fit, (qe, d, plate)
+
+
+TRUTH_KEYS = ("truth_seed", "ap_before_mm", "ap_after_mm", "ap_before_cell_mm",
+              "ap_after_cell_mm", "rp_mm", "rp_before_mm", "rp_after_mm",
+              "gauge_error_before_mm", "gauge_error_after_mm")
+
+
+def truth_row(v: dict) -> dict:
+    """The per-truth entry of a validation over truths (``truths`` in its JSON)."""
+    row = {k: v.get(k) for k in TRUTH_KEYS}
+    cal = v.get("calibration") or {}
+    row["max_model_error_mm"] = cal.get("max_model_error_mm")
+    row["samples"] = cal.get("samples")
+    row["offset_error_rad"] = (v.get("residual_offset_error") or {}).get("offset_error_rad")
+    return row
+
+
+def summarize(results: list[dict]) -> tuple[dict, dict, dict]:
+    """(summary, the median truth's result, the worst truth's): median and worst over the
+    truths of each figure (the worst truth: the largest AP after calibration; the median
+    truth: the one whose AP after is the median, the lower one of an even count)."""
+    ok = [v for v in results if "failed" not in v]
+    if not ok:
+        raise InputError("no truth could be validated: "
+                         + "; ".join(f"truth {v['truth_seed']}: {v['failed']}" for v in results))
+    after = np.array([v["ap_after_mm"] for v in ok])
+    order = np.argsort(after, kind="stable")
+    med = ok[int(order[(len(ok) - 1) // 2])]
+    worst = ok[int(order[-1])]
+
+    def stat(key, f):
+        vals = [v[key] for v in ok if v.get(key) is not None]
+        return float(f(vals)) if vals else None
+    out = {"truths": [truth_row(v) for v in results if "failed" not in v],
+           "failed_truths": [{"truth_seed": v["truth_seed"], "reason": v["failed"]}
+                             for v in results if "failed" in v],
+           "median_truth_seed": med["truth_seed"], "worst_truth_seed": worst["truth_seed"]}
+    for key in ("ap_before_mm", "ap_after_mm", "ap_before_cell_mm", "ap_after_cell_mm", "rp_mm",
+                "rp_before_mm", "rp_after_mm"):
+        base = key[:-3]
+        out[f"{base}_median_mm"] = stat(key, np.median)
+        out[f"{base}_worst_mm"] = stat(key, np.max)
+    for key in ("gauge_error_before_mm", "gauge_error_after_mm"):
+        base = key[:-3]
+        out[f"{base}_median_mm"] = stat(key, np.median)
+        out[f"{base}_worst_mm"] = stat(key, lambda x: max(x, key=abs))
+    return out, med, worst
+
+
+def breakdown_variants(sources: list[str], mode: str = "alone") -> list[tuple[str, tuple]]:
+    """(label, families switched off): 'off' each family switched off in turn, 'alone'
+    each family alone; both with all sources and none of them."""
+    if mode not in ("off", "alone"):
+        raise InputError(f"--breakdown: 'off', 'alone' or 'none', got {mode!r}")
+    rows = [("all sources", ())]
+    if mode == "off":
+        rows += [(f"without {f}", (f,)) for f in sources]
+    else:
+        rows += [(f"{f} alone", tuple(g for g in sources if g != f)) for f in sources]
+    rows.append(("none (cell only)", tuple(sources)))
+    return rows
+
+
+def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) -> dict:
+    """``job``'s truth repeated with each error family switched off (``mode`` 'off') or on
+    alone ('alone'), the gauge block skipped: AP after calibration per variant (the same
+    rehearsal seed: the same pose draws)."""
+    from dataclasses import replace
+
+    from planecal.studies.common import cached_scene
+    from planecal.twin.world import sources_on
+    on = sources_on(cached_scene(job.scene).robot, *job.rehearsal().world(0))
+    variants = breakdown_variants(on, mode)
+    st = replace(job.settings, gauge=False)
+    res = run_jobs(validate_truth, [replace(job, off=off, settings=st)
+                                    for _, off in variants], engine, "breakdown", quiet)
+    rows = []
+    for (label, off), v in zip(variants, res):
+        row = {"variant": label, "off": list(off)}
+        if "failed" in v:
+            row["failed"] = v["failed"]
+        else:
+            row.update({k: v[k] for k in ("ap_before_mm", "ap_after_mm", "ap_after_cell_mm",
+                                          "rp_mm")})
+            row["max_model_error_mm"] = v["calibration"]["max_model_error_mm"]
+        rows.append(row)
+    return {"truth_seed": job.truth_seed, "mode": mode, "sources": on, "variants": rows}
+
+
+def cannot_remove(bd: dict) -> list[dict]:
+    """From a breakdown: per error family, what it leaves in AP after calibration (with
+    all on minus with it off; or, alone, with it alone minus with none), largest first."""
+    rows = {r["variant"]: r for r in bd["variants"] if "failed" not in r}
+    allr, none = rows.get("all sources"), rows.get("none (cell only)")
+    out = []
+    for f in bd["sources"]:
+        if bd["mode"] == "off":
+            r = rows.get(f"without {f}")
+            if r is None or allr is None:
+                continue
+            share = allr["ap_after_mm"] - r["ap_after_mm"]
+        else:
+            r = rows.get(f"{f} alone")
+            if r is None or none is None:
+                continue
+            share = r["ap_after_mm"] - none["ap_after_mm"]
+        out.append({"source": f, "what": SOURCES[f], "ap_after_share_mm": float(share),
+                    "ap_after_variant_mm": r["ap_after_mm"]})
+    return sorted(out, key=lambda x: -x["ap_after_share_mm"])
