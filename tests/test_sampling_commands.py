@@ -128,7 +128,7 @@ def test_ctrl_c_stops_cleanly(tmp_path):
     assert p.returncode == 130
     assert "interrupted" in stderr and "Traceback" not in stderr
     side = load_sidecar(out)
-    assert side["status"] == "stopped" and side["stop_reason"] == "interrupted"
+    assert side["status"] == "stopped" and side["stop_reason"] == "interrupted (SIGINT)"
     assert len(read_samples(out)) == side["samples"] >= 3
 
 
