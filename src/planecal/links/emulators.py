@@ -14,13 +14,18 @@ sends unless it has received (send-first handshake).
   ``session_gap_s`` (2 s: longer than any outage a client rides through, 0.5 s by
   default) without any, starts a client session. Between sessions the
   robot holds its last command: the backend is ticked with it until the counts sit on it
-  (at most ``settle_ticks``), as the servo would in the meantime. Then, by
-  ``reference_mode`` (`planecal.links.fd11`, "Sessions", for the two readings of the seed):
-  ``"session"`` (default): the reference is latched at the first packet of every session,
-  ``reference = current - delta``, so any first delta commands the robot where it is;
-  ``"boot"``: the reference stays the one of the emulator's start and the first delta of a
-  session is checked against the last one received, like any other (delta 0 after a
-  session that moved trips it).
+  (at most ``settle_ticks``), as the servo would in the meantime. What the controller
+  does with its reference is ``reference_mode``, in the words of robot.json's
+  ``controller.sessions`` (`planecal.links.sessions`):
+  ``"keep"``: the reference stays the one of the emulator's start, and a session's first
+  delta is checked against the last one received, like any other (delta 0 after a
+  session that moved trips it);
+  ``"fresh_after_silence"`` (default): a request after ``session_gap_s`` without any takes
+  the robot's current counts as the new reference (the delta it holds becomes 0, so a
+  first delta other than 0 is a step of that size, and trips it above 60) -- the
+  behaviour of the independent FD11 peer of issue 25;
+  ``"fresh_each_client"``: the same, at a request from another client address, however
+  short the silence (the same address continues its session).
   The emulator talks to its backend in the backend's own frame: backend delta = delta +
   (reference - backend reference); the backend is assumed to start at rest on its
   reference counts (the twin does).
@@ -71,10 +76,11 @@ from typing import Callable
 import numpy as np
 
 from planecal.links.fd11 import TRIP_STEP_COUNTS, pack_reply, unpack_request
+from planecal.links.sessions import BEHAVIOURS
 from planecal.links.zs_ld80 import FIELD_WIDTH, encode_reply
 
 _POLL_S = 0.05  # how often the threads look at their stop flag
-REFERENCE_MODES = ("session", "boot")
+REFERENCE_MODES = BEHAVIOURS  # keep, fresh_after_silence, fresh_each_client
 SESSION_GAP_S = 2.0  # > the client's outage bound (0.5 s): an outage it rides through is no new session
 SETTLE_TICKS = 500  # 5 s of robot time: any servo lag has gone by then
 
@@ -111,6 +117,7 @@ class FD11EmulatorCounters:
     invalid: int = 0     # wrong size or negatives mismatch
     boot_ignored: int = 0  # valid requests not seen while booting
     sessions: int = 0    # client sessions begun
+    fresh_references: int = 0  # of those, the ones that took the robot's counts as reference
     ticks: int = 0       # backend.exchange calls for requests
     moves: int = 0       # of those, the ones commanding motion (a delta other than the last)
     settle_ticks: int = 0  # backend.exchange calls between sessions (robot settling)
@@ -186,8 +193,8 @@ class FD11Emulator(_Served):
     def __init__(self, backend, host: str = "127.0.0.1", rt_port: int = 5555,
                  reply_port: int | None = 5556, *, faults: FD11Faults | None = None,
                  trip_counts: int = TRIP_STEP_COUNTS, trip_mode: str = "silent", lock=None,
-                 reference_mode: str = "session", session_gap_s: float = SESSION_GAP_S,
-                 settle_ticks: int = SETTLE_TICKS):
+                 reference_mode: str = "fresh_after_silence",
+                 session_gap_s: float = SESSION_GAP_S, settle_ticks: int = SETTLE_TICKS):
         if trip_mode not in ("silent", "hold"):
             raise ValueError(f"trip_mode must be 'silent' or 'hold', got {trip_mode!r}")
         if reference_mode not in REFERENCE_MODES:
@@ -284,8 +291,12 @@ class FD11Emulator(_Served):
                 f.outage_requests > 0 and f.outage_from <= n < f.outage_from + f.outage_requests):
             c.lost_requests += 1
             return [], 0.0
-        if self._peer is None or addr != self._peer or now - self._last_t >= self.session_gap_s:
-            self._begin_session(addr, delta)
+        silent = self._last_t is not None and now - self._last_t >= self.session_gap_s
+        if self._peer is None or addr != self._peer or silent:
+            self._begin_session(addr, fresh=(
+                self._peer is not None and not self.tripped
+                and (self.reference_mode == "fresh_after_silence" and silent
+                     or self.reference_mode == "fresh_each_client" and addr != self._peer)))
         self._last_t = now
         if self.tripped and self.trip_mode == "silent":
             c.ignored_tripped += 1
@@ -354,7 +365,7 @@ class FD11Emulator(_Served):
         self._b_delta = b_delta.copy()
         return True
 
-    def _begin_session(self, addr, first: np.ndarray) -> None:
+    def _begin_session(self, addr, fresh: bool) -> None:
         self.counters.sessions += 1
         if self._peer is not None:
             if self.released:  # the operator holds the switch again before a new session
@@ -362,12 +373,11 @@ class FD11Emulator(_Served):
                 self._release_done = True
             self._settle()
         self._peer = addr
-        if self.reference_mode == "boot" or self.tripped:
-            return
-        # latch the reference where the robot is: reference = current - first delta
-        here = np.zeros(6, np.int64) if self._b_ref is None else self._b_cur - self._b_ref
-        self._offset = here - first
-        self.last_delta = first.copy()
+        if fresh and self._b_ref is not None:
+            # a new reference: the robot's counts; the delta it holds is 0
+            self.counters.fresh_references += 1
+            self._offset = self._b_cur - self._b_ref
+            self.last_delta = np.zeros(6, np.int64)
 
     def _settle(self) -> None:
         """The robot held its last command while no client was there: tick the backend with
@@ -527,7 +537,8 @@ class Emulators:
     def __init__(self, robot, laser=None, *, host: str = "127.0.0.1", rt_port: int = 5555,
                  reply_port: int | None = 5556, fd11_faults: FD11Faults | None = None,
                  laser_faults: LaserFaults | None = None, trip_mode: str = "silent",
-                 reference_mode: str = "session", session_gap_s: float = SESSION_GAP_S):
+                 reference_mode: str = "fresh_after_silence",
+                 session_gap_s: float = SESSION_GAP_S):
         self.lock = threading.Lock()
         self.fd11 = FD11Emulator(robot, host, rt_port, reply_port, faults=fd11_faults,
                                  trip_mode=trip_mode, lock=self.lock,
@@ -541,8 +552,11 @@ class Emulators:
 
     def describe(self) -> list[str]:
         reply = "the sender's port" if self.fd11.reply_port is None else f"port {self.fd11.reply_port}"
+        mode = self.fd11.reference_mode + (f" {self.fd11.session_gap_s:g} s"
+                                           if self.fd11.reference_mode == "fresh_after_silence"
+                                           else "")
         return [f"FD11 RT emulator: UDP {self.fd11.host}:{self.fd11.rt_port} (replies to {reply}; "
-                f"reference mode {self.fd11.reference_mode})",
+                f"reference {mode})",
                 f"ZS-LD80 emulator: serial device {self.laser.port}"]
 
     def start(self) -> "Emulators":
