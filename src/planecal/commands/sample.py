@@ -195,7 +195,7 @@ class Controller:
             self.state = StateFile(path)
             override = "fresh" if args.rt_fresh else "keep" if args.rt_keep else None
             self.contact = plan_contact(stated_behaviour(robot.source), self.state.last,
-                                        override, self.link.client)
+                                        override, self.link.client, where=str(robot.source))
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
             except OSError as e:

@@ -118,6 +118,7 @@ class FD11EmulatorCounters:
     boot_ignored: int = 0  # valid requests not seen while booting
     sessions: int = 0    # client sessions begun
     fresh_references: int = 0  # of those, the ones that took the robot's counts as reference
+    max_step: int = 0    # largest |delta - the delta held| a request asked for (trips included)
     ticks: int = 0       # backend.exchange calls for requests
     moves: int = 0       # of those, the ones commanding motion (a delta other than the last)
     settle_ticks: int = 0  # backend.exchange calls between sessions (robot settling)
@@ -302,6 +303,7 @@ class FD11Emulator(_Served):
             c.ignored_tripped += 1
             return [], 0.0
         step = np.abs(delta - self.last_delta)
+        c.max_step = max(c.max_step, int(step.max()))
         if not self.tripped and np.any(step > self.trip_counts):
             j = int(np.argmax(step))
             self.tripped = True

@@ -165,12 +165,14 @@ class Contact:
 
 
 def plan_contact(behaviour: SessionBehaviour | None, last: LastSession | None,
-                 override: str | None, client: str, now: float | None = None) -> Contact:
+                 override: str | None, client: str, now: float | None = None,
+                 where: str = "robot.json") -> Contact:
     """The first contact of a new session (module doc). ``override``: "fresh" or "keep",
     the operator's statement for this run (``--rt-fresh``, ``--rt-keep``), which wins over
     the cell's. ``client``: this link's address ("ip:port"). Raises `InputError` (exit 2)
-    when the behaviour is unstated and the controller was last left at a delta other than
-    0: planecal cannot tell which first packet is safe, so it asks."""
+    when the behaviour is unstated (in ``where``, the robot file) and the controller was
+    last left at a delta other than 0: planecal cannot tell which first packet is safe, so
+    it asks."""
     now = time.time() if now is None else now
     if override == "fresh":
         return Contact.fresh("--rt-fresh: the controller took a fresh reference")
@@ -184,8 +186,9 @@ def plan_contact(behaviour: SessionBehaviour | None, last: LastSession | None,
         if not last.delta.any():
             return Contact.either(f"the last delta recorded is 0 ({last.path})")
         raise InputError(
-            f"the controller's session behaviour is not stated (robot.json controller."
-            f"sessions) and it was last left at delta {last.delta.tolist()} ({last.path}): "
+            f"{where}: controller.sessions is not stated (what the controller does with its "
+            f"reference between client sessions), and it was last left at delta "
+            f"{last.delta.tolist()} ({last.path}): "
             f"planecal will not guess whether the first packet must repeat it; state for "
             f"this run that the controller took a fresh reference (--rt-fresh) or kept it "
             f"(--rt-keep)")

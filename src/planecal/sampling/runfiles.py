@@ -5,6 +5,7 @@ stops with."""
 from __future__ import annotations
 
 import os
+import weakref
 from pathlib import Path
 
 from planecal.base.errors import InputError, RunFailed
@@ -30,7 +31,9 @@ class RunLock:
     closing releases it too, and a killed one leaves ``FILE.lock`` behind until the next
     run on the file removes it. A lock file removed or replaced between another process's
     open and its lock is noticed (its inode is no longer the path's) and opened again.
-    ``what`` names the locked thing in the refusal (default: the file)."""
+    A forked child (the background planner) closes its copy at once: the lock ends with
+    the process that took it, not with its children. ``what`` names the locked thing in
+    the refusal (default: the file)."""
 
     def __init__(self, out: str | Path, what: str | None = None):
         import fcntl
@@ -58,6 +61,7 @@ class RunLock:
                 same = False
             if same:
                 self._fd = fd
+                _HELD.add(self)
                 return
             os.close(fd)
         raise InputError(f"{self.path}: cannot lock ({self.lock_path} keeps changing)")
@@ -70,6 +74,26 @@ class RunLock:
                 pass
             os.close(self._fd)  # releases the lock
             self._fd = None
+            _HELD.discard(self)
+
+
+_HELD: "weakref.WeakSet[RunLock]" = weakref.WeakSet()
+
+
+def _close_in_child() -> None:
+    """After a fork, in the child: close the copies of the held locks' descriptors (the
+    parent still holds them), so the lock is free as soon as the parent ends."""
+    for lock in list(_HELD):
+        if lock._fd is not None:
+            try:
+                os.close(lock._fd)
+            except OSError:
+                pass
+            lock._fd = None
+    _HELD.clear()
+
+
+os.register_at_fork(after_in_child=_close_in_child)
 
 
 def load_sidecar(out: str | Path) -> dict:
