@@ -56,13 +56,15 @@ def test_emulate_fault_flags_are_checked_in_one_line(flags, message, capsys):
 
 
 def _default_sigint():
-    """In the child: SIGINT back to its default, so Python raises KeyboardInterrupt on it
-    even when the test runner was started in the background (SIGINT ignored, inherited)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    """In the child: the signals back to their defaults, so Python raises KeyboardInterrupt
+    on SIGINT even when the test runner was started in the background (SIGINT ignored,
+    inherited), and planecal takes SIGTERM and SIGHUP."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
 
 
 class Emulate:
-    """`planecal emulate ...` in a subprocess: ``port``, ``tty``; ended by SIGINT."""
+    """`planecal emulate ...` in a subprocess: ``port``, ``tty``; ended by a signal."""
 
     def __init__(self, *flags):
         env = dict(os.environ, MUJOCO_GL="disable")
@@ -85,8 +87,8 @@ class Emulate:
         self.port = int(re.search(r"UDP 127\.0\.0\.1:(\d+)", self.text).group(1))
         self.tty = re.search(r"serial device (\S+)", self.text).group(1)
 
-    def stop(self):
-        self.proc.send_signal(signal.SIGINT)
+    def stop(self, sig=signal.SIGINT):
+        self.proc.send_signal(sig)
         out, err = self.proc.communicate(timeout=30)
         self.guard.cancel()
         self.proc_out = out  # after "running": the counters line it prints on exit
@@ -117,6 +119,21 @@ def test_planecal_emulate_serves_the_twin():
     finally:
         code, err = emu.stop()
     assert code == 130 and "interrupted" in err
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGHUP, 130)])
+def test_emulate_prints_what_it_served_on_any_signal(sig, code):
+    """A process manager stops emulate with SIGTERM (a closed terminal: SIGHUP): it ends as
+    on Ctrl-C, with its counters line and one line saying which signal."""
+    emu = Emulate("--seed", "3", "--errors", "ideal")
+    with FD11Link("127.0.0.1", emu.port, 0, timeout_s=0.5, silence_s=2.0, tick_s=0) as link:
+        for d in range(3):
+            link.exchange(np.array([10 * d, 0, 0, 0, 0, 0]))
+    rc, err = emu.stop(sig)
+    name = signal.Signals(sig).name
+    assert rc == code and err.strip().splitlines()[-1] == f"planecal emulate: interrupted ({name})"
+    served = json.loads(emu.proc_out.split("served: fd11 ")[1].split(" laser ")[0])
+    assert served["ticks"] == 3 and served["max_step"] == 10 and served["sessions"] == 1
 
 
 def test_sample_sessions_one_after_the_other_against_one_emulate(tmp_path, capsys):

@@ -298,3 +298,77 @@ def test_a_full_disk_stops_with_one_line_and_consistent_files(twin, tmp_path, ca
     qe = read_samples(out).qe
     assert len(qe) == 5 and far_apart(qe) > FAR_COUNTS
     assert math.isclose(load_sidecar(out)["samples"], 5)
+
+
+# --- no litter -------------------------------------------------------------------------------
+
+def listing(folder) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_a_complete_run_leaves_its_files_and_the_controllers_state_only(twin, tmp_path, capsys):
+    """A complete `sample`: the sample file and its sidecar beside it, nothing else (no lock,
+    no state file); the controller's state in its one place (PLANECAL_STATE_DIR), without
+    its lock."""
+    import os
+    from pathlib import Path
+
+    state_dir = Path(os.environ["PLANECAL_STATE_DIR"])
+    with Emulators(twin, rt_port=0, reply_port=None) as emu:
+        code, s, err = sample(emu, tmp_path / "RUN.tsv", "--samples", "1", capsys=capsys)
+        assert code == 0, err
+        state = default_state_path(("127.0.0.1", emu.fd11.rt_port))
+    assert listing(tmp_path) == ["RUN.tsv", "RUN.tsv.json"]
+    assert listing(state_dir) == [state.name]
+    assert load_sidecar(tmp_path / "RUN.tsv")["real_cell"]["rt_state"] == str(state)
+
+
+@pytest.mark.parametrize("case", ["laser port missing", "controller silent", "not stated",
+                                  "controller in use"])
+def test_a_failed_start_leaves_nothing(twin, tmp_path, capsys, case):
+    """A start that fails leaves no file in the run's folder, and no state file where no
+    packet was sent: a laser port that does not exist (exit 2), a controller that never
+    answers (exit 1; its packets' time is the controller's state, kept), a cell that does
+    not state its controller's behaviour once the controller was left mid-move (exit 2),
+    and a controller another run is using (exit 2)."""
+    import os
+    from pathlib import Path
+
+    from planecal.sampling.runfiles import RunLock
+
+    state_dir = Path(os.environ["PLANECAL_STATE_DIR"])
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    out = run_dir / "RUN.tsv"
+    faults = FD11Faults(boot_s=60.0) if case == "controller silent" else None
+    with Emulators(twin, rt_port=0, reply_port=None, fd11_faults=faults) as emu:
+        state = default_state_path(("127.0.0.1", emu.fd11.rt_port))
+        extra, held = [], None
+        if case == "laser port missing":
+            extra = ["--laser", str(tmp_path / "no-such-tty")]
+        elif case == "controller silent":
+            extra = ["--rt-boot-timeout-s", "0.3"]
+        elif case == "not stated":
+            st = StateFile(state)
+            st.sending()
+            st.answered(np.array([0, 0, 0, 900, 0, 0]), twin.reference_counts, "127.0.0.1:1")
+            st.close()
+        before = listing(state_dir)
+        if case == "controller in use":
+            held = RunLock(state, what="the controller")  # another run on it
+        try:
+            code, s, err = sample(emu, out, "--samples", "1", *extra, capsys=capsys)
+        finally:
+            if held is not None:
+                held.close()
+        sent = emu.fd11.snapshot().datagrams
+    lines = problem_lines(err)
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert code == (1 if case == "controller silent" else 2)
+    assert listing(run_dir) == []
+    if case == "controller silent":  # packets went out: their time is the state
+        assert sent >= 1 and listing(state_dir) == [state.name]
+        assert StateFile.read(state).reference is None
+    else:
+        assert sent == 0 and listing(state_dir) == before
+    print(f"{case}: {lines[0]}")
