@@ -23,7 +23,8 @@ import pytest
 
 from planecal.cli import main
 from planecal.io.samples import read_samples
-from planecal.links.emulators import FD11Emulator, LaserEmulator
+from planecal.links.emulators import FD11Emulator
+from planecal.links.laser_emulator import LaserEmulator
 from planecal.links.fd11 import unpack_request
 from planecal.links.sessions import StateFile, default_state_path
 from planecal.sampling.runfiles import load_sidecar
@@ -175,6 +176,9 @@ def test_a_signal_mid_move_then_a_resume_never_jumps(tmp_path, capsys, behaviour
     assert not fd11.tripped and c.sessions == 2
     assert got.max() <= STEP_LIMIT and got.max() == c.max_step, (got.max(), c.max_step)
     first = s["first_contact"]
+    assert load_sidecar(out)["real_cell"]["first_contact"] == first
+    # what the first reply showed: the reference the state file recorded, or a new one
+    assert first["observed_reference"] == ("kept" if behaviour == "keep" else "new")
     if behaviour == "keep":
         assert first["kind"] == "kept" and s["link"]["boot_wait_s"] < 1.0
         assert c.fresh_references == 0 and first["waited_s"] == 0

@@ -209,6 +209,12 @@ class Controller:
             self.close()
             raise
 
+    @property
+    def recorded_reference(self):
+        """The controller's reference as the state file recorded it (None: unknown)."""
+        last = self.state.last if self.state is not None else None
+        return None if last is None else last.reference
+
     def wait_for_silence(self) -> float:
         """Keep the silence the first contact needs (a fresh reference after silence)."""
         import time
@@ -295,7 +301,7 @@ def run(args) -> int:
         real_cell = {"rt": args.rt, "rt_port": args.rt_port, "laser": args.laser,
                      "follow_limit_counts": limit, **cell.record(waited), "link_total": before}
         code, summary = _run(args, scene, settings, checker, model, observer, cell.link, laser,
-                             monitor, real_cell, before)
+                             monitor, real_cell, before, cell.recorded_reference)
     finally:
         if raw_laser is not None:
             raw_laser.close()
@@ -308,17 +314,21 @@ def run(args) -> int:
         summary["rrd"] = str(observer.path)
     summary["link"] = real_cell["link"]
     summary["link_total"] = real_cell["link_total"]
-    summary["first_contact"] = real_cell["first_contact"]
+    summary["first_contact"] = real_cell["first_contact"]  # with what the controller did
     summary["following"] = {"limit_counts": limit, "max_lag_counts": monitor.max_lag}
     print_summary(summary)
     return code
 
 
 def _run(args, scene, settings, checker, model, observer, link, laser, monitor, real_cell,
-         before) -> tuple[int, dict]:
+         before, recorded) -> tuple[int, dict]:
     """The session (`sampling.session`); a link or laser failure is one line (exit 1); the
-    link counters go to the sidecar however it ends."""
+    link counters go to the sidecar however it ends, and what the controller's first reply
+    showed of its reference (``observed_reference``: "kept" -- the one ``recorded`` in the
+    state file --, "new", or None when either is unknown)."""
     from dataclasses import asdict
+
+    import numpy as np
 
     from planecal.commands.sampling_options import pose_list_planner, session_from_args
     from planecal.links.fd11 import LinkError
@@ -330,6 +340,7 @@ def _run(args, scene, settings, checker, model, observer, link, laser, monitor, 
                                                         model[0]),
                                 observer, {"real_cell": real_cell}, hold_while_planning=True,
                                 model=model)
+    observed = None
     try:
         return run_session(session, scene, settings, monitor, laser, monitor, checker)
     except (LinkError, LaserError) as e:
@@ -338,10 +349,14 @@ def _run(args, scene, settings, checker, model, observer, link, laser, monitor, 
                  else "nothing sampled")
         raise RunFailed(f"run stopped: {e} ({where})") from None
     finally:
+        if recorded is not None and link.fd11_reference is not None:
+            observed = "kept" if np.array_equal(link.fd11_reference, recorded) else "new"
         session_link = asdict(link.counters)
         real_cell["link"] = session_link
         real_cell["link_total"] = link_totals(before, session_link)
+        real_cell["first_contact"]["observed_reference"] = observed
         # (nothing sent: the session never began -- e.g. another run holds the file)
         if link.counters.sent and sidecar_path(args.out).exists():
             _record_link(Path(args.out), {"link": session_link,
-                                          "link_total": real_cell["link_total"]})
+                                          "link_total": real_cell["link_total"],
+                                          "first_contact": real_cell["first_contact"]})

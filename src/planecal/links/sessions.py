@@ -181,7 +181,7 @@ def plan_contact(behaviour: SessionBehaviour | None, last: LastSession | None,
             return Contact.either("--rt-keep, but no earlier session recorded")
         return Contact.kept(last, f"--rt-keep: the controller kept its reference ({last.path})")
     if last is None:
-        return Contact.either(f"no earlier session recorded for this controller")
+        return Contact.either("no earlier session recorded for this controller")
     if behaviour is None:
         if not last.delta.any():
             return Contact.either(f"the last delta recorded is 0 ({last.path})")
