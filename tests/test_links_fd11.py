@@ -673,6 +673,26 @@ def test_the_state_file_records_the_time_of_packets_nobody_answered(tmp_path, pe
     assert time.time() - 0.5 <= last.sent_at <= time.time()
 
 
+def test_the_state_file_holds_a_delta_sent_in_an_answered_session(tmp_path, peer):
+    """Once the controller has answered the session, each packet's delta is recorded as it
+    goes out: a run stopped while it waits for the reply (here: none comes) has recorded
+    what the controller most likely holds; the other candidate is one step away."""
+    path = tmp_path / "fd11.state"
+    state = StateFile(path)
+    with link_to(peer.port, Contact.either(), state, timeout_s=0.1, silence_s=0.3) as link:
+        t = threading.Thread(target=lambda: peer.sock.sendto(pack_reply(HOME, HOME),
+                                                             peer.recv()[1]))
+        t.start()
+        link.handshake()
+        t.join(5)
+        with pytest.raises(LinkError, match="no reply for 0.3 s"):
+            link.exchange([40, 0, 0, 0, 0, -40])
+    state.close()
+    last = StateFile.read(path)
+    assert last.delta.tolist() == [40, 0, 0, 0, 0, -40]
+    np.testing.assert_array_equal(last.reference, HOME)
+
+
 @pytest.mark.parametrize("damage", [b"", b"fd11-state/2 +5\n", b"x" * 105,
                                     b"fd11-last-delta/1 +0000000007" + b" +0000000000" * 5
                                     + b" crc32=00000000\n"])

@@ -111,7 +111,9 @@ def start_and_stop(fd11, laser, out, sig, *flags) -> Stopped:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=_default_signals)
     try:
-        assert fd11.wait_until(lambda c: c.moves >= MOVING, 120), proc.stderr.read()
+        deadline = time.monotonic() + 120
+        while not fd11.wait_until(lambda c: c.moves >= MOVING, 0.5):
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
     finally:
@@ -145,17 +147,21 @@ def check_stopped(stopped: Stopped, sig, out) -> None:
     assert not (out.parent / (out.name + ".lock")).exists()
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL],
-                         ids=["SIGINT", "SIGTERM", "SIGKILL"])
-@pytest.mark.parametrize("behaviour", ["fresh_after_silence", "keep"])
+@pytest.mark.parametrize("behaviour, sig", [
+    (b, s) for b in ("fresh_after_silence", "keep")
+    for s in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)] + [
+    ("fresh_each_client", signal.SIGTERM)],
+    ids=lambda v: v.name if isinstance(v, signal.Signals) else v)
 def test_a_signal_mid_move_then_a_resume_never_jumps(tmp_path, capsys, behaviour, sig):
     """Stated fresh_after_silence (2 s): the resume waits until 2.5 s have passed since the
     last packet (the state file's time) and starts from delta 0 on a fresh reference.
     Stated keep: it repeats the last delta the controller answered (after SIGKILL the
     controller may hold one step more, still within 51). Both complete; no request asks
     for more than 51 counts; the controller never trips. After SIGKILL the resume comes
-    late (3 s after the last packet, as in the issue: nothing left to wait)."""
-    scene = stated_scene(tmp_path, behaviour, SILENCE_S if behaviour != "keep" else None)
+    late (3 s after the last packet, as in the issue: nothing left to wait). Stated
+    fresh_each_client: the resume's new port is a new client, so delta 0 at once."""
+    scene = stated_scene(tmp_path, behaviour,
+                         SILENCE_S if behaviour == "fresh_after_silence" else None)
     out = tmp_path / "RUN.tsv"
     with controller(behaviour) as (fd11, laser):
         stopped = start_and_stop(fd11, laser, out, sig, "--scene", str(scene))
@@ -175,6 +181,7 @@ def test_a_signal_mid_move_then_a_resume_never_jumps(tmp_path, capsys, behaviour
     assert len(read_samples(out)) == 2
     assert not fd11.tripped and c.sessions == 2
     assert got.max() <= STEP_LIMIT and got.max() == c.max_step, (got.max(), c.max_step)
+    assert got[stopped.datagrams] <= STEP_LIMIT  # the resume's first packet (0 as a rule)
     first = s["first_contact"]
     assert load_sidecar(out)["real_cell"]["first_contact"] == first
     # what the first reply showed: the reference the state file recorded, or a new one
@@ -182,6 +189,9 @@ def test_a_signal_mid_move_then_a_resume_never_jumps(tmp_path, capsys, behaviour
     if behaviour == "keep":
         assert first["kind"] == "kept" and s["link"]["boot_wait_s"] < 1.0
         assert c.fresh_references == 0 and first["waited_s"] == 0
+    elif behaviour == "fresh_each_client":
+        assert first["kind"] == "fresh" and c.fresh_references == 1 and first["waited_s"] == 0
+        assert first["client"] != last.client and "note: waiting" not in err
     else:
         assert first["kind"] == "fresh" and c.fresh_references == 1
         assert 0 <= first["waited_s"] <= SILENCE_S + 0.5 and (first["waited_s"] == 0) >= late
@@ -190,8 +200,8 @@ def test_a_signal_mid_move_then_a_resume_never_jumps(tmp_path, capsys, behaviour
         gap = max(b[0] - a[0] for a, b in zip(fd11.received, fd11.received[1:]))
         assert gap >= SILENCE_S + 0.5 - 0.05 and time.monotonic() - t0 >= first["waited_s"]
     print(f"{behaviour} {signal.Signals(sig).name}: {len(got)} requests, largest step "
-          f"{got.max()} counts, the resume's first delta {s['first_contact']['kind']}, "
-          f"waited {first['waited_s']} s")
+          f"{got.max()} counts, the resume's first packet a step of "
+          f"{got[stopped.datagrams]} ({first['kind']}), waited {first['waited_s']} s")
 
 
 def test_a_resume_on_a_cell_that_states_nothing_asks_and_sends_nothing(tmp_path, capsys):

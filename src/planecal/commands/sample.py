@@ -29,9 +29,10 @@ reference between client sessions is a stated property of the cell (robot.json
 ``controller.sessions``): it keeps it (the first packet repeats the last delta it
 received), takes a fresh one after a silence (the run waits that silence out, then sends
 delta 0) or takes one for each new client address. The controller's state -- the last
-delta it answered, its reference, the time of the last packet and the client -- is kept
-in one file per controller (``--rt-state``, default ``$PLANECAL_STATE_DIR`` or
-``~/.local/state/planecal/fd11-IP-PORT.state``), read by every run against it. Where the
+delta sent in a session it answered, its reference, the time of the last packet and the
+client -- is kept in one file per controller (``--rt-state``, default
+``$PLANECAL_STATE_DIR`` or ``~/.local/state/planecal/fd11-IP-PORT.state``), read by every
+run against it. Where the
 behaviour is not stated and the controller was left at a delta other than 0, the run
 asks (one line, exit 2): ``--rt-fresh`` states that the controller took a fresh reference
 (e.g. the RT system was restarted), ``--rt-keep`` that it kept it. The link refuses a

@@ -62,8 +62,9 @@ reference is the commanded position at first contact (``fd11_reference + held``)
 whose first delta is zero, as in the seed. On the wire, delta + ``held`` goes out. The
 FD11's reference is checked to stay constant within a link; a change (controller
 restarted, new reference) raises `LinkError`, since the deltas would then move the robot
-elsewhere. With a `StateFile`, the link records the time just before every packet and
-the delta, reference and client address after every reply taken.
+elsewhere. With a `StateFile`, the link records the time just before every packet (and,
+once the controller has answered the session, the packet's delta), and the delta,
+reference and client address after every reply taken.
 
 Counts are unpacked as uint32 and returned as int64 with the same value (0..2**32-1,
 no sign reinterpretation); the MC70's 24-bit encoders stay far from the wrap. Use
@@ -298,7 +299,7 @@ class FD11Link:
         self._drain()
         t0 = time.monotonic()
         bound = self.boot_timeout_s if first else self.silence_s
-        self._send(packet)
+        self._send(packet, wire)
         self.last_sent = d
         self._last_tick_t = t0
         lost = 0
@@ -323,7 +324,7 @@ class FD11Link:
                 self._owed = lost
                 raise LinkInterrupted(f"{self.where}: enable dropped during an outage "
                                       f"({lost} replies lost); nothing more sent")
-            self._send(packet)
+            self._send(packet, wire)
             if first:
                 self.counters.boot_resends += 1
             else:
@@ -381,9 +382,9 @@ class FD11Link:
             c.max_lost_in_a_row = max(c.max_lost_in_a_row, lost)
             c.longest_outage_s = max(c.longest_outage_s, round(dt, 6))
 
-    def _send(self, packet: bytes) -> None:
+    def _send(self, packet: bytes, wire: np.ndarray) -> None:
         if self.state is not None:  # the time first: a kill can only shorten the silence
-            self.state.sending()
+            self.state.sending(None if self.fd11_reference is None else wire)
         try:
             self._sock.sendto(packet, self.remote)
         except ConnectionRefusedError:  # ICMP "port unreachable" for an earlier packet:

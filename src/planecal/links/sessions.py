@@ -33,10 +33,11 @@ for ``planecal emulate --reference``):
 
 The state file (`StateFile`)
 ----------------------------
-One line per controller, rewritten in place at every packet: the last delta the
-controller answered, its reference counts then, the time the last packet was sent (UNIX
+One line per controller, rewritten in place at every packet: the last delta sent to the
+controller in a session it has answered (the first packet of a session only once
+answered), its reference counts then, the time the last packet was sent (UNIX
 milliseconds, written just before each send, so a kill can only make the recorded
-silence shorter than the real one) and the client address that sent it::
+silence shorter than the real one) and the client address of the session::
 
     fd11-state/2 +0000000050 ... -0000000050 0008388608 ... 0008388608 1764000000123 \
         127.0.0.1:5556 crc32=1a2b3c4d
@@ -116,7 +117,7 @@ def stated_behaviour(robot_file: str | Path | None) -> SessionBehaviour | None:
 
 @dataclass(frozen=True)
 class LastSession:
-    """What the state file recorded: the last delta the controller answered (wire frame),
+    """What the state file recorded: the last delta sent in an answered session (wire frame),
     its reference then (None before any answer), when the last packet was sent (UNIX
     seconds; None: unknown) and from which client address ("ip:port"; None: unknown)."""
     path: Path
@@ -320,10 +321,17 @@ class StateFile:
                              f"bytes)")
         return _parse(path, data)
 
-    def sending(self) -> None:
-        """Record that a packet is about to go out, now (the delta, reference and client
-        stay the last answered ones until the controller answers this session)."""
+    def sending(self, delta: np.ndarray | None = None) -> None:
+        """Record that a packet is about to go out, now, and with ``delta`` the delta it
+        carries (given once the controller has answered this session: a packet within the
+        step limit of an answered one, which the controller takes if it arrives -- so a
+        run interrupted while it waits for the reply records what the controller most
+        likely holds, and the other candidate is one step away). A session's first packet
+        is recorded only when answered (a wrong one trips the controller, which then
+        holds the delta before it)."""
         self._sent_ms = int(time.time() * 1000)
+        if delta is not None:
+            self.delta = np.asarray(delta, np.int64).copy()
         self._write()
 
     def answered(self, delta: np.ndarray, reference: np.ndarray, client: str) -> None:
