@@ -704,6 +704,22 @@ def test_a_damaged_state_file_is_one_line(tmp_path, damage):
     assert "\n" not in str(exc.value)
 
 
+def test_a_state_line_is_read_whatever_a_kill_left_after_it(tmp_path):
+    """Killed between writing a shorter line and truncating the file: line 1 is whole."""
+    path = tmp_path / "fd11.state"
+    state = StateFile(path)
+    state.sending()
+    state.answered(np.arange(6), HOME, "192.168.100.200:40001")
+    state.close()
+    long_line = path.read_bytes()
+    state = StateFile(path)
+    state.answered(np.arange(6) + 1, HOME, "10.0.0.2:5556")  # shorter, then truncated
+    state.close()
+    short = path.read_bytes()
+    path.write_bytes(short + long_line[len(short):])
+    assert StateFile.read(path).delta.tolist() == [1, 2, 3, 4, 5, 6]
+
+
 def test_an_older_state_line_is_read_with_time_and_client_unknown(tmp_path):
     path = tmp_path / "RUN.tsv.fd11"
     body = b"fd11-last-delta/1 +0000000007" + b" +0000000000" * 4 + b" -0000000050"

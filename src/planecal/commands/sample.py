@@ -32,12 +32,11 @@ delta 0) or takes one for each new client address. The controller's state -- the
 delta sent in a session it answered, its reference, the time of the last packet and the
 client -- is kept in one file per controller (``--rt-state``, default
 ``$PLANECAL_STATE_DIR`` or ``~/.local/state/planecal/fd11-IP-PORT.state``), read by every
-run against it. Where the
-behaviour is not stated and the controller was left at a delta other than 0, the run
-asks (one line, exit 2): ``--rt-fresh`` states that the controller took a fresh reference
-(e.g. the RT system was restarted), ``--rt-keep`` that it kept it. The link refuses a
-first packet farther than the step limit from what the controller holds, and checks the
-first reply before any motion (one line, exit 1, nothing more sent).
+run against it. Where the behaviour is not stated and the controller was left at a delta
+other than 0, the run asks (one line, exit 2): ``--rt-fresh`` states that the controller
+took a fresh reference (e.g. the RT system was restarted), ``--rt-keep`` that it kept it.
+The link refuses a first packet farther than the step limit from what the controller
+holds, and checks the first reply before any motion (one line, exit 1, nothing more sent).
 
 The RT link never goes quiet: while a pose is planned, and during the laser read, the hold
 delta keeps being sent every 10 ms. The laser is polled once a tick without blocking it

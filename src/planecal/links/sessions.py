@@ -256,9 +256,12 @@ def _line(delta, reference, sent_ms: int, client: str) -> bytes:
 def _parse(path: Path, data: bytes) -> LastSession:
     bad = InputError(f"{path}: line 1: not an FD11 state line ({STATE_TAG.decode()}: 6 deltas, "
                      f"6 reference counts, time, client, crc32)")
-    if not data.endswith(b"\n") or b" crc32=" not in data:
+    # line 1 only: a kill between writing a shorter line and truncating the file leaves
+    # the end of the longer one after it
+    line = data.split(b"\n", 1)[0]
+    if b"\n" not in data or b" crc32=" not in line:
         raise bad
-    body, crc = data[:-1].rsplit(b" crc32=", 1)
+    body, crc = line.rsplit(b" crc32=", 1)
     fields = body.split(b" ")
     try:
         if fields[0] == OLD_TAG and len(fields) == 7:
