@@ -855,8 +855,13 @@ def test_twin_over_udp_and_pty_matches_in_process_twin():
     remote = twin_mod.Twin("thesis_final", seed=3)
     move = ramp(20, joints=(1, 0, 0, 0, 1, -1))
     path = [np.zeros(6, np.int64)] + move + [move[-1]] * 10   # move 1000 counts, then dwell
+    # the remote twin's first tick and first ray cast build and warm up its models in the
+    # emulator's thread: seconds on a loaded machine (a resend would tick it twice), so
+    # bounds of seconds, not T
     with Emulators(remote, host=LO, rt_port=0, reply_port=None) as emus, \
-            link_to(emus.fd11.rt_port) as link, ZSLD80(emus.laser.port, timeout_s=T) as laser:
+            link_to(emus.fd11.rt_port, timeout_s=5.0, boot_timeout_s=30.0,
+                    silence_s=10.0) as link, \
+            ZSLD80(emus.laser.port, timeout_s=10.0) as laser:
         for d in path:
             ref_w, cur_w = link.exchange(d)
             mm_w = laser.read()
