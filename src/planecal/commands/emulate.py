@@ -56,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "silence, or at each new client address (default: what the scene's "
                         "robot.json states, else fresh_after_silence)")
     p.add_argument("--silence-s", "--session-gap-s", dest="session_gap_s", type=float,
-                   default=None,
+                   default=None, metavar="S",
                    help="silence after which a request begins a new session (and, with "
                         "fresh_after_silence, a new reference) (default: robot.json's, else 2)")
     p.add_argument("--drop-replies", "--drop-rate", dest="drop_replies", type=float,
