@@ -94,3 +94,13 @@ def perturbed(params: CellParams, rng, offsets=2e-3, length=0.005, angle=0.02) -
         planes.append(n_tilde_from_point_normal(p + rng.uniform(-length, length, 3), nh))
     t.planes = np.array(planes)
     return t
+
+
+@pytest.fixture(autouse=True)
+def _fd11_state_dir(tmp_path_factory):
+    """The FD11 controllers' state files (`planecal.links.sessions.state_dir`) in a fresh
+    folder per test (subprocesses inherit it): never the user's ~/.local/state. (Its own
+    MonkeyPatch: a test's ``monkeypatch.undo()`` does not take it back.)"""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PLANECAL_STATE_DIR", str(tmp_path_factory.mktemp("fd11-state")))
+        yield

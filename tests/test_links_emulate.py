@@ -17,10 +17,11 @@ import pytest
 
 from planecal.cli import main
 from planecal.links.emulators import Emulators, FD11Faults, LaserFaults
-from planecal.links.fd11 import DeltaRecord, FD11Link
+from planecal.links.fd11 import FD11Link
+from planecal.links.sessions import StateFile, default_state_path
 from planecal.io.samples import read_samples
 from planecal.sampling.runfiles import load_sidecar
-from wire import sample_argv
+from wire import sample_argv, stated_scene
 
 mujoco = pytest.importorskip("mujoco")
 twin_mod = pytest.importorskip("planecal.twin")
@@ -43,7 +44,8 @@ def sample(port, tty, out, *extra, capsys):
     (["--drop-replies", "1.0"], "--drop-replies must be in [0, 1)"),
     (["--drop-replies", "nan"], "--drop-replies must be in [0, 1)"),
     (["--boot-silence-s", "-1"], "--boot-silence-s must be a number >= 0"),
-    (["--session-gap-s", "0"], "--session-gap-s must be a positive number"),
+    (["--session-gap-s", "0"], "--silence-s must be a positive number"),
+    (["--silence-s", "-1"], "--silence-s must be a positive number"),
     (["--laser-silent-every", "-2"], "--laser-silent-every must be >= 0"),
     (["--errors", "nosuch"], "--errors nosuch: no such profile"),
 ])
@@ -54,13 +56,15 @@ def test_emulate_fault_flags_are_checked_in_one_line(flags, message, capsys):
 
 
 def _default_sigint():
-    """In the child: SIGINT back to its default, so Python raises KeyboardInterrupt on it
-    even when the test runner was started in the background (SIGINT ignored, inherited)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    """In the child: the signals back to their defaults, so Python raises KeyboardInterrupt
+    on SIGINT even when the test runner was started in the background (SIGINT ignored,
+    inherited), and planecal takes SIGTERM and SIGHUP."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
 
 
 class Emulate:
-    """`planecal emulate ...` in a subprocess: ``port``, ``tty``; ended by SIGINT."""
+    """`planecal emulate ...` in a subprocess: ``port``, ``tty``; ended by a signal."""
 
     def __init__(self, *flags):
         env = dict(os.environ, MUJOCO_GL="disable")
@@ -83,8 +87,8 @@ class Emulate:
         self.port = int(re.search(r"UDP 127\.0\.0\.1:(\d+)", self.text).group(1))
         self.tty = re.search(r"serial device (\S+)", self.text).group(1)
 
-    def stop(self):
-        self.proc.send_signal(signal.SIGINT)
+    def stop(self, sig=signal.SIGINT):
+        self.proc.send_signal(sig)
         out, err = self.proc.communicate(timeout=30)
         self.guard.cancel()
         self.proc_out = out  # after "running": the counters line it prints on exit
@@ -99,7 +103,7 @@ def test_planecal_emulate_serves_the_twin():
 
     emu = Emulate("--seed", "3")
     try:
-        assert "reference mode session" in emu.text
+        assert "reference fresh_after_silence 2 s" in emu.text  # MC70: unstated, the default
         assert "errors realistic, seed 3" in emu.text  # the default world: as rehearse's
         local = make_twin(load_scene("thesis_final"), 3, "realistic")
         with FD11Link("127.0.0.1", emu.port, 0, timeout_s=0.5, silence_s=2.0,
@@ -117,48 +121,78 @@ def test_planecal_emulate_serves_the_twin():
     assert code == 130 and "interrupted" in err
 
 
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGHUP, 130)])
+def test_emulate_prints_what_it_served_on_any_signal(sig, code):
+    """A process manager stops emulate with SIGTERM (a closed terminal: SIGHUP): it ends as
+    on Ctrl-C, with its counters line and one line saying which signal."""
+    emu = Emulate("--seed", "3", "--errors", "ideal")
+    with FD11Link("127.0.0.1", emu.port, 0, timeout_s=0.5, silence_s=2.0, tick_s=0) as link:
+        for d in range(3):
+            link.exchange(np.array([10 * d, 0, 0, 0, 0, 0]))
+    rc, err = emu.stop(sig)
+    name = signal.Signals(sig).name
+    assert rc == code and err.strip().splitlines()[-1] == f"planecal emulate: interrupted ({name})"
+    served = json.loads(emu.proc_out.split("served: fd11 ")[1].split(" laser ")[0])
+    assert served["ticks"] == 3 and served["max_step"] == 10 and served["sessions"] == 1
+
+
 def test_sample_sessions_one_after_the_other_against_one_emulate(tmp_path, capsys):
     """Issue 11: `emulate` served one session only. Here: a run stopped by the dead-man
-    switch, its `--resume`, and a new run, all against one `planecal emulate`."""
-    emu = Emulate("--seed", "2", "--release-after-moves", str(RELEASE_AT))
+    switch, its `--resume`, and a new run, all against one `planecal emulate`, on a cell
+    whose robot.json states that the controller takes a fresh reference after 2 s of
+    silence (emulate takes the behaviour from it, and each later session waits the silence
+    out and starts from delta 0)."""
+    scene = stated_scene(tmp_path, "fresh_after_silence", 2.0)
+    emu = Emulate("--seed", "2", "--scene", str(scene), "--release-after-moves",
+                  str(RELEASE_AT))
     try:
+        assert "reference fresh_after_silence 2 s" in emu.text
         run = tmp_path / "RUN.tsv"
-        code, s1, err = sample(emu.port, emu.tty, run, "--samples", "3", capsys=capsys)
+        code, s1, err = sample(emu.port, emu.tty, run, "--samples", "3", "--scene",
+                               str(scene), capsys=capsys)
         assert code == 1, err
         assert s1["status"] == "stopped" and "dead-man" in s1["stop_reason"]
         assert 1 <= s1["samples"] < 3
         assert s1["following"]["max_lag_counts"] <= s1["following"]["limit_counts"] == 211
-        last = DeltaRecord.read(tmp_path / "RUN.tsv.fd11")
-        assert last is not None and last.any()
-        # the switch is held again; the resumed session's first packet repeats the last delta
+        last = StateFile.read(default_state_path(("127.0.0.1", emu.port)))
+        assert last is not None and last.delta.any()
+        # the switch is held again; the resumed session waits out the silence, delta 0 first
         code, s2, err = sample(emu.port, emu.tty, run, "--resume", capsys=capsys)
         assert code == 0, err
-        assert "repeats the last delta sent" in err
+        assert "note: waiting" in err and "new reference after 2 s of silence" in err
         assert s2["status"] == "complete" and s2["samples"] == 3 and s2["sessions"] == 2
-        assert load_sidecar(run)["real_cell"]["first_delta"] == last.tolist()
-        # a new run, a third session
+        side = load_sidecar(run)["real_cell"]
+        assert side["first_delta"] == [0] * 6 and side["first_contact"]["kind"] == "fresh"
+        assert 0 < side["first_contact"]["waited_s"] <= 2.5
+        # a new run, a third session: it reads the same controller's state, and waits too
         code, s3, err = sample(emu.port, emu.tty, tmp_path / "NEW.tsv", "--samples", "1",
-                               capsys=capsys)
+                               "--scene", str(scene), capsys=capsys)
         assert code == 0, err
         assert s3["status"] == "complete" and s3["link"]["boot_resends"] == 0
+        assert s3["first_contact"]["kind"] == "fresh"
     finally:
         code, err = emu.stop()
     assert code == 130
+    served = json.loads(emu.proc_out.split("served: fd11 ")[1].split(" laser ")[0])
+    assert served["sessions"] == 3 and served["fresh_references"] == 2
     assert len(read_samples(run)) == 3 and len(read_samples(tmp_path / "NEW.tsv")) == 1
 
 
 def test_a_controller_that_keeps_its_reference(tmp_path, capsys):
-    """Reference mode "boot" (the other reading of appendix C): the resumed run repeats the
-    recorded delta first and completes; the same resume with delta 0 first (--rt-fresh:
-    the fault of issue 16) trips the controller and says so in one line, before any
-    motion. The released switch never let the command run more than 211 counts ahead."""
+    """A controller that keeps its reference, and a cell that says so: the resumed run
+    repeats the recorded delta first and completes; the same resume stated wrongly
+    (--rt-fresh: delta 0 first, the fault of issue 16) trips the controller and says so in
+    one line, before any motion. The released switch never let the command run more than
+    211 counts ahead."""
     twin = twin_mod.Twin("thesis_final", seed=2)
+    scene = stated_scene(tmp_path, "keep")
     faults = FD11Faults(release_after_moves=RELEASE_AT)
     run = tmp_path / "RUN.tsv"
     with Emulators(twin, rt_port=0, reply_port=None, fd11_faults=faults,
-                   reference_mode="boot") as emu:
+                   reference_mode="keep") as emu:
         port, tty = emu.fd11.rt_port, emu.laser.port
-        code, s1, err = sample(port, tty, run, "--samples", "3", capsys=capsys)
+        code, s1, err = sample(port, tty, run, "--samples", "3", "--scene", str(scene),
+                               capsys=capsys)
         assert code == 1 and s1["status"] == "stopped", err
         n1 = s1["samples"]
         released = emu.fd11.snapshot()
@@ -176,9 +210,10 @@ def test_a_controller_that_keeps_its_reference(tmp_path, capsys):
         code, s2, err = sample(port, tty, run, "--resume", capsys=capsys)
         assert code == 0, err
         assert s2["status"] == "complete" and s2["samples"] == 3
+        assert s2["first_contact"]["kind"] == "kept"
     c = emu.fd11.counters
     assert released.released_ticks >= 1 and released.max_released_gap <= 211
-    assert c.sessions == 3 and not emu.fd11.tripped
+    assert c.sessions == 3 and not emu.fd11.tripped and c.fresh_references == 0
     np.testing.assert_array_equal(emu.fd11.reference, twin.reference_counts)  # kept
 
 

@@ -13,9 +13,10 @@ import pytest
 from planecal.base.errors import InputError
 from planecal.links.emulators import Emulators, FD11Emulator, FD11Faults, serve
 from planecal.links.fake import HOME, FakeCell
-from planecal.links.fd11 import (ContactError, DeltaRecord, FD11Link, LinkError,
-                                 LinkInterrupted, StepLimitError, pack_reply, pack_request,
-                                 unpack_reply, unpack_request, wrap_diff)
+from planecal.links.fd11 import (ContactError, FD11Link, LinkError, LinkInterrupted,
+                                 StepLimitError, pack_reply, pack_request, unpack_reply,
+                                 unpack_request, wrap_diff)
+from planecal.links.sessions import Contact, LastSession, StateFile
 
 LO = "127.0.0.1"
 T = 0.25  # generous per-reply timeout for a loaded machine
@@ -53,12 +54,23 @@ def peer():
     p.close()
 
 
-def link_to(port, **kw):
+def link_to(port, contact=None, state=None, **kw):
+    """A link to ``port`` with the loaded machine's intervals, expecting ``contact``
+    (default: delta 0, nothing recorded) and recording in ``state``."""
     kw.setdefault("timeout_s", T)
     kw.setdefault("silence_s", 4 * kw["timeout_s"])
     kw.setdefault("boot_timeout_s", 4 * kw["timeout_s"])
     kw.setdefault("tick_s", 0.0)
-    return FD11Link(LO, port, 0, **kw)
+    link = FD11Link(LO, port, 0, **kw)
+    if contact is not None or state is not None:
+        link.expect(contact or Contact.either(), state)
+    return link
+
+
+def kept(delta, reference=None) -> Contact:
+    """A controller stated to keep its reference, holding ``delta``."""
+    last = LastSession(None, np.asarray(delta, np.int64), reference, None, None)
+    return Contact.kept(last, "stated in the test")
 
 
 def quiesce(link, emu, earlier=()):
@@ -443,41 +455,96 @@ def test_random_reply_loss_is_seeded_and_ridden_through(cell):
     assert c.lost_replies >= 1 and c.outages >= 1
 
 
-def test_sessions_latch_the_reference_where_the_robot_is():
-    """Reference mode "session" (the default): each client session latches reference =
-    current - first delta. A second client sending delta 0 commands the robot where it
-    stands; the robot first settles on the command the last session left (lag 3 ticks)."""
+def test_a_new_client_takes_a_fresh_reference_where_the_robot_is():
+    """Reference behaviour fresh_each_client: a second client (another port) gets the
+    robot's counts as the reference and delta 0 as what the controller holds; its first
+    packet, delta 0, commands the robot where it stands (which first settles on the command
+    the last session left, lag 3 ticks)."""
     cell = FakeCell(lag_ticks=3)
     move = ramp(10)
-    with FD11Emulator(cell, LO, 0, None) as emu:
+    with FD11Emulator(cell, LO, 0, None, reference_mode="fresh_each_client") as emu:
         with link_to(emu.rt_port) as link:
             link.handshake()
             for d in move:
                 link.exchange(d)
-        with link_to(emu.rt_port) as link2:  # another port: another session
+        with link_to(emu.rt_port, Contact.fresh()) as link2:  # another port: a new client
             ref, cur = link2.handshake()
+            np.testing.assert_array_equal(link2.fd11_reference, HOME + move[-1])
             np.testing.assert_array_equal(ref, HOME + move[-1])
             np.testing.assert_array_equal(cur, HOME + move[-1])
             _, cur = link2.exchange([50, 0, 0, 0, 0, 0])
             quiesce(link2, emu, [link])
     assert not emu.tripped
     e = emu.counters
-    assert (e.sessions, e.settle_ticks, e.ticks) == (2, 3, 1 + 10 + 2)
+    assert (e.sessions, e.fresh_references, e.settle_ticks, e.ticks) == (2, 1, 3, 1 + 10 + 2)
     np.testing.assert_array_equal(emu.reference, HOME + move[-1])
     # the backend saw one continuous command: the settle holds, then from where it stood
     np.testing.assert_array_equal(cell.deltas[-1], move[-1] + [50, 0, 0, 0, 0, 0])
 
 
-def _two_sessions_boot_mode(start_delta):
+def _after_silence(contact, pause_s=1.5, silence_s=0.5):
+    """A session moves 4 ramp steps (to delta 200 on five joints); after ``pause_s`` (three
+    times the controller's ``silence_s``) another begins, expecting ``contact``."""
     cell = FakeCell()
-    move = ramp(10)
-    with FD11Emulator(cell, LO, 0, None, reference_mode="boot") as emu:
+    move = ramp(4)
+    with FD11Emulator(cell, LO, 0, None, reference_mode="fresh_after_silence",
+                      session_gap_s=silence_s) as emu:
         with link_to(emu.rt_port) as link:
             link.handshake()
             for d in move:
                 link.exchange(d)
-        with link_to(emu.rt_port, timeout_s=0.1, boot_timeout_s=0.5,
-                     start_delta=start_delta) as link2:
+            quiesce(link, emu)
+        time.sleep(pause_s)
+        with link_to(emu.rt_port, contact, timeout_s=0.1, boot_timeout_s=0.5) as link2:
+            try:
+                got = link2.handshake()
+            except LinkError as e:
+                got = e
+            if not emu.tripped:
+                quiesce(link2, emu, [link])
+    return emu, cell, link2, got, move
+
+
+def test_a_silence_takes_a_fresh_reference_where_the_robot_is():
+    emu, cell, link, got, move = _after_silence(Contact.fresh())
+    ref, cur = got
+    assert not emu.tripped and emu.counters.fresh_references == 1
+    np.testing.assert_array_equal(link.fd11_reference, HOME + move[-1])  # the robot's counts
+    np.testing.assert_array_equal(cur, HOME + move[-1])
+    np.testing.assert_array_equal(cell.deltas[-1], move[-1])  # nothing moved
+
+
+def test_a_fresh_reference_trips_on_the_last_delta_repeated():
+    """The cell stated wrongly (keep, against a controller that takes a fresh reference
+    after silence): the first packet repeats the last delta, 200 counts from the 0 the
+    controller holds -- the fault of issue 25. It trips; the link says so in one line."""
+    emu, cell, link, got, move = _after_silence(kept(move_last := ramp(4)[-1], HOME))
+    assert isinstance(got, LinkError) and "tripped on this packet" in str(got)
+    assert f"a kept reference (first delta {move_last.tolist()}" in str(got)
+    assert emu.tripped and "joint 1 delta changed by 200 counts" in emu.trip_reason
+    assert cell.ticks == 1 + 4  # nothing went to the robot
+
+
+def test_no_pause_keeps_the_reference_for_another_client():
+    """fresh_after_silence: another client address without a pause (well within the
+    controller's 5 s) continues the session (the reference and the delta held are kept)."""
+    emu, cell, link, got, move = _after_silence(kept(ramp(4)[-1], HOME), pause_s=0.0,
+                                                silence_s=5.0)
+    ref, cur = got
+    assert not emu.tripped and emu.counters.fresh_references == 0
+    np.testing.assert_array_equal(link.fd11_reference, HOME)
+    np.testing.assert_array_equal(cur, HOME + move[-1])
+
+
+def _two_sessions_kept_reference(contact):
+    cell = FakeCell()
+    move = ramp(10)
+    with FD11Emulator(cell, LO, 0, None, reference_mode="keep") as emu:
+        with link_to(emu.rt_port) as link:
+            link.handshake()
+            for d in move:
+                link.exchange(d)
+        with link_to(emu.rt_port, contact, timeout_s=0.1, boot_timeout_s=0.5) as link2:
             try:
                 return emu, cell, link2, link2.handshake(), move
             except LinkError as e:
@@ -485,14 +552,19 @@ def _two_sessions_boot_mode(start_delta):
 
 
 def test_a_kept_reference_trips_on_a_first_delta_of_zero():
-    emu, cell, link, got, move = _two_sessions_boot_mode(None)
+    """The cell stated wrongly (fresh, against a controller that keeps its reference): the
+    first packet, 0, is the jump the statement cannot see; the controller trips on it and
+    the link says so in one line."""
+    emu, cell, link, got, move = _two_sessions_kept_reference(Contact.fresh())
     assert isinstance(got, LinkError) and "tripped on this packet" in str(got)
+    assert "a fresh reference" in str(got)
     assert emu.tripped and "joint 1 delta changed by 500 counts" in emu.trip_reason
     assert cell.ticks == 11  # nothing went to the robot
 
 
 def test_a_kept_reference_is_safe_with_the_last_delta_first():
-    emu, cell, link, got, move = _two_sessions_boot_mode(move_last := ramp(10)[-1])
+    move_last = ramp(10)[-1]
+    emu, cell, link, got, move = _two_sessions_kept_reference(kept(move_last, HOME))
     ref, cur = got
     assert not emu.tripped
     np.testing.assert_array_equal(link.fd11_reference, HOME)        # kept since boot
@@ -501,17 +573,42 @@ def test_a_kept_reference_is_safe_with_the_last_delta_first():
     np.testing.assert_array_equal(cell.deltas[-1], move_last)       # nothing moved
 
 
+@pytest.mark.parametrize("stated, first_wire, held", [
+    ("kept", [0] * 6, [500, 500, 500, -500, -500, 0]),   # a fresh session's first packet
+    ("fresh", [500, 500, 500, -500, -500, 0], [0] * 6),  # a kept session's first packet
+    ("kept", [552, 500, 500, -500, -500, 0], [500, 500, 500, -500, -500, 0]),  # 52 off
+])
+def test_the_first_packet_is_refused_when_it_is_not_what_the_controller_holds(
+        peer, stated, first_wire, held):
+    """The link is told what the controller holds (kept: the last delta, fresh: 0); a first
+    packet farther than the step limit (51) from it is refused and nothing is sent, under
+    either behaviour. (The loop's frame is the wire's minus what the controller holds.)"""
+    contact = kept(held) if stated == "kept" else Contact.fresh()
+    with link_to(peer.port, contact, max_step_counts=51) as link:
+        loop = np.asarray(first_wire) - np.asarray(held)
+        with pytest.raises(StepLimitError, match=r"the first packet, measured from what the "
+                                                 r"controller holds.*nothing sent"):
+            link.exchange(loop)
+        assert peer.recv(0.3) == (None, None)
+        assert link.counters.sent == 0 and link.counters.refused == 1
+        # what the controller holds goes out: the first packet is the held delta itself
+        with pytest.raises(LinkError):  # nobody answers the raw peer's end: boot timeout
+            link.exchange(np.zeros(6, np.int64))
+        data, _ = peer.recv()
+        np.testing.assert_array_equal(unpack_request(data), held)
+
+
 def test_a_first_reply_that_fits_neither_reading_is_a_contact_error():
     """The last delta recorded is 40 counts off what the controller holds (robot jogged,
     another state file): within a trip step, so no trip, but the first reply shows it."""
     cell = FakeCell(lag_ticks=3)
-    with FD11Emulator(cell, LO, 0, None, reference_mode="boot") as emu:
+    with FD11Emulator(cell, LO, 0, None, reference_mode="keep") as emu:
         with link_to(emu.rt_port) as link:
             link.handshake()
             for d in ramp(4):
                 link.exchange(d)
         off = ramp(4)[-1] + [0, 0, 0, 40, 0, 0]
-        with link_to(emu.rt_port, start_delta=off, contact_tolerance_counts=30) as link2:
+        with link_to(emu.rt_port, kept(off), contact_tolerance_counts=30) as link2:
             with pytest.raises(ContactError, match=r"commanded - current = \[0, 0, 0, 40, 0, 0\]"
                                                    r" counts \(joint 4: 40, tolerance 30\)"):
                 link2.handshake()
@@ -522,42 +619,126 @@ def test_a_first_reply_that_fits_neither_reading_is_a_contact_error():
     assert emu.counters.settle_ticks == 3  # the lag, before the second session began
 
 
-def test_delta_record_holds_the_last_wire_delta(tmp_path, cell):
-    path = tmp_path / "cell.fd11"
-    assert DeltaRecord.read(path) is None
-    path.write_bytes(b"x" * 300)  # whatever was there: replaced at the first packet
-    rec = DeltaRecord(path)
-    with FD11Emulator(cell, LO, 0, None) as emu, \
-            link_to(emu.rt_port, start_delta=[7, 0, 0, 0, 0, 0], record=rec) as link:
+def test_a_kept_reference_that_changed_is_a_contact_error(peer):
+    """Stated kept, recorded reference HOME; the first reply shows HOME + 7 (the RT system
+    restarted): one line, nothing more sent, even though commanded - current fits."""
+    with link_to(peer.port, kept([0] * 6, HOME)) as link:
+        t = threading.Thread(target=lambda: peer.sock.sendto(
+            pack_reply(HOME + 7, HOME + 7), peer.recv()[1]))
+        t.start()
+        with pytest.raises(ContactError, match=r"reference .* is not the .* the controller "
+                                               r"was stated to keep .*nothing more sent"):
+            link.handshake()
+        t.join(5)
+        assert link.counters.sent == 1
+
+
+def test_the_state_file_holds_the_last_answered_delta_reference_time_and_client(tmp_path, cell):
+    path = tmp_path / "fd11.state"
+    assert StateFile.read(path) is None
+    state = StateFile(path)
+    assert not path.exists()  # created at the first packet, not before
+    t0 = time.time()
+    with FD11Emulator(cell, LO, 0, None, reference_mode="keep") as emu, \
+            link_to(emu.rt_port, kept([7, 0, 0, 0, 0, 0], None), state) as link:
         link.handshake()
-        body = b"fd11-last-delta/1 +0000000007" + b" +0000000000" * 5
-        assert path.read_bytes() == body + b" crc32=%08x\n" % zlib.crc32(body)
+        line = path.read_bytes()
+        body = line[:line.index(b" crc32=")]
+        assert body.startswith(b"fd11-state/2 +0000000007" + b" +0000000000" * 5
+                               + b"".join(b" %010d" % v for v in cell.reference))
+        assert body.endswith(f" {link.client}".encode()) and link.client.endswith(
+            f":{link.local_port}")
+        assert line == body + b" crc32=%08x\n" % zlib.crc32(body)
         for d in ramp(3):
             link.exchange(d)
-        np.testing.assert_array_equal(DeltaRecord.read(path), ramp(3)[-1] + [7, 0, 0, 0, 0, 0])
-    rec.close()
+        last = StateFile.read(path)
+    state.close()
+    np.testing.assert_array_equal(last.delta, ramp(3)[-1] + [7, 0, 0, 0, 0, 0])
+    np.testing.assert_array_equal(last.reference, cell.reference)
+    assert last.client == link.client and t0 - 0.01 <= last.sent_at <= time.time()
 
 
-@pytest.mark.parametrize("damage", [b"", b"fd11-last-delta/1 +5\n", b"x" * 105,
+def test_the_state_file_records_the_time_of_packets_nobody_answered(tmp_path, peer):
+    """A packet that goes out unanswered (a booting, or tripped, controller) still counts
+    for the silence: its time is recorded before it is sent; the delta stays the last
+    answered one."""
+    path = tmp_path / "fd11.state"
+    state = StateFile(path)
+    with link_to(peer.port, Contact.either(), state, timeout_s=0.1, boot_timeout_s=0.3) as link:
+        with pytest.raises(LinkError, match="no reply to the first packet"):
+            link.handshake()
+    state.close()
+    last = StateFile.read(path)
+    assert last.reference is None and last.client is None and not last.delta.any()
+    assert time.time() - 0.5 <= last.sent_at <= time.time()
+
+
+def test_the_state_file_holds_a_delta_sent_in_an_answered_session(tmp_path, peer):
+    """Once the controller has answered the session, each packet's delta is recorded as it
+    goes out: a run stopped while it waits for the reply (here: none comes) has recorded
+    what the controller most likely holds; the other candidate is one step away."""
+    path = tmp_path / "fd11.state"
+    state = StateFile(path)
+    with link_to(peer.port, Contact.either(), state, timeout_s=0.1, silence_s=0.3) as link:
+        t = threading.Thread(target=lambda: peer.sock.sendto(pack_reply(HOME, HOME),
+                                                             peer.recv()[1]))
+        t.start()
+        link.handshake()
+        t.join(5)
+        with pytest.raises(LinkError, match="no reply for 0.3 s"):
+            link.exchange([40, 0, 0, 0, 0, -40])
+    state.close()
+    last = StateFile.read(path)
+    assert last.delta.tolist() == [40, 0, 0, 0, 0, -40]
+    np.testing.assert_array_equal(last.reference, HOME)
+
+
+@pytest.mark.parametrize("damage", [b"", b"fd11-state/2 +5\n", b"x" * 105,
                                     b"fd11-last-delta/1 +0000000007" + b" +0000000000" * 5
                                     + b" crc32=00000000\n"])
-def test_a_damaged_delta_record_is_one_line(tmp_path, damage):
+def test_a_damaged_state_file_is_one_line(tmp_path, damage):
     path = tmp_path / "cell.fd11"
     path.write_bytes(damage)
     with pytest.raises(InputError, match=rf"^{path}: line 1: .*FD11 state line") as exc:
-        DeltaRecord.read(path)
+        StateFile.read(path)
     assert "\n" not in str(exc.value)
+
+
+def test_a_state_line_is_read_whatever_a_kill_left_after_it(tmp_path):
+    """Killed between writing a shorter line and truncating the file: line 1 is whole."""
+    path = tmp_path / "fd11.state"
+    state = StateFile(path)
+    state.sending()
+    state.answered(np.arange(6), HOME, "192.168.100.200:40001")
+    state.close()
+    long_line = path.read_bytes()
+    state = StateFile(path)
+    state.answered(np.arange(6) + 1, HOME, "10.0.0.2:5556")  # shorter, then truncated
+    state.close()
+    short = path.read_bytes()
+    path.write_bytes(short + long_line[len(short):])
+    assert StateFile.read(path).delta.tolist() == [1, 2, 3, 4, 5, 6]
+
+
+def test_an_older_state_line_is_read_with_time_and_client_unknown(tmp_path):
+    path = tmp_path / "RUN.tsv.fd11"
+    body = b"fd11-last-delta/1 +0000000007" + b" +0000000000" * 4 + b" -0000000050"
+    path.write_bytes(body + b" crc32=%08x\n" % zlib.crc32(body))
+    last = StateFile.read(path)
+    assert last.delta.tolist() == [7, 0, 0, 0, 0, -50]
+    assert (last.reference, last.sent_at, last.client) == (None, None, None)
 
 
 def test_the_switch_released_stops_the_robot_until_the_next_session():
     cell = FakeCell()
     faults = FD11Faults(release_after_ticks=4)
     move = ramp(8)
-    with FD11Emulator(cell, LO, 0, None, faults=faults) as emu:
+    with FD11Emulator(cell, LO, 0, None, faults=faults,
+                      reference_mode="fresh_each_client") as emu:
         with link_to(emu.rt_port) as link:
             link.handshake()
             curs = [link.exchange(d)[1] for d in move]
-        with link_to(emu.rt_port) as link2:
+        with link_to(emu.rt_port, Contact.fresh()) as link2:
             ref, cur = link2.handshake()
             quiesce(link2, emu, [link])
     for c in curs[3:]:  # stopped after 4 ticks (the handshake and 3 steps)
@@ -581,10 +762,10 @@ class RawClient(RawPeer):
         return self.recv(timeout)[0]
 
 
-# reference mode "boot": the reference is the backend's, every delta passes through as sent
+# reference "keep": the reference is the backend's, every delta passes through as sent
 
 def test_emulator_ignores_invalid_packets(cell):
-    with FD11Emulator(cell, LO, 0, None, reference_mode="boot") as emu:
+    with FD11Emulator(cell, LO, 0, None, reference_mode="keep") as emu:
         c = RawClient(emu)
         bad = bytearray(pack_request([1, 0, 0, 0, 0, 0]))
         bad[24:28] = b"\x00\x00\x00\x00"
@@ -598,7 +779,7 @@ def test_emulator_ignores_invalid_packets(cell):
 
 
 def test_emulator_trips_silently_on_jump_over_60(cell):
-    with FD11Emulator(cell, LO, 0, None, reference_mode="boot") as emu:
+    with FD11Emulator(cell, LO, 0, None, reference_mode="keep") as emu:
         c = RawClient(emu)
         assert c.send(pack_request([0] * 6)) is not None
         assert c.send(pack_request([60, 0, 0, 0, 0, -60])) is not None  # exactly 60: fine
@@ -614,7 +795,7 @@ def test_emulator_trips_silently_on_jump_over_60(cell):
 
 
 def test_emulator_trip_hold_answers_without_moving(cell):
-    with FD11Emulator(cell, LO, 0, None, trip_mode="hold", reference_mode="boot") as emu:
+    with FD11Emulator(cell, LO, 0, None, trip_mode="hold", reference_mode="keep") as emu:
         c = RawClient(emu)
         c.send(pack_request([50, 0, 0, 0, 0, 0]))
         r = c.send(pack_request([200, 0, 0, 0, 0, 0]))
@@ -652,7 +833,8 @@ def test_serve_runs_both_until_stopped(cell):
     t.start()
     assert up.wait(10)
     emus: Emulators = ready["e"]
-    assert any("UDP" in line and "reference mode session" in line for line in emus.describe())
+    assert any("UDP" in line and "reference fresh_after_silence 2 s" in line
+               for line in emus.describe())
     with link_to(emus.fd11.rt_port) as link, ZSLD80(emus.laser.port, timeout_s=T) as laser:
         link.handshake()
         link.exchange([50, 0, 0, 0, 0, 0])
@@ -673,8 +855,13 @@ def test_twin_over_udp_and_pty_matches_in_process_twin():
     remote = twin_mod.Twin("thesis_final", seed=3)
     move = ramp(20, joints=(1, 0, 0, 0, 1, -1))
     path = [np.zeros(6, np.int64)] + move + [move[-1]] * 10   # move 1000 counts, then dwell
+    # the remote twin's first tick and first ray cast build and warm up its models in the
+    # emulator's thread: seconds on a loaded machine (a resend would tick it twice), so
+    # bounds of seconds, not T
     with Emulators(remote, host=LO, rt_port=0, reply_port=None) as emus, \
-            link_to(emus.fd11.rt_port) as link, ZSLD80(emus.laser.port, timeout_s=T) as laser:
+            link_to(emus.fd11.rt_port, timeout_s=5.0, boot_timeout_s=30.0,
+                    silence_s=10.0) as link, \
+            ZSLD80(emus.laser.port, timeout_s=10.0) as laser:
         for d in path:
             ref_w, cur_w = link.exchange(d)
             mm_w = laser.read()

@@ -8,7 +8,7 @@ import tty
 
 import pytest
 
-from planecal.links.emulators import LaserEmulator, LaserFaults
+from planecal.links.laser_emulator import LaserEmulator, LaserFaults
 from planecal.links.fake import ScriptedLaser
 from planecal.links.zs_ld80 import (NO_READING, ZSLD80, LaserError, LaserTimeout, decode_reply,
                                     encode_reply)

@@ -19,7 +19,7 @@ import pytest
 
 from planecal.cli import main
 from planecal.links.emulators import Emulators, FD11Faults
-from planecal.links.fd11 import DeltaRecord
+from planecal.links.sessions import LastSession, StateFile, default_state_path
 from planecal.io.samples import read_samples
 from planecal.sampling.enable import follow_limit_counts
 from planecal.sampling.runfiles import count_samples, load_sidecar
@@ -45,6 +45,11 @@ def problem_lines(err: str) -> list[str]:
     """stderr without the progress lines and the notes: what the command said went wrong."""
     return [ln for ln in err.strip().splitlines()
             if ln.strip() and not ln.startswith(("samples ", "note: "))]
+
+
+def state_of(emu) -> LastSession | None:
+    """The state file `planecal sample` keeps for the emulated controller."""
+    return StateFile.read(default_state_path(("127.0.0.1", emu.fd11.rt_port)))
 
 
 def far_apart(qe: np.ndarray, counts: np.ndarray | None = None) -> float:
@@ -139,27 +144,28 @@ def test_ticks_without_a_laser_reply_are_skipped_not_out_of_range():
 
 def test_a_resume_whose_first_reply_does_not_fit_stops_before_any_motion(twin, tmp_path,
                                                                           capsys):
-    """A controller that keeps its reference ("boot") and holds its command on a trip
-    ("hold": it still answers): the state file's delta is 500 counts off on joint 4 (another
-    cell's file, a robot jogged since). The first reply shows commanded - current = 500:
-    one line, exit 1, nothing more sent, the robot where it was, the samples untouched."""
+    """A controller that keeps its reference (stated: --rt-keep) and holds its command on
+    a trip ("hold": it still answers): the state file's delta is 500 counts off on joint 4
+    (another cell's file, a robot jogged since). The first reply shows commanded - current
+    = 500: one line, exit 1, nothing more sent, the robot where it was, the samples
+    untouched."""
     out = tmp_path / "RUN.tsv"
-    with Emulators(twin, rt_port=0, reply_port=None, reference_mode="boot",
+    with Emulators(twin, rt_port=0, reply_port=None, reference_mode="keep",
                    trip_mode="hold") as emu:
         code, s1, err = sample(emu, out, "--samples", "1", capsys=capsys)
         assert code == 0, err
         # a resend of the last tick may still be queued: let the thread take it first
         assert emu.fd11.wait_until(lambda c: c.datagrams >= s1["link"]["sent"], 5)
-        state = tmp_path / "RUN.tsv.fd11"
-        last = DeltaRecord.read(state)
-        assert last is not None and last.any()
-        wrong = last + np.array([0, 0, 0, 500, 0, 0])
-        rec = DeltaRecord(state)
-        rec.write(wrong)
-        rec.close()
+        last = state_of(emu)
+        assert last is not None and last.delta.any()
+        wrong = last.delta + np.array([0, 0, 0, 500, 0, 0])
+        state = StateFile(last.path)
+        state.answered(wrong, last.reference, last.client)
+        state.close()
         before = emu.fd11.snapshot()
         at = twin.current_counts.copy()
-        code, s2, err = sample(emu, out, "--resume", "--samples", "2", capsys=capsys)
+        code, s2, err = sample(emu, out, "--resume", "--samples", "2", "--rt-keep",
+                               capsys=capsys)
         assert emu.fd11.wait_until(lambda c: c.replies == c.queued, 5)
         after = emu.fd11.snapshot()
     assert code == 1 and s2 is None
@@ -174,7 +180,7 @@ def test_a_resume_whose_first_reply_does_not_fit_stops_before_any_motion(twin, t
     assert emu.fd11.tripped and "joint 4 delta changed by 500" in emu.fd11.trip_reason
     np.testing.assert_array_equal(twin.current_counts, at)
     assert count_samples(out) == 1 and load_sidecar(out)["samples"] == 1
-    np.testing.assert_array_equal(DeltaRecord.read(state), wrong)  # not overwritten
+    np.testing.assert_array_equal(StateFile.read(last.path).delta, wrong)  # not overwritten
 
 
 # --- dead-man switch -----------------------------------------------------------------------
@@ -233,7 +239,7 @@ def test_a_kill_between_the_sidecar_and_the_sample_line_leaves_no_duplicate(twin
     script = tmp_path / "killed_sample.py"
     script.write_text(KILLER)
     out = tmp_path / "RUN.tsv"
-    with Emulators(twin, rt_port=0, reply_port=None) as emu:
+    with Emulators(twin, rt_port=0, reply_port=None, reference_mode="keep") as emu:
         proc = subprocess.run(
             [sys.executable, str(script), "2", where,
              *sample_argv(emu.fd11.rt_port, emu.laser.port, out, "--samples", "3")],
@@ -245,7 +251,7 @@ def test_a_kill_between_the_sidecar_and_the_sample_line_leaves_no_duplicate(twin
         side = load_sidecar(out)
         assert n == (1 if where == "before" else 2)
         assert side["samples"] == 2 and side["status"] == "running"  # written first
-        code, s, err = sample(emu, out, "--resume", capsys=capsys)
+        code, s, err = sample(emu, out, "--resume", "--rt-keep", capsys=capsys)
     assert code == 0, err
     assert s["status"] == "complete" and s["samples"] == 3 and s["sessions"] == 2
     qe = read_samples(out).qe
@@ -271,7 +277,7 @@ def test_a_full_disk_stops_with_one_line_and_consistent_files(twin, tmp_path, ca
     header = len("\t".join(samples_mod.HEADER) + "\n")
     disk = FullDisk(left=header + 2 * 60 + 20)  # header, two lines, then a line is cut
 
-    with Emulators(twin, rt_port=0, reply_port=None) as emu:
+    with Emulators(twin, rt_port=0, reply_port=None, reference_mode="keep") as emu:
         disk.install(monkeypatch, samples_mod)
         code, s, err = sample(emu, out, "--samples", "5", capsys=capsys)
         monkeypatch.undo()
@@ -285,10 +291,84 @@ def test_a_full_disk_stops_with_one_line_and_consistent_files(twin, tmp_path, ca
         assert out.read_text().endswith("\n")  # the cut line was taken back
         assert load_sidecar(out)["samples"] in (n, n + 1)  # written just before each line
         assert not list(tmp_path.glob("*.tmp"))
-        assert DeltaRecord.read(tmp_path / "RUN.tsv.fd11") is not None
-        code, s, err = sample(emu, out, "--resume", capsys=capsys)
+        assert state_of(emu) is not None
+        code, s, err = sample(emu, out, "--resume", "--rt-keep", capsys=capsys)
     assert code == 0, err
     assert s["status"] == "complete" and s["samples"] == 5
     qe = read_samples(out).qe
     assert len(qe) == 5 and far_apart(qe) > FAR_COUNTS
     assert math.isclose(load_sidecar(out)["samples"], 5)
+
+
+# --- no litter -------------------------------------------------------------------------------
+
+def listing(folder) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_a_complete_run_leaves_its_files_and_the_controllers_state_only(twin, tmp_path, capsys):
+    """A complete `sample`: the sample file and its sidecar beside it, nothing else (no lock,
+    no state file); the controller's state in its one place (PLANECAL_STATE_DIR), without
+    its lock."""
+    import os
+    from pathlib import Path
+
+    state_dir = Path(os.environ["PLANECAL_STATE_DIR"])
+    with Emulators(twin, rt_port=0, reply_port=None) as emu:
+        code, s, err = sample(emu, tmp_path / "RUN.tsv", "--samples", "1", capsys=capsys)
+        assert code == 0, err
+        state = default_state_path(("127.0.0.1", emu.fd11.rt_port))
+    assert listing(tmp_path) == ["RUN.tsv", "RUN.tsv.json"]
+    assert listing(state_dir) == [state.name]
+    assert load_sidecar(tmp_path / "RUN.tsv")["real_cell"]["rt_state"] == str(state)
+
+
+@pytest.mark.parametrize("case", ["laser port missing", "controller silent", "not stated",
+                                  "controller in use"])
+def test_a_failed_start_leaves_nothing(twin, tmp_path, capsys, case):
+    """A start that fails leaves no file in the run's folder, and no state file where no
+    packet was sent: a laser port that does not exist (exit 2), a controller that never
+    answers (exit 1; its packets' time is the controller's state, kept), a cell that does
+    not state its controller's behaviour once the controller was left mid-move (exit 2),
+    and a controller another run is using (exit 2)."""
+    import os
+    from pathlib import Path
+
+    from planecal.sampling.runfiles import RunLock
+
+    state_dir = Path(os.environ["PLANECAL_STATE_DIR"])
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    out = run_dir / "RUN.tsv"
+    faults = FD11Faults(boot_s=60.0) if case == "controller silent" else None
+    with Emulators(twin, rt_port=0, reply_port=None, fd11_faults=faults) as emu:
+        state = default_state_path(("127.0.0.1", emu.fd11.rt_port))
+        extra, held = [], None
+        if case == "laser port missing":
+            extra = ["--laser", str(tmp_path / "no-such-tty")]
+        elif case == "controller silent":
+            extra = ["--rt-boot-timeout-s", "0.3"]
+        elif case == "not stated":
+            st = StateFile(state)
+            st.sending()
+            st.answered(np.array([0, 0, 0, 900, 0, 0]), twin.reference_counts, "127.0.0.1:1")
+            st.close()
+        before = listing(state_dir)
+        if case == "controller in use":
+            held = RunLock(state, what="the controller")  # another run on it
+        try:
+            code, s, err = sample(emu, out, "--samples", "1", *extra, capsys=capsys)
+        finally:
+            if held is not None:
+                held.close()
+        sent = emu.fd11.snapshot().datagrams
+    lines = problem_lines(err)
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert code == (1 if case == "controller silent" else 2)
+    assert listing(run_dir) == []
+    if case == "controller silent":  # packets went out: their time is the state
+        assert sent >= 1 and listing(state_dir) == [state.name]
+        assert StateFile.read(state).reference is None
+    else:
+        assert sent == 0 and listing(state_dir) == before
+    print(f"{case}: {lines[0]}")

@@ -43,6 +43,8 @@ def test_rehearse_writes_samples_sidecar_truth_and_summary(tmp_path, capsys):
     assert np.any(t.joint_offsets != 0)
     # stderr is not a TTY here: plain progress lines
     assert "samples 6/6" in stderr
+    # no litter: the lock went with the run
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["RUN.tsv", "RUN.tsv.json", "TRUTH.json"]
 
 
 def test_rehearse_resume_extends_the_run(tmp_path, capsys):
@@ -100,36 +102,58 @@ def test_a_second_run_on_the_same_file_is_refused(tmp_path, capsys):
     assert code == 0
 
 
-def test_ctrl_c_stops_cleanly(tmp_path):
-    """SIGINT to the whole process group (as Ctrl-C does): the run stops, the sidecar says
-    so, the file is valid, the planner process does not print a traceback."""
+@pytest.mark.parametrize("sig, group, code", [
+    ("SIGINT", True, 130),   # Ctrl-C: the terminal signals the whole process group
+    ("SIGTERM", False, 143),  # kill PID, a process manager's stop
+    ("SIGTERM", True, 143),  # systemd's default: every process of the unit
+    ("SIGHUP", True, 130),   # the terminal closed
+])
+def test_a_signal_stops_cleanly(tmp_path, sig, group, code):
+    """Each signal a user or a process manager sends ends the run as Ctrl-C does: the run
+    stops, the sidecar says so and names the signal, the file is valid, one line on stderr,
+    no lock file left, and the forked planner process goes too (no traceback from it)."""
     import os
     import signal
     import subprocess
     import sys
     import time
 
+    def defaults():
+        for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            signal.signal(s, signal.SIG_DFL)
+
     out = tmp_path / "RUN.tsv"
     p = subprocess.Popen([sys.executable, "-m", "planecal.cli", "rehearse", "--samples", "5000",
                           "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True, start_new_session=True,
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                         text=True, start_new_session=True, preexec_fn=defaults)
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
             time.sleep(0.2)
             if out.exists() and out.read_text().count("\n") >= 4:
                 break
-        os.killpg(p.pid, signal.SIGINT)
+        signum = signal.Signals[sig]
+        os.killpg(p.pid, signum) if group else os.kill(p.pid, signum)
         stdout, stderr = p.communicate(timeout=30)
     finally:
         if p.poll() is None:
             p.kill()
-    assert p.returncode == 130
-    assert "interrupted" in stderr and "Traceback" not in stderr
+    assert p.returncode == code, stderr
+    assert stderr.strip().splitlines()[-1] == f"planecal rehearse: interrupted ({sig})"
+    assert "Traceback" not in stderr
     side = load_sidecar(out)
-    assert side["status"] == "stopped" and side["stop_reason"] == "interrupted"
+    assert side["status"] == "stopped" and side["stop_reason"] == f"interrupted ({sig})"
     assert len(read_samples(out)) == side["samples"] >= 3
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["RUN.tsv", "RUN.tsv.json"]
+    deadline = time.monotonic() + 10  # the planner ends when the run's pipe closes
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(p.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
+    else:
+        raise AssertionError("a process of the run outlived it")
 
 
 def test_rehearse_with_rrd_records_the_run(tmp_path, capsys):

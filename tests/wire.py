@@ -23,3 +23,31 @@ def sample_argv(port, tty, out, *extra, seed: int = 2) -> list[str]:
             "--rt-tick-s", "0", "--rt-resend-s", str(RESEND_S),
             "--laser", str(tty), "--laser-timeout-s", str(LASER_TIMEOUT_S),
             "--seed", str(seed), "--out", str(out), *extra]
+
+
+def stated_scene(folder, reference: str, silence_s: float | None = None):
+    """The thesis_final scene on an MC70 whose robot.json states the controller's session
+    behaviour (``controller.sessions``: keep, fresh_after_silence with ``silence_s``, or
+    fresh_each_client), written to ``folder`` (the robot in its own folder, with the MC70's
+    error profiles beside it, as under models/): the scene's path."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    from planecal.base.paths import data_path
+
+    folder = Path(folder)
+    mc70 = data_path("models", "mc70")
+    robot = json.loads((mc70 / "robot.json").read_text())
+    robot["controller"]["sessions"] = {"reference": reference, "source": "the test's statement"}
+    if silence_s is not None:
+        robot["controller"]["sessions"]["silence_s"] = silence_s
+    robot_dir = folder / f"mc70-{reference}"
+    shutil.copytree(mc70 / "errors", robot_dir / "errors")
+    robot_path = robot_dir / "robot.json"
+    robot_path.write_text(json.dumps(robot))
+    scene = json.loads(data_path("scenes", "thesis_final.json").read_text())
+    scene["robot"] = str(robot_path.resolve())
+    scene_path = folder / f"cell-{reference}.json"
+    scene_path.write_text(json.dumps(scene))
+    return scene_path

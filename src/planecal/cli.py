@@ -42,7 +42,8 @@ COMMANDS = {
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,
-gave up, link lost), the reason in one line; 2 bad input or usage; 130 interrupted.
+gave up, link lost), the reason in one line; 2 bad input or usage; 130 interrupted
+(SIGINT, SIGHUP); 143 terminated (SIGTERM).
 Every command takes --config FILE.toml (a table per command, keys = long option names,
 e.g. [rehearse] samples = 20; flags given on the command line win), -v and -q."""
 
@@ -185,17 +186,19 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     _logging(args)
     module = _module(args.command)
+    from planecal.base.interrupts import exit_code, interrupt_on_signals, signal_name
     try:
-        return int(module.run(args) or 0)
+        with interrupt_on_signals():  # SIGTERM, SIGHUP end a command as Ctrl-C does
+            return int(module.run(args) or 0)
     except InputError as e:
         print(f"planecal {args.command}: error: {e}", file=sys.stderr)
         return 2
     except RunFailed as e:
         print(f"planecal {args.command}: failed: {e}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"planecal {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        print(f"planecal {args.command}: interrupted ({signal_name(e)})", file=sys.stderr)
+        return exit_code(e)
     except BrokenPipeError:  # stdout closed early (| head): end quietly
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

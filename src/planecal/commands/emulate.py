@@ -9,11 +9,13 @@ as ``rehearse``) and ``--seed``, or read from ``--truth`` (a truth file ``rehear
 wrote; the profile then gives the twin's noise and servo).
 
 It serves any number of client sessions in a row (``sample``, ``sample --resume``, ...).
-``--reference`` chooses what the emulated controller does with its reference between
-them (`planecal.links.fd11`, "Sessions": the seed reads both ways): ``session``
-(default) latches it where the robot stands at each session's first packet; ``boot``
-keeps the one it started with, so a client must carry on from the last delta it sent
-(``planecal sample`` does, from its ``--rt-state`` file).
+``--reference`` says what the emulated controller does with its reference between them,
+in the words of robot.json's ``controller.sessions`` (`planecal.links.sessions`; the
+seed reads both ways): ``keep`` keeps the one it started with, so a client must carry on
+from the last delta it sent; ``fresh_after_silence`` takes the robot's counts as a new
+reference at a request after ``--silence-s`` (default 2) without any, so the first delta
+must be 0; ``fresh_each_client`` does so at a request from another client address. The
+default is what the scene's robot.json states, else ``fresh_after_silence``.
 
 Faults, all deterministic (`planecal.links.emulators`): ``--drop-replies P`` (alias
 ``--drop-rate``) loses each reply with probability P (``--fault-seed``, alias
@@ -21,7 +23,8 @@ Faults, all deterministic (`planecal.links.emulators`): ``--drop-replies P`` (al
 ``--laser-silent-every K`` leaves every K-th laser request unanswered,
 ``--release-after-ticks N`` (or ``--release-after-moves N``, ticks that command motion)
 releases the dead-man switch (held again when the next session starts). On exit it prints
-its counters in one line (``served: fd11 {...} laser {...}``). Bounds: docs/LINKS.md.
+its counters in one line (``served: fd11 {...} laser {...}``), whichever signal ends it
+(SIGINT, SIGTERM, SIGHUP). Bounds: docs/LINKS.md.
 """
 from __future__ import annotations
 
@@ -31,6 +34,8 @@ from planecal.base.errors import InputError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from planecal.formats.robot import REFERENCE_BEHAVIOURS
+
     p.add_argument("--scene", default=None, help="twin scene name or JSON path (twin default)")
     p.add_argument("--seed", type=int, default=None, help="random seed of the twin's truth and noise")
     p.add_argument("--truth", default=None, metavar="T.json",
@@ -45,12 +50,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reply-port", type=int, default=5556,
                    help="UDP port replies are sent to on the sender's host (default 5556; "
                         "0 = the sender's own port)")
-    p.add_argument("--reference", choices=("session", "boot"), default="session",
-                   help="the controller's reference: latched at each client session "
-                        "(default) or kept from its start")
-    p.add_argument("--session-gap-s", type=float, default=2.0,
-                   help="silence after which the same client address begins a new session "
-                        "(default 2)")
+    p.add_argument("--reference", choices=REFERENCE_BEHAVIOURS, default=None,
+                   help="what the controller does with its reference between client "
+                        "sessions: keep it, take the robot's counts after --silence-s of "
+                        "silence, or at each new client address (default: what the scene's "
+                        "robot.json states, else fresh_after_silence)")
+    p.add_argument("--silence-s", "--session-gap-s", dest="session_gap_s", type=float,
+                   default=None, metavar="S",
+                   help="silence after which a request begins a new session (and, with "
+                        "fresh_after_silence, a new reference) (default: robot.json's, else 2)")
     p.add_argument("--drop-replies", "--drop-rate", dest="drop_replies", type=float,
                    default=0.0, metavar="P",
                    help="fault: lose each FD11 reply with probability P (default 0)")
@@ -74,8 +82,9 @@ def _faults(args):
 
     if not 0.0 <= args.drop_replies < 1.0:
         raise InputError(f"--drop-replies must be in [0, 1), got {args.drop_replies}")
-    if not (math.isfinite(args.session_gap_s) and args.session_gap_s > 0):
-        raise InputError(f"--session-gap-s must be a positive number, got {args.session_gap_s}")
+    if args.session_gap_s is not None and not (math.isfinite(args.session_gap_s)
+                                               and args.session_gap_s > 0):
+        raise InputError(f"--silence-s must be a positive number, got {args.session_gap_s}")
     if not (math.isfinite(args.boot_silence_s) and args.boot_silence_s >= 0):
         raise InputError(f"--boot-silence-s must be a number >= 0, got {args.boot_silence_s}")
     for flag in ("laser_silent_every", "release_after_ticks", "release_after_moves"):
@@ -104,11 +113,26 @@ def _make_twin(args):
     return Twin(scene, truth=world, seed=seed, options=options)
 
 
+def _reference(args, robot) -> tuple[str, float]:
+    """The emulated controller's reference behaviour and silence: the flags, else what the
+    robot states, else fresh_after_silence after 2 s."""
+    from planecal.links.emulators import SESSION_GAP_S
+    from planecal.links.sessions import stated_behaviour
+
+    stated = stated_behaviour(robot.source)
+    mode = args.reference or (stated.reference if stated else "fresh_after_silence")
+    gap = args.session_gap_s
+    if gap is None:
+        gap = stated.silence_s if stated and stated.silence_s else SESSION_GAP_S
+    return mode, gap
+
+
 def run(args) -> int:
     from planecal.links.emulators import serve
 
     fd11_faults, laser_faults = _faults(args)
     twin = _make_twin(args)
+    reference_mode, session_gap_s = _reference(args, twin.scene.robot)
     print(f"twin: scene {twin.scene.name}, errors {args.errors or 'realistic'}, seed "
           f"{twin.seed}" + (f", truth {args.truth}" if args.truth else ""), flush=True)
     reply_port = None if args.reply_port == 0 else args.reply_port
@@ -124,7 +148,7 @@ def run(args) -> int:
     try:
         serve(twin, twin, host=args.host, rt_port=args.rt_port, reply_port=reply_port,
               on_ready=ready, fd11_faults=fd11_faults, laser_faults=laser_faults,
-              reference_mode=args.reference, session_gap_s=args.session_gap_s)
+              reference_mode=reference_mode, session_gap_s=session_gap_s)
     except OSError as e:
         raise InputError(str(e)) from None
     finally:

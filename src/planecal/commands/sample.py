@@ -22,11 +22,21 @@ every ``--rt-resend-s`` and gives up only after ``--rt-silence-s`` without a rep
 (``--rt-boot-timeout-s`` for the first contact, while the RT system may still be booting).
 The summary's ``link`` reports the session's lost replies and outages, ``link_total``
 those of every session of the run; both are written to the sidecar's ``real_cell`` when
-the session ends (stopped, failed or complete). The first packet repeats the
-last delta sent to the controller, kept in ``--rt-state`` (default RUN.tsv.fd11, rewritten
-every tick), so a restart is safe whether the controller latches a new reference per
-client session or keeps the one it booted with; the first reply is checked before any
-motion. ``--rt-fresh`` sends delta 0 first instead (the RT system was restarted since).
+the session ends (stopped, failed or complete).
+
+The first packet (``planecal.links.sessions``): what the controller does with its
+reference between client sessions is a stated property of the cell (robot.json
+``controller.sessions``): it keeps it (the first packet repeats the last delta it
+received), takes a fresh one after a silence (the run waits that silence out, then sends
+delta 0) or takes one for each new client address. The controller's state -- the last
+delta sent in a session it answered, its reference, the time of the last packet and the
+client -- is kept in one file per controller (``--rt-state``, default
+``$PLANECAL_STATE_DIR`` or ``~/.local/state/planecal/fd11-IP-PORT.state``), read by every
+run against it. Where the behaviour is not stated and the controller was left at a delta
+other than 0, the run asks (one line, exit 2): ``--rt-fresh`` states that the controller
+took a fresh reference (e.g. the RT system was restarted), ``--rt-keep`` that it kept it.
+The link refuses a first packet farther than the step limit from what the controller
+holds, and checks the first reply before any motion (one line, exit 1, nothing more sent).
 
 The RT link never goes quiet: while a pose is planned, and during the laser read, the hold
 delta keeps being sent every 10 ms. The laser is polled once a tick without blocking it
@@ -38,7 +48,8 @@ out-of-range reading; ``--laser-error-limit`` errors in a row stop the run (cabl
 power).
 Exit 0 when all samples were taken; 1 when the run stopped, gave up, lost its link or
 could not write its files (one line saying why; the files are valid and ``--resume``
-continues); 2 for bad input or usage; 130 interrupted. Bounds: docs/LINKS.md.
+continues); 2 for bad input or usage; 130 interrupted (SIGINT, SIGHUP), 143 terminated
+(SIGTERM): the sidecar says ``stopped`` and which signal. Bounds: docs/LINKS.md.
 """
 from __future__ import annotations
 
@@ -67,11 +78,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="how long the first contact may wait for a booting RT system "
                         "(default 10)")
     p.add_argument("--rt-state", default=None, metavar="FILE",
-                   help="the last delta sent to the FD11, repeated as the first packet "
-                        "(default RUN.tsv.fd11)")
-    p.add_argument("--rt-fresh", action="store_true",
-                   help="first packet delta 0, not the recorded one (the RT system was "
-                        "restarted since the last session)")
+                   help="the controller's state file: last delta, reference, time of the last "
+                        "packet (default: one per controller, $PLANECAL_STATE_DIR or "
+                        "~/.local/state/planecal/fd11-IP-PORT.state)")
+    who = p.add_mutually_exclusive_group()
+    who.add_argument("--rt-fresh", action="store_true",
+                     help="state for this run that the controller took a fresh reference "
+                          "(e.g. the RT system was restarted): first packet delta 0")
+    who.add_argument("--rt-keep", action="store_true",
+                     help="state for this run that the controller kept its reference: the "
+                          "first packet repeats the last delta it received")
     p.add_argument("--laser", default="/dev/ttyUSB0", metavar="PORT",
                    help="ZS-LD80 serial port (default /dev/ttyUSB0)")
     p.add_argument("--baud", type=int, default=38400, help="laser baud rate (default 38400)")
@@ -127,10 +143,9 @@ class TolerantLaser:
         self.laser.close()
 
 
-def _check_link_flags(args, robot) -> tuple[int, Path]:
-    """The following limit, and the FD11 state file's path (checked)."""
+def _check_link_flags(args, robot) -> int:
+    """The following limit (the link flags checked)."""
     from planecal.sampling.enable import SERVO_TAU_S, follow_limit_counts
-    from planecal.sampling.runfiles import sidecar_path
 
     for flag in ("rt_resend_s", "rt_silence_s", "rt_boot_timeout_s", "laser_timeout_s"):
         v = getattr(args, flag)
@@ -150,11 +165,78 @@ def _check_link_flags(args, robot) -> tuple[int, Path]:
     if limit <= robot.max_step_counts:
         raise InputError(f"--follow-limit-counts must exceed the largest step "
                          f"({robot.max_step_counts} counts), got {limit}")
-    out = Path(args.out)
-    state = Path(args.rt_state) if args.rt_state else out.with_name(out.name + ".fd11")
-    if state.resolve() in (out.resolve(), sidecar_path(out).resolve()):
-        raise InputError(f"--rt-state {state}: is the run's own sample file or sidecar")
-    return limit, state
+    return limit
+
+
+class Controller:
+    """The FD11 link with its state file, the controller's lock and the first contact
+    (`planecal.links.sessions`): opened before any packet, closed in any case."""
+
+    def __init__(self, args, robot):
+        from planecal.links.fd11 import FD11Link, LinkError
+        from planecal.links.sessions import (StateFile, default_state_path, plan_contact,
+                                             stated_behaviour)
+        from planecal.sampling.runfiles import RunLock, sidecar_path
+
+        self.link = self.lock = self.state = None
+        try:
+            self.link = FD11Link(args.rt, args.rt_port, args.local_port, tick_s=args.rt_tick_s,
+                                 timeout_s=args.rt_resend_s, silence_s=args.rt_silence_s,
+                                 boot_timeout_s=args.rt_boot_timeout_s,
+                                 max_step_counts=robot.max_step_counts)
+        except (LinkError, ValueError) as e:
+            raise InputError(f"--rt {args.rt}: {e}") from None
+        try:
+            out = Path(args.out)
+            path = Path(args.rt_state) if args.rt_state else default_state_path(self.link.remote)
+            if path.resolve() in (out.resolve(), sidecar_path(out).resolve()):
+                raise InputError(f"--rt-state {path}: is the run's own sample file or sidecar")
+            self.path = path
+            self.state = StateFile(path)
+            override = "fresh" if args.rt_fresh else "keep" if args.rt_keep else None
+            self.contact = plan_contact(stated_behaviour(robot.source), self.state.last,
+                                        override, self.link.client, where=str(robot.source))
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise InputError(f"--rt-state {path}: cannot create {path.parent} "
+                                 f"({e.strerror})") from None
+            # one client per controller: a second run on it would command it too
+            self.lock = RunLock(path, what="the FD11 at "
+                                f"{self.link.remote[0]}:{self.link.remote[1]} (state {path})")
+            self.link.expect(self.contact, self.state)
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def recorded_reference(self):
+        """The controller's reference as the state file recorded it (None: unknown)."""
+        last = self.state.last if self.state is not None else None
+        return None if last is None else last.reference
+
+    def wait_for_silence(self) -> float:
+        """Keep the silence the first contact needs (a fresh reference after silence)."""
+        import time
+
+        wait = self.contact.wait_s
+        if wait > 0:
+            print(f"note: waiting {wait:.1f} s before the first FD11 packet: {self.contact.why}",
+                  file=sys.stderr, flush=True)
+            time.sleep(wait)
+        return wait
+
+    def record(self, waited_s: float) -> dict:
+        """The sidecar's record of the first contact."""
+        c = self.contact
+        return {"rt_state": str(self.path), "first_delta": c.held.tolist(),
+                "first_contact": {"kind": c.kind, "why": c.why, "waited_s": round(waited_s, 3),
+                                  "client": self.link.client}}
+
+    def close(self) -> None:
+        for part in (self.link, self.state, self.lock):
+            if part is not None:
+                part.close()
 
 
 _PEAKS = ("max_lost_in_a_row", "longest_outage_s", "boot_wait_s")  # maxima, not sums
@@ -192,34 +274,18 @@ def run(args) -> int:
     from dataclasses import asdict
 
     from planecal.commands.rehearse import make_checker
-    from planecal.commands.sampling_options import (command_model, pose_list_planner, prepare,
-                                                    rerun_observer, session_from_args)
-    from planecal.links.fd11 import DeltaRecord, FD11Link, LinkError
+    from planecal.commands.sampling_options import command_model, prepare, rerun_observer
     from planecal.links.zs_ld80 import NO_READING, ZSLD80, LaserError
     from planecal.sampling.enable import FollowingMonitor
-    from planecal.sampling.run import count_samples, sidecar_path
-    from planecal.sampling.session import print_summary, run_session
+    from planecal.sampling.session import print_summary
 
     scene, settings, side = prepare(args)
     robot = scene.robot
-    limit, state_path = _check_link_flags(args, robot)
-    start_delta = None if args.rt_fresh else DeltaRecord.read(state_path)
-    if start_delta is not None and start_delta.any():
-        print(f"note: the first FD11 packet repeats the last delta sent, {start_delta.tolist()} "
-              f"({state_path}; --rt-fresh if the RT system was restarted since)", file=sys.stderr)
+    limit = _check_link_flags(args, robot)
     model = command_model(args, scene, side)
     checker = make_checker(scene, settings.clearance_m)
-    observer = rerun_observer(args.rrd, scene) if args.rrd else None
-    record = DeltaRecord(state_path)
-    try:
-        link = FD11Link(args.rt, args.rt_port, args.local_port, tick_s=args.rt_tick_s,
-                        timeout_s=args.rt_resend_s, silence_s=args.rt_silence_s,
-                        boot_timeout_s=args.rt_boot_timeout_s,
-                        max_step_counts=robot.trip_step_counts, start_delta=start_delta,
-                        record=record)
-    except (LinkError, ValueError) as e:
-        record.close()
-        raise InputError(f"--rt {args.rt}: {e}") from None
+    cell = Controller(args, robot)  # nothing sent yet; a run that cannot tell asks here
+    observer = raw_laser = None
     try:
         try:
             raw_laser = ZSLD80(args.laser, baudrate=args.baud, timeout_s=args.laser_timeout_s,
@@ -227,36 +293,19 @@ def run(args) -> int:
         except LaserError as e:
             raise InputError(f"--laser {args.laser}: {e}") from None
         laser = TolerantLaser(raw_laser, args.laser_error_limit, (LaserError,), NO_READING)
-        monitor = FollowingMonitor(link, limit, max_step_counts=robot.max_step_counts,
+        waited = cell.wait_for_silence()
+        observer = rerun_observer(args.rrd, scene) if args.rrd else None
+        monitor = FollowingMonitor(cell.link, limit, max_step_counts=robot.max_step_counts,
                                    trip_counts=robot.trip_step_counts, tick_s=robot.tick_s)
         before = ((side or {}).get("real_cell") or {}).get("link_total")
         real_cell = {"rt": args.rt, "rt_port": args.rt_port, "laser": args.laser,
-                     "follow_limit_counts": limit, "rt_state": str(state_path),
-                     "first_delta": link.start_delta.tolist(), "link_total": before}
-        extra = {"real_cell": real_cell}
-        session = session_from_args(args, pose_list_planner(args, scene, settings, checker,
-                                                            model[0]),
-                                    observer, extra, hold_while_planning=True, model=model)
-        try:
-            code, summary = run_session(session, scene, settings, monitor, laser, monitor,
-                                        checker)
-        except (LinkError, LaserError) as e:
-            n = count_samples(Path(args.out)) if sidecar_path(args.out).exists() else 0
-            where = (f"{n} samples so far are in {args.out}; continue with --resume" if n
-                     else "nothing sampled")
-            raise RunFailed(f"run stopped: {e} ({where})") from None
-        finally:
-            laser.close()
-            session_link = asdict(link.counters)
-            real_cell["link"] = session_link
-            real_cell["link_total"] = link_totals(before, session_link)
-            # (nothing sent: the session never began -- e.g. another run holds the file)
-            if link.counters.sent and sidecar_path(args.out).exists():
-                _record_link(Path(args.out), {"link": session_link,
-                                              "link_total": real_cell["link_total"]})
+                     "follow_limit_counts": limit, **cell.record(waited), "link_total": before}
+        code, summary = _run(args, scene, settings, checker, model, observer, cell.link, laser,
+                             monitor, real_cell, before, cell.recorded_reference)
     finally:
-        link.close()
-        record.close()
+        if raw_laser is not None:
+            raw_laser.close()
+        cell.close()
         if observer is not None:
             observer.close()
     summary["laser_read_errors"] = laser.total
@@ -265,6 +314,49 @@ def run(args) -> int:
         summary["rrd"] = str(observer.path)
     summary["link"] = real_cell["link"]
     summary["link_total"] = real_cell["link_total"]
+    summary["first_contact"] = real_cell["first_contact"]  # with what the controller did
     summary["following"] = {"limit_counts": limit, "max_lag_counts": monitor.max_lag}
     print_summary(summary)
     return code
+
+
+def _run(args, scene, settings, checker, model, observer, link, laser, monitor, real_cell,
+         before, recorded) -> tuple[int, dict]:
+    """The session (`sampling.session`); a link or laser failure is one line (exit 1); the
+    link counters go to the sidecar however it ends, and what the controller's first reply
+    showed of its reference (``observed_reference``: "kept" -- the one ``recorded`` in the
+    state file --, "new", or None when either is unknown)."""
+    from dataclasses import asdict
+
+    import numpy as np
+
+    from planecal.commands.sampling_options import pose_list_planner, session_from_args
+    from planecal.links.fd11 import LinkError
+    from planecal.links.zs_ld80 import LaserError
+    from planecal.sampling.run import count_samples, sidecar_path
+    from planecal.sampling.session import run_session
+
+    session = session_from_args(args, pose_list_planner(args, scene, settings, checker,
+                                                        model[0]),
+                                observer, {"real_cell": real_cell}, hold_while_planning=True,
+                                model=model)
+    observed = None
+    try:
+        return run_session(session, scene, settings, monitor, laser, monitor, checker)
+    except (LinkError, LaserError) as e:
+        n = count_samples(Path(args.out)) if sidecar_path(args.out).exists() else 0
+        where = (f"{n} samples so far are in {args.out}; continue with --resume" if n
+                 else "nothing sampled")
+        raise RunFailed(f"run stopped: {e} ({where})") from None
+    finally:
+        if recorded is not None and link.fd11_reference is not None:
+            observed = "kept" if np.array_equal(link.fd11_reference, recorded) else "new"
+        session_link = asdict(link.counters)
+        real_cell["link"] = session_link
+        real_cell["link_total"] = link_totals(before, session_link)
+        real_cell["first_contact"]["observed_reference"] = observed
+        # (nothing sent: the session never began -- e.g. another run holds the file)
+        if link.counters.sent and sidecar_path(args.out).exists():
+            _record_link(Path(args.out), {"link": session_link,
+                                          "link_total": real_cell["link_total"],
+                                          "first_contact": real_cell["first_contact"]})

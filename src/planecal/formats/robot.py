@@ -2,7 +2,8 @@
 
 Six joints (planecal's parameter vector, sample files and IK are built for six), standard
 DH rows, joint limits in degrees, the encoder model ``q = C x, x = (qe - qe0) / g`` and the
-controller's step limits and home counts. Checked: every number finite, lengths and angles
+controller's step limits, home counts and (when known) what it does with its reference
+between client sessions (``controller.sessions``, `planecal.links.sessions`). Checked: every number finite, lengths and angles
 of plausible size, non-zero gains, coupling entries on existing joints and a non-singular
 C, counts within the encoder's bits, the trip limit above the step limit.
 """
@@ -11,7 +12,7 @@ import math
 from typing import Annotated
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import AfterValidator, Field, model_validator
 
 from planecal.formats.base import (
     MM_AS_M, Angle, FormatTag, Int, Model, Num, Ranged, Str, Vector, problem, short)
@@ -45,6 +46,19 @@ LinkMass = Ranged(0.0, 10000.0, "kg", "link mass")
 Com = Vector(Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "centre of mass coordinate", MM_AS_M), 3,
              "coordinates in the frame")
 Solver = Annotated[Str | None, Field(json_schema_extra={"enum": ["spherical_wrist", None]})]
+REFERENCE_BEHAVIOURS = ("keep", "fresh_after_silence", "fresh_each_client")  # links.sessions
+SilenceS = Ranged(0.01, 3600.0, "s", "silence")
+
+
+def _behaviour(v):
+    if v not in REFERENCE_BEHAVIOURS:
+        raise problem(f"{short(v)} is not a reference behaviour "
+                      f"({', '.join(REFERENCE_BEHAVIOURS)})")
+    return v
+
+
+Behaviour = Annotated[Str, AfterValidator(_behaviour),
+                      Field(json_schema_extra={"enum": list(REFERENCE_BEHAVIOURS)})]
 
 
 class DHRow(Model):
@@ -92,11 +106,32 @@ class Encoder(Model):
         return C
 
 
+class Sessions(Model):
+    """What the controller does with its reference between client sessions
+    (`planecal.links.sessions`): ``keep`` it; take a fresh one (the robot's counts) at a
+    request after ``silence_s`` without any (``fresh_after_silence``); or at a request from
+    another client address (``fresh_each_client``). ``source``: how it is known."""
+    reference: Behaviour
+    silence_s: SilenceS | None = None
+    source: Str | None = None
+
+    @model_validator(mode="after")
+    def silence_with_its_behaviour(self):
+        if self.reference == "fresh_after_silence" and self.silence_s is None:
+            raise problem("fresh_after_silence needs silence_s, the silence (s) after which "
+                          "the controller takes a new reference", "silence_s")
+        if self.reference != "fresh_after_silence" and self.silence_s is not None:
+            raise problem(f"silence_s goes only with fresh_after_silence, not with "
+                          f"{self.reference}", "silence_s")
+        return self
+
+
 class Controller(Model):
     tick_s: Tick
     max_step_counts: StepLimit
     trip_step_counts: TripLimit
     home_counts: JointCounts
+    sessions: Sessions | None = None  # unknown: a session that cannot tell asks
 
     @model_validator(mode="after")
     def trip_above_step(self):

@@ -14,13 +14,18 @@ sends unless it has received (send-first handshake).
   ``session_gap_s`` (2 s: longer than any outage a client rides through, 0.5 s by
   default) without any, starts a client session. Between sessions the
   robot holds its last command: the backend is ticked with it until the counts sit on it
-  (at most ``settle_ticks``), as the servo would in the meantime. Then, by
-  ``reference_mode`` (`planecal.links.fd11`, "Sessions", for the two readings of the seed):
-  ``"session"`` (default): the reference is latched at the first packet of every session,
-  ``reference = current - delta``, so any first delta commands the robot where it is;
-  ``"boot"``: the reference stays the one of the emulator's start and the first delta of a
-  session is checked against the last one received, like any other (delta 0 after a
-  session that moved trips it).
+  (at most ``settle_ticks``), as the servo would in the meantime. What the controller
+  does with its reference is ``reference_mode``, in the words of robot.json's
+  ``controller.sessions`` (`planecal.links.sessions`):
+  ``"keep"``: the reference stays the one of the emulator's start, and a session's first
+  delta is checked against the last one received, like any other (delta 0 after a
+  session that moved trips it);
+  ``"fresh_after_silence"`` (default): a request after ``session_gap_s`` without any takes
+  the robot's current counts as the new reference (the delta it holds becomes 0, so a
+  first delta other than 0 is a step of that size, and trips it above 60) -- the
+  behaviour of the independent FD11 peer of issue 25;
+  ``"fresh_each_client"``: the same, at a request from another client address, however
+  short the silence (the same address continues its session).
   The emulator talks to its backend in the backend's own frame: backend delta = delta +
   (reference - backend reference); the backend is assumed to start at rest on its
   reference counts (the twin does).
@@ -45,11 +50,7 @@ sends unless it has received (send-first handshake).
   `snapshot()`, wait for them with `wait_until(predicate, timeout_s)`, or read
   ``counters`` after `stop()` (the thread has ended).
 
-`LaserEmulator` -- the ZS-LD80 on a pseudo-terminal (framing in
-`planecal.links.zs_ld80`). `port` is the slave's device name for pyserial. Each
-request line (``command`` + ``terminator``; CR/LF/space around it ignored) is answered
-with ``encode_reply(backend.read())``; other lines are ignored and counted. Faults
-(`LaserFaults`): garbage reply, no reply, delayed reply.
+`LaserEmulator` -- the ZS-LD80 on a pseudo-terminal (`planecal.links.laser_emulator`).
 
 Both run in a background thread: ``with FD11Emulator(...) as emu:`` or start()/stop().
 `Emulators` starts both on one backend with a shared lock (the twin is not
@@ -59,28 +60,22 @@ The backend is owned by the caller: the emulators never close it.
 from __future__ import annotations
 
 import dataclasses
-import os
 import select
 import socket
 import threading
 import time
-import tty
 from contextlib import nullcontext
-from typing import Callable
 
 import numpy as np
 
 from planecal.links.fd11 import TRIP_STEP_COUNTS, pack_reply, unpack_request
-from planecal.links.zs_ld80 import FIELD_WIDTH, encode_reply
+from planecal.links.laser_emulator import LaserEmulator, LaserFaults
+from planecal.links.served import POLL_S, Served, every
+from planecal.links.sessions import BEHAVIOURS
 
-_POLL_S = 0.05  # how often the threads look at their stop flag
-REFERENCE_MODES = ("session", "boot")
+REFERENCE_MODES = BEHAVIOURS  # keep, fresh_after_silence, fresh_each_client
 SESSION_GAP_S = 2.0  # > the client's outage bound (0.5 s): an outage it rides through is no new session
 SETTLE_TICKS = 500  # 5 s of robot time: any servo lag has gone by then
-
-
-def _every(n: int, k: int) -> bool:
-    return k > 0 and n % k == 0
 
 
 @dataclasses.dataclass
@@ -111,6 +106,8 @@ class FD11EmulatorCounters:
     invalid: int = 0     # wrong size or negatives mismatch
     boot_ignored: int = 0  # valid requests not seen while booting
     sessions: int = 0    # client sessions begun
+    fresh_references: int = 0  # of those, the ones that took the robot's counts as reference
+    max_step: int = 0    # largest |delta - the delta held| a request asked for (trips included)
     ticks: int = 0       # backend.exchange calls for requests
     moves: int = 0       # of those, the ones commanding motion (a delta other than the last)
     settle_ticks: int = 0  # backend.exchange calls between sessions (robot settling)
@@ -125,60 +122,7 @@ class FD11EmulatorCounters:
     max_released_gap: int = 0  # largest |commanded - current| seen while released
 
 
-class _Served:
-    """A server loop (``_serve``) in a daemon thread: start/stop and a context manager;
-    ``_close`` releases the endpoint after the thread has stopped. ``_cv`` guards
-    ``counters``: the thread updates them holding it."""
-
-    _thread_name = "emulator"
-
-    def _init_served(self, counters) -> None:
-        self.counters = counters
-        self._cv = threading.Condition()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._started_t: float | None = None
-
-    def start(self):
-        if self._thread is None:
-            self._started_t = time.monotonic()
-            self._thread = threading.Thread(target=self._serve, name=self._thread_name, daemon=True)
-            self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
-        self._close()
-
-    def snapshot(self):
-        """A consistent copy of the counters."""
-        with self._cv:
-            return dataclasses.replace(self.counters)
-
-    def wait_until(self, predicate: Callable, timeout_s: float) -> bool:
-        """Wait until ``predicate(counters)`` holds (True) or ``timeout_s`` passed (False)."""
-        with self._cv:
-            return self._cv.wait_for(lambda: predicate(self.counters), timeout_s)
-
-    def idle(self, timeout_s: float) -> bool:
-        """Wait until every reply decided on has been sent (or refused by the socket)."""
-        return self.wait_until(lambda c: c.replies + c.send_errors == c.queued, timeout_s)
-
-    def _count(self, name: str, k: int = 1) -> None:
-        with self._cv:
-            setattr(self.counters, name, getattr(self.counters, name) + k)
-            self._cv.notify_all()
-
-    def __enter__(self):
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
-
-
-class FD11Emulator(_Served):
+class FD11Emulator(Served):
     """FD11 RT server on UDP backed by ``backend`` (any RobotLink); see the module doc."""
 
     _thread_name = "fd11-emulator"
@@ -186,8 +130,8 @@ class FD11Emulator(_Served):
     def __init__(self, backend, host: str = "127.0.0.1", rt_port: int = 5555,
                  reply_port: int | None = 5556, *, faults: FD11Faults | None = None,
                  trip_counts: int = TRIP_STEP_COUNTS, trip_mode: str = "silent", lock=None,
-                 reference_mode: str = "session", session_gap_s: float = SESSION_GAP_S,
-                 settle_ticks: int = SETTLE_TICKS):
+                 reference_mode: str = "fresh_after_silence",
+                 session_gap_s: float = SESSION_GAP_S, settle_ticks: int = SETTLE_TICKS):
         if trip_mode not in ("silent", "hold"):
             raise ValueError(f"trip_mode must be 'silent' or 'hold', got {trip_mode!r}")
         if reference_mode not in REFERENCE_MODES:
@@ -280,17 +224,22 @@ class FD11Emulator(_Served):
         self._n_valid += 1
         n = self._n_valid
         drop = f.drop_probability > 0 and self._rng.random() < f.drop_probability
-        if _every(n, f.lose_request_every) or (
+        if every(n, f.lose_request_every) or (
                 f.outage_requests > 0 and f.outage_from <= n < f.outage_from + f.outage_requests):
             c.lost_requests += 1
             return [], 0.0
-        if self._peer is None or addr != self._peer or now - self._last_t >= self.session_gap_s:
-            self._begin_session(addr, delta)
+        silent = self._last_t is not None and now - self._last_t >= self.session_gap_s
+        if self._peer is None or addr != self._peer or silent:
+            self._begin_session(addr, fresh=(
+                self._peer is not None and not self.tripped
+                and (self.reference_mode == "fresh_after_silence" and silent
+                     or self.reference_mode == "fresh_each_client" and addr != self._peer)))
         self._last_t = now
         if self.tripped and self.trip_mode == "silent":
             c.ignored_tripped += 1
             return [], 0.0
         step = np.abs(delta - self.last_delta)
+        c.max_step = max(c.max_step, int(step.max()))
         if not self.tripped and np.any(step > self.trip_counts):
             j = int(np.argmax(step))
             self.tripped = True
@@ -323,12 +272,12 @@ class FD11Emulator(_Served):
             c.ticks += 1
             c.moves += moving
             reference, current = self._b_ref + self._offset, self._b_cur
-        if drop or _every(n, f.drop_every):
+        if drop or every(n, f.drop_every):
             c.dropped_replies += 1
             return [], 0.0
         reply = pack_reply(reference, current)
-        delay = f.delay_s if _every(n, f.delay_every) else 0.0
-        replies = [reply, reply] if _every(n, f.duplicate_every) else [reply]
+        delay = f.delay_s if every(n, f.delay_every) else 0.0
+        replies = [reply, reply] if every(n, f.duplicate_every) else [reply]
         c.queued += len(replies)
         return replies, delay
 
@@ -354,7 +303,7 @@ class FD11Emulator(_Served):
         self._b_delta = b_delta.copy()
         return True
 
-    def _begin_session(self, addr, first: np.ndarray) -> None:
+    def _begin_session(self, addr, fresh: bool) -> None:
         self.counters.sessions += 1
         if self._peer is not None:
             if self.released:  # the operator holds the switch again before a new session
@@ -362,12 +311,11 @@ class FD11Emulator(_Served):
                 self._release_done = True
             self._settle()
         self._peer = addr
-        if self.reference_mode == "boot" or self.tripped:
-            return
-        # latch the reference where the robot is: reference = current - first delta
-        here = np.zeros(6, np.int64) if self._b_ref is None else self._b_cur - self._b_ref
-        self._offset = here - first
-        self.last_delta = first.copy()
+        if fresh and self._b_ref is not None:
+            # a new reference: the robot's counts; the delta it holds is 0
+            self.counters.fresh_references += 1
+            self._offset = self._b_cur - self._b_ref
+            self.last_delta = np.zeros(6, np.int64)
 
     def _settle(self) -> None:
         """The robot held its last command while no client was there: tick the backend with
@@ -389,7 +337,7 @@ class FD11Emulator(_Served):
 
     def _serve(self) -> None:
         while not self._stop.is_set():
-            if not select.select([self._sock], [], [], _POLL_S)[0]:
+            if not select.select([self._sock], [], [], POLL_S)[0]:
                 continue
             try:
                 data, addr = self._sock.recvfrom(4096)
@@ -410,124 +358,14 @@ class FD11Emulator(_Served):
         self._sock.close()
 
 
-@dataclasses.dataclass
-class LaserFaults:
-    garbage_every: int = 0     # answer with ``garbage`` instead of a reading
-    silent_every: int = 0      # do not answer
-    delay_every: int = 0       # answer delay_s late
-    delay_s: float = 0.0
-    garbage: bytes = b"ER?x12#\x00\xff\r"
-
-
-@dataclasses.dataclass
-class LaserEmulatorCounters:
-    requests: int = 0
-    replies: int = 0
-    unknown: int = 0    # lines that are not the command
-    silent: int = 0     # requests left unanswered (fault or backend error)
-    queued: int = 0     # replies decided on
-    send_errors: int = 0
-    backend_errors: int = 0
-
-
-class LaserEmulator(_Served):
-    """ZS-LD80 on a pty backed by ``backend`` (any Laser); `port` is the device to open."""
-
-    _thread_name = "laser-emulator"
-
-    def __init__(self, backend, *, faults: LaserFaults | None = None, command: bytes = b"M",
-                 terminator: bytes = b"\r", field_width: int = FIELD_WIDTH, lock=None):
-        self._init_served(LaserEmulatorCounters())
-        self.backend = backend
-        self.faults = faults or LaserFaults()
-        self.command = bytes(command)
-        self.terminator = bytes(terminator)
-        self.field_width = int(field_width)
-        self._lock = lock if lock is not None else nullcontext()
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)  # no echo, no CR/LF translation until pyserial opens it
-        self.port = os.ttyname(self._slave)
-        self._buf = b""
-
-    def handle(self, data: bytes) -> list[bytes]:
-        """Feed received bytes; return the replies to write (delays applied here)."""
-        with self._cv:
-            out, delay = self._handle(data)
-            self._cv.notify_all()  # counters changed: wake `wait_until`
-        if delay > 0:
-            time.sleep(delay)
-        return out
-
-    def _handle(self, data: bytes) -> tuple[list[bytes], float]:
-        self._buf += data
-        out, delay = [], 0.0
-        while self.terminator in self._buf:
-            line, self._buf = self._buf.split(self.terminator, 1)
-            line = line.strip(b"\r\n ")
-            if not line:
-                continue
-            if line != self.command:
-                self.counters.unknown += 1
-                continue
-            self.counters.requests += 1
-            n = self.counters.requests
-            reply = self._answer(n)
-            if reply is None:
-                self.counters.silent += 1
-            else:
-                out.append(reply)
-                self.counters.queued += 1
-                if _every(n, self.faults.delay_every):
-                    delay = max(delay, self.faults.delay_s)
-        if len(self._buf) > 4096:  # a flood without terminators: forget it
-            self._buf = b""
-        return out, delay
-
-    def _answer(self, n: int) -> bytes | None:
-        f = self.faults
-        if _every(n, f.silent_every):
-            return None
-        if _every(n, f.garbage_every):
-            return f.garbage
-        try:
-            with self._lock:
-                mm = self.backend.read()
-        except Exception:
-            self.counters.backend_errors += 1
-            return None
-        return encode_reply(mm, terminator=self.terminator, field_width=self.field_width)
-
-    def _serve(self) -> None:
-        while not self._stop.is_set():
-            try:
-                if not select.select([self._master], [], [], _POLL_S)[0]:
-                    continue
-                data = os.read(self._master, 1024)
-            except OSError:
-                return
-            for reply in self.handle(data):
-                try:
-                    os.write(self._master, reply)
-                except OSError:
-                    self._count("send_errors")
-                    return
-                self._count("replies")
-
-    def _close(self) -> None:
-        for fd in (self._master, self._slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-
-
 class Emulators:
     """Both emulators on one backend pair, sharing a lock; a context manager."""
 
     def __init__(self, robot, laser=None, *, host: str = "127.0.0.1", rt_port: int = 5555,
                  reply_port: int | None = 5556, fd11_faults: FD11Faults | None = None,
                  laser_faults: LaserFaults | None = None, trip_mode: str = "silent",
-                 reference_mode: str = "session", session_gap_s: float = SESSION_GAP_S):
+                 reference_mode: str = "fresh_after_silence",
+                 session_gap_s: float = SESSION_GAP_S):
         self.lock = threading.Lock()
         self.fd11 = FD11Emulator(robot, host, rt_port, reply_port, faults=fd11_faults,
                                  trip_mode=trip_mode, lock=self.lock,
@@ -541,8 +379,11 @@ class Emulators:
 
     def describe(self) -> list[str]:
         reply = "the sender's port" if self.fd11.reply_port is None else f"port {self.fd11.reply_port}"
+        mode = self.fd11.reference_mode + (f" {self.fd11.session_gap_s:g} s"
+                                           if self.fd11.reference_mode == "fresh_after_silence"
+                                           else "")
         return [f"FD11 RT emulator: UDP {self.fd11.host}:{self.fd11.rt_port} (replies to {reply}; "
-                f"reference mode {self.fd11.reference_mode})",
+                f"reference {mode})",
                 f"ZS-LD80 emulator: serial device {self.laser.port}"]
 
     def start(self) -> "Emulators":

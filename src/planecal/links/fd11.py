@@ -43,33 +43,28 @@ delta. A reply later than that (or a duplicated datagram) can still be taken as 
 answer to the next request: the values are then a tick or so old -- always the answer
 to a delta already sent, never from a different reference.
 
-Sessions and the reference (appendix C, seed 7.1.1): decision
---------------------------------------------------------------
-The seed: commanded = FD11 reference + delta; "concurrently the delta is subtracted from
-the current q^e and because of this the FD11 reference will represent the robot's
-initial encoder position when application is booted up and will remain constant while
-the application is running". Which application? Read as the sampling application (the
-client), the RT system latches ``reference = current - delta`` at the first packet of
-each client session ("session" reference); read as the RT application, the reference is
-fixed when the RT system boots and a restarted client must carry on from the last delta
-the controller received ("boot" reference): a first packet of delta 0 then commands a
-jump back to where the RT system booted, and the FD11 trips. The text allows both, and a
-client cannot ask which before it sends (the RT system answers only a command). So the
-first packet is made safe under both: it repeats ``start_delta``, the last delta this cell
-sent to the controller and answered (kept in a `DeltaRecord` file, rewritten every
-tick; zero for a controller never driven). Under a session reference it commands the robot's current
-position; under a boot reference it commands what the controller already commands. The
-first reply is then checked before any motion: ``reference + start_delta - current``
-must be within ``contact_tolerance_counts`` (60, one trip step) on every joint, else
+Sessions and the reference (appendix C, seed 7.1.1)
+----------------------------------------------------
+Whether the controller keeps its reference across client sessions or takes a fresh one
+is a stated property of the cell (`planecal.links.sessions`); before its first exchange
+the link is told, by `expect`, what the controller holds (a `Contact`: ``held``, the last
+delta it received under a kept reference, or zero under a fresh one). The first packet
+is ``held`` itself, and like every packet it is refused (`StepLimitError`, nothing sent)
+when it is farther than ``max_step_counts`` from what the controller holds: the first
+packet is checked like any other. The first reply is then checked before any motion:
+``reference + held - current`` must be within ``contact_tolerance_counts`` (60, one trip
+step) on every joint, and a kept reference must be the one recorded; otherwise
 `ContactError` names both readings and nothing more is sent. No reply at all to the first
 packet within the boot timeout names the other possibility (a trip on that packet).
 
-The loop never sees ``start_delta``: `exchange` takes and returns the loop's frame, whose
-reference is the commanded position at first contact (``fd11_reference + start_delta``)
-and whose first delta is zero, as in the seed. On the wire, delta + ``start_delta`` goes
-out. The FD11's reference is checked to stay constant within a link; a change
-(controller restarted, new reference) raises `LinkError`, since the deltas would then
-move the robot elsewhere.
+The loop never sees ``held``: `exchange` takes and returns the loop's frame, whose
+reference is the commanded position at first contact (``fd11_reference + held``) and
+whose first delta is zero, as in the seed. On the wire, delta + ``held`` goes out. The
+FD11's reference is checked to stay constant within a link; a change (controller
+restarted, new reference) raises `LinkError`, since the deltas would then move the robot
+elsewhere. With a `StateFile`, the link records the time just before every packet (and,
+once the controller has answered the session, the packet's delta), and the delta,
+reference and client address after every reply taken.
 
 Counts are unpacked as uint32 and returned as int64 with the same value (0..2**32-1,
 no sign reinterpretation); the MC70's 24-bit encoders stay far from the wrap. Use
@@ -80,7 +75,8 @@ Safety
 The FD11 trips (encoder-jump error, brakes) when the commanded position changes by more
 than 60 counts per joint in one 10 ms cycle. `FD11Link.exchange` refuses -- raises
 `StepLimitError` and sends nothing -- any delta whose change from the previously *sent*
-delta (``start_delta`` before the first packet) exceeds ``max_step_counts`` (at most 60)
+delta (the controller's held delta before the first packet) exceeds ``max_step_counts``
+(at most 60; ``planecal sample`` uses robot.json's step limit, 51)
 on any joint, whatever the caller. It also never sends two ticks less than ``tick_s``
 apart (resends of the same delta excepted), so a fast caller cannot multiply the rate.
 This is the last line of defence, independent of the step generator (<= 51 counts).
@@ -88,18 +84,16 @@ This is the last line of defence, independent of the step generator (<= 51 count
 from __future__ import annotations
 
 import dataclasses
-import os
 import select
 import socket
 import struct
 import time
-import zlib
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from planecal.base.errors import InputError
+from planecal.links.errors import ContactError, LinkError, LinkInterrupted, StepLimitError
+from planecal.links.sessions import Contact, StateFile, client_address
 
 if TYPE_CHECKING:
     from planecal.links.base import EnableSignal
@@ -113,22 +107,6 @@ INT32_MAX = 2**31 - 1
 RESEND_S = 0.02        # default resend interval: two 10 ms ticks without a reply
 SILENCE_S = 0.5        # default bound on an outage after first contact
 BOOT_TIMEOUT_S = 10.0  # default bound on first contact (an RT system still booting)
-
-
-class LinkError(RuntimeError):
-    """The FD11 link failed (no reply, reference changed, socket error). One-line message."""
-
-
-class StepLimitError(LinkError):
-    """A delta was refused because it changes too much from the previous one; nothing sent."""
-
-
-class ContactError(LinkError):
-    """The first reply does not fit the first packet (commanded - current too large)."""
-
-
-class LinkInterrupted(LinkError):
-    """The enable signal dropped during an outage; nothing more was sent."""
 
 
 def pack_request(delta) -> bytes:
@@ -183,84 +161,6 @@ def _as_delta(delta) -> np.ndarray:
     return d
 
 
-# ----- the last delta sent, kept across processes -----------------------------------------
-
-RECORD_TAG = b"fd11-last-delta/1"
-RECORD_BYTES = len(RECORD_TAG) + N_JOINTS * 12 + len(b" crc32=") + 8 + 1
-
-
-def _record_line(delta) -> bytes:
-    body = RECORD_TAG + b"".join(b" %+011d" % int(v) for v in delta)
-    return body + b" crc32=%08x\n" % zlib.crc32(body)
-
-
-class DeltaRecord:
-    """The last delta sent to one FD11, in a one-line text file rewritten in place.
-
-    ``fd11-last-delta/1 +0000000050 ... -0000000050 crc32=1a2b3c4d`` (fixed length:
-    each delta a signed 11-character field, then the CRC-32 of the line before it).
-    `write` is one ``pwrite`` of that line at offset 0, no fsync: a killed planecal leaves
-    the file current (a PC power loss may leave it seconds old). The link records each
-    delta once the controller has answered it. A delta sent but not answered (the process
-    killed meanwhile) is at most one step from the recorded one, so repeating the recorded
-    one is safe; the first packet of a session, which can be far from it (``--rt-fresh``)
-    and may be refused (the FD11 trips), is recorded only when answered.
-    ``DeltaRecord(path)`` opens (creates) the file; it is written first when the
-    controller answers the first packet.
-    """
-
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
-        self._sized = False
-        try:
-            self._fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as e:
-            raise InputError(f"{self.path}: cannot open the FD11 state file ({e.strerror})") from None
-
-    @staticmethod
-    def read(path: str | Path) -> np.ndarray | None:
-        """The recorded delta (int64[6]); None when the file does not exist; `InputError`
-        (file and problem in one line) when it is not an intact record."""
-        path = Path(path)
-        try:
-            with open(path, "rb") as f:
-                data = f.read(RECORD_BYTES + 1)
-        except FileNotFoundError:
-            return None
-        except OSError as e:
-            raise InputError(f"{path}: cannot read the FD11 state file ({e.strerror})") from None
-        fields = data[:-1].split(b" ")
-        delta = None
-        if len(data) == RECORD_BYTES and fields[0] == RECORD_TAG and len(fields) == 8:
-            try:
-                delta = np.array([int(v) for v in fields[1:7]], np.int64)
-            except ValueError:
-                pass
-        if delta is None:
-            raise InputError(f"{path}: line 1: not an FD11 state line "
-                             f"({RECORD_TAG.decode()}, 6 deltas, crc32)")
-        if np.any(np.abs(delta) > INT32_MAX) or _record_line(delta) != data:
-            raise InputError(f"{path}: line 1: FD11 state line damaged (checksum or field widths)")
-        return delta
-
-    def write(self, delta: np.ndarray) -> None:
-        """Record ``delta``; an OSError (disk full, ...) becomes a one-line `LinkError`
-        before the packet goes out."""
-        try:
-            os.pwrite(self._fd, _record_line(delta), 0)
-            if not self._sized:
-                os.ftruncate(self._fd, RECORD_BYTES)
-                self._sized = True
-        except OSError as e:
-            raise LinkError(f"{self.path}: cannot record the FD11 delta ({e.strerror}); "
-                            f"nothing sent") from None
-
-    def close(self) -> None:
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
-
-
 # ----- the client ----------------------------------------------------------------------------
 
 @dataclasses.dataclass
@@ -290,19 +190,19 @@ class FD11Link:
     else all interfaces). ``timeout_s``: the resend interval; ``silence_s``: the longest
     outage after first contact; ``boot_timeout_s``: the longest wait for first contact.
     ``tick_s``: minimum interval between ticks (0 for emulators on a virtual clock).
-    ``max_step_counts``: refusal threshold, 1..60. ``start_delta``: the first packet's
-    delta on the wire (the last one the controller received, `DeltaRecord.read`; default
-    zero). ``contact_tolerance_counts``: the first reply's largest |commanded - current|.
-    ``record``: a `DeltaRecord` each answered wire delta is written to.
-    ``enable``: an `EnableSignal` that ends an outage when it drops.
+    ``max_step_counts``: refusal threshold, 1..60, for every packet (the first measured
+    from what the controller holds, `expect`). ``contact_tolerance_counts``: the first
+    reply's largest |commanded - current|. ``enable``: an `EnableSignal` that ends an
+    outage when it drops. Before the first exchange, `expect` says what the controller
+    holds (default: delta 0, nothing recorded) and gives the `StateFile` to record in.
     """
 
     def __init__(self, host: str, remote_port: int = 5555, local_port: int = 5556, *,
                  timeout_s: float = RESEND_S, silence_s: float = SILENCE_S,
                  boot_timeout_s: float = BOOT_TIMEOUT_S, tick_s: float = 0.01,
                  max_step_counts: int = TRIP_STEP_COUNTS, bind_host: str | None = None,
-                 start_delta=None, contact_tolerance_counts: int = TRIP_STEP_COUNTS,
-                 record: DeltaRecord | None = None, enable: EnableSignal | None = None):
+                 contact_tolerance_counts: int = TRIP_STEP_COUNTS,
+                 enable: EnableSignal | None = None):
         if not 1 <= int(max_step_counts) <= TRIP_STEP_COUNTS:
             raise ValueError(f"max_step_counts must be in 1..{TRIP_STEP_COUNTS} "
                              f"(the FD11 trips above {TRIP_STEP_COUNTS}), got {max_step_counts}")
@@ -316,9 +216,8 @@ class FD11Link:
         self.boot_timeout_s = float(boot_timeout_s)
         self.tick_s = float(tick_s)
         self.contact_tolerance_counts = int(contact_tolerance_counts)
-        self.start_delta = (np.zeros(N_JOINTS, np.int64) if start_delta is None
-                            else _as_delta(start_delta))
-        self.record = record
+        self.contact = Contact.either()
+        self.state: StateFile | None = None
         self.enable = enable
         self.counters = LinkCounters()
         self.reference: np.ndarray | None = None       # the loop's frame, from the first reply
@@ -341,6 +240,21 @@ class FD11Link:
             self._sock.close()
             raise LinkError(f"FD11 link: cannot bind UDP {bind_host}:{local_port} ({e})") from None
         self._sock.setblocking(False)
+        self.client = client_address(self.remote, self.local_port, bind_host)
+
+    def expect(self, contact: Contact, state: StateFile | None = None) -> None:
+        """What the controller holds at this link's first packet (`sessions.plan_contact`),
+        and the state file to record in; only before the first exchange."""
+        if self.fd11_reference is not None or self.counters.sent:
+            raise RuntimeError("FD11Link.expect: the session has begun")
+        _as_delta(contact.held)
+        self.contact = contact
+        self.state = state
+
+    @property
+    def start_delta(self) -> np.ndarray:
+        """The first packet's wire delta: what the controller holds (`expect`)."""
+        return self.contact.held.copy()
 
     @property
     def local_port(self) -> int:
@@ -365,22 +279,27 @@ class FD11Link:
         if self._failed is not None:
             raise LinkError(f"{self.where}: link unusable after an earlier error ({self._failed})")
         d = _as_delta(delta)
+        held = self.contact.held
+        first = self.fd11_reference is None
         step = np.abs(d - self.last_sent)
         if np.any(step > self.max_step_counts):
             self.counters.refused += 1
             j = int(np.argmax(step))
             raise StepLimitError(
                 f"FD11 delta refused: joint {j + 1} changes by {int(step[j])} counts "
-                f"(limit {self.max_step_counts}) from {self.last_sent.tolist()} to {d.tolist()}")
-        wire = _as_delta(d + self.start_delta)
+                f"(limit {self.max_step_counts}) from {(self.last_sent + held).tolist()} to "
+                f"{(d + held).tolist()}" + (
+                    f" (the first packet, measured from what the controller holds: "
+                    f"{self.contact.describe()}); nothing sent" if first and not self.counters.sent
+                    else "; nothing sent"))
+        wire = _as_delta(d + held)
         packet = pack_request(wire)
-        first = self.fd11_reference is None
         self._settle()
         self._pace()
         self._drain()
         t0 = time.monotonic()
         bound = self.boot_timeout_s if first else self.silence_s
-        self._send(packet)
+        self._send(packet, wire)
         self.last_sent = d
         self._last_tick_t = t0
         lost = 0
@@ -392,8 +311,8 @@ class FD11Link:
                 self._owed = lost  # extra packets whose replies may still come
                 self._note_tick(first, lost, time.monotonic() - t0)
                 answer = self._accept(reply)
-                if self.record is not None:
-                    self.record.write(wire)
+                if self.state is not None:
+                    self.state.answered(wire, self.fd11_reference, self.client)
                 return answer
             lost += 1
             if not first:
@@ -405,7 +324,7 @@ class FD11Link:
                 self._owed = lost
                 raise LinkInterrupted(f"{self.where}: enable dropped during an outage "
                                       f"({lost} replies lost); nothing more sent")
-            self._send(packet)
+            self._send(packet, wire)
             if first:
                 self.counters.boot_resends += 1
             else:
@@ -448,9 +367,9 @@ class FD11Link:
         if first:
             return (f"{self.where}: no reply to the first packet (delta {wire.tolist()}) within "
                     f"the boot timeout of {bound:g} s ({lost} packets): the RT system is not "
-                    f"running, or it tripped on this packet (a controller that keeps its "
-                    f"reference across client sessions trips when the first delta is not the "
-                    f"last one it received: check the teach pendant and the FD11 state file)")
+                    f"running, or it tripped on this packet (it assumed {self.contact.describe()}; "
+                    f"a controller that does not behave so trips on it: check the teach "
+                    f"pendant and the cell's statement, robot.json controller.sessions)")
         return (f"{self.where}: no reply for {bound:g} s ({lost} packets of delta "
                 f"{wire.tolist()} unanswered); the robot holds its last command")
 
@@ -463,7 +382,9 @@ class FD11Link:
             c.max_lost_in_a_row = max(c.max_lost_in_a_row, lost)
             c.longest_outage_s = max(c.longest_outage_s, round(dt, 6))
 
-    def _send(self, packet: bytes) -> None:
+    def _send(self, packet: bytes, wire: np.ndarray) -> None:
+        if self.state is not None:  # the time first: a kill can only shorten the silence
+            self.state.sending(None if self.fd11_reference is None else wire)
         try:
             self._sock.sendto(packet, self.remote)
         except ConnectionRefusedError:  # ICMP "port unreachable" for an earlier packet:
@@ -534,22 +455,35 @@ class FD11Link:
         fd11_ref, current = unpack_reply(data)
         self.counters.ticks += 1  # answered, whether the answer is then accepted or not
         if self.fd11_reference is None:
-            gap = wrap_diff(fd11_ref + self.start_delta, current)
-            worst = int(np.argmax(np.abs(gap)))
-            if abs(int(gap[worst])) > self.contact_tolerance_counts:
-                self._failed = "the first reply did not fit the first packet"
-                raise ContactError(
-                    f"{self.where}: the first reply does not fit the first packet (delta "
-                    f"{self.start_delta.tolist()}): commanded - current = {gap.tolist()} counts "
-                    f"(joint {worst + 1}: {int(gap[worst])}, tolerance "
-                    f"{self.contact_tolerance_counts}); neither a reference latched at this "
-                    f"connection nor one kept from the last session fits (robot moved or not "
-                    f"enabled since, or another FD11 state file?); nothing more sent")
+            self._check_first(fd11_ref, current)
             self.fd11_reference = fd11_ref.copy()
-            self.reference = fd11_ref + self.start_delta
+            self.reference = fd11_ref + self.contact.held
         elif not np.array_equal(fd11_ref, self.fd11_reference):
             self._failed = "the reference changed"
             raise LinkError(f"{self.where}: reference counts changed from "
                             f"{self.fd11_reference.tolist()} to {fd11_ref.tolist()}: controller "
                             f"restarted? refusing to go on")
         return self.reference.copy(), current
+
+    def _check_first(self, fd11_ref: np.ndarray, current: np.ndarray) -> None:
+        """The first reply against the contact: a kept reference is the one recorded, and
+        the first packet commands where the robot is (module doc); else `ContactError`."""
+        c = self.contact
+        if c.reference is not None and not np.array_equal(fd11_ref, c.reference):
+            self._failed = "the first reply's reference is not the kept one"
+            raise ContactError(
+                f"{self.where}: the first reply's reference {fd11_ref.tolist()} is not the "
+                f"{c.reference.tolist()} the controller was stated to keep ({c.why}): it took "
+                f"a new reference (RT system restarted, or it does not keep it); nothing more "
+                f"sent (--rt-fresh if the controller took a fresh reference)")
+        gap = wrap_diff(fd11_ref + c.held, current)
+        worst = int(np.argmax(np.abs(gap)))
+        if abs(int(gap[worst])) > self.contact_tolerance_counts:
+            self._failed = "the first reply did not fit the first packet"
+            raise ContactError(
+                f"{self.where}: the first reply does not fit the first packet (delta "
+                f"{c.held.tolist()}, {c.describe()}): commanded - current = {gap.tolist()} "
+                f"counts (joint {worst + 1}: {int(gap[worst])}, tolerance "
+                f"{self.contact_tolerance_counts}): the controller is not where that says "
+                f"(robot moved since, another client, or the wrong statement?); nothing more "
+                f"sent")

@@ -259,7 +259,8 @@ class ListPlanner:
 
 def _planner_worker(conn, parent_end, planner) -> None:
     import signal
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's to handle, not ours
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # the run's to handle: it
+        signal.signal(sig, signal.SIG_IGN)  # ends this process (or its death closes the pipe)
     # the fork gave us a copy of the run's end of the pipe too: close it, so that the
     # run's death (even SIGKILL) closes the pipe and ends this process (EOF, broken pipe)
     parent_end.close()

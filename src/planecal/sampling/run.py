@@ -47,6 +47,7 @@ import numpy as np
 
 from planecal.model.encoder import counts_to_joints
 from planecal.base.errors import InputError
+from planecal.base.interrupts import stop_reason
 from planecal.formats.run import SIDECAR_FORMAT
 from planecal.io.params import save_json
 from planecal.sampling.collect import Cursor, DriveAcquirer, Tally, collect
@@ -310,8 +311,8 @@ class SamplingRun:
         except EnableDropped:
             st.status = "stopped"
             st.reason = getattr(drv.enable, "reason", None) or "enable signal dropped"
-        except KeyboardInterrupt:
-            st.status, st.reason = "stopped", "interrupted"
+        except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM/SIGHUP (base.interrupts)
+            st.status, st.reason = "stopped", stop_reason(e)
             raise
         except OSError as e:  # writing the sample file or the sidecar (disk full, ...)
             st.status, st.reason = "error", f"cannot write: {e.strerror or e}"
