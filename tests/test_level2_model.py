@@ -1,4 +1,4 @@
-"""Level 2's whole kinematic model (model_full): it is today's model at zero corrections,
+"""Level 2's whole kinematic model (model.measurement at level full): it is today's model at zero corrections,
 its analytic Jacobian is the distance's derivative, its compliance is the twin's, and its
 parameter files round-trip."""
 import numpy as np
@@ -30,7 +30,7 @@ def corrected(params: CellParams, rng, compliance=True) -> CellParams:
 def test_zero_corrections_reproduce_todays_model_on_the_seeds_real_samples(robot, params):
     L2 = level2_layout(1, compliance=True)
     d1, J1 = predict_with_jacobian(robot, SEED_QE, params)  # level 1's own code path
-    d2, J2 = predict_with_jacobian(robot, SEED_QE, params, layout=L2)  # model_full's
+    d2, J2 = predict_with_jacobian(robot, SEED_QE, params, layout=L2)  # the whole model's
     assert np.abs(d2 - d1).max() < 1e-12
     n1 = len(level1_layout(1))
     assert L2.names[:n1] == level1_layout(1).names

@@ -19,7 +19,6 @@ from rerun.chunk import RrdReader  # noqa: E402
 from planecal import cli  # noqa: E402
 from planecal.model.measurement import predict  # noqa: E402
 from planecal.base.errors import InputError  # noqa: E402
-from planecal.estimation.fit import Problem, solve  # noqa: E402
 from planecal.links.base import AlwaysEnabled  # noqa: E402
 from planecal.present.rerun import (HIST_BINS, SamplingObserver, log_fit_to_file,  # noqa: E402
                                 open_recording, recording_path, reject_kind, sampling_observer)

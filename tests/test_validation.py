@@ -147,7 +147,6 @@ def test_summarize_even_count_and_failed_truths():
 
 
 def test_level_and_seed_errors(capsys):
-    from planecal.model.scene import load_scene
     assert main(["validate", "--level", "level3"]) == 2
     assert "--level" in capsys.readouterr().err
     assert main(["validate", "--truth-seeds", "0,0"]) == 2

@@ -66,7 +66,7 @@ Compliances = Vector(Compliance, 6, "values, one per joint")
 
 
 class KinematicCorrections(Model):
-    """Level 2 (issue 13, ``model_full``): corrections of robot.json's model per joint in
+    """Level 2 (issue 13, ``model.measurement``): corrections of robot.json's model per joint in
     modified DH (alpha, a, Hayati's beta, d), the base frame (x, y, z [m], rx, ry, rz
     [rad]: T(x,y,z) Rz Ry Rx) and the joint compliance c = 1/k (theta += c tau_gravity)."""
     alpha_rad: TwistCorrections
