@@ -13,6 +13,7 @@ from planecal.model.kinematics import fk
 from planecal.model.scene import load_scene
 from planecal.twin.world import without
 from planecal.studies.replay import replay, replay_world
+from planecal.twin.world import WorldRef
 from planecal.twin.profile import load_profile
 
 
@@ -27,7 +28,7 @@ def _twin(res):
 
 def test_ideal_profile_world_is_the_exact_twin(scene):
     base = replay(scene, TABLE10, SEED_QE, SEED_DM)
-    w, o = replay_world(scene, TABLE10, load_profile("ideal", scene.robot), 0)
+    w, o = replay_world(scene, TABLE10, WorldRef("ideal", 0))
     res = replay(scene, TABLE10, SEED_QE, SEED_DM, world=w, options=o)
     np.testing.assert_allclose(_twin(res), _twin(base), atol=1e-9)
     np.testing.assert_allclose(_twin(res), [89.776, 85.318, 68.221, 68.017, 71.580], atol=6e-4)
@@ -36,7 +37,7 @@ def test_ideal_profile_world_is_the_exact_twin(scene):
 def test_realistic_geometry_against_the_analytic_true_kinematics(scene):
     """The world's geometry alone (compliance, gear, backlash off): MuJoCo's ray cast equals
     the ray-plane distance of the true kinematics (an independent model), to 1e-6 mm."""
-    w, o = replay_world(scene, TABLE10, load_profile("realistic", scene.robot), 2)
+    w, o = replay_world(scene, TABLE10, WorldRef("realistic", 2))
     wg, og = without(w, o, ("compliance", "gear", "backlash", "thermal"))
     res = replay(scene, TABLE10, SEED_QE, SEED_DM, world=wg, options=og)
     q = counts_to_joints(scene.robot, SEED_QE)
@@ -70,5 +71,33 @@ def test_replay_command_errors(tmp_path, capsys):
     assert main(["replay"] + args + ["--errors", "ideal", "--out", str(out), ]) == 0
     r = json.loads(out.read_text())
     assert r["errors"] == "ideal" and r["summary"]["max_abs_twin_minus_analytic_mm"] < 1e-6
-    assert r["summary"]["mean_diff_mm"] == pytest.approx(1.2114, abs=1e-3)
+    # twin - measured (predicted - measured): the seed's samples read 1.21 mm long
+    assert r["summary"]["mean_diff_mm"] == pytest.approx(-1.2114, abs=1e-3)
     assert main(["replay"] + args + ["--errors", "nonesuch"]) == 2
+
+
+def test_replay_takes_the_world_from_the_run_and_its_truth_file(tmp_path, capsys):
+    """The issue's case: a rehearsal in the realistic world of truth seed 3 replayed with
+    its truth file agrees to the noise (tens of um), not to the 2 mm of another world; the
+    sidecar alone says the same; a flag that contradicts the record is refused."""
+    run, truth = tmp_path / "r.tsv", tmp_path / "t.json"
+    assert main(["rehearse", "--out", str(run), "--seed", "3", "--samples", "20",
+                 "--truth-out", str(truth), "-q"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "R.json"
+    assert main(["replay", str(run), "--params", str(truth), "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["world"]["truth_file"] == str(truth) and "world of" in capsys.readouterr().out
+    assert r["summary"]["rms_diff_mm"] < 0.1  # the noise of the run, not a world apart
+    # without the truth's world: the sidecar names the world (realistic, truth seed 3)
+    from planecal.io.params import load_params, save_params
+    cell = tmp_path / "cell.json"
+    save_params(cell, load_params(truth))
+    assert main(["replay", str(run), "--params", str(cell), "--out", str(out)]) == 0
+    r2 = json.loads(out.read_text())
+    assert r2["world"]["truth_seed"] == 3 and r2["world"]["errors"] == "realistic"
+    assert r2["summary"]["rms_diff_mm"] == pytest.approx(r["summary"]["rms_diff_mm"], rel=1e-9)
+    # a flag that contradicts the record
+    assert main(["replay", str(run), "--params", str(cell), "--truth-seed", "4"]) == 2
+    err = capsys.readouterr().err
+    assert "--truth-seed 4" in err and "records truth seed 3" in err and err.count("\n") == 1

@@ -37,7 +37,9 @@ def test_rehearse_writes_samples_sidecar_truth_and_summary(tmp_path, capsys):
     assert len(s) == 6 and np.all((s.d_mm > 65) & (s.d_mm < 95))
     side = load_sidecar(out)
     assert side["samples"] == 6 and side["twin"] == {"seed": 4, "exact": False,
-                                                        "errors": "realistic"}
+                                                        "errors": "realistic",
+                                                        "truth_file": None,
+                                                        "truth_sha256": None}
     assert side["settings"]["collision_checking"] is True
     t = load_params(truth)
     assert np.any(t.joint_offsets != 0)

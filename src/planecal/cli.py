@@ -56,7 +56,13 @@ class UsageError(InputError):
 
 
 class Parser(argparse.ArgumentParser):
-    """One line for a usage error, with a pointer to --help (exit 2)."""
+    """One line for a usage error, with a pointer to --help (exit 2). No abbreviations: an
+    option is taken only by its whole name, so an input flag (``--truth``) can never
+    resolve to an output flag (``--truth-out``)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs["allow_abbrev"] = False
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         raise UsageError(f"{self.prog}: error: {message} (see {self.prog} --help)")

@@ -18,7 +18,6 @@ position error and the offsets, then exits 1).
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -72,9 +71,9 @@ WHY_OFF = (
 
 
 def run(args) -> int:
-    from planecal.safety.collision import CollisionWorld
-    from planecal.commands import rehearse
+    from planecal.cli import main as planecal_main
     from planecal.estimation.calibrate import CalibrationSettings, calibrate_samples
+    from planecal.safety.collision import CollisionWorld
     from planecal.formats.params import provenance, result_document
     from planecal.present.calibration import document, text
     from planecal.io.params import save_json
@@ -92,16 +91,19 @@ def run(args) -> int:
     run_file, truth_file, result_file = _check_outputs(out, args.force)
     scene = load_scene(args.scene)
     profile = load_profile(args.errors, scene.robot)  # a bad --errors before any work
-    rp = argparse.ArgumentParser(prog="planecal rehearse")
-    rehearse.add_arguments(rp)
-    argv = ["--out", str(run_file), "--truth", str(truth_file), "--force",
+    # the rehearsal is planecal rehearse itself, as a user runs it
+    argv = ["rehearse", "--out", str(run_file), "--truth-out", str(truth_file), "--force",
             "--scene", args.scene, "--samples", str(args.samples), "--seed", str(args.seed),
             "--errors", args.errors]
     if args.rrd:
         argv += ["--rrd", args.rrd]
     print(f"== rehearsal on the twin ({args.scene}, {args.samples} samples, seed {args.seed}, "
-          f"{profile.name} world)")
-    code = rehearse.run(rp.parse_args(argv))
+          f"{profile.name} world)", flush=True)
+    code = planecal_main(argv)
+    if code == 2:  # refused: its one line said why
+        return 2
+    if code >= 128:  # interrupted: its line said so
+        return code
     if code != 0:
         print("the rehearsal did not complete; calibrating what was sampled")
     samples = read_samples(run_file)

@@ -31,9 +31,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     add_sampling_arguments(p)
     add_errors_argument(p)
-    p.add_argument("--truth-out", dest="truth", default=None, metavar="TRUTH.json",
+    p.add_argument("--truth", dest="truth_in", default=None, metavar="TRUTH.json",
+                   help="run in the world of this truth file (one --truth-out wrote, or edited "
+                        "by hand, e.g. to inject a drift): its cell, the robot's true "
+                        "geometry and phases, and its error profile")
+    p.add_argument("--truth-out", dest="truth_out", default=None, metavar="TRUTH.json",
                    help="write the twin's hidden truth here (parameter-file format, with the "
-                        "robot's true geometry)")
+                        "robot's true geometry and the world it was drawn in)")
     p.add_argument("--twin-seed", type=int, default=None,
                    help="seed of the twin's hidden truth and noise (default: --seed)")
     p.add_argument("--exact", action="store_true",
@@ -48,23 +52,32 @@ def add_errors_argument(p: argparse.ArgumentParser) -> None:
                         "models/mc70/errors/realistic.json and edit it)")
 
 
-def make_twin(scene, seed: int, errors: str, exact: bool = False):
-    """The twin of the error profile ``errors`` for ``seed`` (exact: no random noise)."""
-    from dataclasses import replace
-
-    from planecal.twin import Twin
-    from planecal.twin.profile import draw_world, load_profile
-
-    world, opts = draw_world(scene, seed, load_profile(errors, scene.robot))
-    if exact:
-        opts = replace(opts, servo="ideal", laser_noise_mm=0.0, repeatability_mm=0.0,
-                       quantization=False)
-    return Twin(scene, truth=world, seed=seed, options=opts)
-
-
-def make_checker(scene, clearance_m: float):
-    from planecal.safety.collision import CollisionWorld
-    return CollisionWorld(scene, clearance_m=clearance_m)
+def world_ref(args, side, seed: int):
+    """The world the run is made in (``twin.world.WorldRef``): a resumed run's (its sidecar
+    names it; a flag that contradicts it is refused), or the truth file's (--truth), or the
+    error profile's draw for --twin-seed (default --seed)."""
+    from planecal.twin.profile import DEFAULT_PROFILE, truth_file_errors
+    from planecal.twin.world import WorldRef, file_sha256
+    if side is not None:
+        t = side.get("twin") or {}
+        ref = WorldRef(str(t.get("errors", "ideal")),  # runs before profiles: the ideal world
+                       None if t.get("truth_file") else int(t.get("seed", seed)),
+                       t.get("truth_file"), t.get("truth_sha256"), bool(t.get("exact", False)))
+        for flag, given, rec in (("--errors", args.errors, ref.errors),
+                                 ("--truth", args.truth_in, ref.truth_file)):
+            if given is not None and str(given) != str(rec):
+                raise InputError(f"{flag} {given}: the run in {args.out} was made in "
+                                 f"{ref.describe()}; --resume continues it there")
+        return ref, int(t.get("seed", seed))
+    twin_seed = seed if args.twin_seed is None else args.twin_seed
+    if args.truth_in is not None:
+        recorded = truth_file_errors(args.truth_in)
+        if args.errors is not None and recorded is not None and args.errors != recorded:
+            raise InputError(f"--errors {args.errors}: {args.truth_in} was drawn in the "
+                             f"{recorded} world")
+        return WorldRef(args.errors or recorded or DEFAULT_PROFILE, None, str(args.truth_in),
+                        file_sha256(args.truth_in), args.exact), twin_seed
+    return WorldRef(args.errors or DEFAULT_PROFILE, twin_seed, exact=args.exact), twin_seed
 
 
 def run(args) -> int:
@@ -72,34 +85,29 @@ def run(args) -> int:
                                                     pose_list_planner, prepare, rerun_observer,
                                                     session_from_args)
     from planecal.links.base import AlwaysEnabled
+    from planecal.safety.collision import CollisionWorld
     from planecal.sampling.session import print_summary, run_session
-    from planecal.twin.profile import DEFAULT_PROFILE, save_truth
+    from planecal.twin.profile import save_truth
+    from planecal.twin.world import make_twin
 
-    scene, settings, side = prepare(args, also_out={"--truth-out": args.truth})
-    if side is not None:
-        twin_info = side.get("twin") or {}
-        twin_seed = int(twin_info.get("seed", settings.seed))
-        exact = bool(twin_info.get("exact", False))
-        errors = twin_info.get("errors", "ideal")  # runs before profiles: the ideal world
-        if args.errors is not None and args.errors != errors:
-            raise InputError(f"--errors {args.errors}: the run in {args.out} was sampled in "
-                             f"the {errors} world; --resume continues it there")
-    else:
-        twin_seed = settings.seed if args.twin_seed is None else args.twin_seed
-        exact = args.exact
-        errors = args.errors or DEFAULT_PROFILE
-    twin = make_twin(scene, twin_seed, errors, exact)
-    checker = make_checker(scene, settings.clearance_m)
-    if args.truth:
+    scene, settings, side = prepare(args, also_out={"--truth-out": args.truth_out},
+                                    also_in=[args.truth_in])
+    ref, twin_seed = world_ref(args, side, settings.seed)
+    twin = make_twin(scene, ref, twin_seed)
+    checker = CollisionWorld(scene, clearance_m=settings.clearance_m)
+    errors = ref.errors
+    if args.truth_out:
         try:
-            save_truth(args.truth, twin)
+            save_truth(args.truth_out, twin, errors, ref.truth_seed)
         except OSError as e:
-            raise InputError(f"--truth-out {args.truth}: cannot write ({e.strerror})") from None
+            raise InputError(f"--truth-out {args.truth_out}: cannot write ({e.strerror})") from None
     observer = rerun_observer(args.rrd, scene, twin) if args.rrd else None
     model = command_model(args, scene, side)
     session = session_from_args(args, pose_list_planner(args, scene, settings, checker, model[0]),
-                                observer, extra={"twin": {"seed": twin_seed, "exact": exact,
-                                                          "errors": str(errors)}},
+                                observer, extra={"twin": {"seed": twin_seed, "exact": ref.exact,
+                                                          "errors": str(errors),
+                                                          "truth_file": ref.truth_file,
+                                                          "truth_sha256": ref.truth_sha256}},
                                 model=model)
     try:
         code, summary = run_session(session, scene, settings, twin, twin, AlwaysEnabled(),
@@ -116,8 +124,10 @@ def run(args) -> int:
     if args.foreground:
         summary["collision"] = checker.summary()
     summary["cpu_count"] = os.cpu_count()
-    if args.truth:
-        summary["truth"] = str(args.truth)
+    if args.truth_out:
+        summary["truth"] = str(args.truth_out)
+    if args.truth_in:
+        summary["world"] = ref.describe()
     if settings.pose.fixed_distance_mm is not None:
         summary["fixed_distance"] = fixed_distance_summary(args.out, settings, model[1])
     if args.rrd:

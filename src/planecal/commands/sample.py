@@ -273,7 +273,7 @@ def _record_link(out: Path, real_cell: dict) -> None:
 def run(args) -> int:
     from dataclasses import asdict
 
-    from planecal.commands.rehearse import make_checker
+    from planecal.safety.collision import CollisionWorld
     from planecal.commands.sampling_options import command_model, prepare, rerun_observer
     from planecal.links.zs_ld80 import NO_READING, ZSLD80, LaserError
     from planecal.sampling.enable import FollowingMonitor
@@ -283,7 +283,7 @@ def run(args) -> int:
     robot = scene.robot
     limit = _check_link_flags(args, robot)
     model = command_model(args, scene, side)
-    checker = make_checker(scene, settings.clearance_m)
+    checker = CollisionWorld(scene, clearance_m=settings.clearance_m)
     cell = Controller(args, robot)  # nothing sent yet; a run that cannot tell asks here
     observer = raw_laser = None
     try:

@@ -139,18 +139,20 @@ def _inputs(args) -> list:
     return [args.poses, args.params, args.encoder_offsets]
 
 
-def prepare(args, default_samples: int = 150, also_out: dict | None = None):
+def prepare(args, default_samples: int = 150, also_out: dict | None = None,
+            also_in: list | None = None):
     """(scene, settings, sidecar or None) for a new run or a resumed one; refuses to
     overwrite an existing sample file without --resume or --force. The outputs (``--out``,
-    its sidecar, and ``also_out``: flag -> path, e.g. rehearse's ``--truth``) are checked
-    before anything runs: none is an input, a directory, or in a place that cannot be
-    written (``planecal.io.outputs.check_output``)."""
+    its sidecar, and ``also_out``: flag -> path, e.g. rehearse's ``--truth-out``) are
+    checked before anything runs: none is an input (``also_in`` too: rehearse's
+    ``--truth``), a directory, or in a place that cannot be written
+    (``planecal.io.outputs.check_output``)."""
     from planecal.io.outputs import check_output
     from planecal.io.params import PARAMS_FORMAT
     from planecal.model.scene import DEFAULT_SCENE, load_scene
 
     out = Path(args.out)
-    inputs = _inputs(args)
+    inputs = _inputs(args) + [p for p in also_in or [] if p is not None]
     check_output(out, inputs, force=True)  # existing: the --resume/--force rule below
     check_output(sidecar_path(out), inputs, fmt="planecal-run/1", force=True,
                  what="--out's sidecar")

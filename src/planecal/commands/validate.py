@@ -224,44 +224,23 @@ def _detail(v: dict) -> dict:
 
 
 def _validate_given(args, scene, st) -> dict:
-    """--calibrated/--truth/--run: one calibration in the world its truth file holds."""
-    from pathlib import Path
-
+    """--calibrated/--truth/--run: one calibration in the world it was made in: the truth
+    file's world, with the error profile the truth file or the run's sidecar records
+    (``twin.world.recorded_world``; --errors only where neither does, and never against
+    them)."""
     from planecal.safety.collision import CollisionWorld
     from planecal.io.params import load_params
     from planecal.io.samples import read_samples
-    from planecal.sampling.runfiles import sidecar_path
-    from planecal.twin.world import sources_on
+    from planecal.twin.world import recorded_world, sources_on
     from planecal.studies.validation import FORMAT, truth_row, validate
     from planecal.present.validation import format_validation
-    from planecal.twin.profile import DEFAULT_PROFILE, load_profile, load_world
+    from planecal.twin.profile import load_profile
 
-    calibrated = load_params(args.calibrated)
-    world = load_world(scene, args.truth)
+    calibrated = load_params(args.calibrated, scene.robot)
     qe = read_samples(args.run).qe
-    errors, why = args.errors, "--errors"
-    if errors is None:
-        side = sidecar_path(args.run)
-        twin = {}
-        if Path(side).exists():
-            from planecal.sampling.runfiles import load_sidecar
-            twin = load_sidecar(args.run).get("twin") or {}
-        if "errors" in twin:
-            errors, why = twin["errors"], f"the run's sidecar {side}"
-        elif world.kinematics is None and not world.gear_phases:
-            errors, why = "ideal", f"{args.truth} holds no world"
-        else:
-            errors, why = DEFAULT_PROFILE, "the default"
-    profile = load_profile(errors, scene.robot)
-    opts = profile.options()
-    if len(world.gear_phases) != len(opts.gear):
-        raise InputError(f"--truth {args.truth}: its world has {len(world.gear_phases)} gear "
-                         f"phases, the {profile.name} profile ({why}) {len(opts.gear)} gear "
-                         "harmonics: give the --errors the truth was drawn with")
-    if profile.doc.geometry is not None and world.kinematics is None:
-        raise InputError(f"--truth {args.truth}: no robot geometry in the file (no 'world'), "
-                         f"but the {profile.name} profile ({why}) has geometric errors: "
-                         "give --errors ideal, or the truth file rehearse --truth wrote")
+    ref = recorded_world(scene, args.run, args.truth, args.errors, None, default="ideal")
+    world, opts = ref.build(scene)
+    profile = load_profile(ref.errors, scene.robot)
     checker = CollisionWorld(scene, clearance_m=st.clearance_m)
     v = validate(scene, world, calibrated, qe, st, checker, None, opts)
     v["scene"] = scene.name
@@ -269,7 +248,8 @@ def _validate_given(args, scene, st) -> dict:
     v["truth_offsets_rad"] = world.params.joint_offsets
     v["calibrated_offsets_rad"] = calibrated.joint_offsets
     v["sources"] = sources_on(scene.robot, world, opts)
-    print(f"{profile.name} world ({why}); error sources: {', '.join(v['sources']) or 'none'}")
+    v["world"] = ref.to_dict()
+    print(f"{ref.describe()}; error sources: {', '.join(v['sources']) or 'none'}")
     print(format_validation(v))
     row = {**truth_row({**v, "truth_seed": None}), "truth_file": str(args.truth)}
     return {"format": FORMAT, "errors": profile.name, "profile": str(profile.path),

@@ -8,17 +8,18 @@ Reported per sample: the measured distance, the twin's ray cast, the analytic mo
 floor, nothing). The twin places each plate by the scene's corner and size on the given
 plane: where the beam misses the plate (plate too small or placed elsewhere) the ray hits
 something else or nothing and that sample is listed as such, not compared.
-Summary: mean, std and max |measured - twin| over plate hits, and max |twin - analytic|
-(the ray cast against a box geom agrees with the analytic plane to ~1e-12 m).
+Summary: mean, std and max |twin - measured| over plate hits (the twin predicts, the
+laser measured: predicted - measured, planecal's one sign), and max |twin - analytic| (the
+ray cast against a box geom agrees with the analytic plane to ~1e-12 m).
 
-In the world of an error profile (``replay_world``: ``--errors realistic``), the twin's
-robot is that world's -- the true geometry and gear phases drawn for a truth seed
-(``twin.profile.draw_world``), the cell (offsets, sensor pose, planes) still the given
-parameters -- and at each sample's counts its joints carry the profile's errors at rest
-(gravity compliance, gear error; backlash keeps its direction, the noise is off: the
-replay is deterministic). ``twin - analytic`` is then what the world's errors the model
-lacks do to each distance, and ``measured - twin`` compares the real robot with a robot
-of that class rather than with the ideal one.
+In a world (``replay_world``: a ``twin.world.WorldRef``: an error profile and a truth seed,
+or a truth file), the twin's robot is that world's -- its true geometry and gear phases,
+the cell (offsets, sensor pose, planes) still the given parameters -- and at each sample's
+counts its joints carry the profile's errors at rest (gravity compliance, gear error;
+backlash keeps its direction, the noise is off: the replay is deterministic).
+``twin - analytic`` is then what the world's errors the model lacks do to each distance,
+and ``twin - measured`` compares the real robot with a robot of that class rather than
+with the ideal one.
 """
 from __future__ import annotations
 
@@ -29,14 +30,13 @@ from planecal.model.measurement import predict
 from planecal.base.errors import InputError
 
 
-def replay_world(scene, params: CellParams, profile, truth_seed: int = 0):
-    """(world, options) of a replay in ``profile``'s world (module docstring): the world
-    drawn for ``truth_seed`` with the cell of ``params``, the profile's options with the
-    noise off (repeatability, quantisation, laser noise)."""
+def replay_world(scene, params: CellParams, ref):
+    """(world, options) of a replay in the world ``ref`` names (``twin.world.WorldRef``;
+    module docstring) with the cell of ``params``, the profile's options with the noise off
+    (repeatability, quantisation, laser noise)."""
     from dataclasses import replace
 
-    from planecal.twin.profile import draw_world
-    world, opts = draw_world(scene, truth_seed, profile)
+    world, opts = ref.build(scene)
     return (replace(world, params=params),
             replace(opts, repeatability_mm=0.0, quantization=False, laser_noise_mm=0.0))
 
@@ -72,11 +72,11 @@ def replay(scene, params: CellParams, qe: np.ndarray, d_mm: np.ndarray,
             "index": i, "measured_mm": float(d_mm[i]), "twin_mm": t_mm,
             "analytic_mm": float(analytic[i]), "hit": h.name or "nothing",
             "on_plate": bool(on_plate), "edge_margin_mm": float(margins[i] * 1e3),
-            "measured_minus_twin_mm": None if (t_mm is None or not on_plate) else float(d_mm[i] - t_mm),
+            "twin_minus_measured_mm": None if (t_mm is None or not on_plate) else float(t_mm - d_mm[i]),
             "twin_minus_analytic_mm": None if (t_mm is None or not on_plate) else float(t_mm - analytic[i]),
         })
     hits = [r for r in rows if r["on_plate"]]
-    diff = np.array([r["measured_minus_twin_mm"] for r in hits])
+    diff = np.array([r["twin_minus_measured_mm"] for r in hits])
     agree = np.array([r["twin_minus_analytic_mm"] for r in hits])
     summary = {
         "samples": n, "plate_hits": len(hits), "misses": n - len(hits),

@@ -459,6 +459,12 @@ class Twin:
         return self._world.kinematics
 
     @property
+    def world(self):
+        """The twin's world (``twin.truth.Truth``: cell, true geometry, phases). Calibration
+        code must not read it."""
+        return self._world
+
+    @property
     def qpos(self) -> np.ndarray:
         """The true joint angles q + delta (+ joint errors) in MuJoCo, rad."""
         return self._F[T.QNOW:T.QNOW + 6].copy()

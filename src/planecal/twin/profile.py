@@ -121,15 +121,17 @@ def draw_world(scene: Scene, seed: int, profile: ErrorProfile) -> tuple[Truth, T
     return Truth(params, kin, phases, laser), profile.options()
 
 
-def save_truth(path, twin) -> None:
+def save_truth(path, twin, errors: str | None = None, truth_seed: int | None = None) -> None:
     """The twin's hidden truth as a parameter file (``params``: what a level-1 calibration
-    is compared with), plus the world it was drawn in: the robot's true geometry and the
-    gear phases (``world``; extra keys a parameter-file reader keeps)."""
+    is compared with), plus the world it was drawn in: the error profile and seed it was
+    drawn with, the robot's true geometry and the gear phases (``world``; extra keys a
+    parameter-file reader keeps)."""
     from planecal.io.params import PARAMS_FORMAT, params_to_dict, save_json
     doc = {"format": PARAMS_FORMAT, **params_to_dict(twin.truth)}
     kin = twin.true_kinematics
-    world = {"gear_phases_rad": list(twin._world.gear_phases),
-             "laser_linearity_phases_rad": list(twin._world.laser_phases)}
+    world = {"errors": None if errors is None else str(errors), "truth_seed": truth_seed,
+             "gear_phases_rad": list(twin.world.gear_phases),
+             "laser_linearity_phases_rad": list(twin.world.laser_phases)}
     if kin is not None:
         world["kinematics"] = {"alpha_rad": kin.alpha.tolist(), "a_m": kin.a.tolist(),
                                "beta_rad": kin.beta.tolist(), "theta_rad": kin.theta.tolist(),
@@ -152,6 +154,8 @@ class _KinematicsDoc(Record):
 
 
 class _WorldDoc(Record):
+    errors: str | None = None
+    truth_seed: int | None = None
     gear_phases_rad: list[Num] = []
     laser_linearity_phases_rad: Vector(Num, 2) = [0.0, 0.0]
     kinematics: _KinematicsDoc | None = None
@@ -191,3 +195,12 @@ def load_world(scene: Scene, path) -> Truth:
                          frames["flange"])
     return Truth(params, kin, tuple(float(v) for v in w.gear_phases_rad),
                  tuple(float(v) for v in w.laser_linearity_phases_rad))
+
+
+def truth_file_errors(path) -> str | None:
+    """The error profile a truth file says its world was drawn with (``save_truth``), or
+    None (a file written before it recorded it, or by hand)."""
+    doc = read_json(path, "truth file")
+    w = doc.get("world") if isinstance(doc, dict) else None
+    e = w.get("errors") if isinstance(w, dict) else None
+    return e if isinstance(e, str) else None

@@ -12,6 +12,7 @@ and its hash), so a replay, a validation or the API rebuilds the same world from
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -85,9 +86,74 @@ class WorldRef:
             if self.truth_sha256 is not None and file_sha256(self.truth_file) != self.truth_sha256:
                 raise InputError(f"{self.truth_file}: the truth file changed since the run was "
                                  "made in its world (its SHA-256 differs)")
-            return load_world(scene, self.truth_file), opts
+            world = load_world(scene, self.truth_file)
+            check_world(world, profile, self.truth_file)
+            return world, opts
         world, _ = draw_world(scene, int(self.truth_seed or 0), profile)
         return world, opts
+
+    def describe(self) -> str:
+        """In words: 'the realistic world of truth seed 3', 'the world of t.json (...)'."""
+        name = Path(self.errors).stem if "/" in self.errors else self.errors
+        if self.truth_file is not None:
+            return f"the world of {self.truth_file} ({name} errors)"
+        return f"the {name} world of truth seed {self.truth_seed}"
+
+
+def check_world(world: Truth, profile: ErrorProfile, where) -> None:
+    """InputError where a truth file's world cannot be the profile's: another count of gear
+    phases, or no geometry for a profile that draws one."""
+    opts = profile.options()
+    if len(world.gear_phases) != len(opts.gear):
+        raise InputError(f"{where}: its world has {len(world.gear_phases)} gear phases, the "
+                         f"{profile.name} profile {len(opts.gear)} gear harmonics: give the "
+                         "--errors the truth was drawn with")
+    if profile.doc.geometry is not None and world.kinematics is None:
+        raise InputError(f"{where}: no robot geometry in the file (no 'world'), but the "
+                         f"{profile.name} profile has geometric errors: give --errors ideal, "
+                         "or a truth file rehearse --truth-out wrote")
+
+
+def recorded_world(scene: Scene, sample_file=None, truth_file=None, errors: str | None = None,
+                   truth_seed: int | None = None, default: str = "realistic") -> WorldRef:
+    """The world a run was made in, from what travels with its files: the truth file
+    (``rehearse --truth-out``: its world and error profile), the sample file's sidecar
+    (the twin's error profile and seed, or the truth file it ran in). ``errors`` and
+    ``truth_seed`` given by hand must agree with them (InputError naming both); where
+    nothing is recorded they choose the world (``default`` profile, seed 0)."""
+    from planecal.sampling.runfiles import load_sidecar, sidecar_path
+    from planecal.twin.profile import truth_file_errors
+    rec = {}
+    if sample_file is not None and Path(sidecar_path(sample_file)).exists():
+        twin = load_sidecar(sample_file).get("twin") or {}
+        rec = {"errors": twin.get("errors"), "truth_seed": twin.get("seed"),
+               "truth_file": twin.get("truth_file"), "truth_sha256": twin.get("truth_sha256"),
+               "exact": bool(twin.get("exact", False)), "where": str(sidecar_path(sample_file))}
+    if truth_file is not None:
+        t_err = truth_file_errors(truth_file)
+        if t_err is not None and rec.get("errors") not in (None, t_err):
+            raise InputError(f"{truth_file}: drawn in the {t_err} world, but {rec['where']} "
+                             f"says the run was made in the {rec['errors']} world")
+        rec.update(errors=t_err or rec.get("errors"), truth_file=str(truth_file),
+                   truth_sha256=file_sha256(truth_file), where=str(truth_file))
+    for flag, key, given in (("--errors", "errors", errors), ("--truth-seed", "truth_seed",
+                                                              truth_seed)):
+        if given is None:
+            continue
+        if rec.get(key) is not None and str(rec[key]) != str(given):
+            raise InputError(f"{flag} {given}: {rec['where']} records "
+                             f"{key.replace('_', ' ')} {rec[key]}: the run was made there")
+        rec[key] = given
+    return WorldRef(str(rec.get("errors") or default),
+                    None if rec.get("truth_file") else int(rec.get("truth_seed") or 0),
+                    rec.get("truth_file"), rec.get("truth_sha256"), bool(rec.get("exact")))
+
+
+def make_twin(scene: Scene, ref: WorldRef, seed: int):
+    """The twin of a world reference; ``seed`` its noise's."""
+    from planecal.twin import Twin
+    world, opts = ref.build(scene)
+    return Twin(scene, truth=world, seed=seed, options=opts)
 
 
 def file_sha256(path) -> str:

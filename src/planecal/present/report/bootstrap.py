@@ -39,6 +39,17 @@ def fig_spread(out, res, group, names):
     for ax, n in zip(axes.flat, names):
         obs, ind, rep = (_series(res, n, k) for k in ("std", "std_independent", "reported_std"))
         allv = np.concatenate([obs, ind, rep])
+        top = np.nanmax(np.abs(allv)) if np.isfinite(allv).any() else 0.0
+        # a spread at rounding level is no spread: it has no place on a log axis
+        flat = [int(s) for s, v in zip(N, obs) if np.isfinite(v) and v <= 1e-9 * top]
+        obs = np.where(obs > 1e-9 * top, obs, np.nan)
+        ind = np.where(ind > 1e-9 * top, ind, np.nan)
+        if not (np.isfinite(obs).any() or np.isfinite(rep).any()):
+            ax.text(0.5, 0.5, f"{label(n)}: no spread (every subset gave the same value)",
+                    ha="center", va="center", transform=ax.transAxes, fontsize=9, wrap=True)
+            ax.set_axis_off()
+            continue
+        allv = np.concatenate([obs, ind, rep])
         scale, unit = display_scale(parameter_unit(n), allv[np.isfinite(allv)])
         ok = np.isfinite(ind) & (ind > 0)
         ax.loglog(N, obs * scale, "o", mfc="white", color=AFTER, label="observed spread")
@@ -54,6 +65,8 @@ def fig_spread(out, res, group, names):
             b = slope(N, ind)
             if b is not None:
                 title += f": slope {b:+.2f}"
+        if flat:
+            title += f" (no spread at {', '.join(map(str, flat))})"
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("subset size [samples]")
         ax.set_ylabel(f"std of {label(n)} [{unit}]")

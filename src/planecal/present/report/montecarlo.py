@@ -39,16 +39,22 @@ def fig_errors(out, group, names, free, E, C, params):
     bins = int(np.clip(2 * np.sqrt(R), 5, 40))
     for ax, n in zip(axes.flat, names):
         i = free.index(n)
-        e, c = E[:, i], C[:, i]
+        ok = np.isfinite(E[:, i]) & np.isfinite(C[:, i])  # the runs that fitted it
+        e, c = E[ok, i], C[ok, i]
+        if not e.size:
+            ax.text(0.5, 0.5, f"{label(n)}: no run fitted it", ha="center", va="center",
+                    transform=ax.transAxes, fontsize=9)
+            ax.set_axis_off()
+            continue
         scale, unit = display_scale(parameter_unit(n), np.concatenate([e, 4 * c]))
         half = max(np.max(np.abs(e)), 4 * np.max(c)) * scale * 1.02
         edges = np.linspace(-half, half, bins + 1)
         ax.hist(e * scale, bins=edges, color=AFTER, alpha=0.75, edgecolor="white",
-                label=f"{R} runs")
+                label=f"{len(e)} runs")
         # expected runs per bin: the mixture's probability of each bin (exact for any
         # binning, also when the runs' bounds differ a lot, as delta5's do)
         cdf = np.mean([stats.norm.cdf(edges, 0.0, ci * scale) for ci in c], axis=0)
-        ax.stairs(R * np.diff(cdf), edges, color="black", linewidth=1.5,
+        ax.stairs(len(e) * np.diff(cdf), edges, color="black", linewidth=1.5,
                   label="expected runs per bin (CRB)")
         ax.set_xlabel(f"error of {label(n)} [{unit}]")
         ax.set_ylabel("runs")
@@ -69,16 +75,26 @@ def fig_normalized(out, free, E, C, params):
     bound holds run by run (what std(e/CRB) in the table measures)."""
     from scipy import stats
     R = len(E)
-    Z = E / C
+    with np.errstate(invalid="ignore", divide="ignore"):
+        Z = np.asarray(E, float) / np.asarray(C, float)
     rows, cols = grid_shape(len(free), 4)
-    fig, axes = new_figure(3.0 * cols + 0.4, 2.5 * rows + 0.7, rows, cols, sharex=True)
-    half = max(4.0, float(np.max(np.abs(Z))) * 1.02)
-    edges = np.linspace(-half, half, int(np.clip(2 * np.sqrt(R), 5, 40)) + 1)
+    fig, axes = new_figure(3.0 * cols + 0.4, 2.5 * rows + 0.7, rows, cols)
     for ax, n in zip(axes.flat, free):
         z = Z[:, free.index(n)]
-        ax.hist(z, bins=edges, color=AFTER, alpha=0.75, edgecolor="white", label=f"{R} runs")
-        ax.stairs(R * np.diff(stats.norm.cdf(edges)), edges, color="black", linewidth=1.5,
-                  label="expected runs per bin, N(0, 1)")
+        z = z[np.isfinite(z)]
+        if not z.size:  # no run fitted it (another base set each run): say so
+            ax.text(0.5, 0.5, f"{label(n)}: no run fitted it", ha="center", va="center",
+                    transform=ax.transAxes, fontsize=9)
+            ax.set_axis_off()
+            continue
+        # each panel on its own axis: a parameter whose errors sit far out must not squeeze
+        # the others into one bar
+        half = max(4.0, float(np.max(np.abs(z))) * 1.02)
+        edges = np.linspace(-half, half, int(np.clip(2 * np.sqrt(len(z)), 5, 40)) + 1)
+        ax.hist(z, bins=edges, color=AFTER, alpha=0.75, edgecolor="white",
+                label=f"{R} runs")
+        ax.stairs(len(z) * np.diff(stats.norm.cdf(edges)), edges, color="black",
+                  linewidth=1.5, label="expected runs per bin, N(0, 1)")
         ax.set_title(f"{label(n)}: std {params[n]['normalized_std']:.2f}", fontsize=9)
         integer_y(ax)
     for ax in axes[-1]:
@@ -200,8 +216,10 @@ def build(ctx: Context) -> Page:
     res = ctx.doc
     st = res.get("settings", {})
     free = list(res["free"])
-    E = np.asarray(res.get("run_errors", []), float)
-    C = np.asarray(res.get("run_crb_std", []), float)
+    E = np.array([[np.nan if v is None else v for v in row]
+                  for row in res.get("run_errors", [])], float)
+    C = np.array([[np.nan if v is None else v for v in row]
+                  for row in res.get("run_crb_std", [])], float)
     out = ctx.out_dir
     page = Page("Monte Carlo study",
                 f"Scene {st.get('scene', '?')}, mode {st.get('mode', '?')}: {res['runs']} runs of "
