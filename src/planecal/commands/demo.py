@@ -86,14 +86,14 @@ def run(args) -> int:
     from planecal.studies.validation import ValidationSettings, validate
     from planecal.twin.profile import load_profile, load_world
 
+    scene = load_scene(args.scene)  # a bad scene or --errors before any folder is made
+    profile = load_profile(args.errors, scene.robot)
     out = Path(args.dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"--dir {out}: cannot create ({e.strerror})") from None
     run_file, truth_file, result_file = _check_outputs(out, args.force)
-    scene = load_scene(args.scene)
-    profile = load_profile(args.errors, scene.robot)  # a bad --errors before any work
     rp = argparse.ArgumentParser(prog="planecal rehearse")
     rehearse.add_arguments(rp)
     argv = ["--out", str(run_file), "--truth", str(truth_file), "--force",

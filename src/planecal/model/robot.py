@@ -16,7 +16,7 @@ import numpy as np
 from planecal.base.errors import InputError
 from planecal.formats.base import read_json, validate
 from planecal.formats.robot import RobotFile
-from planecal.base.paths import data_path
+from planecal.base.paths import data_folder
 
 DEFAULT_ROBOT = "mc70"
 
@@ -52,7 +52,7 @@ def load_robot(name_or_path: str | Path = DEFAULT_ROBOT) -> Robot:
     Validated by ``planecal.formats.robot.RobotFile``; one-line InputError otherwise."""
     p = Path(name_or_path)
     if not p.suffix and len(p.parts) == 1:  # a name, not a path
-        p = data_path("models") / str(name_or_path) / "robot.json"
+        p = data_folder("models") / str(name_or_path) / "robot.json"
     rf = validate(RobotFile, read_json(p, "robot description"), p, "robot description")
     enc, ctrl = rf.encoder, rf.controller
     return Robot(
