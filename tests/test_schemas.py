@@ -194,8 +194,15 @@ def test_robot_values_reach_the_robot(tmp_path):
      "plates[1].n_tilde: |n~| = 1e+06 1/m puts the plane 1e-06 m from the base origin "
      "(plausible: 0.01 to 100 m; n~ cannot describe a plane through the origin)"),
     (("plates", 2, "corner_m"), [0.3805, -1.0568, 1.8283],
-     "plates[2].corner_m: the corner is 0.549 m off the plane n~ . p = 1 (at most 0.1 m): "
-     "corner and n~ describe different plates"),
+     "plates[2].corner_m: plate 'plate_c': the corner is 548.6 mm off the plane n~ . p = 1 "
+     "(at most 5 mm): corner and n~ describe different plates"),
+    # 84 mm off (issue 25: accepted before), and just past the tolerance either side
+    (("plates", 0, "corner_m"), [0.729, 0.737, 0.484 + 0.084 * 3.7691 / 3.62708],
+     "plates[0].corner_m: plate 'plate_a': the corner is 84.0 mm off the plane n~ . p = 1 "
+     "(at most 5 mm): corner and n~ describe different plates"),
+    (("plates", 0, "corner_m"), [0.729, 0.737, 0.484 - 0.0051 * 3.7691 / 3.62708],
+     "plates[0].corner_m: plate 'plate_a': the corner is 5.1 mm off the plane n~ . p = 1 "
+     "(at most 5 mm): corner and n~ describe different plates"),
     (("plates", 2, "x_axis"), [0.515464, -1.649485, -1.134021],
      "plates[2].x_axis: lies along the plate's normal: it gives no in-plane direction"),
     (("plates", 2, "face"), 0,
