@@ -152,7 +152,7 @@ def test_level_and_seed_errors(capsys):
         calibrate_run(load_scene("thesis_final"), np.zeros((0, 6)), np.zeros(0),
                       np.zeros(0, int), "level3")
     assert main(["validate", "--truth-seeds", "0,0"]) == 2
-    assert "a seed twice" in capsys.readouterr().err
+    assert "argument --truth-seeds: the seed 0 is given twice" in capsys.readouterr().err
     assert main(["validate", "--truth-seed", "1", "--truth-seeds", "2"]) == 2
     assert main(["validate", "--errors", "nonesuch"]) == 2
     assert main(["validate", "--calibrated", "x.json"]) == 2

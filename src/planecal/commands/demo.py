@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError, RunFailed
+from planecal.commands.value_options import seed
 from planecal.model.scene import DEFAULT_SCENE
 
 DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
@@ -32,7 +33,7 @@ DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
 def add_arguments(p):
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--samples", type=int, default=150, help="samples to take (default %(default)s)")
-    p.add_argument("--seed", type=int, default=1, help="seed of poses and twin truth (default %(default)s)")
+    p.add_argument("--seed", type=seed, default=1, help="seed of poses and twin truth (default %(default)s)")
     p.add_argument("--dir", default="runs/demo", help="output directory (default %(default)s)")
     p.add_argument("--errors", default="realistic", metavar="ideal|realistic|FILE.json",
                    help="the twin's error profile (default %(default)s)")

@@ -10,13 +10,14 @@ sensor pose, planes); --level full: the whole kinematic model's (level 2).
 from __future__ import annotations
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import seed
 
 
 def add_arguments(p):
     p.add_argument("--scene", default="three_plates", help="scene (default %(default)s)")
     p.add_argument("--samples", type=int, default=150,
                    help="poses per layout (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="pose draw seed (default %(default)s)")
+    p.add_argument("--seed", type=seed, default=0, help="pose draw seed (default %(default)s)")
     p.add_argument("--free", default=None,
                    help="parameters to test, comma-separated, or 'all' (default: the "
                         "calibration's default free set, delta1 and delta6 fixed)")
@@ -39,8 +40,6 @@ def run(args) -> int:
     from planecal.studies.layouts import FORMAT, format_layouts, layout_study
 
     out = check_output(args.out, [], FORMAT, args.force) if args.out else None
-    if args.seed < 0:
-        raise InputError(f"--seed must be >= 0, got {args.seed}")
     if not 0 < args.tol < 1:
         raise InputError(f"--tol must be in (0, 1), got {args.tol:g}")
     scene = load_scene(args.scene)

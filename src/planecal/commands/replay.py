@@ -12,6 +12,8 @@ Example: planecal replay examples/seed_samples.tsv --params examples/table10_par
 """
 from __future__ import annotations
 
+from planecal.commands.value_options import seed
+
 
 REPLAY_FORMAT = "planecal-replay/1"
 
@@ -23,7 +25,7 @@ def add_arguments(p):
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--errors", default="realistic", metavar="ideal|realistic|FILE.json",
                    help="the twin robot's error profile (default %(default)s)")
-    p.add_argument("--truth-seed", type=int, default=0,
+    p.add_argument("--truth-seed", type=seed, default=0,
                    help="seed of the world's geometry and gear phases (default 0)")
     p.add_argument("--out", help="write the per-sample table and summary (JSON) here")
 
