@@ -17,6 +17,7 @@ B.runs.jsonl next to it); --resume fits only the subsets not in it yet.
 from __future__ import annotations
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import seed
 
 FORMAT = "planecal-bootstrap/1"
 
@@ -27,7 +28,7 @@ def add_arguments(p):
     p.add_argument("--sizes", default="30,50,100,150",
                    help="comma-separated subset sizes (default %(default)s)")
     p.add_argument("--repeats", type=int, default=10, help="subsets per size (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the subsets")
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the subsets")
     p.add_argument("--initial", help="initial parameter file (default: the scene's nominal values)")
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values (default %(default)s)")
     p.add_argument("--free", help="comma-separated parameters to fit (default: all but delta1, delta6)")
@@ -61,17 +62,16 @@ def run(args) -> int:
     if args.out:
         check_output(args.out, args.samples + [args.initial], FORMAT, args.force)
     sizes = parse_int_list(args.sizes, "--sizes")
-    if args.seed < 0:
-        raise InputError(f"--seed must be >= 0, got {args.seed}")
     if args.max_iter < 1:
         raise InputError("--max-iter must be at least 1")
     samples, scene, initial = load_inputs(args)
     problem = build_problem(samples, scene, initial, args.free, FitOptions(max_iter=args.max_iter))
     settings = BootstrapSettings(tuple(sizes), args.repeats, args.seed)
     check_settings(problem, settings)  # before an engine starts
+    engine = engine_from_args(args)  # its options checked before any file
     results = results_path(args)
     check_results_path(results, args)
-    with engine_from_args(args) as engine:
+    with engine:
         res = bootstrap(problem, settings, engine, results=results, resume=args.resume)
     print(format_bootstrap(res, problem.layout))
     res = {"format": FORMAT, **res}
