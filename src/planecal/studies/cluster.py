@@ -223,9 +223,16 @@ def probe(addr: SchedulerAddress, security, timeout_s: float) -> None:
 
 
 def _tls_failure(e: OSError) -> str | None:
-    """The reason of the TLS error behind ``e`` (dask wraps it in CommClosedError), or
-    None."""
-    for err in (e, e.__cause__, e.__context__):
+    """The reason of the TLS error behind ``e``, or None. dask wraps it in CommClosedError
+    (the SSLError its cause), or, when the other side refused our certificate (an unknown
+    CA), raises FatalCommClosedError with the SSL error only in its message."""
+    from distributed.comm.core import FatalCommClosedError
+    err: BaseException | None = e
+    while err is not None:
         if isinstance(err, ssl.SSLError):
-            return str(err.reason or err)
+            return str(err)
+        err = err.__cause__ or err.__context__
+    if isinstance(e, FatalCommClosedError):
+        m = re.search(r"\[SSL: [^\]]*\][^(]*", str(e))
+        return m[0].strip() if m else str(e)
     return None
