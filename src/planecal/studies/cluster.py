@@ -196,8 +196,8 @@ def probe(addr: SchedulerAddress, security, timeout_s: float) -> None:
     from distributed.comm import connect
     args = security.get_connection_args("client") if security is not None else {}
 
-    async def handshake():
-        comm = await connect(str(addr), timeout=timeout_s, **args)
+    async def handshake():  # dask's own connect bound first: its error names the cause
+        comm = await connect(str(addr), timeout=0.75 * timeout_s, **args)
         await comm.close()
 
     def run():  # a loop of its own, in a thread of its own (the caller may be in a loop)

@@ -48,9 +48,10 @@ come back as lists; dict keys must be strings. ``resume`` refuses a file written
 another ``header`` (one line naming the first field that differs).
 
 Numba: the twin's tick is compiled once and cached on disk (``planecal.base.paths``:
-``~/.cache/planecal/numba`` by default; ``~7 s`` cold, ``~0.3 s`` to load). ``warmup`` (e.g. ``warm_twin``) runs first on one
-worker -- which compiles if the cache is cold and writes it -- and only then on every other
-worker, which load it: a cold start compiles once per cache folder, not once per worker.
+``~/.cache/planecal/numba`` by default; ``~7 s`` cold, ``~0.3 s`` to load). ``warmup``
+(e.g. ``warm_twin``) runs first on one worker -- which compiles if the cache is cold and
+writes it -- and only then on every other worker, which load it: a cold start compiles
+once per cache folder, not once per worker.
 """
 from __future__ import annotations
 
