@@ -14,16 +14,18 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from planecal.formats import schema_documents
-from planecal.base.paths import data_path
+
+SCHEMAS = Path(__file__).resolve().parents[1] / "docs" / "schemas"  # in this checkout
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="compare, do not write")
     args = ap.parse_args(argv)
-    out = data_path("docs", "schemas")
+    out = SCHEMAS
     docs = schema_documents()
     status = 0
     if args.check:

@@ -9,11 +9,11 @@ import pytest
 from conftest import INITIAL, perturbed, synthetic_counts
 from planecal.cli import main
 from planecal.io.params import save_params
-from planecal.base.paths import data_path
+from repo import repo_path
 from planecal.io.samples import write_samples
 
-SEED = str(data_path("examples", "seed_samples.tsv"))
-TABLE10 = str(data_path("examples", "table10_params.json"))
+SEED = str(repo_path("examples", "seed_samples.tsv"))
+TABLE10 = str(repo_path("examples", "table10_params.json"))
 
 
 def test_predict_prints_index_measured_predicted_error(capsys):

@@ -14,7 +14,6 @@ from planecal.model.scene import load_scene
 from planecal.twin.world import without
 from planecal.studies.replay import replay, replay_world
 from planecal.twin.world import WorldRef
-from planecal.twin.profile import load_profile
 
 
 @pytest.fixture(scope="module")
@@ -58,8 +57,8 @@ def test_realistic_geometry_against_the_analytic_true_kinematics(scene):
 
 
 def test_replay_command_errors(tmp_path, capsys):
-    from planecal.base.paths import data_path
-    ex = data_path("examples")
+    from repo import repo_path
+    ex = repo_path("examples")
     args = [str(ex / "seed_samples.tsv"), "--params", str(ex / "table10_params.json")]
     out = tmp_path / "R.json"
     assert main(["replay"] + args + ["--out", str(out)]) == 0

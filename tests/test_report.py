@@ -10,12 +10,12 @@ from PIL import Image
 
 from planecal.cli import main
 from planecal.base.errors import InputError
-from planecal.base.paths import data_path
+from repo import repo_path
 from planecal.present.report import detect_kind, write_report
 from planecal.present.report.figures import display_scale, num
 from planecal.present.report.inputs import sha256
 
-TABLE10 = str(data_path("examples", "table10_params.json"))
+TABLE10 = str(repo_path("examples", "table10_params.json"))
 
 
 @pytest.fixture(scope="session")

@@ -4,11 +4,11 @@ import pytest
 from conftest import SEED_DM, SEED_QE
 from planecal.base.errors import InputError
 from planecal.io.samples import HEADER, SampleWriter, read_samples, write_samples
-from planecal.base.paths import data_path
+from repo import repo_path
 
 
 def test_reads_the_seed_format(tmp_path):
-    s = read_samples(data_path("examples", "seed_samples.tsv"))  # comma decimals, header, CRLF
+    s = read_samples(repo_path("examples", "seed_samples.tsv"))  # comma decimals, header, CRLF
     np.testing.assert_array_equal(s.qe, SEED_QE)
     np.testing.assert_array_equal(s.d_mm, SEED_DM)
     assert s.n_zero == 0 and list(s.lines) == [2, 3, 4, 5, 6]
@@ -136,7 +136,7 @@ def test_plate_numbers_the_scene_lacks(tmp_path):
     p = tmp_path / "k.tsv"
     p.write_text(_rows([80, 81, 82], [1, 3, 4]))
     with pytest.raises(InputError, match=r"k.tsv:3: plate 4, but scene three_plates has 3 plates$"):
-        read_many([data_path("examples", "seed_samples.tsv"), p], load_scene("three_plates"))
+        read_many([repo_path("examples", "seed_samples.tsv"), p], load_scene("three_plates"))
     with pytest.raises(InputError, match=r"k.tsv:2: plate 3, but scene thesis_final has 1 plate$"):
         read_samples(p, load_scene("thesis_final"))
 

@@ -22,8 +22,8 @@ def scene():
 
 def two_plate_scene(tmp_path):
     raw = json.loads(load_scene("thesis_final").path.read_text())
-    p2 = dict(raw["plates"][0], name="plate2", corner_m=[0.30, 0.80, 0.50],
-              n_tilde=[0.0, -0.9, 3.6])
+    p2 = dict(raw["plates"][0], name="plate2", corner_m=[0.30, 0.805229, 0.479085],
+              n_tilde=[0.0, -0.9, 3.6])  # the corner on its plane (the scene check: 5 mm)
     raw["plates"].append(p2)
     path = tmp_path / "two.json"
     path.write_text(json.dumps(raw))

@@ -15,13 +15,14 @@ from planecal.formats import MODELS, load_sidecar, schema_documents, schema_file
 from planecal.formats.params import RESULT_FORMAT, ResultFile, provenance, result_document
 from planecal.io.params import load_params, params_to_dict, save_params
 from planecal.base.paths import data_path
+from repo import repo_path
 from planecal.model.robot import load_robot
 from planecal.model.scene import load_scene, nominal_params
 from planecal.studies.planning import load_poses
 
 ROBOT = json.loads(data_path("models", "mc70", "robot.json").read_text())
 SCENE = json.loads(data_path("scenes", "three_plates.json").read_text())
-PARAMS = json.loads(data_path("examples", "table10_params.json").read_text())
+PARAMS = json.loads(repo_path("examples", "table10_params.json").read_text())
 POSES = {"format": "planecal-poses/1", "scene": "thesis_final", "seed": 0, "samples": 2,
          "counts": [[8388608] * 6, [8388000, 8388608, 8388608, 8388608, 8388608, 8388608]],
          "plates": [0, 0]}
@@ -193,8 +194,15 @@ def test_robot_values_reach_the_robot(tmp_path):
      "plates[1].n_tilde: |n~| = 1e+06 1/m puts the plane 1e-06 m from the base origin "
      "(plausible: 0.01 to 100 m; n~ cannot describe a plane through the origin)"),
     (("plates", 2, "corner_m"), [0.3805, -1.0568, 1.8283],
-     "plates[2].corner_m: the corner is 0.549 m off the plane n~ . p = 1 (at most 0.1 m): "
-     "corner and n~ describe different plates"),
+     "plates[2].corner_m: plate 'plate_c': the corner is 548.6 mm off the plane n~ . p = 1 "
+     "(at most 5 mm): corner and n~ describe different plates"),
+    # 84 mm off (issue 25: accepted before), and just past the tolerance either side
+    (("plates", 0, "corner_m"), [0.729, 0.737, 0.484 + 0.084 * 3.7691 / 3.62708],
+     "plates[0].corner_m: plate 'plate_a': the corner is 84.0 mm off the plane n~ . p = 1 "
+     "(at most 5 mm): corner and n~ describe different plates"),
+    (("plates", 0, "corner_m"), [0.729, 0.737, 0.484 - 0.0051 * 3.7691 / 3.62708],
+     "plates[0].corner_m: plate 'plate_a': the corner is 5.1 mm off the plane n~ . p = 1 "
+     "(at most 5 mm): corner and n~ describe different plates"),
     (("plates", 2, "x_axis"), [0.515464, -1.649485, -1.134021],
      "plates[2].x_axis: lies along the plate's normal: it gives no in-plane direction"),
     (("plates", 2, "face"), 0,
@@ -276,7 +284,7 @@ def test_params_checks(tmp_path, path, value, message):
 
 
 def test_params_round_trip_with_format_and_old_files(tmp_path):
-    old = load_params(data_path("examples", "table10_params.json"))  # no format field
+    old = load_params(repo_path("examples", "table10_params.json"))  # no format field
     p = tmp_path / "p.json"
     save_params(p, old)
     written = json.loads(p.read_text())
@@ -286,7 +294,7 @@ def test_params_round_trip_with_format_and_old_files(tmp_path):
 
 
 def test_result_document_is_a_parameter_file_with_provenance(tmp_path):
-    samples = data_path("examples", "seed_samples.tsv")
+    samples = repo_path("examples", "seed_samples.tsv")
     params = nominal_params(load_scene("thesis_final"))
     k = params.n_planes
     result = {**params_to_dict(params),
@@ -432,7 +440,7 @@ def test_invalid_json_names_the_line(tmp_path):
 
 def test_published_schemas_are_current():
     """docs/schemas/ is what scripts/export_schemas.py makes from the models now."""
-    folder = data_path("docs", "schemas")
+    folder = repo_path("docs", "schemas")
     docs = schema_documents()
     assert sorted(p.name for p in folder.glob("*.schema.json")) == sorted(docs)
     for name, text in docs.items():
@@ -447,14 +455,14 @@ SHIPPED = [("planecal-robot/1", "models/mc70/robot.json"), ("planecal-robot/1", 
 
 @pytest.mark.parametrize("fmt, rel", SHIPPED)
 def test_an_independent_validator_accepts_the_shipped_files(fmt, rel):
-    schema = json.loads(data_path("docs", "schemas", schema_file_name(fmt)).read_text())
+    schema = json.loads(repo_path("docs", "schemas", schema_file_name(fmt)).read_text())
     jsonschema.Draft202012Validator.check_schema(schema)
-    jsonschema.Draft202012Validator(schema).validate(json.loads(data_path(rel).read_text()))
+    jsonschema.Draft202012Validator(schema).validate(json.loads(repo_path(rel).read_text()))
 
 
 @pytest.mark.parametrize("fmt, doc", [("planecal-poses/1", POSES), ("planecal-run/1", SIDECAR)])
 def test_an_independent_validator_agrees_on_written_files(fmt, doc):
-    schema = json.loads(data_path("docs", "schemas", schema_file_name(fmt)).read_text())
+    schema = json.loads(repo_path("docs", "schemas", schema_file_name(fmt)).read_text())
     v = jsonschema.Draft202012Validator(schema)
     v.validate(doc)
     # and refuses what the models refuse for the same reason (type, length, range)
@@ -468,7 +476,7 @@ def test_an_independent_validator_agrees_on_written_files(fmt, doc):
     (("encoder", "coupling", "+"), [7, 4, 0.1]),
 ])
 def test_schema_and_model_refuse_the_same_robot_files(tmp_path, path, value):
-    schema = json.loads(data_path("docs", "schemas", schema_file_name("planecal-robot/1")).read_text())
+    schema = json.loads(repo_path("docs", "schemas", schema_file_name("planecal-robot/1")).read_text())
     doc = mutated(ROBOT, path, value)
     assert not jsonschema.Draft202012Validator(schema).is_valid(doc)
     with pytest.raises(InputError):

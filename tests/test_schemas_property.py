@@ -35,6 +35,7 @@ from planecal.io.params import load_params
 from planecal.base.paths import data_path
 from planecal.model.kinematics import fk
 from planecal.model.robot import load_robot
+from repo import repo_path
 from planecal.io.samples import read_samples
 from planecal.model.scene import load_scene
 from planecal.studies.planning import load_poses
@@ -99,14 +100,14 @@ def _profile_ok(prof):
 
 
 def _result():
-    params = json.loads(data_path("examples", "table10_params.json").read_text())
+    params = json.loads(repo_path("examples", "table10_params.json").read_text())
     std = {"joint_offsets_rad": [None, 1e-4, 1e-4, 1e-4, 1e-4, None],
            "planes": [{"n_tilde": [1e-3] * 3}],
            "sensor": {"origin_m": [1e-4] * 3, "phi_y_rad": 1e-3, "phi_z_rad": 1e-3}}
     result = {**params, "std": std, "residual_rms_mm": 0.01, "residual_rms_initial_mm": 1.2,
               "residual_max_mm": 0.03, "iterations": 5, "converged": True, "outliers": [3],
               "samples_used": 4, "identifiability": {"sigma_mm": 0.01}, "free": ["delta2"]}
-    samples = data_path("examples", "seed_samples.tsv")
+    samples = repo_path("examples", "seed_samples.tsv")
     return result_document(result, provenance([("samples", samples)], "thesis_final", "mc70"))
 
 
@@ -117,7 +118,7 @@ READERS = {
     SCENE_FORMAT: (load_scene, json.loads(data_path("scenes", "three_plates.json").read_text()),
                    _scene_ok),
     PARAMS_FORMAT: (load_params,
-                    json.loads(data_path("examples", "table10_params.json").read_text()),
+                    json.loads(repo_path("examples", "table10_params.json").read_text()),
                     _params_ok),
     RESULT_FORMAT: (load_params, _result(), _params_ok),
     POSES_FORMAT: (load_poses, POSES, _poses_ok),
@@ -248,7 +249,7 @@ def test_valid_documents_are_read():
 
 # ----- sample files ------------------------------------------------------------------------
 
-SAMPLES = data_path("examples", "seed_samples.tsv").read_bytes()
+SAMPLES = repo_path("examples", "seed_samples.tsv").read_bytes()
 
 
 def sample_outcome(data: bytes):

@@ -124,8 +124,8 @@ def test_replay_seed_samples_in_the_twin():
 
 
 def test_replay_command(tmp_path, capsys):
-    from planecal.base.paths import data_path
-    ex = data_path("examples")
+    from repo import repo_path
+    ex = repo_path("examples")
     out = tmp_path / "R.json"
     assert main(["replay", str(ex / "seed_samples.tsv"), "--params",
                  str(ex / "table10_params.json"), "--out", str(out)]) == 0

@@ -13,12 +13,12 @@ from planecal.model.measurement import sensor_in_base  # noqa: E402
 from planecal.cli import main  # noqa: E402
 from planecal.model.geometry import robot_link_meshes, sensor_pose, tool_meshes  # noqa: E402
 from planecal.io.params import load_params  # noqa: E402
-from planecal.base.paths import data_path  # noqa: E402
+from repo import repo_path  # noqa: E402
 from planecal.model.kinematics import fk, link_frames  # noqa: E402
 from planecal.model.scene import load_scene, nominal_params  # noqa: E402
 from planecal.io.urdf import urdf_text  # noqa: E402
 
-TABLE10 = str(data_path("examples", "table10_params.json"))
+TABLE10 = str(repo_path("examples", "table10_params.json"))
 
 
 def _random_q(robot, rng, n):

@@ -150,7 +150,7 @@ def test_level_and_seed_errors(capsys):
     assert main(["validate", "--level", "level3"]) == 2
     assert "--level" in capsys.readouterr().err
     assert main(["validate", "--truth-seeds", "0,0"]) == 2
-    assert "a seed twice" in capsys.readouterr().err
+    assert "argument --truth-seeds: the seed 0 is given twice" in capsys.readouterr().err
     assert main(["validate", "--truth-seed", "1", "--truth-seeds", "2"]) == 2
     assert main(["validate", "--errors", "nonesuch"]) == 2
     assert main(["validate", "--calibrated", "x.json"]) == 2

@@ -58,14 +58,38 @@ class UsageError(InputError):
 class Parser(argparse.ArgumentParser):
     """One line for a usage error, with a pointer to --help (exit 2). No abbreviations: an
     option is taken only by its whole name, so an input flag (``--truth``) can never
-    resolve to an output flag (``--truth-out``)."""
+    resolve to an output flag (``--truth-out``). Remembers its long options without the
+    dashes (``long_options``: what a ``--config`` table may name), those of its argument
+    groups included."""
 
     def __init__(self, *args, **kwargs):
         kwargs["allow_abbrev"] = False
+        self.long_options: set[str] = set()  # before argparse adds --help
+        self.commands: dict[str, Parser] = {}  # the top-level parser's commands
         super().__init__(*args, **kwargs)
 
     def error(self, message):
         raise UsageError(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+    def _recording(self, add):
+        def add_argument(*args, **kwargs):
+            action = add(*args, **kwargs)
+            self.long_options.update(s[2:] for s in action.option_strings if s.startswith("--"))
+            return action
+        return add_argument
+
+    def add_argument(self, *args, **kwargs):
+        return self._recording(super().add_argument)(*args, **kwargs)
+
+    def add_argument_group(self, *args, **kwargs):
+        group = super().add_argument_group(*args, **kwargs)
+        group.add_argument = self._recording(group.add_argument)
+        return group
+
+    def add_mutually_exclusive_group(self, **kwargs):
+        group = super().add_mutually_exclusive_group(**kwargs)
+        group.add_argument = self._recording(group.add_argument)
+        return group
 
 
 class DefaultsFormatter(argparse.RawDescriptionHelpFormatter):
@@ -94,8 +118,9 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="no progress and notes on stderr; errors only")
 
 
-def build_parser(argv: list[str], full: bool = False) -> argparse.ArgumentParser:
-    """The parser; only the command in ``argv`` gets its arguments (all with ``full``)."""
+def build_parser(argv: list[str], full: bool = False) -> Parser:
+    """The parser; only the command in ``argv`` gets its arguments (all with ``full``).
+    ``parser.commands`` holds each command's own parser."""
     parser = Parser(prog="planecal", description=__doc__.split("\n\n")[0].replace("\n", " "),
                     epilog=EPILOG, formatter_class=DefaultsFormatter)
     parser.add_argument("--version", action="version", version=f"planecal {__version__}")
@@ -106,16 +131,20 @@ def build_parser(argv: list[str], full: bool = False) -> argparse.ArgumentParser
     for name, help_text in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text, epilog=EPILOG,
                            formatter_class=DefaultsFormatter)
+        parser.commands[name] = p
         if full or name == wanted:
             _module(name).add_arguments(p)
             _common(p)
     return parser
 
 
-def _config_argv(path: str, command: str) -> list[str]:
+def _config_argv(path: str, command: str, options: set[str]) -> list[str]:
     """The options of the ``[command]`` table of a TOML file, as command-line tokens (so
     argparse checks them as if typed): ``key = value`` is ``--key value``, a list gives
-    several values, ``key = true`` a flag. One-line errors name the file."""
+    several values, ``key = true`` a flag. ``options``: the command's long options. A
+    table that names no command, a key outside a table and a key that is not one of the
+    command's long options (misspelt, abbreviated) are refused. One-line errors name the
+    file."""
     import tomllib
 
     from planecal.formats.base import read_bounded
@@ -124,14 +153,25 @@ def _config_argv(path: str, command: str) -> list[str]:
         doc = tomllib.loads(data.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise InputError(f"{path}: invalid TOML: {str(e).splitlines()[0]}") from None
+    for name, value in doc.items():
+        if name in COMMANDS and not isinstance(value, dict):
+            raise InputError(f"{path}: [{name}] must be a table of options")
+        if not isinstance(value, dict):
+            raise InputError(f"{path}: {name}: an option outside a [command] table (each "
+                             "command reads its own table, e.g. [rehearse])")
+        if name not in COMMANDS:
+            raise InputError(f"{path}: [{name}]: no such command (the tables are "
+                             f"commands: {', '.join(sorted(COMMANDS))})")
     table = doc.get(command, {})
-    if not isinstance(table, dict):
-        raise InputError(f"{path}: [{command}] must be a table of options")
     out = []
     for key, value in table.items():
         flag = "--" + key.replace("_", "-")
         if key in ("config", "help"):
             raise InputError(f"{path}: [{command}].{key}: not allowed in a config file")
+        if flag[2:] not in options:
+            raise InputError(f"{path}: [{command}].{key}: planecal {command} has no option "
+                             f"{flag} (the keys are its long option names, in full; see "
+                             f"planecal {command} --help)")
         if isinstance(value, dict):
             raise InputError(f"{path}: [{command}].{key}: a table is not an option value")
         if value is True:
@@ -160,7 +200,7 @@ def parse(argv: list[str]) -> argparse.Namespace:
     if cfg:
         # the file's options first, the command line's after: the last value wins
         pos = argv.index(args.command)
-        extra = _config_argv(cfg, args.command)
+        extra = _config_argv(cfg, args.command, parser.commands[args.command].long_options)
         try:
             args = parser.parse_args(argv[:pos + 1] + extra + argv[pos + 1:])
         except UsageError as e:

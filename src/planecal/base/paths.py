@@ -1,20 +1,80 @@
-"""Where the project's data (models/, scenes/) lives.
+"""Where planecal's data and caches live (the one place that knows).
 
-The package is installed in place (``pip install -e .``) from a checkout whose root holds
-models/ and scenes/; ``PLANECAL_HOME`` overrides the root.
+Data: the robot models (``models/<robot>/``: robot.json, the MJCF files, the error
+profiles ``errors/<name>.json``) and the scenes (``scenes/<name>.json``), under one root:
+
+* ``$PLANECAL_HOME``, if set: a folder holding models/ and scenes/ (a shop's own set);
+* else the installed package's copy, ``planecal/data/`` (a wheel or ``pip install .``:
+  setup.py copies the repository's models/ and scenes/ there when it builds);
+* else the checkout the package runs from (an editable install, ``pip install -e .``:
+  the repository's own models/ and scenes/, as edited).
+
+A model or scene given by path is read from that path; only names are looked up here.
+A data folder that is missing or empty is a one-line ``InputError`` naming it.
+
+Caches, written at run time, never into the installed package: ``cache_dir()`` is
+``$PLANECAL_CACHE_DIR``, else ``$XDG_CACHE_HOME/planecal``, else ``~/.cache/planecal``.
+It holds the convex-hull cache (``planecal.model.mesh``) and numba's compiled code
+(``numba_cache()``; numba's own default is the ``__pycache__`` beside the source, i.e.
+inside site-packages) unless ``$NUMBA_CACHE_DIR`` names another folder.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-_ROOT = Path(__file__).resolve().parents[3]
+from planecal.base.errors import InputError
+
+DATA_FOLDERS = ("models", "scenes")
+_PACKAGED = Path(__file__).resolve().parents[1] / "data"  # planecal/data in an install
+_CHECKOUT = Path(__file__).resolve().parents[3]  # src/planecal/base/paths.py -> the checkout
 
 
-def project_root() -> Path:
+def data_root() -> Path:
+    """The folder holding models/ and scenes/ (module docstring)."""
     env = os.environ.get("PLANECAL_HOME")
-    return Path(env) if env else _ROOT
+    if env:
+        return Path(env)
+    return _PACKAGED if _PACKAGED.is_dir() else _CHECKOUT
 
 
 def data_path(*parts: str) -> Path:
-    return project_root().joinpath(*parts)
+    """A path under ``data_root()``, e.g. ``data_path("scenes", "thesis_final.json")``."""
+    return data_root().joinpath(*parts)
+
+
+def data_folder(name: str) -> Path:
+    """``models`` or ``scenes`` under ``data_root()``; a one-line InputError if that
+    folder is missing or holds nothing (a broken install, a wrong ``$PLANECAL_HOME``)."""
+    if name not in DATA_FOLDERS:
+        raise ValueError(f"not a data folder: {name!r} (one of {', '.join(DATA_FOLDERS)})")
+    folder = data_path(name)
+    try:
+        empty = not any(folder.iterdir())
+    except OSError:  # missing, not a folder, unreadable
+        empty = None
+    if empty is None or empty:
+        where = ("$PLANECAL_HOME" if os.environ.get("PLANECAL_HOME")
+                 else "planecal's installed data")
+        problem = "is empty" if empty else "is not a readable folder"
+        raise InputError(f"{folder}: {problem} ({where}; set PLANECAL_HOME to a folder "
+                         "holding models/ and scenes/, or reinstall planecal)")
+    return folder
+
+
+def cache_dir() -> Path:
+    """Where planecal keeps what it computes once and reuses (module docstring)."""
+    env = os.environ.get("PLANECAL_CACHE_DIR")
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "planecal"
+
+
+def numba_cache() -> None:
+    """Point numba's on-disk cache at ``cache_dir()/numba`` (call before ``njit(cache=True)``
+    makes a function), unless the user chose a folder (``$NUMBA_CACHE_DIR``). numba falls
+    back to its own places if that folder cannot be written."""
+    from numba import config
+    if not config.CACHE_DIR:
+        config.CACHE_DIR = str(cache_dir() / "numba")

@@ -16,7 +16,7 @@ B.runs.jsonl next to it); --resume fits only the subsets not in it yet.
 """
 from __future__ import annotations
 
-from planecal.base.errors import InputError
+from planecal.commands.value_options import seed
 
 FORMAT = "planecal-bootstrap/1"
 
@@ -28,7 +28,7 @@ def add_arguments(p):
                    help="comma-separated subset sizes, each below the pool (default: those of "
                         "30,50,100,150 below the pool)")
     p.add_argument("--repeats", type=int, default=10, help="subsets per size (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the subsets")
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the subsets")
     p.add_argument("--initial", help="initial parameter file (default: the scene's nominal values)")
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values (default %(default)s)")
     from planecal.commands.calibration_options import (add_calibration_arguments,
@@ -64,15 +64,14 @@ def run(args) -> int:
     if args.out:
         check_output(args.out, args.samples + [args.initial], FORMAT, args.force)
     sizes = None if args.sizes is None else tuple(parse_int_list(args.sizes, "--sizes"))
-    if args.seed < 0:
-        raise InputError(f"--seed must be >= 0, got {args.seed}")
     samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
     cal = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
     pool = Pool(scene.robot, samples.qe, samples.d_mm * 1e-3, samples.plate, initial, cal)
     settings = check_settings(pool, BootstrapSettings(sizes, args.repeats, args.seed))
+    engine = engine_from_args(args)  # its options checked before any file
     results = results_path(args)
     check_results_path(results, args)
-    with engine_from_args(args) as engine:
+    with engine:
         res = bootstrap(pool, settings, engine, results=results, resume=args.resume)
     print(format_bootstrap(res, pool.layout))
     res = {"format": FORMAT, **res}

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError, RunFailed
+from planecal.commands.value_options import seed
 from planecal.model.scene import DEFAULT_SCENE
 
 DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
@@ -31,7 +32,7 @@ DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
 def add_arguments(p):
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--samples", type=int, default=150, help="samples to take (default %(default)s)")
-    p.add_argument("--seed", type=int, default=1, help="seed of poses and twin truth (default %(default)s)")
+    p.add_argument("--seed", type=seed, default=1, help="seed of poses and twin truth (default %(default)s)")
     p.add_argument("--dir", default="runs/demo", help="output directory (default %(default)s)")
     p.add_argument("--errors", default="realistic", metavar="ideal|realistic|FILE.json",
                    help="the twin's error profile (default %(default)s)")
@@ -83,14 +84,14 @@ def run(args) -> int:
     from planecal.studies.validation import ValidationSettings, validate
     from planecal.twin.profile import load_profile, load_world
 
+    scene = load_scene(args.scene)  # a bad scene or --errors before any folder is made
+    profile = load_profile(args.errors, scene.robot)
     out = Path(args.dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"--dir {out}: cannot create ({e.strerror})") from None
     run_file, truth_file, result_file = _check_outputs(out, args.force)
-    scene = load_scene(args.scene)
-    profile = load_profile(args.errors, scene.robot)  # a bad --errors before any work
     # the rehearsal is planecal rehearse itself, as a user runs it
     argv = ["rehearse", "--out", str(run_file), "--truth-out", str(truth_file), "--force",
             "--scene", args.scene, "--samples", str(args.samples), "--seed", str(args.seed),

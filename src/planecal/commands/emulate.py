@@ -31,13 +31,14 @@ from __future__ import annotations
 import argparse
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import port_or_zero, seed
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from planecal.formats.robot import REFERENCE_BEHAVIOURS
 
     p.add_argument("--scene", default=None, help="twin scene name or JSON path (twin default)")
-    p.add_argument("--seed", type=int, default=None, help="random seed of the twin's truth and noise")
+    p.add_argument("--seed", type=seed, default=None, help="random seed of the twin's truth and noise")
     p.add_argument("--truth", default=None, metavar="T.json",
                    help="the twin's hidden truth (a parameter file, e.g. written by "
                         "`rehearse --truth-out`; default: drawn from --errors and --seed)")
@@ -45,9 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the twin's error profile: realistic (default: a robot of the MC70's "
                         "class), ideal (the nominal robot), or a profile file")
     p.add_argument("--host", default="127.0.0.1", help="address the FD11 emulator binds")
-    p.add_argument("--rt-port", type=int, default=5555,
+    p.add_argument("--rt-port", type=port_or_zero, default=5555,
                    help="UDP port receiving delta packets (FD11 remote port, default 5555)")
-    p.add_argument("--reply-port", type=int, default=5556,
+    p.add_argument("--reply-port", type=port_or_zero, default=5556,
                    help="UDP port replies are sent to on the sender's host (default 5556; "
                         "0 = the sender's own port)")
     p.add_argument("--reference", choices=REFERENCE_BEHAVIOURS, default=None,
@@ -62,7 +63,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drop-replies", "--drop-rate", dest="drop_replies", type=float,
                    default=0.0, metavar="P",
                    help="fault: lose each FD11 reply with probability P (default 0)")
-    p.add_argument("--fault-seed", "--drop-seed", dest="fault_seed", type=int, default=0,
+    p.add_argument("--fault-seed", "--drop-seed", dest="fault_seed", type=seed, default=0,
                    help="seed of the random faults (default 0)")
     p.add_argument("--boot-silence-s", type=float, default=0.0,
                    help="fault: the RT system answers nothing for this long after start")

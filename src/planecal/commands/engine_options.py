@@ -3,7 +3,10 @@ bootstrap, plan --measure, validate):
 
     --jobs N                    1: in this process; N: a local Dask cluster of N worker
                                 processes (default: one per core)
-    --scheduler tcp://HOST:PORT a Dask cluster the user already runs
+    --scheduler tls://HOST:PORT a Dask cluster the user already runs, with TLS
+    --tls-ca, --tls-cert, --tls-key   the certificates for it (default: dask's settings,
+                                e.g. export $(planecal worker-env --tls-...))
+    --insecure                  allow a plain tcp:// scheduler that is not on this machine
 
 and its results file (``add_results_arguments``):
 
@@ -11,13 +14,14 @@ and its results file (``add_results_arguments``):
                                 OUT.json: OUT.runs.jsonl next to it)
     --resume                    run only the runs not in the results file yet
 
-A cluster on other machines (every machine with planecal installed, the same version)::
+A cluster on other machines (every machine with planecal installed, the same version;
+certificates from a CA of the cluster's own, README: a cluster of your machines)::
 
-    export $(planecal worker-env)
-    dask scheduler --port 8786
-    dask worker tcp://SCHEDULER-HOST:8786 --nthreads 1  # once per core
+    export $(planecal worker-env --tls-ca ca.pem --tls-cert cluster.pem --tls-key cluster-key.pem)
+    dask scheduler --protocol tls --port 8786 --tls-ca-file ca.pem --tls-cert cluster.pem --tls-key cluster-key.pem
+    dask worker tls://SCHEDULER-HOST:8786 --nthreads 1 ...  # once per core
 
-then ``planecal montecarlo ... --scheduler tcp://SCHEDULER-HOST:8786``.
+then ``planecal montecarlo ... --scheduler tls://SCHEDULER-HOST:8786``.
 """
 from __future__ import annotations
 
@@ -26,28 +30,52 @@ from pathlib import Path
 from typing import Any, Callable
 
 from planecal.base.errors import InputError
+from planecal.studies.cluster import TLSFiles, tls_files
 from planecal.studies.distributed import Engine
 
 RESULTS_SUFFIX = ".runs.jsonl"
 
 
 def add_engine_arguments(p) -> None:
-    """``--jobs N`` and ``--scheduler tcp://HOST:PORT`` on parser ``p``."""
+    """``--jobs N``, ``--scheduler tls://HOST:PORT`` with its certificates and
+    ``--insecure`` on parser ``p``."""
     g = p.add_argument_group("where the runs go (planecal.studies.distributed)")
     g.add_argument("--jobs", type=int, default=None, metavar="N",
                    help="1: run in this process; N: a local Dask cluster of N worker "
                         "processes (default: one per core)")
-    g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="run on a Dask cluster you already run ('export $(planecal "
-                        "worker-env)', then 'dask scheduler' and 'dask worker "
-                        "tcp://HOST:PORT --nthreads 1' on each machine)")
+    g.add_argument("--scheduler", default=None, metavar="tls://HOST:PORT",
+                   help="run on a Dask cluster you already run, with TLS (README: a "
+                        "cluster of your machines); tcp:// only to one on this machine")
+    add_tls_arguments(g)
+    g.add_argument("--insecure", action="store_true",
+                   help="allow a plain tcp:// --scheduler on another machine (it runs any "
+                        "code anyone who reaches its port sends)")
+
+
+def add_tls_arguments(g) -> None:
+    """``--tls-ca``, ``--tls-cert``, ``--tls-key`` (dask's TLS: PEM files) on ``g``."""
+    g.add_argument("--tls-ca", default=None, metavar="CA.pem",
+                   help="the cluster's CA certificate (default: dask's "
+                        "distributed.comm.tls.ca-file, e.g. from planecal worker-env)")
+    g.add_argument("--tls-cert", default=None, metavar="CERT.pem",
+                   help="this machine's certificate, signed by that CA")
+    g.add_argument("--tls-key", default=None, metavar="KEY.pem",
+                   help="its private key (unless the certificate file holds it)")
+
+
+def tls_from_args(args) -> TLSFiles | None:
+    """The ``--tls-*`` files (None if none is given); one line for a missing one."""
+    return tls_files(args.tls_ca, args.tls_cert, args.tls_key)
 
 
 def engine_from_args(args, warmup: Callable[[], Any] | None = None) -> Engine:
-    """The ``Engine`` the options name (not started: use it as a context manager).
-    ``warmup`` runs on every worker before the runs (``studies.distributed.warm_twin``)."""
+    """The ``Engine`` the options name, its scheduler address and certificates checked
+    (not started: use it as a context manager; make it before any work, so a bad option is
+    one line before anything is computed or written). ``warmup`` runs on every worker
+    before the runs (``studies.distributed.warm_twin``)."""
     return Engine(jobs=args.jobs, scheduler=args.scheduler, warmup=warmup,
-                  notify=lambda m: print(f"note: {m}", file=sys.stderr, flush=True))
+                  notify=lambda m: print(f"note: {m}", file=sys.stderr, flush=True),
+                  tls=tls_from_args(args), insecure=args.insecure)
 
 
 def add_results_arguments(p) -> None:

@@ -11,6 +11,7 @@ table, n1 is the first plate of that layout, n2 the second.
 from __future__ import annotations
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import seed
 
 
 def add_arguments(p):
@@ -18,7 +19,7 @@ def add_arguments(p):
     p.add_argument("--scene", default="three_plates", help="scene (default %(default)s)")
     p.add_argument("--samples", type=int, default=150,
                    help="poses per layout (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="pose draw seed (default %(default)s)")
+    p.add_argument("--seed", type=seed, default=0, help="pose draw seed (default %(default)s)")
     add_calibration_arguments(p)
     p.add_argument("--tol", type=float, default=1e-6,
                    help="base set threshold on |R_kk| / |R_00| of the pivoted QR "
@@ -41,8 +42,6 @@ def run(args) -> int:
     from planecal.model.layout import display_of
 
     out = check_output(args.out, [], FORMAT, args.force) if args.out else None
-    if args.seed < 0:
-        raise InputError(f"--seed must be >= 0, got {args.seed}")
     if not 0 < args.tol < 1:
         raise InputError(f"--tol must be in (0, 1), got {args.tol:g}")
     scene = load_scene(args.scene)

@@ -7,6 +7,8 @@ twin's hidden truth instead (its joint offsets are in the ``calibration`` keyfra
 """
 from __future__ import annotations
 
+from planecal.commands.value_options import seed
+
 
 def add_arguments(p):
     from planecal.model.scene import DEFAULT_SCENE
@@ -14,7 +16,7 @@ def add_arguments(p):
                    help="scene name (planecal scenes) or path (default %(default)s)")
     p.add_argument("--out", required=True, metavar="OUT.xml", help="MJCF file to write")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--truth-seed", type=int, default=None,
+    g.add_argument("--truth-seed", type=seed, default=None,
                    help="place sensor and plates at the twin's truth drawn from this seed")
     g.add_argument("--truth", default=None, metavar="FILE",
                    help="place them at this truth (parameter file, e.g. rehearse --truth-out)")
@@ -23,13 +25,10 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from planecal.base.errors import InputError
     from planecal.io.outputs import check_output
     from planecal.model.scene import load_scene
     from planecal.twin.export import export_scene
 
-    if args.truth_seed is not None and args.truth_seed < 0:
-        raise InputError(f"--truth-seed must be >= 0, got {args.truth_seed}")
     scene = load_scene(args.scene)
     ours = _written_by_us(args.out)  # a model this command wrote may be replaced
     out = check_output(args.out, inputs=(args.truth, scene.path), force=args.force or ours)

@@ -30,6 +30,7 @@ Cramer-Rao bound of the noise. The output says by how much; it is what a real ro
 from __future__ import annotations
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import seed
 
 
 def add_arguments(p):
@@ -48,8 +49,8 @@ def add_arguments(p):
     p.add_argument("--mode", choices=MODES, default="twin",
                    help="twin: the sampling run's planner + twin at rest (default); rehearse: "
                         "full tick-by-tick rehearsal; synthetic: analytic model + noise model")
-    p.add_argument("--seed", type=int, default=1000, help="run k uses seed + k (default 1000)")
-    p.add_argument("--truth-seed", type=int, default=0, help="seed of the fixed truth (default 0)")
+    p.add_argument("--seed", type=seed, default=1000, help="run k uses seed + k (default 1000)")
+    p.add_argument("--truth-seed", type=seed, default=0, help="seed of the fixed truth (default 0)")
     p.add_argument("--vary-truth", action="store_true", help="draw a new truth for every run")
     p.add_argument("--offsets-all", action="store_true", help="truth with delta1, delta6 != 0 too")
     p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
@@ -113,15 +114,16 @@ def run(args) -> int:
     slope_counts = parse_int_list(args.slope, "--slope", 20) if args.slope else None
     if slope_counts is not None and len(slope_counts) < 2:
         raise InputError("--slope needs at least two sample counts")
+    # the twin's numba tick: compiled (or loaded from its cache) once before the runs
+    warm = None if st.mode == "synthetic" else functools.partial(warm_twin, st.scene)
+    engine = engine_from_args(args, warmup=warm)  # its options checked before any file
     results = results_path(args)
 
     def slope_results(n: int):
         return results_path(args, f"slope-{n}")
     for path in [results] + [slope_results(n) for n in slope_counts or []]:
         check_results_path(path, args)
-    # the twin's numba tick: compiled (or loaded from its cache) once before the runs
-    warm = None if st.mode == "synthetic" else functools.partial(warm_twin, st.scene)
-    with engine_from_args(args, warmup=warm) as engine:
+    with engine:
         t0 = time.perf_counter()
         runs = run_many(st, engine, results=results, resume=args.resume)
         dt = time.perf_counter() - t0

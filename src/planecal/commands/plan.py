@@ -21,6 +21,7 @@ in this process; default: a local Dask cluster; --scheduler: a cluster you run).
 from __future__ import annotations
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import seed
 
 
 def add_arguments(p):
@@ -39,7 +40,7 @@ def add_arguments(p):
     p.add_argument("--no-order", action="store_true",
                    help="keep the design's order (do not order the poses for robot time)")
     p.add_argument("--candidates", type=int, default=1500, help="candidate poses (default 1500)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the candidates")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the candidates")
     p.add_argument("--out", required=True, help="pose list to write (JSON)")
     from planecal.commands.calibration_options import add_calibration_arguments
     add_calibration_arguments(p)
@@ -75,6 +76,13 @@ def run(args) -> int:
     if args.candidates < args.samples:
         raise InputError(f"--candidates ({args.candidates}) must be at least --samples ({args.samples})")
     settings = calibration_settings(args, scene.robot)
+    engine = None
+    if args.measure:  # the engine's options checked before the planning
+        import functools
+
+        from planecal.commands.engine_options import engine_from_args
+        from planecal.studies.distributed import warm_twin
+        engine = engine_from_args(args, warmup=functools.partial(warm_twin, str(scene.path)))
     from planecal.base.progress import Progress
     from planecal.studies.planning import PLAN_STAGES
     bar = Progress("plan", PLAN_STAGES, unit=" stages")
@@ -85,13 +93,8 @@ def run(args) -> int:
                    target_ap_mm=args.target_ap_mm, ordered=not args.no_order, progress=bar)
     finally:
         bar.close()
-    if args.measure:
-        import functools
-
-        from planecal.commands.engine_options import engine_from_args
-        from planecal.studies.distributed import warm_twin
-        with engine_from_args(args, warmup=functools.partial(warm_twin, str(scene.path))) \
-                as engine:
+    if engine is not None:
+        with engine:
             res["measured"] = measure(scene, res, args.measure, engine, settings)
     rows = []
     for n in res["free"]:

@@ -24,6 +24,7 @@ import argparse
 import os
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import seed
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth-out", dest="truth_out", default=None, metavar="TRUTH.json",
                    help="write the twin's hidden truth here (parameter-file format, with the "
                         "robot's true geometry and the world it was drawn in)")
-    p.add_argument("--twin-seed", type=int, default=None,
+    p.add_argument("--twin-seed", type=seed, default=None,
                    help="seed of the twin's hidden truth and noise (default: --seed)")
     p.add_argument("--exact", action="store_true",
                    help="no random noise (ideal servo, no laser noise, repeatability or "

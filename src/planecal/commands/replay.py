@@ -16,6 +16,8 @@ Example: planecal replay examples/seed_samples.tsv --params examples/table10_par
 """
 from __future__ import annotations
 
+from planecal.commands.value_options import seed
+
 
 REPLAY_FORMAT = "planecal-replay/1"
 
@@ -28,7 +30,7 @@ def add_arguments(p):
     p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
                    help="the twin robot's error profile where the files record none "
                         "(default realistic)")
-    p.add_argument("--truth-seed", type=int, default=None,
+    p.add_argument("--truth-seed", type=seed, default=None,
                    help="seed of the world's geometry and gear phases where the files record "
                         "none (default 0)")
     p.add_argument("--out", help="write the per-sample table and summary (JSON) here")

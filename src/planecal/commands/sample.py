@@ -58,14 +58,15 @@ import sys
 from pathlib import Path
 
 from planecal.base.errors import InputError, RunFailed
+from planecal.commands.value_options import port, port_or_zero
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from planecal.commands.sampling_options import add_sampling_arguments
 
     p.add_argument("--rt", required=True, metavar="HOST", help="FD11 RT system address")
-    p.add_argument("--rt-port", type=int, default=5555, help="FD11 UDP port (default 5555)")
-    p.add_argument("--local-port", type=int, default=5556,
+    p.add_argument("--rt-port", type=port, default=5555, help="FD11 UDP port (default 5555)")
+    p.add_argument("--local-port", type=port_or_zero, default=5556,
                    help="local UDP port for the replies (default 5556; 0 = any)")
     p.add_argument("--rt-tick-s", type=float, default=0.01,
                    help="minimum interval between ticks (default 0.01; 0 for an emulator "

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import seed
 from planecal.sampling.laserread import LaserSettings
 from planecal.sampling.observer import RecordingObserver
 from planecal.sampling.poses import IK_CHOICES, PLATE_CHOICES
@@ -34,7 +35,7 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
     p.add_argument("--scene", default=None, help="scene name or JSON path (default thesis_final)")
     p.add_argument("--samples", type=int, default=None,
                    help=f"number of samples (default {default_samples}; with --resume: a new target)")
-    p.add_argument("--seed", type=int, default=None, help="random seed of the poses (default 0)")
+    p.add_argument("--seed", type=seed, default=None, help="random seed of the poses (default 0)")
     p.add_argument("--cone-deg", type=finite_float, default=None,
                    help="half-angle of the beam cone about the plate normal (default: the scene's)")
     p.add_argument("--fixed-distance-mm", type=finite_float, default=None,

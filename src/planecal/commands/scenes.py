@@ -10,11 +10,17 @@ def add_arguments(p):
 def run(args) -> int:
     import json
 
-    from planecal.base.paths import data_path
+    from planecal.base.errors import InputError
+
+    from planecal.base.paths import data_folder
     from planecal.model.scene import load_scene
 
     rows = []
-    for path in sorted(data_path("scenes").glob("*.json")):
+    folder = data_folder("scenes")  # a one-line error if it is missing or empty
+    paths = sorted(folder.glob("*.json"))
+    if not paths:
+        raise InputError(f"{folder}: no scenes (*.json) in it")
+    for path in paths:
         s = load_scene(path)
         rows.append({"name": path.stem, "plates": len(s.plates), "robot": s.robot.name,
                      "description": s.description or "", "path": str(path)})

@@ -1,4 +1,4 @@
-"""planecal sweep SPEC.toml --out DIR [--resume] [--jobs J | --scheduler tcp://HOST:8786]
+"""planecal sweep SPEC.toml --out DIR [--resume] [--jobs J | --scheduler tls://HOST:8786]
 
 A grid of scene x error profile x pose design (random, planned, planned+ordered) x sample
 count x calibration level, R runs per cell; each run rehearses in the twin, calibrates and
@@ -25,11 +25,8 @@ def add_arguments(p):
                    help="folder for results.jsonl, sweep.json, sweep.txt and the plots")
     p.add_argument("--resume", action="store_true",
                    help="continue the sweep in DIR (its results file): only missing runs")
-    p.add_argument("--jobs", type=int, default=None,
-                   help="worker processes of the local Dask cluster (default: all cores; 1: "
-                        "in this process)")
-    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
-                   help="run on a Dask cluster you already run")
+    from planecal.commands.engine_options import add_engine_arguments
+    add_engine_arguments(p)
 
 
 def run(args) -> int:
@@ -37,11 +34,13 @@ def run(args) -> int:
     from planecal.base.progress import Progress as Bar
     from planecal.present.report.sweep import fig_accuracy_vs_time
     from planecal.studies.common import Progress
-    from planecal.studies.distributed import Engine, warm_twin
+    from planecal.commands.engine_options import engine_from_args
     from planecal.present.sweep import format_sweep
+    from planecal.studies.distributed import warm_twin
     from planecal.studies.sweep import load_spec, plans_needed, run_sweep
 
     spec = load_spec(args.spec)
+    engine = engine_from_args(args, warmup=lambda: warm_twin(spec.scene[0]))  # checked here
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out}: exists and is not a folder")
@@ -52,8 +51,7 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     n_runs = len(spec.cells()) * spec.runs
     bar = Bar("planning", len(plans_needed(spec)), unit=" plans")
-    with Engine(jobs=args.jobs, scheduler=args.scheduler,
-                warmup=lambda: warm_twin(spec.scene[0])) as eng:
+    with engine as eng:
         res = run_sweep(spec, results, eng, resume=args.resume,
                         progress=Progress(f"sweep: {n_runs} runs, {eng.describe()}", n_runs),
                         plan_progress=bar)

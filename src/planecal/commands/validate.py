@@ -37,6 +37,7 @@ import sys
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import seed, seed_list
 
 
 def add_arguments(p):
@@ -50,12 +51,12 @@ def add_arguments(p):
     p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
                    help="the twin's error profile (default: realistic; with --truth: the "
                         "run's, else ideal for a truth file without a world)")
-    p.add_argument("--truth-seeds", default=None,
+    p.add_argument("--truth-seeds", type=seed_list, default=None,
                    help="seeds of the truths (worlds) to validate on (default 0,1,2,3,4)")
-    p.add_argument("--truth-seed", type=int, default=None,
+    p.add_argument("--truth-seed", type=seed, default=None,
                    help="one truth seed (the same as --truth-seeds T)")
     p.add_argument("--samples", type=int, default=150, help="rehearsal samples (default 150)")
-    p.add_argument("--seed", type=int, default=0, help="rehearsal seed (poses, noise)")
+    p.add_argument("--seed", type=seed, default=0, help="rehearsal seed (poses, noise)")
     p.add_argument("--offsets-all", action="store_true",
                    help="the ideal world with delta1 and delta6 != 0 as well (the realistic "
                         "one has them)")
@@ -103,7 +104,6 @@ def run(args) -> int:
     from planecal.io.outputs import check_output
     from planecal.io.params import save_json
     from planecal.model.scene import load_scene
-    from planecal.studies.common import parse_int_list
     from planecal.studies.validation import FORMAT, TruthJob, ValidationSettings
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile
 
@@ -128,12 +128,8 @@ def run(args) -> int:
             raise InputError(f"--samples must be at least 20, got {args.samples}")
         if args.truth_seed is not None and args.truth_seeds is not None:
             raise InputError("--truth-seed and --truth-seeds: give one of them")
-        if args.truth_seed is not None:
-            seeds = parse_int_list(str(args.truth_seed), "--truth-seed", 0)
-        else:
-            seeds = parse_int_list(args.truth_seeds or "0,1,2,3,4", "--truth-seeds", 0)
-        if len(set(seeds)) != len(seeds):
-            raise InputError(f"--truth-seeds: a seed twice in {seeds}")
+        seeds = ([args.truth_seed] if args.truth_seed is not None
+                 else args.truth_seeds or [0, 1, 2, 3, 4])  # checked seeds (value_options)
         errors = args.errors or DEFAULT_PROFILE
         profile = load_profile(errors, scene.robot)
         poses = None
@@ -144,13 +140,14 @@ def run(args) -> int:
         base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
                         samples=args.samples, seed=args.seed, offsets_all=args.offsets_all,
                         poses=poses, settings=st, calibration=cal)
+        from planecal.commands.engine_options import engine_from_args
+        from planecal.studies.distributed import warm_twin
+        engine = engine_from_args(args, warmup=warm_twin)  # its options checked here
         what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
         print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): rehearse "
               f"{what} (seed {args.seed}), calibrate (level {cal.label}), validate...",
               file=sys.stderr, flush=True)
-        from planecal.commands.engine_options import engine_from_args
-        from planecal.studies.distributed import warm_twin
-        with engine_from_args(args, warmup=warm_twin) as engine:
+        with engine:
             doc = _truths(args, seeds, base, profile, scene, engine)
     if args.out:
         save_json(args.out, doc)

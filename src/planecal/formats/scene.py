@@ -25,7 +25,10 @@ SCENE_FORMAT = "planecal-scene/1"
 CELL_M = 20.0  # anything in a robot cell lies within 20 m of the base
 MIN_PLANE_M = 0.01  # n~ describes no plane through (or within 1 cm of) the base origin
 MAX_PLANE_M = 100.0
-CORNER_OFF_PLANE_M = 0.1  # corner_m is projected onto the plane; further off is a mistake
+# corner_m is projected onto the plane n~ . p = 1: within 5 mm is the rounding of a
+# measured corner (the projection moves it less than that, well inside the 25 mm the laser
+# spot keeps from a plate's edges); further off, corner and n~ describe different plates
+CORNER_OFF_PLANE_M = 0.005
 
 
 def _n_tilde_ok(v):
@@ -105,9 +108,10 @@ class Plate(Model):
         nhat = n / np.linalg.norm(n)
         off = (n @ np.asarray(self.corner_m) - 1.0) / np.linalg.norm(n)
         if abs(off) > CORNER_OFF_PLANE_M:
-            raise problem(f"the corner is {abs(off):.3g} m off the plane n~ . p = 1 (at most "
-                          f"{CORNER_OFF_PLANE_M:g} m): corner and n~ describe different plates",
-                          "corner_m")
+            who = f"plate {self.name!r}: " if self.name else ""
+            raise problem(f"{who}the corner is {abs(off) * 1e3:.1f} mm off the plane n~ . p = 1 "
+                          f"(at most {CORNER_OFF_PLANE_M * 1e3:g} mm): corner and n~ describe "
+                          "different plates", "corner_m")
         x = np.asarray(self.x_axis)
         if not np.linalg.norm(x) > 1e-9:
             raise problem("x_axis = 0 gives no direction", "x_axis")

@@ -60,7 +60,9 @@ def _compiled():
     """The twin's gravity_torque over many rows, compiled with numba (cached)."""
     from numba import njit
 
+    from planecal.base.paths import numba_cache
     from planecal.model.gravity_kernel import gravity_torque
+    numba_cache()  # in planecal's cache folder, not beside this file in site-packages
 
     @njit(cache=True)
     def rows(Q, W, out):

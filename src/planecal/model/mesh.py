@@ -8,8 +8,9 @@ handful of properties the twin, the checker and the exports read (``triangles``,
 
 ``convex_hull(points)`` computes the hull with trimesh (qhull) and caches the result by
 the points' bytes, in memory and in one file under the user's cache directory
-(``$PLANECAL_CACHE_DIR``, else ``$XDG_CACHE_HOME/planecal``, else ``~/.cache/planecal``;
-the file name carries trimesh's version). A hull is a pure function of its points, so a
+(``planecal.base.paths.cache_dir()``: ``$PLANECAL_CACHE_DIR``, else
+``$XDG_CACHE_HOME/planecal``, else ``~/.cache/planecal``; the file name carries trimesh's
+version). A hull is a pure function of its points, so a
 cached hull is the hull trimesh would return. The point of the cache is start-up time:
 importing trimesh (and the scipy modules it pulls in) costs about 0.5 s of every
 ``planecal rehearse``; with the hulls cached, trimesh is imported only when a shape
@@ -27,6 +28,8 @@ from importlib import metadata
 from pathlib import Path
 
 import numpy as np
+
+from planecal.base.paths import cache_dir
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,14 +95,6 @@ class Mesh:
         """The same mesh as a ``trimesh.Trimesh`` (imports trimesh)."""
         import trimesh
         return trimesh.Trimesh(self.vertices.copy(), self.faces.copy(), process=False)
-
-
-def cache_dir() -> Path:
-    env = os.environ.get("PLANECAL_CACHE_DIR")
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "planecal"
 
 
 class _HullCache:

@@ -18,7 +18,7 @@ import numpy as np
 
 from planecal.formats.base import read_json, validate
 from planecal.formats.robot import RobotFile
-from planecal.base.paths import data_path
+from planecal.base.paths import data_folder
 from planecal.model.kinematics import Kinematics, from_standard_dh
 
 DEFAULT_ROBOT = "mc70"
@@ -62,7 +62,7 @@ def load_robot(name_or_path: str | Path = DEFAULT_ROBOT) -> Robot:
     Validated by ``planecal.formats.robot.RobotFile``; one-line InputError otherwise."""
     p = Path(name_or_path)
     if not p.suffix and len(p.parts) == 1:  # a name, not a path
-        p = data_path("models") / str(name_or_path) / "robot.json"
+        p = data_folder("models") / str(name_or_path) / "robot.json"
     raw = read_json(p, "robot description")
     rf = validate(RobotFile, raw, p, "robot description")
     enc, ctrl = rf.encoder, rf.controller

@@ -22,7 +22,7 @@ from planecal.base.errors import InputError
 from planecal.formats.base import read_json, validate
 from planecal.formats.robot import reach_m
 from planecal.formats.scene import RobotBounds, SceneFile
-from planecal.base.paths import data_path
+from planecal.base.paths import data_folder
 from planecal.model.robot import DEFAULT_ROBOT, Robot, load_robot
 
 DEFAULT_SCENE = "thesis_final"
@@ -94,7 +94,7 @@ def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
         exists = False
     if p.suffix == ".json" or exists:
         return p
-    return data_path("scenes") / f"{name_or_path}.json"
+    return data_folder("scenes") / f"{name_or_path}.json"
 
 
 def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:

@@ -9,15 +9,18 @@ descriptions (an item carries its own seed), submitted here.
 * ``Engine()`` / ``Engine(jobs=N)``: an in-process ``dask.distributed.LocalCluster`` on
   this machine, N worker *processes* (default: the CPU count) of one thread each; nothing
   to set up;
-* ``Engine(scheduler="tcp://HOST:8786")``: a cluster the user already runs::
+* ``Engine(scheduler="tls://HOST:8786", tls=TLSFiles(...))``: a cluster the user already
+  runs, with TLS (README: a cluster of your machines)::
 
-      export $(planecal worker-env)        # WORKER_ENV and WORKER_CONFIG
-      dask scheduler --port 8786           # on one machine
-      dask worker tcp://HOST:8786 --nthreads 1   # on each worker, once per core
+      export $(planecal worker-env --tls-ca CA --tls-cert CERT --tls-key KEY)
+      dask scheduler --protocol tls --port 8786 ...   # on one machine
+      dask worker tls://HOST:8786 --nthreads 1 ...    # on each worker, once per core
 
   (every worker needs planecal installed, the same version). ``worker_env_lines()`` gives
   those variables; workers started without the dask ones are counted (``untuned``) and
-  named to the user through ``notify``.
+  named to the user through ``notify``. The address is checked before any connection
+  (``planecal.studies.cluster``: tls://, or tcp:// on this machine unless ``insecure``),
+  and dask's handshake with it is bounded as a whole (``connect_timeout_s``).
 
 Quiet: no dashboard, dask's own log lines at ERROR only while the engine is open; an
 unreachable scheduler (or one with no workers) is a one-line ``InputError`` after
@@ -44,10 +47,11 @@ the decoded line, so a resumed map returns exactly what an uninterrupted one doe
 come back as lists; dict keys must be strings. ``resume`` refuses a file written with
 another ``header`` (one line naming the first field that differs).
 
-Numba: the twin's tick is compiled once and cached on disk next to ``twin/ticks.py``
-(``~7 s`` cold, ``~0.3 s`` to load). ``warmup`` (e.g. ``warm_twin``) runs first on one
-worker -- which compiles if the cache is cold and writes it -- and only then on every other
-worker, which load it: a cold start compiles once per file system, not once per worker.
+Numba: the twin's tick is compiled once and cached on disk (``planecal.base.paths``:
+``~/.cache/planecal/numba`` by default; ``~7 s`` cold, ``~0.3 s`` to load). ``warmup``
+(e.g. ``warm_twin``) runs first on one worker -- which compiles if the cache is cold and
+writes it -- and only then on every other worker, which load it: a cold start compiles
+once per cache folder, not once per worker.
 """
 from __future__ import annotations
 
@@ -63,6 +67,8 @@ from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.studies.cluster import (TLSFiles, check_reach, client_security, parse_address,
+                                      probe, tls_env)
 
 RESULTS_FORMAT = "planecal-results/1"
 CONNECT_TIMEOUT_S = 10.0
@@ -288,12 +294,14 @@ def _config_var(key: str) -> str:
     return "DASK_" + key.upper().replace(".", "__").replace("-", "_")
 
 
-def worker_env_lines() -> list[str]:
+def worker_env_lines(tls: TLSFiles | None = None) -> list[str]:
     """``NAME=value`` for a worker's environment: one BLAS thread, no GL, and
     ``WORKER_CONFIG`` as dask reads it from the environment (``planecal worker-env``
-    prints them, for ``export $(planecal worker-env)``)."""
+    prints them, for ``export $(planecal worker-env)``); with ``tls`` also dask's TLS
+    settings of a cluster member (``cluster.tls_env``)."""
+    config = {**WORKER_CONFIG, **(tls_env(tls) if tls is not None else {})}
     return ([f"{k}={v}" for k, v in WORKER_ENV.items()]
-            + [f"{_config_var(k)}={v}" for k, v in WORKER_CONFIG.items()])
+            + [f"{_config_var(k)}={v}" for k, v in config.items()])
 
 
 def _set_worker_env() -> None:
@@ -310,14 +318,22 @@ class Engine:
     def __init__(self, jobs: int | None = None, scheduler: str | None = None,
                  connect_timeout_s: float = CONNECT_TIMEOUT_S,
                  warmup: Callable[[], Any] | None = None,
-                 notify: Callable[[str], None] | None = None):
+                 notify: Callable[[str], None] | None = None,
+                 tls: TLSFiles | None = None, insecure: bool = False):
         if jobs is not None and jobs < 1:
             raise InputError(f"--jobs must be at least 1, got {jobs}")
         if scheduler is not None and jobs is not None:
             raise InputError("--jobs and --scheduler exclude each other (the scheduler's "
                              "workers run the jobs)")
-        if scheduler is not None and not str(scheduler).strip():
-            raise InputError("--scheduler: empty address (expected tcp://HOST:8786)")
+        if scheduler is None and (tls is not None or insecure):
+            raise InputError("--tls-ca/--tls-cert/--tls-key and --insecure are for "
+                             "--scheduler")
+        self.security = None
+        if scheduler is not None:  # checked before any connection (planecal.studies.cluster)
+            address = parse_address(scheduler)
+            check_reach(address, insecure)
+            self.security = client_security(address, tls)
+            scheduler = str(address)
         self.scheduler = scheduler
         self.jobs = jobs
         self.mode = ("scheduler" if scheduler else
@@ -383,11 +399,10 @@ class Engine:
     def _connect(self) -> None:
         from distributed import Client
         addr = self.scheduler
+        probe(parse_address(addr), self.security, self.connect_timeout_s)  # bounded
         try:
-            self.client = Client(addr, timeout=self.connect_timeout_s, set_as_default=False)
-        except ValueError as e:
-            raise InputError(f"--scheduler {addr}: not a scheduler address like "
-                             f"tcp://HOST:8786 ({e})") from None
+            self.client = Client(addr, timeout=self.connect_timeout_s, set_as_default=False,
+                                 security=self.security)
         except (OSError, TimeoutError) as e:
             raise InputError(f"--scheduler {addr}: no Dask scheduler answered within "
                              f"{self.connect_timeout_s:g} s ({type(e).__name__})") from None

@@ -45,12 +45,14 @@ optional quantum, and the window (NaN outside, and for no hit, d < 0).
 
 State travels in two arrays, ``S`` (int64) and ``F`` (float64), laid out by the indices
 below, and the world (``W``): gear harmonics and the gravity model (body poses, masses).
-numba compiles at the first use in a process (cached next to this file).
+numba compiles at the first use in a process (cached on disk in planecal's cache folder,
+``planecal.base.paths.numba_cache``).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from planecal.base.paths import numba_cache
 from planecal.model.gravity_kernel import gravity_torque  # the one formula (also the calibration's)
 
 try:
@@ -311,9 +313,10 @@ REFERENCE = Ticks(advance, laser, settle, refresh, compiled=False)
 
 
 def compiled() -> Ticks:
-    """The compiled tick (numba, cached next to this file; ~1-2 s to compile the first
-    time, ~0.3 s to load from the cache)."""
+    """The compiled tick (numba, cached in ``cache_dir()/numba``; ~1-2 s to compile the
+    first time, ~0.3 s to load from the cache)."""
     if njit is None:
         raise ImportError("numba is not installed")
+    numba_cache()
     jit = njit(cache=True, nogil=True)
     return Ticks(jit(advance), jit(laser), jit(settle), jit(refresh), compiled=True)
