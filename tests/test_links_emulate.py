@@ -98,14 +98,14 @@ class Emulate:
 def test_planecal_emulate_serves_the_twin():
     from planecal.links.zs_ld80 import ZSLD80, decode_reply, encode_reply
 
-    from planecal.commands.rehearse import make_twin
+    from planecal.twin.world import WorldRef, make_twin
     from planecal.model.scene import load_scene
 
     emu = Emulate("--seed", "3")
     try:
         assert "reference fresh_after_silence 2 s" in emu.text  # MC70: unstated, the default
         assert "errors realistic, seed 3" in emu.text  # the default world: as rehearse's
-        local = make_twin(load_scene("thesis_final"), 3, "realistic")
+        local = make_twin(load_scene("thesis_final"), WorldRef("realistic", 3), 3)
         with FD11Link("127.0.0.1", emu.port, 0, timeout_s=0.5, silence_s=2.0,
                      tick_s=0) as link, \
                 ZSLD80(emu.tty, timeout_s=1.0) as laser:

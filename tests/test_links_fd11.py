@@ -880,14 +880,14 @@ def test_emulate_twin_is_the_profiles_world():
     pytest.importorskip("mujoco")
     import argparse
     from planecal.commands import emulate
-    from planecal.commands.rehearse import make_twin
+    from planecal.twin.world import WorldRef, make_twin
     from planecal.model.scene import load_scene
     p = argparse.ArgumentParser()
     emulate.add_arguments(p)
     scene = load_scene("thesis_final")
     for argv, errors in (([], "realistic"), (["--errors", "ideal"], "ideal")):
         got = emulate._make_twin(p.parse_args(["--seed", "3"] + argv))
-        want = make_twin(scene, 3, errors)
+        want = make_twin(scene, WorldRef(errors, 3), 3)
         assert got.options == want.options
         np.testing.assert_array_equal(got.truth.joint_offsets, want.truth.joint_offsets)
         np.testing.assert_array_equal(got.true_kinematics.a, want.true_kinematics.a)

@@ -4,7 +4,7 @@ in-process twin."""
 import numpy as np
 
 from planecal.cli import main
-from planecal.commands.rehearse import make_twin
+from planecal.twin.world import WorldRef, make_twin
 from planecal.links.emulators import Emulators
 from planecal.io.samples import read_samples
 from planecal.model.scene import load_scene
@@ -16,7 +16,7 @@ def test_sample_over_udp_and_serial_equals_rehearsal_in_process(tmp_path, capsys
     local = tmp_path / "local.tsv"
     assert main(["rehearse", "--out", str(local), "--twin-seed", "7", *common]) == 0
     wire = tmp_path / "wire.tsv"
-    twin = make_twin(load_scene("thesis_final"), 7, "realistic")  # rehearse's default world
+    twin = make_twin(load_scene("thesis_final"), WorldRef("realistic", 7), 7)  # rehearse's default world
     with Emulators(twin, rt_port=0, reply_port=None) as emu:
         code = main(sample_argv(emu.fd11.rt_port, emu.laser.port, wire, *common))
         assert not emu.fd11.tripped

@@ -99,19 +99,20 @@ def _faults(args):
 
 
 def _make_twin(args):
-    from planecal.twin import Twin
+    """The twin behind the wire: the world of --truth (its error profile, or --errors), or
+    the profile's draw for --seed; the world builder ``rehearse`` uses."""
     from planecal.model.scene import load_scene
-    from planecal.twin.profile import DEFAULT_PROFILE, draw_world, load_profile, load_world
+    from planecal.twin.profile import DEFAULT_PROFILE, truth_file_errors
+    from planecal.twin.world import WorldRef, file_sha256, make_twin
 
     seed = 0 if args.seed is None else args.seed
-    if seed < 0:
-        raise InputError(f"--seed must be >= 0, got {seed}")
     scene = load_scene(args.scene) if args.scene else load_scene()
-    profile = load_profile(args.errors or DEFAULT_PROFILE, scene.robot)
-    world, options = draw_world(scene, seed, profile)
     if args.truth is not None:
-        world = load_world(scene, args.truth)
-    return Twin(scene, truth=world, seed=seed, options=options)
+        errors = args.errors or truth_file_errors(args.truth) or DEFAULT_PROFILE
+        ref = WorldRef(errors, None, str(args.truth), file_sha256(args.truth))
+    else:
+        ref = WorldRef(args.errors or DEFAULT_PROFILE, seed)
+    return make_twin(scene, ref, seed)
 
 
 def _reference(args, robot) -> tuple[str, float]:
