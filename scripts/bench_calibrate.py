@@ -1,18 +1,23 @@
-"""Benchmark: planecal's Gauss-Newton (analytic Jacobian) against
-scipy.optimize.least_squares with its numeric Jacobian on the same synthetic problems
-(150, 1,000 and 10,000 samples on the thesis cell, 2 um noise), measured side by side.
+"""Benchmark: planecal's calibration (``estimation.calibrate.calibrate``, the path every
+command and study takes: the base-set selection and the Gauss-Newton fit with the analytic
+Jacobian) against scipy.optimize.least_squares with its numeric Jacobian on the same
+synthetic problems (150, 1,000 and 10,000 samples on the thesis cell, 2 um noise), measured
+side by side; scipy evaluates the same model function (``model.measurement.predict``).
 
 Prints per size: both wall times, the largest difference in the identified parameters,
 and the speed ratio: ``speedup_vs_scipy_1000: X``.
 
 Level 2 (issue 13), on the three-plate cell with a truth whose every geometric parameter
-is off (the realistic profile's tolerances, drawn here): ``calibration.calibrate(...,
-level="full")`` (the base-set selection included) against scipy's least_squares on the
-same base set (handed to it), once with its numeric Jacobian ("2-point") and once given
-planecal's analytic Jacobian, side by side on 1,000 samples; then planecal alone on
-10,000. Lines: ``level2_speedup_vs_scipy_numeric: X`` (target >= 10),
-``level2_vs_scipy_analytic: X`` (>= 1), ``level2_10k_s: X`` (< 0.5). Timing figures
-depend on the machine's load: report them with ``uptime``.
+is off (the realistic profile's tolerances, drawn here): ``calibrate(...,
+CalibrationSettings(level="full"))`` (the base-set selection included) against scipy's
+least_squares on the same base set (handed to it), once with its numeric Jacobian
+("2-point") and once given planecal's analytic Jacobian, side by side on 1,000 samples;
+then planecal alone on 10,000. Lines: ``level2_speedup_vs_scipy_numeric: X`` (target
+>= 10), ``level2_vs_scipy_analytic: X`` (>= 1), ``level2_10k_s: X`` (< 0.5).
+
+One pose's flange and geometric Jacobian (``model.kinematics.fk_jacobian``, what IK,
+planning and compensation's Newton steps pay per pose): ``fk_jacobian_one_pose_us: X``
+(target < 20). Timing figures depend on the machine's load: report them with ``uptime``.
 """
 from __future__ import annotations
 
@@ -25,9 +30,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 from scipy.optimize import least_squares
 
+from planecal.estimation.calibrate import CalibrationSettings, calibrate
+from planecal.estimation.fit import FitOptions
 from planecal.model.cell_params import CellParams
 from planecal.model.measurement import predict
-from planecal.estimation.fit import FitOptions, Problem, solve
 from planecal.model.scene import load_scene, nominal_params
 from planecal.twin.synthetic import synthetic_samples
 from planecal.twin.truth import draw_truth
@@ -54,12 +60,14 @@ def main():
     for n in (150, 1000, 10000):
         qe, d, _ = synthetic_samples(scene, truth, n, rng, noise_m=2e-6)
 
-        problem = Problem.from_arrays(robot, qe, d, nominal, options=opts)
-        layout, free = problem.layout, problem.free
-        x0 = nominal.to_vector(layout)
+        settings = CalibrationSettings(options=opts)
 
-        def ours():  # the problem built from the arrays, as every caller does, and solved
-            return solve(Problem.from_arrays(robot, qe, d, nominal, options=opts))
+        def ours():  # the calibration every command takes
+            return calibrate(robot, qe, d, nominal, None, settings).result
+
+        first = ours()
+        layout, free = first.layout, first.free
+        x0 = nominal.to_vector(layout)
 
         def residual(xf):
             x = x0.copy()
@@ -80,6 +88,18 @@ def main():
         assert offsets_diff < 1e-9, f"solutions differ by {offsets_diff:.3e} rad at n={n}"
     print(f"speedup_vs_scipy_1000: {ratios[1000]:.1f}")
     level2()
+    one_pose(robot)
+
+
+def one_pose(robot):
+    """One pose's flange and geometric Jacobian, called one pose at a time."""
+    from planecal.model.kinematics import fk_jacobian
+    q = np.radians([28.7, -15.2, -44.5, -66.1, 73.3, -92.5])
+    kin = robot.kinematics
+    fk_jacobian(kin, q)
+    n = 20000
+    t, _ = best_of(lambda: [fk_jacobian(kin, q) for _ in range(n)], 3)
+    print(f"fk_jacobian_one_pose_us: {t / n * 1e6:.2f}")
 
 
 def level2():
@@ -98,8 +118,10 @@ def level2():
     opts = FitOptions(improvement_limit=1e-13)
     qe, d, plate = synthetic_samples(scene, truth, 1000, rng, noise_m=2e-6)
 
+    full = CalibrationSettings(level="full", options=opts)
+
     def ours():
-        return calibrate(robot, qe, d, nominal, plate, level="full", options=opts)
+        return calibrate(robot, qe, d, nominal, plate, full)
 
     cal = ours()
     layout, free = cal.result.layout, cal.base_set.mask(cal.result.layout)
@@ -135,8 +157,7 @@ def level2():
         # the same minimum: predictions within 1 nm (the noise is 2 um)
         assert np.abs(dd - d_ours).max() < 1e-9, name
     qe10, d10, plate10 = synthetic_samples(scene, truth, 10000, rng, noise_m=2e-6)
-    t10, cal10 = best_of(lambda: calibrate(robot, qe10, d10, nominal, plate10, level="full",
-                                           options=opts), 3)
+    t10, cal10 = best_of(lambda: calibrate(robot, qe10, d10, nominal, plate10, full), 3)
     print(f"level 2, 10000 samples: {t10:.4f} s, {cal10.result.iterations} iterations, "
           f"rms {cal10.result.rms_mm() * 1e3:.3f} um")
     print(f"level2_speedup_vs_scipy_numeric: {t_num / t_ours:.1f}")

@@ -35,8 +35,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def main(argv=None) -> int:
-    from planecal.base.progress import Progress as Bar
-    from planecal.studies.common import Progress
+    from planecal.base.progress import Progress
     from planecal.studies.distributed import Engine, warm_twin
     from planecal.present.sweep import format_sweep
     from planecal.studies.sweep import plans_needed, run_sweep, spec_from_dict
@@ -70,7 +69,7 @@ def main(argv=None) -> int:
             if results.exists() and not a.resume:
                 results.unlink()
             n_runs = len(sp.cells()) * sp.runs
-            bar = Bar("planning", len(plans_needed(sp)), unit=" plans")
+            bar = Progress("planning", len(plans_needed(sp)), unit=" plans")
             r = run_sweep(sp, results, eng, resume=a.resume,
                           progress=Progress(f"bench {name}: {eng.describe()}", n_runs),
                           plan_progress=bar)

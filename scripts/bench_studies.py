@@ -26,7 +26,7 @@ def main() -> int:
     ap.add_argument("--mode", default="twin", choices=("twin", "synthetic", "rehearse"))
     ap.add_argument("--jobs", type=int, default=None)
     args = ap.parse_args()
-    from planecal.estimation.fit import Problem, solve
+    from planecal.estimation.calibrate import calibrate
     from planecal.model.scene import nominal_params
     from planecal.studies.common import cached_scene
     from planecal.studies.montecarlo import MCSettings, run_many, truth_for
@@ -46,7 +46,7 @@ def main() -> int:
     n = 20
     t0 = time.perf_counter()
     for _ in range(n):
-        solve(Problem.from_arrays(scene.robot, qe, d, nominal_params(scene), plate))
+        calibrate(scene.robot, qe, d, nominal_params(scene), plate)
     fit_s = (time.perf_counter() - t0) / n
     print(f"calibration alone: {fit_s * 1e3:.1f} ms for {args.samples} samples "
           f"({1 / fit_s:.0f} per second per process)")

@@ -42,7 +42,7 @@ TABLE9 = {"sizes": [98, 49, 48, 30, 32, 62, 257],
 def one_set(scene, world, opts, twin_seed, samples, seed, world_checker, pose):
     """A rehearsal set (the product's sampling run) calibrated offsets-only: (max |model
     error| mm, identified delta2..delta5 rad)."""
-    from planecal.estimation.fit import Problem, solve
+    from planecal.estimation.calibrate import calibrate_samples
     from planecal.links.base import AlwaysEnabled
     from planecal.io.samples import read_samples
     from planecal.sampling.driver import Driver
@@ -61,7 +61,7 @@ def one_set(scene, world, opts, twin_seed, samples, seed, world_checker, pose):
         if stats.status != "complete":
             raise SystemExit(f"set (seed {seed}): {stats.status} {stats.reason}")
         s = read_samples(out)
-    fit = solve(Problem.from_samples(scene.robot, s, nominal_params(scene)))
+    fit = calibrate_samples(scene.robot, s, nominal_params(scene)).result
     return float(np.abs(fit.residuals_m).max() * 1e3), fit.params.joint_offsets[1:5].copy()
 
 

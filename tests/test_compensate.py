@@ -8,8 +8,8 @@ import pytest
 
 from planecal.cli import main
 from planecal.estimation.compensate import (COMPENSATED_FORMAT, CalibratedModel, Region,
-                                            Targets, compensate, load_calibrated, pose_from,
-                                            read_targets, solve_poses)
+                                            compensate, load_calibrated, solve_poses)
+from planecal.io.targets import Targets, pose_from, read_targets
 from planecal.model.cell_params import CellParams
 from regions import joint_region
 from planecal.model.encoder import counts_to_joints, joints_to_counts, offsets_to_qe0

@@ -3,8 +3,8 @@ import numpy as np
 
 
 from planecal.model.cell_params import CellParams  # noqa: E402
-from planecal.estimation.compensate import (CalibratedModel, Targets,  # noqa: E402
-                                 compensate, load_calibrated)
+from planecal.estimation.compensate import CalibratedModel, compensate, load_calibrated  # noqa: E402
+from planecal.io.targets import Targets  # noqa: E402
 from planecal.model.kinematics import frame_error  # noqa: E402
 from planecal.io.params import save_params  # noqa: E402
 from planecal.model.kinematics import fk

@@ -8,7 +8,8 @@ from planecal.cli import main
 from planecal.io.params import load_params
 from planecal.io.samples import read_samples
 from planecal.sampling.runfiles import load_sidecar
-from planecal.sampling.session import Progress
+from planecal.base.progress import Progress
+from planecal.sampling.session import close_run, show_run
 from planecal.sampling.run import RunStats
 from wire import sample_argv
 
@@ -263,13 +264,13 @@ def test_sample_with_a_silent_controller_stops_with_one_line(tmp_path, capsys):
 def test_progress_plain_lines_every_tenth():
     import io
     buf = io.StringIO()
-    p = Progress(20, stream=buf)
+    p = Progress("samples", 20, stream=buf)
     st = RunStats()
     for k in range(1, 21):
         st.samples = k
-        p(st)
+        show_run(p, st)
     st.status = "complete"
-    p.done(st)
+    close_run(p, st)
     lines = buf.getvalue().splitlines()
     assert len(lines) == 10 and lines[-1].startswith("samples 20/20  rejected 0")
     assert lines[0].startswith("samples 2/20")
@@ -283,14 +284,14 @@ def test_progress_bar_on_a_tty():
             return True
 
     buf = Tty()
-    p = Progress(4, stream=buf)
+    p = Progress("samples", 4, stream=buf)
     st = RunStats()
     st.samples = 2
-    p(st)
+    show_run(p, st)
     out = buf.getvalue()  # a tqdm bar, redrawn in place
     assert out.startswith("\r") and "samples 2/4" in out and "rejected 0" in out
     st.samples, st.status, st.reason = 3, "stopped", "interrupted"
-    p.done(st)
+    close_run(p, st)
     assert buf.getvalue().rstrip().endswith("run stopped: interrupted")
 
 

@@ -5,6 +5,8 @@ a plain line every tenth of the work (and at the end) otherwise, nothing with ``
     bar.update(done=12, note="rejected 3 (collision 3)  robot time 0:01:42")
     bar.close()
 
+A study steps it once a run (``bar.step()``, closed at the total); a sampling run shows its
+rejections and robot time as the note.
 ``quiet()`` / ``set_quiet(True)`` is the process-wide switch the CLI's ``-q`` sets.
 """
 from __future__ import annotations
@@ -27,15 +29,16 @@ class Progress:
     stderr; ``tty``: override the stream's own answer (tests)."""
 
     def __init__(self, label: str, total: int, stream=None, tty: bool | None = None,
-                 unit: str = ""):
+                 unit: str = "", quiet: bool = False):
         self.label, self.total = label, max(int(total), 0)
         self.stream = stream or sys.stderr
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)()) if tty is None else tty
-        self.off = quiet()
+        self.tty = self.stream.isatty() if tty is None else tty
+        self.off = quiet or _QUIET[0]
         self.done = 0
         self.note = ""
         self._printed = -1
         self._bar = None
+        self._closed = False
         if self.tty and not self.off:
             from tqdm import tqdm
             self._bar = tqdm(total=self.total, desc=label, unit=unit or " " + label,
@@ -63,8 +66,17 @@ class Progress:
             self._printed = self.done
             print(self.line(), file=self.stream, flush=True)
 
+    def step(self, k: int = 1) -> None:
+        """``k`` more units done (a study's run, a plan); closed when the total is done."""
+        self.update(step=k)
+        if self.done >= self.total:
+            self.close()
+
     def close(self, final: str | None = None) -> None:
         """The last state (and ``final``, e.g. why the work stopped, on a line of its own)."""
+        if self._closed:
+            return
+        self._closed = True
         if self._bar is not None:
             self._bar.close()
         elif not self.off and self.done != self._printed:

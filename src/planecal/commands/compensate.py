@@ -46,7 +46,8 @@ def add_arguments(p):
 def _region(args, doc, robot):
     from pathlib import Path
 
-    from planecal.estimation.compensate import Region, recorded_samples
+    from planecal.estimation.compensate import Region
+    from planecal.io.params import recorded_samples
     from planecal.io.samples import read_samples
     paths = [Path(s) for s in args.samples] if args.samples else recorded_samples(doc, args.params)
     if not paths:
@@ -58,8 +59,9 @@ def _region(args, doc, robot):
 
 
 def run(args) -> int:
-    from planecal.estimation.compensate import (COMPENSATED_FORMAT, compensate, compensated_document,
-                                     load_calibrated, read_targets, write_counts_table)
+    from planecal.estimation.compensate import COMPENSATED_FORMAT, compensate, load_calibrated
+    from planecal.io.targets import read_targets, write_counts_table
+    from planecal.present.compensation import compensated_document
     from planecal.io.outputs import check_output
     from planecal.io.params import save_json
     from planecal.model.robot import load_robot

@@ -1,10 +1,11 @@
 """planecal demo [--scene S] [--samples N] [--seed K] [--dir D] [--errors ideal|realistic|FILE]
-[--rrd FILE] [--force]
+[--level offsets|full] [--compliance] [--rrd FILE] [--force]
 
 The main job on the built-in twin: rehearse a sampling run on the default scene (the
 thesis's final cell) in the world of an error profile (default realistic: a robot of the
-MC70's class, with the errors a real one has), calibrate from the scene's nominal values
-exactly as ``planecal calibrate`` would, then show what the calibration did: the position
+MC70's class, with the errors a real one has) by running ``planecal rehearse``, calibrate
+from the scene's nominal values exactly as ``planecal calibrate`` would (the same
+calibration options), then show what the calibration did: the position
 error before and after in the calibrated region (ISO 9283 AP on the same twin,
 ``studies.validation``), and the identified joint offsets against the twin's hidden truth
 in units of the reported standard deviations, with why they can sit far from it.
@@ -41,6 +42,8 @@ def add_arguments(p):
                         "a file name, or 'auto' for recordings/)")
     p.add_argument("--force", action="store_true",
                    help="replace files in --dir even if the demo did not write them")
+    from planecal.commands.calibration_options import add_calibration_arguments
+    add_calibration_arguments(p)
 
 
 def _check_outputs(out: Path, force: bool) -> tuple[Path, Path, Path]:
@@ -72,46 +75,61 @@ WHY_OFF = (
 
 
 def run(args) -> int:
-    from planecal.cli import main as planecal_main
-    from planecal.estimation.calibrate import CalibrationSettings, calibrate_samples
-    from planecal.safety.collision import CollisionWorld
-    from planecal.formats.params import provenance, result_document
-    from planecal.present.calibration import document, text
-    from planecal.io.params import save_json
-    from planecal.io.samples import read_samples
-    from planecal.model.scene import load_scene, nominal_params
-    from planecal.twin.world import MISMATCH, SHORT, sources_on
-    from planecal.studies.validation import ValidationSettings, validate
-    from planecal.twin.profile import load_profile, load_world
+    from planecal.commands.calibration_options import calibration_settings
+    from planecal.model.scene import load_scene
+    from planecal.twin.profile import load_profile
 
-    scene = load_scene(args.scene)  # a bad scene or --errors before any folder is made
+    scene = load_scene(args.scene)  # a bad scene, --errors or --level before any folder
     profile = load_profile(args.errors, scene.robot)
+    settings = calibration_settings(args, scene.robot)
     out = Path(args.dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"--dir {out}: cannot create ({e.strerror})") from None
-    run_file, truth_file, result_file = _check_outputs(out, args.force)
-    # the rehearsal is planecal rehearse itself, as a user runs it
+    files = _check_outputs(out, args.force)
+    print(f"== rehearsal on the twin ({args.scene}, {args.samples} samples, seed {args.seed}, "
+          f"{profile.name} world)", flush=True)
+    code = _rehearse(args, *files[:2])
+    if code == 2 or code >= 128:  # refused or interrupted: its one line said why
+        return code
+    if code != 0:
+        print("the rehearsal did not complete; calibrating what was sampled")
+    cal, samples, why = _calibrate(args, scene, settings, *files)
+    world, opts, v = _position_error(args, scene, samples, cal, *files[:2])
+    _offsets_against_truth(scene, samples, cal, world, opts)
+    print("files: " + ", ".join(str(f) for f in files))
+    if why:
+        raise RunFailed(why)
+    return 0
+
+
+def _rehearse(args, run_file, truth_file) -> int:
+    """The rehearsal is planecal rehearse itself, as a user runs it: its exit code."""
+    from planecal.cli import main as planecal_main
     argv = ["rehearse", "--out", str(run_file), "--truth-out", str(truth_file), "--force",
             "--scene", args.scene, "--samples", str(args.samples), "--seed", str(args.seed),
             "--errors", args.errors]
     if args.rrd:
         argv += ["--rrd", args.rrd]
-    print(f"== rehearsal on the twin ({args.scene}, {args.samples} samples, seed {args.seed}, "
-          f"{profile.name} world)", flush=True)
-    code = planecal_main(argv)
-    if code == 2:  # refused: its one line said why
-        return 2
-    if code >= 128:  # interrupted: its line said so
-        return code
-    if code != 0:
-        print("the rehearsal did not complete; calibrating what was sampled")
+    return planecal_main(argv)
+
+
+def _calibrate(args, scene, settings, run_file, truth_file, result_file):
+    """The calibration from the scene's nominal values, as planecal calibrate does it:
+    (Calibration, samples, why it failed or None); its result file written. A fit that did
+    not converge ends the demo (RunFailed)."""
+    from planecal.estimation.calibrate import calibrate_samples
+    from planecal.formats.params import provenance, result_document
+    from planecal.io.params import save_json
+    from planecal.io.samples import read_samples
+    from planecal.model.scene import nominal_params
+    from planecal.present.calibration import document, text
+
     samples = read_samples(run_file)
-    nominal = nominal_params(scene)
-    print(f"\n== calibration from the scene's nominal values ({len(samples)} samples)")
-    cal = calibrate_samples(scene.robot, samples, nominal, CalibrationSettings())
-    res = cal.result
+    print(f"\n== calibration (level {settings.label}) from the scene's nominal values "
+          f"({len(samples)} samples)")
+    cal = calibrate_samples(scene.robot, samples, nominal_params(scene), settings)
     doc = result_document(document(cal, scene.robot), provenance(
         [("samples", run_file), ("scene", scene.path), ("robot", scene.robot.source)],
         scene.name, scene.robot.name))
@@ -121,32 +139,47 @@ def run(args) -> int:
         from planecal.present.rerun import log_fit_to_file
         print(f"fit recording written to {log_fit_to_file(args.rrd, cal, samples, scene)}")
     why = cal.failure()
-    if not res.converged:
+    if not cal.result.converged:
         print(f"files: {run_file}, {truth_file}, {result_file}")
         raise RunFailed(why)
     if why:  # the offsets are a calibration; a sensor or plane parameter is not pinned
         print(f"\nplanecal calibrate would fail here ({why}); the demo still shows what the "
               "fitted model does")
+    return cal, samples, why
 
-    world = load_world(scene, truth_file)  # the twin's world, as rehearse wrote it
-    opts = profile.options()
+
+def _position_error(args, scene, samples, cal, run_file, truth_file):
+    """ISO 9283 AP before and after, in the world the run was made in (its files say
+    which): (world, twin options, the validation)."""
+    from planecal.safety.collision import CollisionWorld
+    from planecal.studies.validation import ValidationSettings, validate
+    from planecal.twin.world import recorded_world
+
+    world, opts = recorded_world(scene, run_file, truth_file).build(scene)
     st = ValidationSettings(cycles=DEMO_CYCLES, seed=args.seed, gauge=False)
-    v = validate(scene, world, res.params, samples.qe, st,
+    v = validate(scene, world, cal.params, samples.qe, st,
                  CollisionWorld(scene, clearance_m=st.clearance_m), options=opts)
     iso = v["iso"]
     print(f"\n== position error in the calibrated region (ISO 9283 AP: the worst of five poses "
           f"in a {iso['edge_m'] * 1e3:.0f} mm cube over the samples, {DEMO_CYCLES} cycles, on "
-          "the same twin)")
+          "the same twin, at the flange)")
     print(f"before calibration {v['ap_before_mm']:.3f} mm, after {v['ap_after_mm']:.3f} mm "
           f"(x{v['ap_ratio']:.1f} smaller); repeatability RP {v['rp_mm']:.3f} mm")
+    return world, opts, v
 
+
+def _offsets_against_truth(scene, samples, cal, world, opts) -> None:
+    """The identified joint offsets against the twin's hidden truth, in reported std, and
+    why they can sit far from it."""
+    from planecal.twin.world import MISMATCH, SHORT, sources_on
+
+    res = cal.result
     truth = world.params
     print("\n== identified joint offsets against the twin's hidden truth")
     print(f"{'joint':<7} {'truth_mrad':>11} {'nominal_err':>12} {'identified':>11} "
           f"{'error_mrad':>11} {'std_mrad':>9} {'error/std':>9}")
     worst = 0.0
-    offsets = res.layout.group("joint_offsets").names
-    for i, name in enumerate(offsets):
+    for i, name in enumerate(res.layout.group("joint_offsets").names):
         t, x = truth.joint_offsets[i], res.params.joint_offsets[i]
         j = res.layout.index(name)
         if not res.free[j]:
@@ -160,7 +193,8 @@ def run(args) -> int:
               f"{(x - t) * 1e3:>11.4f} {s * 1e3:>9.4f} {z:>9.2f}")
     verdict = "within" if worst <= 3 else "OUTSIDE"
     print(f"\nidentified offsets are {verdict} 3 reported standard deviations of the truth "
-          f"(worst {worst:.2f} sigma); residual RMS {res.rms_mm(True):.3f} -> {res.rms_mm():.4f} mm")
+          f"(worst {worst:.2f} sigma); model error RMS {res.rms_mm(True):.3f} -> "
+          f"{res.rms_mm():.4f} mm")
     mismatch = [f for f in sources_on(scene.robot, world, opts) if f in MISMATCH]
     if mismatch:
         noise = _noise_rms_mm(scene, samples, res, opts)
@@ -171,10 +205,6 @@ def run(args) -> int:
         print("This twin's world has no error the fit's model lacks: the offsets should sit "
               "within a few reported std of the truth, and the position error after "
               "calibration is the noise's.")
-    print(f"files: {run_file}, {truth_file}, {result_file}")
-    if why:
-        raise RunFailed(why)
-    return 0
 
 
 def _noise_rms_mm(scene, samples, res, opts) -> float:

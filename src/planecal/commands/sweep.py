@@ -31,9 +31,8 @@ def add_arguments(p):
 
 def run(args) -> int:
     from planecal.io.params import save_json
-    from planecal.base.progress import Progress as Bar
+    from planecal.base.progress import Progress
     from planecal.present.report.sweep import fig_accuracy_vs_time
-    from planecal.studies.common import Progress
     from planecal.commands.engine_options import engine_from_args
     from planecal.present.sweep import format_sweep
     from planecal.studies.distributed import warm_twin
@@ -50,7 +49,7 @@ def run(args) -> int:
                          "or give another folder")
     out.mkdir(parents=True, exist_ok=True)
     n_runs = len(spec.cells()) * spec.runs
-    bar = Bar("planning", len(plans_needed(spec)), unit=" plans")
+    bar = Progress("planning", len(plans_needed(spec)), unit=" plans")
     with engine as eng:
         res = run_sweep(spec, results, eng, resume=args.resume,
                         progress=Progress(f"sweep: {n_runs} runs, {eng.describe()}", n_runs),

@@ -36,15 +36,10 @@ from planecal.model.robot import Robot
 from planecal.io.samples import Samples
 
 
-@dataclass
-class FitOptions:
-    max_iter: int = 30
-    improvement_limit: float = 1e-12
-    outlier_sigma: float | None = None
-    method: str = "gn"  # "gn": Gauss-Newton (SVD pseudo-inverse); "lm": Levenberg-Marquardt
-    scale: bool = True  # column scaling of the Jacobian
-    rcond: float = 1e-7  # pseudo-inverse cut-off relative to the largest scaled singular value
-    lm_lambda0: float = 1e-3
+@dataclass(frozen=True)
+class FitOptions(SolverOptions):
+    """The solver's options (``SolverOptions``: iterations, method, scaling, rcond) and
+    what the fit adds: identifiability thresholds, weighting and a prior."""
     unidentifiable_ratio: float = 1e-7
     weak_ratio: float = 1e-3
     correlation_limit: float = 0.95
@@ -58,10 +53,6 @@ class FitOptions:
     # prior_sigma_m: rows (x - x0) * prior_sigma_m / std join the distance rows (gn only)
     prior: tuple = ()
     prior_sigma_m: float = 3e-5
-
-    def solver_options(self) -> SolverOptions:
-        return SolverOptions(self.max_iter, self.improvement_limit, self.outlier_sigma,
-                             self.method, self.scale, self.rcond, self.lm_lambda0)
 
 
 # ----- the problem --------------------------------------------------------------------------
@@ -243,7 +234,7 @@ def solve(problem: Problem) -> Result:
     opt, layout, free = pb.options, pb.layout, pb.free
     prior = _prior(pb)
     sol = least_squares(_residuals(pb), pb.initial.to_vector(layout)[free], len(pb),
-                        opt.solver_options(), prior)
+                        opt, prior)
     x = pb.initial.to_vector(layout)
     x[free] = sol.x
     params = CellParams.from_vector(x, layout)

@@ -12,6 +12,7 @@ where not identifiable), ``residual_rms_mm``, ``iterations``, ``outliers``,
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -126,3 +127,28 @@ def _jsonable(v):
     if isinstance(v, np.generic):
         return v.item()
     raise TypeError(f"not JSON serializable: {type(v).__name__}")
+
+
+def recorded_samples(doc: dict, result_path) -> list[Path]:
+    """The sample files a result's provenance records (role ``samples``), found here with
+    the recorded content (relative paths: from the working directory, then beside the
+    result). InputError for a recorded file that is missing or changed."""
+    prov = doc.get("provenance") if isinstance(doc, dict) else None
+    entries = prov.get("inputs") if isinstance(prov, dict) else None
+    found = []
+    for e in entries if isinstance(entries, list) else []:
+        if not isinstance(e, dict) or e.get("role") != "samples" or not e.get("path"):
+            continue
+        p = Path(str(e["path"]))
+        cands = [p] if p.is_absolute() else [p, Path(result_path).parent / p]
+        hit = next((c for c in cands if c.is_file()), None)
+        if hit is None:
+            raise InputError(f"{result_path}: its samples file {p} is not here; give the "
+                             "calibration's samples with --samples")
+        with open(hit, "rb") as f:
+            digest = hashlib.file_digest(f, "sha256").hexdigest()
+        if e.get("sha256") and digest != e["sha256"]:
+            raise InputError(f"{hit}: not the samples file {result_path} was made from (its "
+                             "SHA-256 differs); give the calibration's samples with --samples")
+        found.append(hit)
+    return found

@@ -19,6 +19,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from planecal.base.paths import numba_cache
+
+numba_cache()  # in planecal's cache folder, not beside this file in site-packages
+
 JIT = dict(cache=True, error_model="numpy")
 
 
@@ -122,6 +126,17 @@ def link_frames(K, B, F, Q):
     return Rs, ps
 
 
+@njit(inline="always", **JIT)
+def _store(T, i, R, p):
+    """T[i] = [[R, p], [0, 1]]."""
+    for r in range(3):
+        for c in range(3):
+            T[i, r, c] = R[r, c]
+        T[i, r, 3] = p[r]
+        T[i, 3, r] = 0.0
+    T[i, 3, 3] = 1.0
+
+
 @njit(**JIT)
 def flange(K, B, F, Q, T):
     """The flange pose of each row of Q into T (N, 4, 4)."""
@@ -131,12 +146,7 @@ def flange(K, B, F, Q, T):
     p = np.empty(3)
     for i in range(N):
         _times(_walk(K, B, Q[i], S), F, R, p)
-        for r in range(3):
-            for c in range(3):
-                T[i, r, c] = R[r, c]
-            T[i, r, 3] = p[r]
-            T[i, 3, r] = 0.0
-        T[i, 3, 3] = 1.0
+        _store(T, i, R, p)
 
 
 @njit(**JIT)
@@ -149,12 +159,7 @@ def flange_jacobian(K, B, F, Q, T, J):
     p = np.empty(3)
     for i in range(N):
         _times(_walk(K, B, Q[i], S), F, R, p)
-        for r in range(3):
-            for c in range(3):
-                T[i, r, c] = R[r, c]
-            T[i, r, 3] = p[r]
-            T[i, 3, r] = 0.0
-        T[i, 3, 3] = 1.0
+        _store(T, i, R, p)
         for j in range(n):
             z0, z1, z2 = S[j, 12], S[j, 13], S[j, 14]
             r0, r1, r2 = p[0] - S[j, 9], p[1] - S[j, 10], p[2] - S[j, 11]
@@ -213,49 +218,62 @@ def distance(K, B, F, Q, o, zf, dzf, planes, pidx, base_axes, base_point, out_d,
         out_hit[i, 0], out_hit[i, 1], out_hit[i, 2] = m0, m1, m2
         if not derivatives:
             continue
-        inv = 1.0 / s
-        for j in range(n):
-            dtheta[j] = _turn(n0, n1, n2, S[j, 12], S[j, 13], S[j, 14], S[j, 9], S[j, 10],
-                              S[j, 11], m0, m1, m2, inv)
-            c = cols_joint[j]
-            if c[3] >= 0:
-                J[i, c[3]] = dtheta[j]
-            if c[0] >= 0:
-                J[i, c[0]] = _turn(n0, n1, n2, S[j, 0], S[j, 1], S[j, 2], S[j, 3], S[j, 4],
-                                   S[j, 5], m0, m1, m2, inv)
-            if c[1] >= 0:
-                J[i, c[1]] = -(n0 * S[j, 0] + n1 * S[j, 1] + n2 * S[j, 2]) * inv
-            if c[2] >= 0:
-                J[i, c[2]] = _turn(n0, n1, n2, S[j, 6], S[j, 7], S[j, 8], S[j, 9], S[j, 10],
-                                   S[j, 11], m0, m1, m2, inv)
-            if c[4] >= 0:
-                J[i, c[4]] = -(n0 * S[j, 12] + n1 * S[j, 13] + n2 * S[j, 14]) * inv
-        for e in range(extra_col.shape[0]):
-            J[i, extra_col[e]] = dtheta[extra_joint[e]] * extra_factor[i, e]
-        nv[0], nv[1], nv[2] = n0, n1, n2
+        _derivatives(J, i, S, R, n0, n1, n2, m0, m1, m2, s, dist, dzf, base_axes, base_point,
+                     cols_joint, cols_base, cols_origin, cols_angles, cols_plane, k,
+                     extra_joint, extra_col, extra_factor, dtheta, nv, m)
+
+
+@njit(inline="always", **JIT)
+def _derivatives(J, i, S, R, n0, n1, n2, m0, m1, m2, s, dist, dzf, base_axes, base_point,
+                 cols_joint, cols_base, cols_origin, cols_angles, cols_plane, k, extra_joint,
+                 extra_col, extra_factor, dtheta, nv, m):
+    """Row i of J: the distance's derivatives by the mapped parameters (``distance``), for
+    the chain's terms S, the flange rotation R, the plate's n~ (n0, n1, n2), the hit point
+    (m0, m1, m2), s = n~ . z_b and the distance."""
+    n = S.shape[0]
+    inv = 1.0 / s
+    for j in range(n):
+        dtheta[j] = _turn(n0, n1, n2, S[j, 12], S[j, 13], S[j, 14], S[j, 9], S[j, 10],
+                          S[j, 11], m0, m1, m2, inv)
+        c = cols_joint[j]
+        if c[3] >= 0:
+            J[i, c[3]] = dtheta[j]
+        if c[0] >= 0:
+            J[i, c[0]] = _turn(n0, n1, n2, S[j, 0], S[j, 1], S[j, 2], S[j, 3], S[j, 4],
+                               S[j, 5], m0, m1, m2, inv)
+        if c[1] >= 0:
+            J[i, c[1]] = -(n0 * S[j, 0] + n1 * S[j, 1] + n2 * S[j, 2]) * inv
+        if c[2] >= 0:
+            J[i, c[2]] = _turn(n0, n1, n2, S[j, 6], S[j, 7], S[j, 8], S[j, 9], S[j, 10],
+                               S[j, 11], m0, m1, m2, inv)
+        if c[4] >= 0:
+            J[i, c[4]] = -(n0 * S[j, 12] + n1 * S[j, 13] + n2 * S[j, 14]) * inv
+    for e in range(extra_col.shape[0]):
+        J[i, extra_col[e]] = dtheta[extra_joint[e]] * extra_factor[i, e]
+    nv[0], nv[1], nv[2] = n0, n1, n2
+    for r in range(3):
+        if cols_base[r] >= 0:
+            J[i, cols_base[r]] = -nv[r] * inv
+        if cols_base[3 + r] >= 0:
+            J[i, cols_base[3 + r]] = _turn(n0, n1, n2, base_axes[r, 0], base_axes[r, 1],
+                                           base_axes[r, 2], base_point[0], base_point[1],
+                                           base_point[2], m0, m1, m2, inv)
+    # R^T n~: the plate's normal in the flange frame
+    f0 = R[0, 0] * n0 + R[1, 0] * n1 + R[2, 0] * n2
+    f1 = R[0, 1] * n0 + R[1, 1] * n1 + R[2, 1] * n2
+    f2 = R[0, 2] * n0 + R[1, 2] * n1 + R[2, 2] * n2
+    if cols_origin[0] >= 0:
+        J[i, cols_origin[0]] = -f0 * inv
+    if cols_origin[1] >= 0:
+        J[i, cols_origin[1]] = -f1 * inv
+    if cols_origin[2] >= 0:
+        J[i, cols_origin[2]] = -f2 * inv
+    for a in range(2):
+        if cols_angles[a] >= 0:
+            J[i, cols_angles[a]] = -dist * inv * (f0 * dzf[0, a] + f1 * dzf[1, a]
+                                                  + f2 * dzf[2, a])
+    if cols_plane.shape[0] > k:
+        m[0], m[1], m[2] = m0, m1, m2
         for r in range(3):
-            if cols_base[r] >= 0:
-                J[i, cols_base[r]] = -nv[r] * inv
-            if cols_base[3 + r] >= 0:
-                J[i, cols_base[3 + r]] = _turn(n0, n1, n2, base_axes[r, 0], base_axes[r, 1],
-                                               base_axes[r, 2], base_point[0], base_point[1],
-                                               base_point[2], m0, m1, m2, inv)
-        # R^T n~: the plate's normal in the flange frame
-        f0 = R[0, 0] * n0 + R[1, 0] * n1 + R[2, 0] * n2
-        f1 = R[0, 1] * n0 + R[1, 1] * n1 + R[2, 1] * n2
-        f2 = R[0, 2] * n0 + R[1, 2] * n1 + R[2, 2] * n2
-        if cols_origin[0] >= 0:
-            J[i, cols_origin[0]] = -f0 * inv
-        if cols_origin[1] >= 0:
-            J[i, cols_origin[1]] = -f1 * inv
-        if cols_origin[2] >= 0:
-            J[i, cols_origin[2]] = -f2 * inv
-        for c in range(2):
-            if cols_angles[c] >= 0:
-                J[i, cols_angles[c]] = -dist * inv * (f0 * dzf[0, c] + f1 * dzf[1, c]
-                                                      + f2 * dzf[2, c])
-        if cols_plane.shape[0] > k:
-            m[0], m[1], m[2] = m0, m1, m2
-            for r in range(3):
-                if cols_plane[k, r] >= 0:
-                    J[i, cols_plane[k, r]] = -m[r] * inv
+            if cols_plane[k, r] >= 0:
+                J[i, cols_plane[k, r]] = -m[r] * inv

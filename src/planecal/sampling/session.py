@@ -6,10 +6,11 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from planecal.base.errors import InputError, RunFailed
-from planecal.base.progress import Progress as ProgressBar
+from planecal.base.progress import Progress
 from planecal.sampling.driver import (Driver, EnableDropped, PathBlocked, move_home,
                                       move_to_calibration)
 from planecal.sampling.observer import Observer
@@ -41,31 +42,28 @@ class Session:
     extra: dict | None = None
 
 
-class Progress:
-    """The run's progress (``planecal.base.progress``): samples taken, rejections and robot time;
-    at the end, why a run that did not complete stopped."""
+def _clock(s: float) -> str:
+    s = int(round(s))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
 
-    def __init__(self, total: int, stream=None, tty: bool | None = None):
-        self.bar = ProgressBar("samples", total, stream, tty)
 
-    @staticmethod
-    def _clock(s: float) -> str:
-        s = int(round(s))
-        return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+def run_note(st: RunStats) -> str:
+    """A sampling run's progress note: rejections and robot time."""
+    r = st.rejected
+    return (f"rejected {sum(r.values())} (collision {r['collision']}, laser {r['laser']}, "
+            f"unreachable {r['unreachable']})  robot time {_clock(st.robot_time_s)}")
 
-    def note(self, st: RunStats) -> str:
-        r = st.rejected
-        return (f"rejected {sum(r.values())} (collision {r['collision']}, laser {r['laser']}, "
-                f"unreachable {r['unreachable']})  robot time {self._clock(st.robot_time_s)}")
 
-    def __call__(self, st: RunStats) -> None:
-        self.bar.update(st.samples, self.note(st))
+def show_run(bar: Progress, st: RunStats) -> None:
+    """The run's state on ``bar``: samples taken and ``run_note``."""
+    bar.update(st.samples, run_note(st))
 
-    def done(self, st: RunStats) -> None:
-        self.bar.update(st.samples, self.note(st))
-        # an "error" run raises, and the command says why in its one line
-        self.bar.close(None if st.status in ("complete", "error")
-                       else f"run {st.status}: {st.reason}")
+
+def close_run(bar: Progress, st: RunStats) -> None:
+    """The last state; for a run that did not complete, why it stopped (an "error" run
+    raises, and the command says why in its one line)."""
+    show_run(bar, st)
+    bar.close(None if st.status in ("complete", "error") else f"run {st.status}: {st.reason}")
 
 
 def run_session(session: Session, scene, settings: RunSettings, link, laser, enable,
@@ -85,7 +83,7 @@ def _move(kind: str):
 
 def _session(ses: Session, scene, settings, link, laser, enable, checker, lock):
     drv = Driver(link, laser, enable, scene.robot, ses.observer)
-    progress = Progress(settings.samples)
+    progress = Progress("samples", settings.samples)
     moves = {}
     try:
         drv.start()
@@ -97,14 +95,14 @@ def _session(ses: Session, scene, settings, link, laser, enable, checker, lock):
         raise RunFailed(f"--start {ses.start}: enable dropped on the way; nothing sampled") from None
     run = SamplingRun(drv, scene, settings, ses.out, checker, resume=ses.resume,
                       background=ses.background, hold_while_planning=ses.hold_while_planning,
-                      progress=progress, extra=ses.extra, lock=lock, planner=ses.planner,
+                      progress=partial(show_run, progress), extra=ses.extra, lock=lock, planner=ses.planner,
                       model=ses.model)
     t0 = time.perf_counter()
     ticks0 = drv.ticks
     try:
         st = run.run()
     finally:
-        progress.done(run.stats)
+        close_run(progress, run.stats)
     summary = st.summary()
     summary["session_robot_time_s"] = round((drv.ticks - ticks0) * scene.robot.tick_s, 3)
     if st.status == "complete" and ses.end != "stay":

@@ -37,7 +37,8 @@ from planecal.model.cell_params import CellParams
 from planecal.model.layout import ParamLayout
 from planecal.model.levels import layout_for
 from planecal.model.robot import Robot
-from planecal.studies.common import Progress, parallel_map
+from planecal.base.progress import Progress
+from planecal.studies.common import parallel_map
 
 OVERLAP_WARN = 0.3
 DEFAULT_SIZES = (30, 50, 100, 150)

@@ -23,7 +23,7 @@ from typing import Callable, Iterable, Iterator
 
 
 from planecal.base.errors import InputError
-from planecal.base.progress import Progress as ProgressBar
+from planecal.base.progress import Progress
 from planecal.studies.distributed import Engine
 
 
@@ -40,21 +40,6 @@ def parse_int_list(text: str, what: str, minimum: int = 1) -> list[int]:
     if bad:
         raise InputError(f"{what}: values must be at least {minimum}, got {bad[0]}")
     return vals
-
-
-class Progress:
-    """A study's progress (``planecal.base.progress``): runs done of ``total``."""
-
-    def __init__(self, label: str, total: int, stream=None, quiet: bool = False):
-        self.bar = None if quiet else ProgressBar(label, total, stream)
-        self.done = 0
-
-    def step(self, k: int = 1) -> None:
-        self.done += k
-        if self.bar is not None:
-            self.bar.update(self.done)
-            if self.done >= self.bar.total:
-                self.bar.close()
 
 
 @contextmanager

@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.estimation.compensate import CalibratedModel, Region, Targets, compensate
+from planecal.estimation.compensate import CalibratedModel, Region, compensate
+from planecal.io.targets import Targets
 from planecal.model.encoder import counts_to_joints
 from planecal.model.kinematics import fk
 from planecal.model.robot import within_limits

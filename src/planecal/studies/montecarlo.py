@@ -37,7 +37,8 @@ from planecal.estimation.noise import sample_variance
 from planecal.model.layout import ParamLayout
 from planecal.model.levels import layout_for as level_layout
 from planecal.model.measurement import predict_with_jacobian
-from planecal.studies.common import Progress, cached_profile, cached_scene, parallel_map
+from planecal.base.progress import Progress
+from planecal.studies.common import cached_profile, cached_scene, parallel_map
 from planecal.studies.rehearsal import RehearsalSettings, sample_run
 from planecal.twin.world import MISMATCH, sources_on, true_params
 
@@ -206,19 +207,12 @@ def _chi2(errs, covs, idx):
             "share_below_chi2_95": float(np.mean(T < q95)), "passes": ok, "values": values}
 
 
-def analyze(runs: list[dict], st: MCSettings) -> dict:
-    """The study's summary over its runs (module docstring); a parameter's statistics are
-    over the runs that fitted it (at level full each run has its own base set)."""
-    names = st.layout().names
-    fnames = st.candidates()
-    failed = [{"seed": r["seed"], "reason": r["failed"]} for r in runs if "failed" in r]
-    runs = [r for r in runs if "failed" not in r]
-    if len(runs) < 2:
-        raise InputError(f"only {len(runs)} of {len(runs) + len(failed)} runs completed")
+def _parameter_stats(runs: list[dict], fnames: list[str]) -> dict:
+    """Per candidate fitted in at least two runs: bias, empirical std, the bounds' RMS over
+    the runs (white, sandwich, Cramer-Rao), the reported std and their ratios."""
     R = len(runs)
     E = np.array([r["err"] for r in runs], float)
-    fitted = np.isfinite(E)
-    n_fit = fitted.sum(0)
+    n_fit = np.isfinite(E).sum(0)
     with np.errstate(invalid="ignore", divide="ignore"):
         bias = np.nansum(E, 0) / np.maximum(n_fit, 1)
         emp = np.sqrt(np.nansum((E - bias) ** 2, 0) / np.maximum(n_fit - 1, 1))
@@ -240,16 +234,15 @@ def analyze(runs: list[dict], st: MCSettings) -> dict:
     rep = np.full(rep2.shape[1], np.nan)
     has = n_rep > 0
     rep[has] = np.sqrt(np.nansum(rep2[:, has], axis=0) / n_rep[has])
-    rel_se = 1.0 / np.sqrt(2 * (R - 1))  # relative standard error of a std from R runs
     params = {}
     for i, n in enumerate(fnames):
         if n_fit[i] < 2:  # fitted in fewer than two runs: no spread to compare
             continue
-        params[n] = {"runs_fitted": int(n_fit[i]),
-            "bias": float(bias[i]), "empirical_std": float(emp[i]),
-            "crb_white_std": float(white[i]), "sandwich_std": float(sand[i]),
-            "crb_std": float(crb[i]), "reported_std": float(rep[i]),
-            "reported_in_runs": int(n_rep[i]),
+        params[n] = {
+            "runs_fitted": int(n_fit[i]), "bias": float(bias[i]),
+            "empirical_std": float(emp[i]), "crb_white_std": float(white[i]),
+            "sandwich_std": float(sand[i]), "crb_std": float(crb[i]),
+            "reported_std": float(rep[i]), "reported_in_runs": int(n_rep[i]),
             "ratio_emp_to_crb_white": float(emp[i] / white[i]),
             "ratio_emp_to_sandwich": float(emp[i] / sand[i]),
             "ratio_emp_to_crb": float(emp[i] / crb[i]),
@@ -258,47 +251,74 @@ def analyze(runs: list[dict], st: MCSettings) -> dict:
             "bias_over_crb": float(abs(bias[i]) / crb[i]),
             "bias_t": float(bias[i] / (emp[i] / np.sqrt(R))),
         }
+    return params, E, n_fit
+
+
+def _chi2_checks(runs: list[dict], fnames: list[str], n_fit, weighted: bool):
+    """(offsets checked, chi-square of the offsets with the reported and the sandwich
+    covariance, chi-square of every parameter fitted in all runs)."""
+    R = len(runs)
+
+    def steady(i, n):
+        return n_fit[i] == R and all(n not in r["not_identifiable"] for r in runs)
     offsets = [f"delta{j}" for j in range(1, 7)]
-    off = [i for i, n in enumerate(fnames) if n in offsets and n_fit[i] == R
-           and all(n not in r["not_identifiable"] for r in runs)]
+    off = [i for i, n in enumerate(fnames) if n in offsets and steady(i, n)]
     errs = [r["err"] for r in runs]
     chi_rep = _chi2(errs, [r["reported_cov"] for r in runs], off)
     # the sandwich is the unweighted estimator's covariance: no check of a weighted fit
-    chi_sand = None if st.weighted else _chi2(errs, [r["sandwich_cov"] for r in runs], off)
+    chi_sand = None if weighted else _chi2(errs, [r["sandwich_cov"] for r in runs], off)
     chi_all = _chi2(errs, [r["reported_cov"] for r in runs],
-                    [i for i, n in enumerate(fnames) if n_fit[i] == R
-                     and all(n not in r["not_identifiable"] for r in runs)])
-    offs = [fnames[i] for i in off]
-    within = {n: abs(params[n]["ratio_emp_to_crb"] - 1) <= TARGET_RATIO for n in offs}
-    within_white = {n: abs(params[n]["ratio_emp_to_crb_white"] - 1) <= TARGET_RATIO for n in offs}
-    honest = {n: abs(params[n]["ratio_emp_to_reported"] - 1) <= TARGET_RATIO for n in offs}
-    small_bias = {n: params[n]["bias_over_crb"] < TARGET_BIAS for n in offs}
-    rej = {k: int(sum(r["rejected"].get(k, 0) for r in runs)) for k in ("collision", "laser", "unreachable")}
+                    [i for i, n in enumerate(fnames) if steady(i, n)])
+    return [fnames[i] for i in off], chi_rep, chi_sand, chi_all
+
+
+def _verdict(params: dict, offs: list[str], chi_rep) -> dict:
+    def each(ok):
+        return {n: bool(ok(params[n])) for n in offs}
+    return {
+        "efficient_within_15pct_of_crb": each(
+            lambda p: abs(p["ratio_emp_to_crb"] - 1) <= TARGET_RATIO),
+        "within_15pct_of_white_crb": each(
+            lambda p: abs(p["ratio_emp_to_crb_white"] - 1) <= TARGET_RATIO),
+        "reported_std_within_15pct": each(
+            lambda p: abs(p["ratio_emp_to_reported"] - 1) <= TARGET_RATIO),
+        "bias_under_fifth_of_crb": each(lambda p: p["bias_over_crb"] < TARGET_BIAS),
+        "chi2_passes": None if chi_rep is None else chi_rep["passes"],
+    }
+
+
+def analyze(runs: list[dict], st: MCSettings) -> dict:
+    """The study's summary over its runs (module docstring); a parameter's statistics are
+    over the runs that fitted it (at level full each run has its own base set)."""
+    names = st.layout().names
+    fnames = st.candidates()
+    failed = [{"seed": r["seed"], "reason": r["failed"]} for r in runs if "failed" in r]
+    runs = [r for r in runs if "failed" not in r]
+    if len(runs) < 2:
+        raise InputError(f"only {len(runs)} of {len(runs) + len(failed)} runs completed")
+    R = len(runs)
+    params, E, n_fit = _parameter_stats(runs, fnames)
+    offs, chi_rep, chi_sand, chi_all = _chi2_checks(runs, fnames, n_fit, st.weighted)
+    rej = {k: int(sum(r["rejected"].get(k, 0) for r in runs))
+           for k in ("collision", "laser", "unreachable")}
     return {
         "format": FORMAT, "world": _world_summary(st, runs),
         "settings": _settings_dict(st), "runs": R, "free": fnames, "params": params,
         "offsets": offs,
-        "relative_standard_error_of_std": rel_se,
+        "relative_standard_error_of_std": 1.0 / np.sqrt(2 * (R - 1)),  # of a std, R runs
         "chi2_offsets_reported": chi_rep, "chi2_offsets_sandwich": chi_sand,
-        "chi2_all_reported": chi_all,
-        "verdict": {
-            "efficient_within_15pct_of_crb": within,
-            "within_15pct_of_white_crb": within_white,
-            "reported_std_within_15pct": honest,
-            "bias_under_fifth_of_crb": small_bias,
-            "chi2_passes": None if chi_rep is None else chi_rep["passes"],
-        },
+        "chi2_all_reported": chi_all, "verdict": _verdict(params, offs, chi_rep),
         "sigma_model_mm": float(np.mean([r["sigma_model_mm"] for r in runs])),
         "sigma_fit_mm": float(np.mean([r["sigma_fit_mm"] for r in runs])),
         "not_converged": int(sum(not r["converged"] for r in runs)),
         "rejected_total": rej,
-        "not_identifiable_all_free": sorted({n for r in runs for n in r["not_identifiable_all_free"]},
-                                            key=names.index),
+        "not_identifiable_all_free": sorted(
+            {n for r in runs for n in r["not_identifiable_all_free"]}, key=names.index),
         "samples_per_run": float(np.mean([r["samples"] for r in runs])),
         "failed_runs": failed,
         "run_errors": [[None if not np.isfinite(v) else float(v) for v in row] for row in E],
-        "run_crb_std": [[None if not np.isfinite(v) else float(np.sqrt(v)) for v in r["crb_var"]]
-                        for r in runs],
+        "run_crb_std": [[None if not np.isfinite(v) else float(np.sqrt(v))
+                         for v in r["crb_var"]] for r in runs],
     }
 
 

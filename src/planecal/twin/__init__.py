@@ -11,7 +11,8 @@ Modules: ``core`` (Twin), ``ticks`` (the tick, written once: compiled and interp
 truth), ``laser`` (sensor model settings, noise), ``beam`` (the beams of many joint
 states in one MuJoCo call), ``export`` (scene MJCF for a viewer).
 """
-from planecal.twin.core import EncoderJumpError, Hit, Twin, TwinOptions
+from planecal.twin.core import EncoderJumpError, Hit, Twin
+from planecal.twin.options import TwinOptions
 from planecal.twin.truth import Tolerances, draw_truth, load_truth
 
 __all__ = ["Twin", "TwinOptions", "Hit", "EncoderJumpError", "Tolerances", "draw_truth",

@@ -23,7 +23,7 @@ from planecal.formats.error_profile import N_JOINTS, ErrorProfileFile
 from planecal.model.kinematics import Kinematics, frame_error, parallel_pairs
 from planecal.model.robot import Robot
 from planecal.model.scene import Scene
-from planecal.twin.core import TwinOptions
+from planecal.twin.options import TwinOptions
 from planecal.twin.truth import Tolerances, Truth, draw_truth
 
 PROFILES = ("ideal", "realistic")

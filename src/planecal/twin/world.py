@@ -18,7 +18,7 @@ import numpy as np
 
 from planecal.base.errors import InputError
 from planecal.model.scene import Scene
-from planecal.twin.core import TwinOptions
+from planecal.twin.options import TwinOptions
 from planecal.twin.profile import ErrorProfile, draw_world, load_profile
 from planecal.twin.truth import Truth, draw_truth
 

@@ -15,7 +15,8 @@ from planecal.twin.world import SOURCES
 def run_jobs(fn, items: list, engine=1, label: str = "validate", quiet: bool = True) -> list:
     """``[fn(item) for item in items]`` on ``engine`` (an open ``studies.distributed.Engine``
     or a job count: ``studies.common.parallel_map``)."""
-    from planecal.studies.common import Progress, parallel_map
+    from planecal.base.progress import Progress
+    from planecal.studies.common import parallel_map
     items = list(items)
     return parallel_map(fn, items, engine, Progress(label, len(items), quiet=quiet))
 
