@@ -78,7 +78,8 @@ def add_arguments(p):
     from planecal.commands.engine_options import add_engine_arguments
     add_engine_arguments(p)
     p.add_argument("--calibrated", help="calibration result to validate (with --truth and --run)")
-    p.add_argument("--truth", help="the twin truth (rehearse --truth) the calibration was made on")
+    p.add_argument("--truth", help="the truth file of the world the calibration's run was "
+                   "made in (rehearse --truth-out, or the file rehearse --truth ran in)")
     p.add_argument("--run", help="the calibration's sample file (places the ISO cube)")
 
 
