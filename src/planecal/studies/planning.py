@@ -276,10 +276,8 @@ PLAN_STAGES = 6  # progress steps of ``plan``
 
 @dataclass
 class _Design:
-    """A plan's candidates, the D-optimal choice among them (in the design's order) and
-    its prediction (``_design``)."""
+    """A plan's candidates, the D-optimal choice among them and its prediction."""
     qe: np.ndarray
-    q: np.ndarray
     plate: np.ndarray
     layout: object
     free: np.ndarray
@@ -297,8 +295,7 @@ class _Design:
 
 @dataclass
 class _RandomRun:
-    """The baseline: the poses the sampling run itself would visit (same seed, same size),
-    its robot time and its prediction (``_random_run``)."""
+    """The baseline: the sampling run's own poses, its robot time and its prediction."""
     qe: np.ndarray
     plate: np.ndarray
     time_s: float
@@ -310,8 +307,7 @@ class _RandomRun:
 
 @dataclass
 class _Tour:
-    """The planned poses in the order the run visits them and its robot time before and
-    after ordering (``_tour``)."""
+    """The planned poses in the order visited; the robot time before and after ordering."""
     chosen: np.ndarray
     order: object | None  # ``tour.order``'s result, None when not ordered
     time_unordered_s: float
@@ -331,8 +327,8 @@ def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
     ``progress``: a ``planecal.base.progress.Progress`` of ``PLAN_STAGES`` steps, updated
     at each stage."""
     target = _target(n, m, target_std_urad, target_ap_mm)
-    noise = _noise_sigmas(scene, repeatability_mm, laser_noise_mm)
-    design = _design(scene, n, m, seed, settings, checker, noise, target, progress)
+    design = _design(scene, n, m, seed, settings, checker, repeatability_mm, laser_noise_mm,
+                     target, progress)
     q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     start = joints_to_counts(scene.robot, q0)
     _say(progress, f"the random run's {design.n} poses")
@@ -362,19 +358,13 @@ def _target(n: int, m: int, target_std_urad, target_ap_mm) -> tuple[str, float] 
     return None if target_ap_mm is None else ("ap", target_ap_mm)
 
 
-def _noise_sigmas(scene, repeatability_mm, laser_noise_mm: float) -> tuple[float, float]:
-    """The twin's noise model of the prediction: (joint sigma [rad], laser sample sigma [m])."""
-    from planecal.estimation.noise import repeatability_sigma, sample_sigma_m
-    rep = scene.robot.repeatability_m if repeatability_mm is None else repeatability_mm * 1e-3
-    s = repeatability_sigma(scene.robot, rep) if rep > 0 else 0.0
-    return s, sample_sigma_m(laser_noise_mm)
-
-
-def _design(scene, n: int, m: int, seed: int, settings, checker, noise, target,
-            progress) -> _Design:
+def _design(scene, n: int, m: int, seed: int, settings, checker, repeatability_mm,
+            laser_noise_mm: float, target, progress) -> _Design:
     """The candidates (``candidate_pool``) and the D-optimal choice of n among them (or of
-    the fewest that meet ``target``: ``choose_count``), with its prediction."""
+    the fewest that meet ``target``: ``choose_count``), with its prediction (the twin's
+    noise model)."""
     from planecal.estimation.calibrate import CalibrationSettings, base_set
+    from planecal.estimation.noise import repeatability_sigma, sample_sigma_m
     from planecal.model.scene import nominal_params
     settings = settings or CalibrationSettings()
     _say(progress, f"drawing {m} candidate poses")
@@ -384,7 +374,9 @@ def _design(scene, n: int, m: int, seed: int, settings, checker, noise, target,
     layout, bs = base_set(scene.robot, qe, nominal_params(scene), plate, settings)
     free = bs.mask(layout)
     J, A = scaled_rows(scene, qe, plate, layout, free)
-    s, sig_l = noise
+    rep = scene.robot.repeatability_m if repeatability_mm is None else repeatability_mm * 1e-3
+    s = repeatability_sigma(scene.robot, rep) if rep > 0 else 0.0
+    sig_l = sample_sigma_m(laser_noise_mm)
     predictor = Predictor(scene, J, layout, free, s, sig_l, position_rows(scene, q, layout, free))
     if target is not None:
         _say(progress, f"choosing the sample count for the target ({target[0]} <= {target[1]:g})")
@@ -395,7 +387,7 @@ def _design(scene, n: int, m: int, seed: int, settings, checker, noise, target,
         _say(progress, f"choosing {n} D-optimal poses")
         chosen, logdet, passes, swaps = d_optimal(A, n)
     std, white = predicted_std(J[chosen], layout, free, s, sig_l)
-    return _Design(qe, q, plate, layout, free, J, predictor, n, chosen, logdet, passes, swaps,
+    return _Design(qe, plate, layout, free, J, predictor, n, chosen, logdet, passes, swaps,
                    std, white, predictor(chosen)[1])
 
 
