@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from planecal.safety.collision import FLOOR_DEPTH_M, CollisionWorld
+from planecal.safety.collision import CollisionWorld
+from planecal.safety.collision_parts import FLOOR_DEPTH_M
 from planecal.base.errors import InputError
 
 

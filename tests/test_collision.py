@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from planecal.safety.collision import FLOOR_DEPTH_M, CollisionWorld
+from planecal.safety.collision import CollisionWorld
+from planecal.safety.collision_parts import FLOOR_DEPTH_M
 from planecal.base.errors import InputError
 from planecal.model.geometry import LinkMesh, StaticMesh, box_mesh
 from planecal.model.kinematics import fk, link_frames

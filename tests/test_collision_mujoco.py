@@ -33,7 +33,8 @@ import pytest
 mujoco = pytest.importorskip("mujoco")
 
 from mujoco_oracle import mujoco_contacts, mujoco_contacts_along_path  # noqa: E402
-from planecal.safety.collision import FLOOR_DEPTH_M, CollisionWorld  # noqa: E402
+from planecal.safety.collision import CollisionWorld  # noqa: E402
+from planecal.safety.collision_parts import FLOOR_DEPTH_M  # noqa: E402
 from planecal.model.kinematics import fk  # noqa: E402
 from planecal.model.scene import load_scene  # noqa: E402
 

@@ -15,6 +15,7 @@ import pytest
 
 from planecal.base.errors import InputError
 from planecal.studies import distributed as D
+from planecal.studies import results as R
 from planecal.studies.montecarlo import MCSettings, run_one
 
 ST = MCSettings(mode="synthetic", samples=30, runs=6)
@@ -65,8 +66,8 @@ def test_encode_decode_round_trip_is_exact():
            "f": np.array([np.nan, np.inf, -np.inf, 5e-324, 1 / 3]), "g": (1, "x", None),
            "h": np.array([True, False]), "i": np.int64(7), "j": np.array(2.5)}
     arrays = {}
-    enc = D.encode(obj, arrays)
-    back = D.decode(json.loads(json.dumps(enc)), arrays)
+    enc = R.encode(obj, arrays)
+    back = R.decode(json.loads(json.dumps(enc)), arrays)
     assert back["a"].tobytes() == obj["a"].tobytes()
     assert back["b"][0].dtype == np.int64 and back["b"][1]["c"].shape == (0, 6)
     assert back["b"][1]["d/e~"] == 1.5 and type(back["b"][1]["d/e~"]) is float
@@ -74,9 +75,9 @@ def test_encode_decode_round_trip_is_exact():
     assert back["g"] == [1, "x", None]
     assert back["h"].dtype == bool and back["i"] == 7 and back["j"].shape == ()
     with pytest.raises(TypeError, match="not a string"):
-        D.encode({1: 2})
+        R.encode({1: 2})
     with pytest.raises(TypeError, match="dtype"):
-        D.encode({"x": np.array(["a"])})
+        R.encode({"x": np.array(["a"])})
 
 
 def test_jobs_1_runs_here_without_dask(tmp_path):
@@ -115,7 +116,7 @@ def test_results_file_streams_resumes_and_refuses_other_settings(tmp_path, refer
     assert_same_results(res, reference)
     lines = out.read_text().splitlines()
     assert len(lines) == 7 and [json.loads(ln)["key"] for ln in lines[1:]] == list(range(6))
-    header, back = D.read_results(out)
+    header, back = R.read_results(out)
     assert header == {"runs": 6}
     assert_same_results([r for _, r in back], reference)
     bad = tmp_path / "bad.jsonl"
@@ -433,11 +434,11 @@ def test_bootstrap_fits_are_the_same_on_a_local_cluster(cluster, tmp_path):
     here = bootstrap(problem, st, 1, quiet=True)
     out = tmp_path / "b.jsonl"
     there = bootstrap(problem, st, cluster, quiet=True, results=out)
-    assert json.dumps(D.encode(there)) == json.dumps(D.encode(here))
-    header, fits = D.read_results(out)
+    assert json.dumps(R.encode(there)) == json.dumps(R.encode(here))
+    header, fits = R.read_results(out)
     assert sorted(k for k, _ in fits) == [[s, r] for s in (30, 60) for r in range(4)]
     assert header["study"] == "bootstrap" and header["seed"] == 5
     more = bootstrap(problem, BootstrapSettings((30, 60), 6, seed=5), cluster, quiet=True,
                      results=out, resume=True)  # two more subsets per size: 4 fits run
-    assert len(D.read_results(out)[1]) == 12
+    assert len(R.read_results(out)[1]) == 12
     assert more["sizes"][0]["fits"] == 6

@@ -3,8 +3,8 @@
 The planner only knows nominal values, so every moving part is posed with
 ``robot.fk_frames(robot, q)`` (no joint offsets) and the scene's nominal sensor mounting.
 
-Parts
------
+Parts (``planecal.safety.collision_parts``)
+-------------------------------------------
 * Moving: the robot link pieces (``geometry.robot_link_meshes``, bodies 0..6) and the tool
   (``geometry.tool_meshes``: flange adapter and laser head, body 6).
 * Static: plates, stands, floor and obstacles (``geometry.scene_meshes``), in the base frame.
@@ -24,8 +24,8 @@ point-in-mesh (winding number) test. Contact reports distance 0 (FCL returns -1 
 penetration; no depth is used). The floor is solid ground: its box keeps its top face
 and x-y extent and reaches ``FLOOR_DEPTH_M`` down, so a part below the slab is inside it.
 
-Pairs checked
--------------
+Pairs checked (``collision_parts.checked_pairs``)
+-------------------------------------------------
 * Self: moving parts on different bodies, except adjacent bodies (|body_i - body_j| = 1:
   base-link1, link1-link2, ..., link5-link6) and the tool against bodies 5 and 6.
 * Environment: every moving part against every static part, except the floor against the
@@ -41,8 +41,8 @@ Pairs checked
 A configuration is ok when it is within the joint limits and every checked pair is
 farther apart than ``clearance_m``.
 
-Path certification (``check_path``): conservative advancement
--------------------------------------------------------------
+Path certification (``check_path``; ``planecal.safety.collision_path``): conservative advancement
+-------------------------------------------------------------------------------------------------
 The step generator moves all joints synchronously and linearly in encoder counts; the
 joint angles q = C x are linear in the counts, so the motion is q(s) = q0 + s dq,
 s in [0, 1], dq = q1 - q0. A point x on body j moves with
@@ -66,25 +66,11 @@ per unit s, so dist(x, axis k) <= min(r_kj, D_k + G_k |t - s|) and the displacem
 certified by a measured gap g = d - c is the larger of g / L and the root of that
 quadratic (``_step_sizes``): on it the pair stays farther than c.
 
-Procedure: (1a) every pair at both ends, the target first: cheap lower bounds (bounding
-sphere against the static part's box, or sphere against sphere), exact distances only
-where a bound is within the clearance; a measured distance <= c + ``resolution_m``
-rejects the path; pairs whose end bounds already certify [0, 1] are done. (1b) the other
-pairs on ``coarse_samples`` interior grid points, likewise (most rejected paths end in 1a
-or 1b); a grid interval [a, b] of a pair is certified when the steps from its ends cover
-it, measuring exact distances at the ends of intervals the bounds leave open.
-(2) each open interval shrinks by the steps of its ends to [a', b'] and is split at its
-midpoint; a', the midpoint and b' are measured exactly, and so on until every interval
-is certified, a measurement rejects the path, or a pair exceeds ``max_steps``
-refinement rounds ('undecided').
-Rejection is always safe; acceptance means every checked pair stays farther than c
-everywhere on the segment, in the nominal model with the geometry as given: no false
-"clear". ``resolution_m`` ends the slow convergence of steps toward a point where the
-distance touches c (a path grazing within 0.1 mm of the clearance is rejected).
-
-Why not ``fcl.continuousCollide``: it certifies a linear or screw *rigid* motion of each
-object between two poses; a link under joint interpolation follows neither, so it would
-certify a different motion, and it has no clearance.
+Procedure (``planecal.safety.collision_path``): every pair at both ends, then on a coarse
+grid, then the intervals still open are refined by the steps of their ends; cheap lower
+bounds first, exact distances where a bound is within the clearance. Rejection is always
+safe; acceptance means every checked pair stays farther than the clearance everywhere on
+the segment, in the nominal model with the geometry as given: no false "clear".
 
 Counters (``counters``, ``summary()``): configurations and paths checked, clear paths, FCL
 distance queries, GJK fallbacks, checking time (``check_time_s``), and rejections by
@@ -104,12 +90,15 @@ import numpy as np
 
 from planecal.safety.collision_joint import (HULL_SECTIONS, SafeSet, axis_coordinates,
                                       axis_distance_max, hull_of_revolution, sweep)
+from planecal.safety.collision_parts import (Part, checked_pairs, contained, make_part,
+                                             moving_parts, static_boxes, static_parts,
+                                             support_gap)
+from planecal.safety.collision_path import PathCheck
 from planecal.base.errors import InputError
-from planecal.model.mesh import Mesh, box, prism
+from planecal.model.mesh import prism
 from planecal.model.robot import Robot, within_limits
 from planecal.model.kinematics import link_frames
 
-FLOOR_DEPTH_M = 10.0  # the floor box reaches this far below the floor's top face
 REASONS = ("limits", "self", "environment", "undecided")
 
 
@@ -131,84 +120,6 @@ class CheckResult:
     pair: tuple[str, str] | None
     reason: str | None = None
     s: float | None = None
-
-
-@dataclass
-class _Part:
-    name: str
-    body: int  # -1 for static parts
-    kind: str  # 'link' | 'tool' | 'plate' | 'stand' | 'floor' | 'obstacle'
-    geom: object  # fcl.Box | fcl.Convex (convex parts) | fcl.BVHModel (others)
-    obj: fcl.CollisionObject
-    T_body_geom: np.ndarray  # 4x4, FCL geometry frame in the body (or base) frame
-    V: np.ndarray  # (n,3) vertices in the body frame (base frame if static)
-    center: np.ndarray  # (3,) bounding-sphere centre, body frame
-    radius: float
-    tri: Mesh  # the part's triangles in the body frame (exact BVH, containment test)
-    bvh: fcl.CollisionObject  # BVH of tri: triangle-exact distances, no GJK
-    convex: bool = True
-    is_identity: bool = False
-
-    def __post_init__(self):
-        self.is_identity = bool(np.array_equal(self.T_body_geom, np.eye(4)))
-
-
-def _transform(T: np.ndarray) -> fcl.Transform:
-    return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
-
-
-def _bvh(V: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
-    bvh = fcl.BVHModel()
-    bvh.beginModel(len(V), len(faces))
-    bvh.addSubModel(np.ascontiguousarray(V, float), np.ascontiguousarray(faces, np.int32))
-    bvh.endModel()
-    return bvh
-
-
-def _make_part(name, body, kind, mesh, T_body_mesh, box_extents=None, box_pose=None) -> _Part:
-    """An exact fcl.Box where the mesh is that box, fcl.Convex where it is convex, a BVH
-    otherwise; every part also gets a BVH of its triangles for exact distances."""
-    V = np.asarray(mesh.vertices, float) @ T_body_mesh[:3, :3].T + T_body_mesh[:3, 3]
-    faces = np.asarray(mesh.faces, np.int64)
-    if np.linalg.det(T_body_mesh[:3, :3]) < 0:
-        faces = faces[:, ::-1]
-    tri = Mesh(V, faces, bool(mesh.is_convex), bool(mesh.is_watertight))
-    geom, Tg, convex = None, np.eye(4), True
-    if box_extents is not None and box_pose is not None:
-        ext = np.asarray(box_extents, float)
-        P = np.asarray(box_pose, float)
-        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
-                            for sz in (-1, 1)]) * ext / 2 @ P[:3, :3].T + P[:3, 3]
-        # trust the box only if it is the mesh (box_pose given in the body frame)
-        if len(V) == 8 and np.allclose(np.sort(corners, 0), np.sort(V, 0), atol=1e-9):
-            geom, Tg = fcl.Box(*ext), P
-    if geom is None and mesh.is_convex:
-        flat = np.hstack([np.full((len(faces), 1), 3), faces]).astype(np.int32).ravel()
-        geom = fcl.Convex(np.ascontiguousarray(V), len(faces), flat)
-    bvh = _bvh(V, faces)
-    if geom is None:
-        geom, convex = bvh, False
-    c, r = _sphere(V)
-    return _Part(name, body, kind, geom, fcl.CollisionObject(geom, _transform(Tg)), Tg, V, c, r,
-                 tri, fcl.CollisionObject(bvh, fcl.Transform()), convex)
-
-
-def _inside(mesh, x: np.ndarray) -> bool:
-    """Point x inside a closed, consistently oriented triangle mesh: its winding number
-    (the solid angles of the triangles seen from x, Van Oosterom-Strackee, over 4 pi) is
-    1 inside and 0 outside. (trimesh's ``contains`` needs the optional rtree package.)"""
-    T = np.asarray(mesh.triangles, float) - x
-    a, b, c = T[:, 0], T[:, 1], T[:, 2]
-    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
-    num = np.einsum("ij,ij->i", a, np.cross(b, c))
-    den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la
-           + np.einsum("ij,ij->i", c, a) * lb)
-    return abs(np.arctan2(num, den).sum() / (2 * np.pi)) > 0.5
-
-
-def _sphere(V: np.ndarray) -> tuple[np.ndarray, float]:
-    c = (V.min(0) + V.max(0)) / 2
-    return c, float(np.sqrt(((V - c) ** 2).sum(1).max()))
 
 
 def _as_q(q, what: str) -> np.ndarray:
@@ -256,53 +167,15 @@ class CollisionWorld:
             tools = geometry.tool_meshes(scene, "collision") if tools is None else tools
             static = geometry.scene_meshes(scene) if static is None else static
 
-        self.parts: list[_Part] = []
-        for kind, group in (("link", links), ("tool", tools)):
-            for lm in group:
-                if not 0 <= int(lm.body) <= 6:
-                    raise InputError(f"collision: part {lm.name!r} has body {lm.body}, expected 0..6")
-                T = np.eye(4) if lm.T_body_mesh is None else np.asarray(lm.T_body_mesh, float)
-                self.parts.append(_make_part(lm.name, int(lm.body), kind, lm.mesh, T,
-                                             lm.box_extents, lm.box_pose))
+        self.parts: list[Part] = moving_parts(links, tools)
         self.n_moving = len(self.parts)
-        for sm in static:
-            ext, pose = sm.box_extents, sm.box_pose
-            mesh = sm.mesh
-            if sm.kind == "floor":  # solid ground: same top face and extent, deep
-                lo, hi = mesh.bounds
-                ext = np.array([hi[0] - lo[0], hi[1] - lo[1], FLOOR_DEPTH_M])
-                pose = np.eye(4)
-                pose[:3, 3] = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] - FLOOR_DEPTH_M / 2]
-                mesh = box(ext, pose)
-            self.parts.append(_make_part(sm.name, -1, sm.kind, mesh, np.eye(4), ext, pose))
+        self.parts += static_parts(static)
         names = [p.name for p in self.parts]
         if len(set(names)) != len(names):
             raise InputError(f"collision: part names must be unique, got {names}")
 
         self._rates = self._axis_radii()  # (n_moving, 6) r_k for each moving part
-        allowed = {frozenset(p) for p in allowed_pairs}
-        pairs, kinds, skipped = [], [], []
-        for i in range(self.n_moving):
-            a = self.parts[i]
-            for j in range(i + 1, len(self.parts)):
-                b = self.parts[j]
-                if frozenset((a.name, b.name)) in allowed:
-                    skipped.append((a.name, b.name, "allowed"))
-                    continue
-                if b.body >= 0:  # self pair
-                    if a.body == b.body:
-                        continue  # rigidly attached to each other
-                    if self._adjacent(a, b):
-                        skipped.append((a.name, b.name, "adjacent"))
-                        continue
-                    pairs.append((i, j))
-                    kinds.append("self")
-                else:
-                    if b.kind == "floor" and a.body in (0, 1):
-                        skipped.append((a.name, b.name, "bolted"))
-                        continue
-                    pairs.append((i, j))
-                    kinds.append("environment")
+        pairs, kinds, skipped = checked_pairs(self.parts, self.n_moving, allowed_pairs)
         self._pairs = np.array(pairs, int).reshape(-1, 2)
         self._kinds = kinds
         self._names = [(self.parts[i].name, self.parts[j].name) for i, j in self._pairs]
@@ -316,19 +189,7 @@ class CollisionWorld:
         self._centers = np.array([p.center for p in self.parts])
         self._radii = np.array([p.radius for p in self.parts])
         self._static_b = np.array([self.parts[j].body < 0 for _, j in self._pairs], bool)
-        self._box_inv = np.zeros((len(self.parts), 4, 4))
-        self._box_half = np.zeros((len(self.parts), 3))
-        for k, p in enumerate(self.parts):
-            if p.body >= 0:
-                continue
-            if isinstance(p.geom, fcl.Box):  # oriented box: the exact shape
-                self._box_inv[k] = np.linalg.inv(p.T_body_geom)
-                self._box_half[k] = np.ptp(p.V @ p.T_body_geom[:3, :3], axis=0) / 2
-            else:  # axis-aligned bounding box of the vertices
-                lo, hi = p.V.min(0), p.V.max(0)
-                self._box_inv[k] = np.eye(4)
-                self._box_inv[k, :3, 3] = -(lo + hi) / 2
-                self._box_half[k] = (hi - lo) / 2
+        self._box_inv, self._box_half = static_boxes(self.parts)  # oriented, else axis-aligned
         self._req = fcl.DistanceRequest()
         self._req_np = fcl.DistanceRequest(enable_nearest_points=True)
         self.counters: Counter = Counter()
@@ -339,13 +200,6 @@ class CollisionWorld:
         self.counters.clear()
 
     # ----- structure -----
-
-    @staticmethod
-    def _adjacent(a: _Part, b: _Part) -> bool:
-        if a.kind == "tool" or b.kind == "tool":
-            other = b if a.kind == "tool" else a
-            return other.kind != "tool" and other.body in (5, 6)
-        return abs(a.body - b.body) == 1
 
     def _axis_radii(self) -> np.ndarray:
         """r[p, k-1]: bound on the distance of moving part p's points from joint axis k,
@@ -407,16 +261,16 @@ class CollisionWorld:
             out.append(self._sweep_pair(n, hull, up, bu, low.name))
         return [s for s in out if len(s.lo)]
 
-    def _hull_part(self, name: str, body: int, X: np.ndarray, T_body_mesh: np.ndarray) -> _Part:
+    def _hull_part(self, name: str, body: int, X: np.ndarray, T_body_mesh: np.ndarray) -> Part:
         """The circumscribed prism of the hull of revolution about z of points X (the
         hull's own frame), on ``body`` with ``T_body_mesh`` from that frame to the body's."""
         r, z_lo, z_hi = hull_of_revolution(X)
         T = np.eye(4)
         T[2, 3] = (z_lo + z_hi) / 2
         mesh = prism(r / np.cos(np.pi / HULL_SECTIONS), max(z_hi - z_lo, 1e-6), HULL_SECTIONS, T)
-        return _make_part(f"{name} (hull)", body, "hull", mesh, T_body_mesh)
+        return make_part(f"{name} (hull)", body, "hull", mesh, T_body_mesh)
 
-    def _sweep_pair(self, n: int, fixed: _Part, moving: _Part, m: int, hull: str) -> SafeSet:
+    def _sweep_pair(self, n: int, fixed: Part, moving: Part, m: int, hull: str) -> SafeSet:
         """Sweep joint m (1-based), which alone moves ``moving`` (body m) against
         ``fixed`` (body m-1), over its limits."""
         rb = self.robot
@@ -498,7 +352,7 @@ class CollisionWorld:
         i, j = self._pairs[n]
         return self._distance(self.parts[i], self.parts[j], F)
 
-    def _distance(self, a: _Part, b: _Part, F: np.ndarray) -> float:
+    def _distance(self, a: Part, b: Part, F: np.ndarray) -> float:
         """Distance of parts a and b with frames F (``_exact``)."""
         Ta = F[a.body] if a.body >= 0 else None
         Tb = F[b.body] if b.body >= 0 else None
@@ -517,7 +371,7 @@ class CollisionWorld:
             nu = np.sqrt(u @ u)
             if nu > 0:
                 u = u / nu
-                gap = self._support_gap(a, Ta, b, Tb, u)
+                gap = support_gap(a, Ta, b, Tb, u)
                 if gap >= d - 1e-9:
                     return float(min(gap, d))
             self.counters["gjk_fallbacks"] += 1
@@ -525,40 +379,9 @@ class CollisionWorld:
             if T is not None:
                 p.bvh.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
         d = fcl.distance(a.bvh, b.bvh, self._req, fcl.DistanceResult())
-        if d <= 0 or self._contained(a, b, F):
+        if d <= 0 or contained(a, b, F):
             return 0.0
         return float(d)
-
-    @staticmethod
-    def _support_gap(a: _Part, Ta, b: _Part, Tb, u: np.ndarray) -> float:
-        """min over b's vertices of u . x minus max over a's (world frame): with x = R v + t,
-        u . x = v . (R^T u) + u . t, one product ``u @ T[:3]`` gives both."""
-        if Ta is None:
-            hi = (a.V @ u).max()
-        else:
-            w = u @ Ta[:3]
-            hi = (a.V @ w[:3]).max() + w[3]
-        if Tb is None:
-            lo = (b.V @ u).min()
-        else:
-            w = u @ Tb[:3]
-            lo = (b.V @ w[:3]).min() + w[3]
-        return float(lo - hi)
-
-    def _contained(self, a: _Part, b: _Part, F: np.ndarray) -> bool:
-        """One part wholly inside the other: BVHs (surfaces) report them separated, so
-        test one vertex of each against the other (closed meshes only)."""
-        for inner, outer in ((a, b), (b, a)):
-            if not outer.tri.is_watertight:
-                continue
-            Ti = F[inner.body] if inner.body >= 0 else np.eye(4)
-            x = Ti[:3, :3] @ inner.V[0] + Ti[:3, 3]
-            To = F[outer.body] if outer.body >= 0 else np.eye(4)
-            x = To[:3, :3].T @ (x - To[:3, 3])
-            lo, hi = outer.tri.bounds
-            if np.all(x >= lo) and np.all(x <= hi) and _inside(outer.tri, x):
-                return True
-        return False
 
     def distances(self, q) -> np.ndarray:
         """Exact distance [m] of every checked pair (``pairs`` order) at q; 0 for contact."""
@@ -634,129 +457,15 @@ class CollisionWorld:
         self.counters["paths"] += 1
         if not (within_limits(self.robot, q0) and within_limits(self.robot, q1)):
             return self._reject("limits", float("nan"), None)  # the box of limits is convex
-        P = len(self._pairs)
-        if P == 0:
+        if len(self._pairs) == 0:
             return CheckResult(True, float("inf"), None)
-        c = self.clearance_m
-        c_meas = c + self.resolution_m  # a measured distance must exceed this
-        dq = q1 - q0
-        adq = np.abs(dq)
-        L = self._W @ adq
-        self._best = (float("inf"), None)
-
-        grid = np.linspace(0.0, 1.0, self.coarse_samples + 2)
-        K = len(grid)
-        Fg = self._frames(q0 + grid[:, None] * dq)
-        D = np.zeros((K, P))  # distance or lower bound at grid point k of pair n
-        G = np.zeros((K, P))  # the step it certifies
-        X = np.zeros((K, P), bool)  # D is exact
-        CU = np.zeros((K, P, 3))  # centre of the pair's moving part
-
-        def bound(rows, cols):
-            D[rows, cols], CU[rows, cols] = self._lower_bounds(Fg, cols, rows)
-
-        def exact(rows, cols):
-            for k, n in zip(rows, cols):
-                if not X[k, n]:
-                    d = self._measure(int(n), Fg[k], c_meas, float(grid[k]))
-                    if isinstance(d, CheckResult):
-                        return d
-                    D[k, n], X[k, n] = d, True
-            return None
-
-        def steps(rows, cols):
-            G[rows, cols] = self._step_sizes(Fg, CU[rows, cols], cols, D[rows, cols] - c,
-                                             adq, L[cols], rows)
-
-        def certify(rows, cols, bounds=True):
-            """Grid points (rows, cols): lower bounds (``bounds``) and exact distances where
-            a bound is within the clearance (all of them without bounds), then the steps
-            they certify; the rejection if a distance is within the clearance."""
-            if bounds:
-                bound(rows, cols)
-                sel = D[rows, cols] <= c_meas
-                bad = exact(rows[sel], cols[sel])
-            else:
-                bad = exact(rows, cols)
-            if bad is None:
-                steps(rows, cols)
-            return bad
-
-        # 1a. both ends of every pair (the target first: colliding targets are common);
-        #     exact distances where the bound is within the clearance; pairs whose end
-        #     bounds certify the whole path are done
-        cols = np.flatnonzero(~self._covered(q0, q1))  # the rest: certified by safe sets
-        bad = certify(np.repeat([K - 1, 0], len(cols)), np.tile(cols, 2))
+        path = PathCheck(self, q0, q1)
+        bad = path.run()
         if bad is not None:
-            return bad
-        R = cols[~(G[0, cols] + G[K - 1, cols] > 1.0)]
-        # 1b. the pairs still open on the interior grid points: bounds, exact distances
-        #     where a bound is within the clearance (most rejected paths end here)
-        unc = np.zeros((K - 1, P), bool)
-        if len(R) and K > 2:
-            bad = certify(np.repeat(np.arange(1, K - 1), len(R)), np.tile(R, K - 2))
-            if bad is not None:
-                return bad
-            h = np.diff(grid)[:, None]
-            unc[:, R] = ~(G[:-1, R] + G[1:, R] > h)
-            # exact distances at the ends of the grid intervals still open, test again
-            ends = np.zeros((K, P), bool)
-            ends[:-1] |= unc
-            ends[1:] |= unc
-            rows, cols = np.nonzero(ends & ~X)
-            if len(rows):
-                bad = certify(rows, cols, bounds=False)
-                if bad is not None:
-                    return bad
-            unc[:, R] = ~(G[:-1, R] + G[1:, R] > h)
-        elif len(R):
-            unc[0, R] = True
-        # 2. refine the intervals still open: shrink each by the steps its ends certify
-        #    and split the rest at its midpoint, measuring the three new points exactly
-        kk, nn = np.nonzero(unc)
-        n_iv = nn
-        a_iv, b_iv = grid[kk], grid[kk + 1]
-        ga, gb = G[kk, nn], G[kk + 1, nn]
-        evals = np.zeros(P, int)
-        while len(n_iv):
-            a2, b2 = a_iv + ga, b_iv - gb
-            m = (a2 + b2) / 2
-            S = np.concatenate([a2, m, b2])
-            nidx = np.concatenate([n_iv, n_iv, n_iv])
-            np.add.at(evals, n_iv, 3)
-            if np.any(evals > 3 * self.max_steps):
-                k = int(np.argmax(evals[n_iv]))
-                return self._reject("undecided", self._best[0], int(n_iv[k]), float(a2[k]))
-            F = self._frames(q0 + S[:, None] * dq)
-            _, cuN = self._lower_bounds(F, nidx)
-            dN = np.empty(len(S))
-            for e in range(len(S)):
-                bad = self._measure(int(nidx[e]), F[e], c_meas, float(S[e]))
-                if isinstance(bad, CheckResult):
-                    return bad
-                dN[e] = bad
-            gN = self._step_sizes(F, cuN, nidx, dN - c, adq, L[nidx])
-            r = len(n_iv)
-            ga_new = np.concatenate([gN[:r], gN[r:2 * r]])
-            gb_new = np.concatenate([gN[r:2 * r], gN[2 * r:]])
-            a_new = np.concatenate([a2, m])
-            b_new = np.concatenate([m, b2])
-            n_new = np.concatenate([n_iv, n_iv])
-            open_ = ~(ga_new + gb_new > b_new - a_new)
-            n_iv, a_iv, b_iv = n_new[open_], a_new[open_], b_new[open_]
-            ga, gb = ga_new[open_], gb_new[open_]
+            return self._reject(bad.reason, bad.d, bad.n, bad.s)
         self.counters["paths_clear"] += 1
-        best, best_n = self._best
+        best, best_n = path.best
         return CheckResult(True, best, None if best_n is None else self._names[best_n])
-
-    def _measure(self, n: int, F: np.ndarray, c_meas: float, s: float):
-        """Exact distance of pair n at frames F, or the rejection if it is <= c_meas."""
-        d = self._exact(n, F)
-        if d < self._best[0]:
-            self._best = (d, n)
-        if d <= c_meas:
-            return self._reject(self._kinds[n], d, n, s)
-        return d
 
     def summary(self) -> dict:
         """Counters and checking time, for a run's sidecar."""

@@ -46,6 +46,8 @@ command line.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from planecal.model.measurement import predict_with_jacobian
@@ -220,7 +222,11 @@ class Predictor:
 
     def __call__(self, rows) -> tuple[np.ndarray, float]:
         """(sandwich std of the free parameters, predicted position error [mm])."""
-        J = self.J[rows]
+        return self.of_jacobian(self.J[rows])
+
+    def of_jacobian(self, J: np.ndarray) -> tuple[np.ndarray, float]:
+        """The same for the Jacobian rows J of any poses (over the same layout), e.g. the
+        random run's."""
         v = noise_variance(J[:, self.layout.slice("joint_offsets")], self.s, self.sig_l)
         cov = covariances(J[:, self.free], v)["sandwich"]
         o = self.offsets
@@ -268,6 +274,46 @@ def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
 PLAN_STAGES = 6  # progress steps of ``plan``
 
 
+@dataclass
+class _Design:
+    """A plan's candidates, the D-optimal choice among them and its prediction."""
+    qe: np.ndarray
+    plate: np.ndarray
+    layout: object
+    free: np.ndarray
+    J: np.ndarray  # the candidates' distance Jacobian over ``layout``
+    predictor: Predictor
+    n: int  # the sample count: asked for, or chosen for a target
+    chosen: np.ndarray
+    logdet: float
+    passes: int
+    swaps: int
+    std: np.ndarray  # sandwich std of the free parameters
+    white: np.ndarray  # white-noise std of the free parameters
+    ap_mm: float  # predicted flange position error
+
+
+@dataclass
+class _RandomRun:
+    """The baseline: the sampling run's own poses, its robot time and its prediction."""
+    qe: np.ndarray
+    plate: np.ndarray
+    time_s: float
+    logdet: float
+    std: np.ndarray
+    white: np.ndarray
+    ap_mm: float
+
+
+@dataclass
+class _Tour:
+    """The planned poses in the order visited; the robot time before and after ordering."""
+    chosen: np.ndarray
+    order: object | None  # ``tour.order``'s result, None when not ordered
+    time_unordered_s: float
+    time_s: float
+
+
 def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
          repeatability_mm: float | None = None, laser_noise_mm: float = 0.001,
          target_std_urad: float | None = None, target_ap_mm: float | None = None,
@@ -280,16 +326,24 @@ def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
     D-optimal for the base set the candidates can identify (``calibrate.base_set``).
     ``progress``: a ``planecal.base.progress.Progress`` of ``PLAN_STAGES`` steps, updated
     at each stage."""
-    from planecal.estimation.calibrate import CalibrationSettings, base_set
-    from planecal.estimation.noise import repeatability_sigma, sample_sigma_m
-    from planecal.model.encoder import joints_to_counts
-    from planecal.model.scene import nominal_params
-    from planecal.sampling import tour
-    from planecal.sampling.planner import ListPlanner
+    target = _target(n, m, target_std_urad, target_ap_mm)
+    design = _design(scene, n, m, seed, settings, checker, repeatability_mm, laser_noise_mm,
+                     target, progress)
+    q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
+    start = joints_to_counts(scene.robot, q0)
+    _say(progress, f"the random run's {design.n} poses")
+    random = _random_run(scene, design, seed, checker, start)
+    tour = _tour(scene, design, checker, q0, start, ordered, progress)
+    return _result(scene, seed, design, random, tour, ordered, target)
 
-    def say(note):
-        if progress is not None:
-            progress.update(note=note)
+
+def _say(progress, note: str) -> None:
+    if progress is not None:
+        progress.update(note=note)
+
+
+def _target(n: int, m: int, target_std_urad, target_ap_mm) -> tuple[str, float] | None:
+    """The plan's sizes checked, and its target: ("std" | "ap", value), or None."""
     if n < 13:
         raise InputError(f"--samples must be at least 13, got {n}")
     if m < n:
@@ -299,8 +353,21 @@ def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
     for name, t in (("--target-std-urad", target_std_urad), ("--target-ap-mm", target_ap_mm)):
         if t is not None and not t > 0:
             raise InputError(f"{name} must be > 0, got {t}")
+    if target_std_urad is not None:
+        return "std", target_std_urad
+    return None if target_ap_mm is None else ("ap", target_ap_mm)
+
+
+def _design(scene, n: int, m: int, seed: int, settings, checker, repeatability_mm,
+            laser_noise_mm: float, target, progress) -> _Design:
+    """The candidates (``candidate_pool``) and the D-optimal choice of n among them (or of
+    the fewest that meet ``target``: ``choose_count``), with its prediction (the twin's
+    noise model)."""
+    from planecal.estimation.calibrate import CalibrationSettings, base_set
+    from planecal.estimation.noise import repeatability_sigma, sample_sigma_m
+    from planecal.model.scene import nominal_params
     settings = settings or CalibrationSettings()
-    say(f"drawing {m} candidate poses")
+    _say(progress, f"drawing {m} candidate poses")
     qe, q, plate = candidate_pool(scene, m, seed, checker)
     if len(qe) < n:
         raise InputError(f"only {len(qe)} collision-free candidates for {n} samples")
@@ -311,82 +378,97 @@ def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
     s = repeatability_sigma(scene.robot, rep) if rep > 0 else 0.0
     sig_l = sample_sigma_m(laser_noise_mm)
     predictor = Predictor(scene, J, layout, free, s, sig_l, position_rows(scene, q, layout, free))
-    p = int(free.sum())
-    target = None
-    if target_std_urad is not None or target_ap_mm is not None:
-        target = ("std", target_std_urad) if target_std_urad is not None else ("ap", target_ap_mm)
-        say(f"choosing the sample count for the target ({target[0]} <= {target[1]:g})")
+    if target is not None:
+        _say(progress, f"choosing the sample count for the target ({target[0]} <= {target[1]:g})")
         n, (chosen, logdet, passes, swaps) = choose_count(A, predictor, *target,
-                                                          max(13, p + 1), n, progress)
+                                                          max(13, int(free.sum()) + 1), n,
+                                                          progress)
     else:
-        say(f"choosing {n} D-optimal poses")
+        _say(progress, f"choosing {n} D-optimal poses")
         chosen, logdet, passes, swaps = d_optimal(A, n)
-    # the baseline: what the sampling run itself would sample (same seed), scaled alike
-    q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    start = joints_to_counts(scene.robot, q0)
-    tick_s = scene.robot.tick_s
-    say(f"the random run's {n} poses")
+    std, white = predicted_std(J[chosen], layout, free, s, sig_l)
+    return _Design(qe, plate, layout, free, J, predictor, n, chosen, logdet, passes, swaps,
+                   std, white, predictor(chosen)[1])
+
+
+def _random_run(scene, d: _Design, seed: int, checker, start: np.ndarray) -> _RandomRun:
+    """What the sampling run itself would sample (same seed; without a checker the first
+    candidates), scaled as the design's candidates, and its robot time from ``start``."""
+    from planecal.sampling import tour
+    n, tick_s = d.n, scene.robot.tick_s
     if checker is not None:
         qe_r, plate_r, visits_r = run_design(scene, n, seed, checker, with_visits=True)
         time_r = tour.robot_time_s(visits_r, start, tick_s)
     else:
-        qe_r, plate_r, time_r = qe[:n], plate[:n], tour.robot_time_s(qe[:n], start, tick_s)
-    J_r, _ = scaled_rows(scene, qe_r, plate_r, layout, free)
-    A_r = J_r[:, free] / np.sqrt(np.mean(J[:, free] ** 2, axis=0))
-    _, logdet_rand = np.linalg.slogdet(A_r.T @ A_r)
-    std_p, white_p = predicted_std(J[chosen], layout, free, s, sig_l)
-    std_r, white_r = predicted_std(J_r, layout, free, s, sig_l)
-    ap_p = predictor(chosen)[1]
-    v = noise_variance(J_r[:, layout.slice("joint_offsets")], s, sig_l)
-    cov_r = covariances(J_r[:, free], v)["sandwich"]
-    o = predictor.offsets
-    ap_r = predicted_position_mm(predictor.Jpos, cov_r[np.ix_(o, o)])
+        qe_r, plate_r, time_r = d.qe[:n], d.plate[:n], tour.robot_time_s(d.qe[:n], start, tick_s)
+    J_r, _ = scaled_rows(scene, qe_r, plate_r, d.layout, d.free)
+    A_r = J_r[:, d.free] / np.sqrt(np.mean(d.J[:, d.free] ** 2, axis=0))
+    _, logdet_r = np.linalg.slogdet(A_r.T @ A_r)
+    p = d.predictor
+    std_r, white_r = predicted_std(J_r, d.layout, d.free, p.s, p.sig_l)
+    return _RandomRun(qe_r, plate_r, time_r, float(logdet_r), std_r, white_r,
+                      p.of_jacobian(J_r)[1])
+
+
+def _tour(scene, d: _Design, checker, q0: np.ndarray, start: np.ndarray, ordered: bool,
+          progress) -> _Tour:
+    """The run's robot time through the design's poses in the design's order and, with
+    ``ordered``, ordered into the tour that minimises it (``tour.order``)."""
+    from planecal.sampling import tour
+    from planecal.sampling.planner import ListPlanner
+    tick_s = scene.robot.tick_s
 
     def run_time(idx):
         """The run's robot time through the list; if its planner cannot serve the list
         (a pose it cannot reach from where it is), the straight moves' (unchecked)."""
         if checker is not None:
             try:
-                vs = tour.visit(ListPlanner(scene, qe[idx], plate[idx], checker), q0, len(idx))
+                vs = tour.visit(ListPlanner(scene, d.qe[idx], d.plate[idx], checker), q0,
+                                len(idx))
                 return tour.robot_time_s(vs, start, tick_s)
             except RuntimeError:
                 pass
-        return tour.robot_time_s(qe[idx], start, tick_s)
+        return tour.robot_time_s(d.qe[idx], start, tick_s)
 
-    say("robot time of the design's order")
-    time_before = run_time(chosen)
-    tr = None
-    say("ordering the poses for robot time" if ordered else "keeping the design's order")
+    _say(progress, "robot time of the design's order")
+    time_before = run_time(d.chosen)
+    chosen, tr = d.chosen, None
+    _say(progress, "ordering the poses for robot time" if ordered else "keeping the design's order")
     if ordered:
-        tr = tour.order(qe[chosen], start, checker, scene if checker is not None else None)
+        tr = tour.order(d.qe[chosen], start, checker, scene if checker is not None else None)
         chosen = chosen[np.array(tr.order, int)]
-    say("robot time of the tour" if ordered else "not ordered")
-    time_after = run_time(chosen) if ordered else time_before
-    fn = layout.names_of(free)
+    _say(progress, "robot time of the tour" if ordered else "not ordered")
+    return _Tour(chosen, tr, time_before, run_time(chosen) if ordered else time_before)
+
+
+def _result(scene, seed: int, d: _Design, r: _RandomRun, t: _Tour, ordered: bool,
+            target) -> dict:
+    """The plan's document (format ``POSES_FORMAT``)."""
+    from planecal.sampling import tour
+    n, p, fn = d.n, int(d.free.sum()), d.layout.names_of(d.free)
+    tr, read_s = t.order, (tour.READ_TICKS + tour.DWELL_TICKS) * scene.robot.tick_s
     res = {
         "format": POSES_FORMAT, "scene": scene.name, "seed": seed, "samples": n,
-        "candidates": int(len(qe)), "free": fn,
-        "counts": qe[chosen].tolist(), "plates": plate[chosen].tolist(),
-        "random_counts": qe_r.tolist(), "random_plates": plate_r.tolist(),
-        "logdet_planned": logdet, "logdet_random": float(logdet_rand),
-        "d_efficiency_gain": float(np.exp((logdet - logdet_rand) / p)),
-        "exchange_passes": passes, "exchange_swaps": swaps,
+        "candidates": int(len(d.qe)), "free": fn,
+        "counts": d.qe[t.chosen].tolist(), "plates": d.plate[t.chosen].tolist(),
+        "random_counts": r.qe.tolist(), "random_plates": r.plate.tolist(),
+        "logdet_planned": d.logdet, "logdet_random": r.logdet,
+        "d_efficiency_gain": float(np.exp((d.logdet - r.logdet) / p)),
+        "exchange_passes": d.passes, "exchange_swaps": d.swaps,
         "ordered": bool(ordered),
         "tour": None if tr is None else {"travel_ticks": tr.travel_ticks, "detours": tr.detours,
                                          "excluded": tr.excluded,
                                          "paths_checked": tr.paths_checked},
-        "robot_time_s": {"random": time_r, "planned_unordered": time_before,
-                         "planned": time_after, "read_ticks_per_sample": tour.READ_TICKS},
-        "robot_time_per_sample_s": {"random": time_r / n, "planned": time_after / n},
-        "travel_per_sample_s": {
-            "random": time_r / n - (tour.READ_TICKS + tour.DWELL_TICKS) * tick_s,
-            "planned": time_after / n - (tour.READ_TICKS + tour.DWELL_TICKS) * tick_s},
-        "predicted_std_planned": dict(zip(fn, std_p.tolist())),
-        "predicted_std_random": dict(zip(fn, std_r.tolist())),
-        "predicted_white_std_planned": dict(zip(fn, white_p.tolist())),
-        "predicted_white_std_random": dict(zip(fn, white_r.tolist())),
-        "predicted_position_mm": {"planned": ap_p, "random": ap_r},
-        "noise": {"joint_sigma_rad": s, "laser_sample_sigma_m": sig_l},
+        "robot_time_s": {"random": r.time_s, "planned_unordered": t.time_unordered_s,
+                         "planned": t.time_s, "read_ticks_per_sample": tour.READ_TICKS},
+        "robot_time_per_sample_s": {"random": r.time_s / n, "planned": t.time_s / n},
+        "travel_per_sample_s": {"random": r.time_s / n - read_s, "planned": t.time_s / n - read_s},
+        "predicted_std_planned": dict(zip(fn, d.std.tolist())),
+        "predicted_std_random": dict(zip(fn, r.std.tolist())),
+        "predicted_white_std_planned": dict(zip(fn, d.white.tolist())),
+        "predicted_white_std_random": dict(zip(fn, r.white.tolist())),
+        "predicted_position_mm": {"planned": d.ap_mm, "random": r.ap_mm},
+        "noise": {"joint_sigma_rad": d.predictor.s, "laser_sample_sigma_m": d.predictor.sig_l},
     }
     if target is not None:
         res["target"] = {"kind": target[0], "value": target[1],

@@ -315,7 +315,8 @@ def fig_correlation(out, cov: dict):
 # ----- the page ----------------------------------------------------------------------------------
 
 def build(ctx: Context) -> Page:
-    from planecal.model.measurement import predict
+    """The page: the model error (the seed's graphs and the per-sample errors), the
+    parameters, the identifiability."""
     from planecal.io.params import params_from_dict
 
     doc = ctx.doc
@@ -324,18 +325,7 @@ def build(ctx: Context) -> Page:
     n_planes = final.n_planes
     rows = parameter_rows(doc)
     free = list(doc.get("free") or [])
-    ident = doc.get("identifiability") if isinstance(doc.get("identifiability"), dict) else {}
-    out = ctx.out_dir
-
-    page = Page("Calibration report",
-                f"{ctx.source.name if ctx.source else 'calibration result'} (level "
-                f"{result_label(doc)}): "
-                f"{doc.get('samples_used', '?')} samples used, model error "
-                f"({MODEL_ERROR}) RMS "
-                f"{_fmt(doc.get('residual_rms_initial_mm'))} mm before, "
-                f"{_fmt(doc.get('residual_rms_mm'))} mm after; "
-                f"{doc.get('iterations', '?')} iterations"
-                + ("" if doc.get("converged", True) else " (NOT converged)") + ".")
+    page = Page("Calibration report", _subtitle(ctx, doc))
     notes: list[str] = []
     scene = load_scene_for(ctx, notes)
     if scene is not None and len(scene.plates) != n_planes:
@@ -344,38 +334,73 @@ def build(ctx: Context) -> Page:
     samples = _samples(ctx, notes)
     initial, initial_from = _initial(ctx, scene, n_planes, notes)
     plates = _plate_names(scene, n_planes)
+    _model_error_section(page.section("Model error (seed 7.3.2)"), ctx, scene, samples,
+                         plates, final, initial, initial_from, notes)
+    _parameters_section(page.section("Parameters"), ctx, rows, free, initial, initial_from)
+    _identifiability_section(page.section("Identifiability"), ctx)
+    return page
 
-    # ---- the seed's graphs and the per-sample errors
-    sec = page.section("Model error (seed 7.3.2)")
+
+def _subtitle(ctx: Context, doc: dict) -> str:
+    return (f"{ctx.source.name if ctx.source else 'calibration result'} (level "
+            f"{result_label(doc)}): "
+            f"{doc.get('samples_used', '?')} samples used, model error "
+            f"({MODEL_ERROR}) RMS "
+            f"{_fmt(doc.get('residual_rms_initial_mm'))} mm before, "
+            f"{_fmt(doc.get('residual_rms_mm'))} mm after; "
+            f"{doc.get('iterations', '?')} iterations"
+            + ("" if doc.get("converged", True) else " (NOT converged)") + ".")
+
+
+def _identifiability(doc: dict) -> dict:
+    return doc.get("identifiability") if isinstance(doc.get("identifiability"), dict) else {}
+
+
+def _model_errors(doc: dict, scene, samples, final, initial, initial_from,
+                  notes: list[str]):
+    """The model error per sample with the calibrated and with the initial parameters
+    and the samples used: (r0, r1, used), r0 or r1 None where the recomputed RMS does not
+    reproduce the file's (said in ``notes``), all None without samples and scene."""
+    from planecal.model.measurement import predict
     r0 = r1 = used = None
-    if samples is not None and scene is not None:
-        if samples.plate.max() >= n_planes:
-            notes.append(f"the samples refer to plate {samples.plate.max() + 1}, the result "
-                         f"has {n_planes} plane(s): not this result's samples")
-        else:
-            used = np.ones(len(samples), bool)
-            outl = [int(i) for i in doc.get("outliers", []) if 0 <= int(i) < len(samples)]
-            used[outl] = False
-            r1 = predict(scene.robot, samples.qe, final, samples.plate) - samples.d_mm * 1e-3
-            rms1 = _rms_mm(r1, used)
-            if not _matches(rms1, doc.get("residual_rms_mm")):
-                notes.append(f"with these samples the calibrated model's RMS error is "
-                             f"{rms1:.6g} mm, the result says {doc.get('residual_rms_mm')} mm: "
-                             f"they are not the samples of this result; no model-error figures")
-                r1 = None
-            elif initial is not None:
-                r0 = predict(scene.robot, samples.qe, initial, samples.plate) - samples.d_mm * 1e-3
-                rms0 = _rms_mm(r0, used)
-                if not _matches(rms0, doc.get("residual_rms_initial_mm")):
-                    notes.append(f"the initial parameters taken ({initial_from}) give an RMS "
-                                 f"error of {rms0:.6g} mm, the result says "
-                                 f"{doc.get('residual_rms_initial_mm')} mm: the fit started "
-                                 f"elsewhere (give the result's initial file); no 'before' "
-                                 f"figures")
-                    r0 = None
-            else:
-                notes.append("the result does not record its initial parameters and the scene "
-                             "cannot supply them: no 'before' figures")
+    if samples is None or scene is None:
+        return r0, r1, used
+    n_planes = final.n_planes
+    if samples.plate.max() >= n_planes:
+        notes.append(f"the samples refer to plate {samples.plate.max() + 1}, the result "
+                     f"has {n_planes} plane(s): not this result's samples")
+        return r0, r1, used
+    used = np.ones(len(samples), bool)
+    outl = [int(i) for i in doc.get("outliers", []) if 0 <= int(i) < len(samples)]
+    used[outl] = False
+    r1 = predict(scene.robot, samples.qe, final, samples.plate) - samples.d_mm * 1e-3
+    rms1 = _rms_mm(r1, used)
+    if not _matches(rms1, doc.get("residual_rms_mm")):
+        notes.append(f"with these samples the calibrated model's RMS error is "
+                     f"{rms1:.6g} mm, the result says {doc.get('residual_rms_mm')} mm: "
+                     f"they are not the samples of this result; no model-error figures")
+        r1 = None
+    elif initial is not None:
+        r0 = predict(scene.robot, samples.qe, initial, samples.plate) - samples.d_mm * 1e-3
+        rms0 = _rms_mm(r0, used)
+        if not _matches(rms0, doc.get("residual_rms_initial_mm")):
+            notes.append(f"the initial parameters taken ({initial_from}) give an RMS "
+                         f"error of {rms0:.6g} mm, the result says "
+                         f"{doc.get('residual_rms_initial_mm')} mm: the fit started "
+                         f"elsewhere (give the result's initial file); no 'before' "
+                         f"figures")
+            r0 = None
+    else:
+        notes.append("the result does not record its initial parameters and the scene "
+                     "cannot supply them: no 'before' figures")
+    return r0, r1, used
+
+
+def _model_error_section(sec, ctx: Context, scene, samples, plates, final, initial,
+                         initial_from, notes: list[str]) -> None:
+    """The seed's graphs and the per-sample errors, then every note gathered so far."""
+    doc, out = ctx.doc, ctx.out_dir
+    r0, r1, used = _model_errors(doc, scene, samples, final, initial, initial_from, notes)
     if samples is not None:
         sec.figure(fig_distances(out, samples, plates, scene))
     history = doc.get("history")
@@ -391,7 +416,7 @@ def build(ctx: Context) -> Page:
             f"Distribution of the model error with the initial parameters ({initial_from}; "
             f"seed 7.3.2, third graph); outliers left out."))
     if r1 is not None:
-        sig = ident.get("sigma_mm")
+        sig = _identifiability(doc).get("sigma_mm")
         sec.figure(fig_error_hist(
             out, "error_after", r1, samples, used, plates,
             "Model error with the calibrated parameters",
@@ -403,8 +428,10 @@ def build(ctx: Context) -> Page:
     for n in notes:
         sec.note(n)
 
-    # ---- parameters
-    sec = page.section("Parameters")
+
+def _parameters_section(sec, ctx: Context, rows, free, initial, initial_from) -> None:
+    """The joint offsets' figure, the parameter table and the correlation matrix."""
+    doc, out = ctx.doc, ctx.out_dir
     sec.figure(fig_offsets(out, rows, initial, free))
     x0 = {r.name: r.value for r in parameter_rows(_as_doc(initial))} \
         if initial is not None else {}
@@ -429,8 +456,11 @@ def build(ctx: Context) -> Page:
         sec.note("No correlation matrix: this result file holds no covariance "
                  "(key 'covariance': {\"names\": [...], \"matrix\": [[...]]}).")
 
-    # ---- identifiability
-    sec = page.section("Identifiability")
+
+def _identifiability_section(sec, ctx: Context) -> None:
+    """The identifiability findings, the scaled singular values and the fit's summary."""
+    doc, out = ctx.doc, ctx.out_dir
+    ident = _identifiability(doc)
     lines = [(f.text, f.warning) for f in findings(doc)]
     if not ident:
         sec.note("The result file holds no identifiability report.")
@@ -452,7 +482,6 @@ def build(ctx: Context) -> Page:
                ["residual RMS after [mm]", _fmt(doc.get("residual_rms_mm"), digits=6)],
                ["largest |residual| after [mm]", _fmt(doc.get("residual_max_mm"), digits=6)]]
     sec.table(["", ""], summary, left=1)
-    return page
 
 
 def _as_doc(p) -> dict:
