@@ -231,7 +231,11 @@ class Engine:
                 # no dashboard; the scheduler's plain HTTP routes (health, metrics) on a
                 # free loopback port instead of 8787 (which another cluster may hold)
                 scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                silence_logs=logging.ERROR)
+                # the workers' own logs: a worker that loses its scheduler while a stopped
+                # study closes (Ctrl-C) logs a heartbeat ERROR with a traceback, a race of
+                # the teardown, not news; what fails in a run reaches the client as an
+                # exception (Engine.map), so only CRITICAL lines are shown
+                silence_logs=logging.CRITICAL)
         self.client = Client(self._cluster, set_as_default=False)
 
     def _connect(self) -> None:
