@@ -17,7 +17,7 @@ then planecal alone on 10,000. Lines: ``level2_speedup_vs_scipy_numeric: X`` (ta
 
 One pose's flange and geometric Jacobian (``model.kinematics.fk_jacobian``, what IK,
 planning and compensation's Newton steps pay per pose): ``fk_jacobian_one_pose_us: X``
-(target < 20). Timing figures depend on the machine's load: report them with ``uptime``.
+(target < 20). Times are CPU times (``best_of``); report them with ``uptime``.
 """
 from __future__ import annotations
 
@@ -40,11 +40,14 @@ from planecal.twin.truth import draw_truth
 
 
 def best_of(fn, repeat):
+    """The least CPU time of ``repeat`` calls (and the last result). Both solvers run on
+    one thread (one BLAS thread, numba's kernels serial), so on an idle machine this is
+    their wall time; on a shared one it leaves out the time other processes took."""
     times, out = [], None
     for _ in range(repeat):
-        t = time.perf_counter()
+        t = time.process_time()
         out = fn()
-        times.append(time.perf_counter() - t)
+        times.append(time.process_time() - t)
     return min(times), out
 
 

@@ -92,6 +92,41 @@ def test_frame_error_small_rotation_and_translation(axis):
         assert abs(W[(k + 2) % 3, (k + 1) % 3] - 1e-6) < 1e-15
 
 
+def test_frame_error_is_translation_then_rz_ry_rx_at_large_angles():
+    """The closed form against the product of elementary rotations, with angles far from
+    small (a sign or order slip in one entry shows only there)."""
+    from planecal.model.kinematics import rot
+    e = np.array([0.1, -0.2, 0.3, 0.7, -1.1, 2.3])
+    T = np.eye(4)
+    T[:3, :3] = rot(2, e[5]) @ rot(1, e[4]) @ rot(0, e[3])
+    T[:3, 3] = e[:3]
+    assert np.abs(frame_error(e) - T).max() < 1e-15
+
+
+def test_joints_take_their_sines_once_and_give_the_same_distances_and_jacobian():
+    """The fit hands the kernel precomputed cos/sin of its joints (``Joints``); a subset of
+    rows and the plain angles give the same numbers, bit for bit."""
+    from planecal.model.layout import level2_layout
+    from planecal.model.measurement import Joints, predict_joints_with_jacobian
+    from planecal.model.scene import load_scene, nominal_params
+    scene = load_scene("three_plates")
+    p = nominal_params(scene)
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-1, 1, (40, 6))
+    plate = rng.integers(0, 3, 40)
+    layout = level2_layout(3, compliance=True)
+    j = Joints.of(q)
+    # numba's libm and numpy's (possibly SIMD) cos may differ in the last bit
+    assert np.abs(j.cos - np.cos(q)).max() < 4e-16 and np.abs(j.sin - np.sin(q)).max() < 4e-16
+    d0, J0 = predict_joints_with_jacobian(ROBOT, q, p, plate, layout)
+    d1, J1 = predict_joints_with_jacobian(ROBOT, j, p, plate, layout)
+    assert np.array_equal(d0, d1) and np.array_equal(J0, J1)
+    rows = np.arange(40) % 3 == 0
+    d2, J2 = predict_joints_with_jacobian(ROBOT, j.rows(rows), p, plate[rows], layout)
+    assert np.array_equal(d2, d0[rows]) and np.array_equal(J2, J0[rows])
+    assert j.rows(np.ones(40, bool)) is j
+
+
 def test_geometric_jacobian_against_central_differences_with_every_parameter_moved():
     # v: the flange origin's velocity; w: the angular velocity from dR R^T
     rng = np.random.default_rng(4)

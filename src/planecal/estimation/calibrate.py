@@ -31,10 +31,11 @@ from planecal.estimation.fit import FitOptions, Problem, Result, solve
 from planecal.estimation.identifiability import DEFAULT_TOL, BaseSet, Excluded, select_base
 from planecal.estimation.noise import row_weights
 from planecal.model.cell_params import CellParams
+from planecal.model.encoder import counts_to_joints
 from planecal.model.layout import ParamLayout
 from planecal.model.levels import (LEVELS, PLANE_BLIND_OFFSETS, layout_for, level_name,
                                    pinned_scale)
-from planecal.model.measurement import predict_with_jacobian
+from planecal.model.measurement import Joints, predict_joints_with_jacobian
 from planecal.model.robot import Robot
 
 
@@ -155,7 +156,8 @@ def candidates(robot: Robot, layout: ParamLayout, settings: CalibrationSettings)
 
 
 def base_set(robot: Robot, qe, initial: CellParams, plate, settings: CalibrationSettings,
-             options: FitOptions | None = None) -> tuple[ParamLayout, BaseSet]:
+             options: FitOptions | None = None,
+             joints: Joints | None = None) -> tuple[ParamLayout, BaseSet]:
     """The layout of the settings' level and the base set of the parameters these poses
     (counts ``qe``, 0-based ``plate``) can identify, at ``initial`` (module docstring):
     what ``calibrate`` fits, and what ``planecal layouts`` and ``plan`` predict."""
@@ -163,7 +165,9 @@ def base_set(robot: Robot, qe, initial: CellParams, plate, settings: Calibration
     layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
     options = options or st.options
     mask, pinned = candidates(robot, layout, st)
-    _, J = predict_with_jacobian(robot, np.asarray(qe, np.int64), initial, plate, layout)
+    if joints is None:
+        joints = Joints.of(counts_to_joints(robot, np.asarray(qe, np.int64)))
+    _, J = predict_joints_with_jacobian(robot, joints, initial, plate, layout)
     w = row_weights(J[:, layout.slice("joint_offsets")], options.joint_sigma_rad,
                     options.distance_sigma_m)
     bs = select_base(J, layout, mask, st.base_tolerance, w)
@@ -194,7 +198,7 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
         n_cand = int(candidates(robot, layout, st)[0].sum())
         if n <= n_cand:
             raise ValueError(f"{n} samples cannot determine {n_cand} free parameters")
-        _, bs = base_set(robot, probe.qe, initial, pidx, st, options)
+        _, bs = base_set(robot, probe.qe, initial, pidx, st, options, probe.joints)
         problem = replace(probe, free=bs.mask(layout))
     except ValueError as e:
         raise InputError(str(e)) from None

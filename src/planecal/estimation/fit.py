@@ -31,7 +31,7 @@ from planecal.estimation.solver import Iteration, Prior, SolverOptions, Status, 
 from planecal.model.cell_params import CellParams
 from planecal.model.encoder import counts_to_joints
 from planecal.model.layout import ParamLayout, level1_layout
-from planecal.model.measurement import predict, predict_joints_with_jacobian
+from planecal.model.measurement import Joints, predict, predict_joints_with_jacobian
 from planecal.model.robot import Robot
 from planecal.io.samples import Samples
 
@@ -72,6 +72,7 @@ class Problem:
     layout: ParamLayout
     free: np.ndarray
     options: FitOptions = field(default_factory=FitOptions)
+    joints: Joints | None = None  # the counts as joint angles with their sines (derived)
 
     def __post_init__(self):
         qe = np.asarray(self.qe, np.int64)
@@ -103,6 +104,8 @@ class Problem:
                 and np.isfinite(opt.distance_sigma_m) and opt.distance_sigma_m > 0):
             raise ValueError("weighted fit: joint_sigma_rad must be finite and >= 0, "
                              "distance_sigma_m finite and > 0")
+        if self.joints is None or len(self.joints) != N:
+            object.__setattr__(self, "joints", Joints.of(counts_to_joints(self.robot, qe)))
 
     @classmethod
     def from_arrays(cls, robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
@@ -134,7 +137,8 @@ class Problem:
 
     def subset(self, idx) -> "Problem":
         """The same problem on the samples ``idx``."""
-        return replace(self, qe=self.qe[idx], d_m=self.d_m[idx], plate=self.plate[idx])
+        return replace(self, qe=self.qe[idx], d_m=self.d_m[idx], plate=self.plate[idx],
+                       joints=self.joints.rows(idx))
 
 
 # ----- the result -----------------------------------------------------------------------------
@@ -196,7 +200,7 @@ def _residuals(pb: Problem):
     """The solver's residual function over the free parameters: (r, J of the free columns,
     row weights) at the samples ``rows``; the counts turned into joint angles once."""
     opt, layout, free = pb.options, pb.layout, pb.free
-    q = counts_to_joints(pb.robot, pb.qe)
+    joints = pb.joints
     x_all = pb.initial.to_vector(layout)
     weighted = opt.joint_sigma_rad is not None
     offsets = layout.mask(layout.group("joint_offsets").names)
@@ -207,8 +211,9 @@ def _residuals(pb: Problem):
     def fun(xf, rows):
         x = x_all.copy()
         x[free] = xf
-        d, J = predict_joints_with_jacobian(pb.robot, q[rows], CellParams.from_vector(x, layout),
-                                            pb.plate[rows], layout, need)
+        d, J = predict_joints_with_jacobian(pb.robot, joints.rows(rows),
+                                            CellParams.from_vector(x, layout), pb.plate[rows],
+                                            layout, need)
         if not weighted:
             return d - pb.d_m[rows], J, None
         w = row_weights(J[:, cols_o], opt.joint_sigma_rad, opt.distance_sigma_m)

@@ -191,7 +191,8 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, layout: ParamLayout, free: np.nda
     if weights is not None:
         Jf, r = Jf * weights[:, None], r * weights
     free_names = layout.names_of(free)
-    norms = np.linalg.norm(Jf, axis=0)
+    squared = np.einsum("ij,ij->j", Jf, Jf)
+    norms = np.sqrt(squared)
     no_effect = [free_names[j] for j in np.flatnonzero(norms <= 1e-10 * norms.max())]
     S = column_scales(Jf)
     A = Jf * S
@@ -321,11 +322,15 @@ def select_base(J: np.ndarray, layout: ParamLayout, free: np.ndarray,
     Jf = np.asarray(J, float)[:, free]
     if weights is not None:
         Jf = Jf * weights[:, None]
-    norms = np.linalg.norm(Jf, axis=0)
+    norms = np.sqrt(np.einsum("ij,ij->j", Jf, Jf))
     top = norms.max() if norms.size else 0.0
     dead = norms <= 1e-12 * top if top > 0 else np.ones(len(names), bool)
     S = np.where(dead, 0.0, 1.0 / np.where(dead, 1.0, norms))
     A = Jf * S  # unit columns
+    if A.shape[0] > A.shape[1]:
+        # A = Q0 R0 with orthonormal Q0: every inner product of A's columns is R0's, so the
+        # pivoting, projections and combinations below are the same on the small R0
+        A = np.linalg.qr(A, mode="r")
     excluded = [Excluded(names[j], "no_effect") for j in np.flatnonzero(dead)]
     live = [j for j in range(len(names)) if not dead[j]]
     groups = [np.array([j for j in live if kind_of[names[j]] in kinds], int) for kinds in tiers]

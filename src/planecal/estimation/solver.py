@@ -90,21 +90,33 @@ def cost(r: np.ndarray, w: np.ndarray | None) -> float:
 
 def column_scales(J: np.ndarray, on: bool = True) -> np.ndarray:
     """1 / |column| (1 for a zero column), or ones."""
+    return _scales(np.einsum("ij,ij->j", J, J), on)
+
+
+def _scales(squared_norms: np.ndarray, on: bool) -> np.ndarray:
     if not on:
-        return np.ones(J.shape[1])
-    norms = np.linalg.norm(J, axis=0)
+        return np.ones(len(squared_norms))
+    norms = np.sqrt(squared_norms)
     return np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
 
 
-def pinv_step(A: np.ndarray, r: np.ndarray, rcond: float) -> np.ndarray:
-    """Minimum-norm least-squares solution of A dx = -r by the SVD pseudo-inverse, with
-    singular values below rcond x the largest cut off. The right singular vectors and
-    singular values come from the eigen-decomposition of the (column-scaled) Gram matrix
-    A^T A, 30x cheaper than an SVD of the tall A; rcond >= 1e-7 keeps the cut above the
-    Gram matrix's rounding floor (1e-16 relative in s^2)."""
-    lam, V = np.linalg.eigh(A.T @ A)
+def pinv_step(H: np.ndarray, g: np.ndarray, rcond: float) -> np.ndarray:
+    """Minimum-norm least-squares solution of A dx = -r by the SVD pseudo-inverse, given
+    the Gram matrix H = A^T A and g = A^T r of the (column-scaled) A, with singular values
+    below rcond x the largest cut off. The right singular vectors and singular values come
+    from the eigen-decomposition of H, 30x cheaper than an SVD of the tall A; rcond >= 1e-7
+    keeps the cut above the Gram matrix's rounding floor (1e-16 relative in s^2)."""
+    lam, V = np.linalg.eigh(H)
     keep = lam > (rcond ** 2) * lam[-1]
-    return -(V[:, keep] @ ((V[:, keep].T @ (A.T @ r)) / lam[keep]))
+    return -(V[:, keep] @ ((V[:, keep].T @ g) / lam[keep]))
+
+
+def _normal_equations(Jw: np.ndarray, rw: np.ndarray, scale: bool):
+    """The column-scaled normal equations of Jw dx = -rw: (H, g, S) with H = S Jw^T Jw S,
+    g = S Jw^T rw and the scales S (the columns' norms are the Gram matrix's diagonal)."""
+    G = Jw.T @ Jw
+    S = _scales(np.diag(G).copy(), scale)
+    return G * S[:, None] * S[None, :], S * (Jw.T @ rw), S
 
 
 def _with_prior(J, r, w, x, prior: Prior | None):
@@ -115,10 +127,8 @@ def _with_prior(J, r, w, x, prior: Prior | None):
     return np.vstack([Jw, P]), np.concatenate([rw, rp])
 
 
-def _lm_step(fun, x, used, A, rw, w, S, lam):
+def _lm_step(fun, x, used, H, g, rw, w, S, lam):
     c0 = rw @ rw
-    H = A.T @ A
-    g = A.T @ rw
     for _ in range(30):
         step = np.linalg.lstsq(H + lam * np.diag(np.maximum(np.diag(H), 1e-30)), -g,
                                rcond=None)[0]
@@ -164,12 +174,11 @@ def least_squares(fun: Callable, x0: np.ndarray, n_rows: int,
     history = [_log(0, r, used)]
     for it in range(1, opt.max_iter + 1):
         Jw, rw = _with_prior(J, r, w, x, prior)
-        S = column_scales(Jw, opt.scale)
-        A = Jw * S
+        H, g, S = _normal_equations(Jw, rw, opt.scale)
         if opt.method == "gn":
-            dx = S * pinv_step(A, rw, opt.rcond)
+            dx = S * pinv_step(H, g, opt.rcond)
         else:
-            dx, lam = _lm_step(fun, x, used, A, rw, w, S, lam)
+            dx, lam = _lm_step(fun, x, used, H, g, rw, w, S, lam)
         x = x + dx
         small = float(np.mean(np.abs(dx))) < opt.improvement_limit
         if small and opt.outlier_sigma is None:

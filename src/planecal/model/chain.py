@@ -1,9 +1,12 @@
 """The compiled kernels of the kinematic chain (``planecal.model.kinematics``) and of the
 laser distance and its Jacobian (``planecal.model.measurement``), compiled by numba and
 cached on disk. Plain loops over samples and joints with scalar locals; the chain is
-passed packed: ``K`` (n, 9) alpha, a, beta, theta, d, cos alpha, sin alpha, cos beta,
-sin beta per joint (``Kinematics.packed``: the fixed angles' sines are taken once, not per
-sample), ``B`` the base and ``F`` the flange frame (4x4).
+passed packed: ``K`` (n, 11) alpha, a, beta, theta, d, cos alpha, sin alpha, cos beta,
+sin beta, cos theta, sin theta per joint (``Kinematics.packed``: the fixed angles' sines
+are taken once, not per sample), ``B`` the base and ``F`` the flange frame (4x4). The
+joint variables come as their cosines and sines (``trig``), and cos(theta + q) is formed by
+the angle sum: a fit evaluates the model at the same joints every iteration, so it takes
+the sines once (``distance``), which is most of a sample's cost.
 
 One joint, from frame j-1 (axes x, y, z, origin p, in the cell frame):
     Rx(alpha): y, z <- ca y + sa z, ca z - sa y       (x stays)
@@ -11,7 +14,7 @@ One joint, from frame j-1 (axes x, y, z, origin p, in the cell frame):
     Ry(beta):  x, z <- cb x - sb z, sb x + cb z        (y' = y: the beta axis)
     Rz(theta + q): x, y <- ct x + st y, ct y - st x    (z: joint j's axis)
     Tz(d):     p <- c + d z
-``_walk`` does it for one row of joint angles and keeps, per joint, in ``S[j]`` (15): x
+``_walk`` does it for one row of joint angles (their cosines c and sines s) and keeps, per joint, in ``S[j]`` (15): x
 and p of frame j-1, the beta axis y', the point c and the axis z.
 """
 from __future__ import annotations
@@ -27,15 +30,16 @@ JIT = dict(cache=True, error_model="numpy")
 
 
 @njit(inline="always", **JIT)
-def _walk(K, B, q, S):
-    """The chain at joint angles q (n,) from the base B; per joint its terms into S
-    (n, 15); returns the last frame's axes and origin (12 scalars)."""
+def _walk(K, B, c, s, S):
+    """The chain at joint angles q (n,), given as c = cos q and s = sin q, from the base B;
+    per joint its terms into S (n, 15); returns the last frame's axes and origin (12
+    scalars)."""
     x0, x1, x2 = B[0, 0], B[1, 0], B[2, 0]
     y0, y1, y2 = B[0, 1], B[1, 1], B[2, 1]
     z0, z1, z2 = B[0, 2], B[1, 2], B[2, 2]
     p0, p1, p2 = B[0, 3], B[1, 3], B[2, 3]
     for j in range(K.shape[0]):
-        a, th, d = K[j, 1], K[j, 3], K[j, 4]
+        a, d = K[j, 1], K[j, 4]
         ca, sa, cb, sb = K[j, 5], K[j, 6], K[j, 7], K[j, 8]
         S[j, 0], S[j, 1], S[j, 2] = x0, x1, x2
         S[j, 3], S[j, 4], S[j, 5] = p0, p1, p2
@@ -48,13 +52,31 @@ def _walk(K, B, q, S):
         x0, z0 = cb * x0 - sb * z0, sb * x0 + cb * z0
         x1, z1 = cb * x1 - sb * z1, sb * x1 + cb * z1
         x2, z2 = cb * x2 - sb * z2, sb * x2 + cb * z2
-        ct, st = np.cos(th + q[j]), np.sin(th + q[j])
+        ct = c[j] * K[j, 9] - s[j] * K[j, 10]  # cos(theta + q), sin(theta + q)
+        st = s[j] * K[j, 9] + c[j] * K[j, 10]
         x0, y0 = ct * x0 + st * y0, ct * y0 - st * x0
         x1, y1 = ct * x1 + st * y1, ct * y1 - st * x1
         x2, y2 = ct * x2 + st * y2, ct * y2 - st * x2
         p0, p1, p2 = p0 + d * z0, p1 + d * z1, p2 + d * z2
         S[j, 12], S[j, 13], S[j, 14] = z0, z1, z2
     return x0, x1, x2, y0, y1, y2, z0, z1, z2, p0, p1, p2
+
+
+@njit(inline="always", **JIT)
+def _row_trig(Q, i, c, s):
+    """c, s = cos, sin of row i of Q."""
+    for j in range(Q.shape[1]):
+        c[j] = np.cos(Q[i, j])
+        s[j] = np.sin(Q[i, j])
+
+
+@njit(**JIT)
+def trig(Q, C, Sn):
+    """C, Sn = cos Q, sin Q (N, n): the joint variables as ``distance`` takes them."""
+    for i in range(Q.shape[0]):
+        for j in range(Q.shape[1]):
+            C[i, j] = np.cos(Q[i, j])
+            Sn[i, j] = np.sin(Q[i, j])
 
 
 @njit(inline="always", **JIT)
@@ -75,8 +97,10 @@ def frames(K, B, Q):
     Rs = np.empty((N, n + 1, 3, 3))
     ps = np.empty((N, n + 1, 3))
     S = np.empty((n, 15))
+    c, s = np.empty(n), np.empty(n)
     for i in range(N):
-        f = _walk(K, B, Q[i], S)
+        _row_trig(Q, i, c, s)
+        f = _walk(K, B, c, s, S)
         for j in range(n + 1):
             if j < n:  # frame j: x and p kept at joint j+1's start; z from joint j
                 for r in range(3):
@@ -144,8 +168,10 @@ def flange(K, B, F, Q, T):
     S = np.empty((n, 15))
     R = np.empty((3, 3))
     p = np.empty(3)
+    c, s = np.empty(n), np.empty(n)
     for i in range(N):
-        _times(_walk(K, B, Q[i], S), F, R, p)
+        _row_trig(Q, i, c, s)
+        _times(_walk(K, B, c, s, S), F, R, p)
         _store(T, i, R, p)
 
 
@@ -157,8 +183,10 @@ def flange_jacobian(K, B, F, Q, T, J):
     S = np.empty((n, 15))
     R = np.empty((3, 3))
     p = np.empty(3)
+    c, s = np.empty(n), np.empty(n)
     for i in range(N):
-        _times(_walk(K, B, Q[i], S), F, R, p)
+        _row_trig(Q, i, c, s)
+        _times(_walk(K, B, c, s, S), F, R, p)
         _store(T, i, R, p)
         for j in range(n):
             z0, z1, z2 = S[j, 12], S[j, 13], S[j, 14]
@@ -179,11 +207,11 @@ def _turn(n0, n1, n2, w0, w1, w2, c0, c1, c2, m0, m1, m2, inv):
 
 
 @njit(**JIT)
-def distance(K, B, F, Q, o, zf, dzf, planes, pidx, base_axes, base_point, out_d, out_hit,
+def distance(K, B, F, C, Sn, o, zf, dzf, planes, pidx, base_axes, base_point, out_d, out_hit,
              J, cols_joint, cols_base, cols_origin, cols_angles, cols_plane, extra_joint,
              extra_col, extra_factor):
-    """For each sample (joint angles Q[i] (gravity deflection included), plane pidx[i]):
-    the distance along the beam to the plane n~ . p = 1 (``out_d``) and the hit point
+    """For each sample (joint angles q as C[i] = cos q and Sn[i] = sin q (``trig``),
+    gravity deflection included; plane pidx[i]): the distance along the beam to the plane n~ . p = 1 (``out_d``) and the hit point
     (``out_hit``); with J of more than 0 columns, the distance's derivatives into J's
     columns as the maps say (-1: not wanted): ``cols_joint`` (n, 5) alpha, a, beta, theta,
     d of each joint; ``cols_base`` (6) the base frame error's x, y, z (translations along
@@ -194,18 +222,16 @@ def distance(K, B, F, Q, o, zf, dzf, planes, pidx, base_axes, base_point, out_d,
     column times ``extra_factor[i, m]`` (compliance: the gravity torque). A rotation about
     an axis w through c: dd = -(p_m - c) . (n~ x w) / s; a translation t: -n~ . t / s;
     s = n~ . z_b, p_m the hit point."""
-    N, n = Q.shape
+    N, n = C.shape
     S = np.empty((n, 15))
     R = np.empty((3, 3))
     fp = np.empty(3)
     dtheta = np.empty(n)
     ob = np.empty(3)
     zb = np.empty(3)
-    nv = np.empty(3)
-    m = np.empty(3)
     derivatives = J.shape[1] > 0
     for i in range(N):
-        _times(_walk(K, B, Q[i], S), F, R, fp)
+        _times(_walk(K, B, C[i], Sn[i], S), F, R, fp)
         for r in range(3):
             ob[r] = fp[r] + R[r, 0] * o[0] + R[r, 1] * o[1] + R[r, 2] * o[2]
             zb[r] = R[r, 0] * zf[0] + R[r, 1] * zf[1] + R[r, 2] * zf[2]
@@ -220,13 +246,13 @@ def distance(K, B, F, Q, o, zf, dzf, planes, pidx, base_axes, base_point, out_d,
             continue
         _derivatives(J, i, S, R, n0, n1, n2, m0, m1, m2, s, dist, dzf, base_axes, base_point,
                      cols_joint, cols_base, cols_origin, cols_angles, cols_plane, k,
-                     extra_joint, extra_col, extra_factor, dtheta, nv, m)
+                     extra_joint, extra_col, extra_factor, dtheta)
 
 
 @njit(inline="always", **JIT)
 def _derivatives(J, i, S, R, n0, n1, n2, m0, m1, m2, s, dist, dzf, base_axes, base_point,
                  cols_joint, cols_base, cols_origin, cols_angles, cols_plane, k, extra_joint,
-                 extra_col, extra_factor, dtheta, nv, m):
+                 extra_col, extra_factor, dtheta):
     """Row i of J: the distance's derivatives by the mapped parameters (``distance``), for
     the chain's terms S, the flange rotation R, the plate's n~ (n0, n1, n2), the hit point
     (m0, m1, m2), s = n~ . z_b and the distance."""
@@ -235,25 +261,28 @@ def _derivatives(J, i, S, R, n0, n1, n2, m0, m1, m2, s, dist, dzf, base_axes, ba
     for j in range(n):
         dtheta[j] = _turn(n0, n1, n2, S[j, 12], S[j, 13], S[j, 14], S[j, 9], S[j, 10],
                           S[j, 11], m0, m1, m2, inv)
-        c = cols_joint[j]
-        if c[3] >= 0:
-            J[i, c[3]] = dtheta[j]
-        if c[0] >= 0:
-            J[i, c[0]] = _turn(n0, n1, n2, S[j, 0], S[j, 1], S[j, 2], S[j, 3], S[j, 4],
-                               S[j, 5], m0, m1, m2, inv)
-        if c[1] >= 0:
-            J[i, c[1]] = -(n0 * S[j, 0] + n1 * S[j, 1] + n2 * S[j, 2]) * inv
-        if c[2] >= 0:
-            J[i, c[2]] = _turn(n0, n1, n2, S[j, 6], S[j, 7], S[j, 8], S[j, 9], S[j, 10],
-                               S[j, 11], m0, m1, m2, inv)
-        if c[4] >= 0:
-            J[i, c[4]] = -(n0 * S[j, 12] + n1 * S[j, 13] + n2 * S[j, 14]) * inv
+        c = cols_joint[j, 3]
+        if c >= 0:
+            J[i, c] = dtheta[j]
+        c = cols_joint[j, 0]
+        if c >= 0:
+            J[i, c] = _turn(n0, n1, n2, S[j, 0], S[j, 1], S[j, 2], S[j, 3], S[j, 4],
+                            S[j, 5], m0, m1, m2, inv)
+        c = cols_joint[j, 1]
+        if c >= 0:
+            J[i, c] = -(n0 * S[j, 0] + n1 * S[j, 1] + n2 * S[j, 2]) * inv
+        c = cols_joint[j, 2]
+        if c >= 0:
+            J[i, c] = _turn(n0, n1, n2, S[j, 6], S[j, 7], S[j, 8], S[j, 9], S[j, 10],
+                            S[j, 11], m0, m1, m2, inv)
+        c = cols_joint[j, 4]
+        if c >= 0:
+            J[i, c] = -(n0 * S[j, 12] + n1 * S[j, 13] + n2 * S[j, 14]) * inv
     for e in range(extra_col.shape[0]):
         J[i, extra_col[e]] = dtheta[extra_joint[e]] * extra_factor[i, e]
-    nv[0], nv[1], nv[2] = n0, n1, n2
     for r in range(3):
         if cols_base[r] >= 0:
-            J[i, cols_base[r]] = -nv[r] * inv
+            J[i, cols_base[r]] = -(n0 if r == 0 else n1 if r == 1 else n2) * inv
         if cols_base[3 + r] >= 0:
             J[i, cols_base[3 + r]] = _turn(n0, n1, n2, base_axes[r, 0], base_axes[r, 1],
                                            base_axes[r, 2], base_point[0], base_point[1],
@@ -273,7 +302,6 @@ def _derivatives(J, i, S, R, n0, n1, n2, m0, m1, m2, s, dist, dzf, base_axes, ba
             J[i, cols_angles[a]] = -dist * inv * (f0 * dzf[0, a] + f1 * dzf[1, a]
                                                   + f2 * dzf[2, a])
     if cols_plane.shape[0] > k:
-        m[0], m[1], m[2] = m0, m1, m2
         for r in range(3):
             if cols_plane[k, r] >= 0:
-                J[i, cols_plane[k, r]] = -m[r] * inv
+                J[i, cols_plane[k, r]] = -(m0 if r == 0 else m1 if r == 1 else m2) * inv

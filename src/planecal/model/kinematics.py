@@ -25,6 +25,7 @@ N poses in one call. Every function here takes q of shape (n,) or (N, n).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -47,17 +48,19 @@ def rot(axis: int, angle: float) -> np.ndarray:
 def frame_error(e) -> np.ndarray:
     """4x4 of a frame error (x, y, z [m], rx, ry, rz [rad]): T(x,y,z) Rz(rz) Ry(ry) Rx(rx)."""
     x, y, z, rx, ry, rz = np.asarray(e, float).reshape(6)
-    T = np.eye(4)
-    T[:3, :3] = rot(2, rz) @ rot(1, ry) @ rot(0, rx)
-    T[:3, 3] = (x, y, z)
-    return T
+    cx, sx, cy, sy, cz, sz = (math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry),
+                              math.cos(rz), math.sin(rz))
+    return np.array([[cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx, x],
+                     [sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx, y],
+                     [-sy, cy * sx, cy * cx, z],
+                     [0.0, 0.0, 0.0, 1.0]])
 
 
 @dataclass(frozen=True, eq=False)
 class Kinematics:
     """The geometric model (module docstring). Arrays (n,) per joint; ``base`` and
-    ``flange`` 4x4. ``packed`` (n, 5): alpha, a, beta, theta, d per joint, contiguous, for
-    the kernels."""
+    ``flange`` 4x4. ``packed`` (n, 11): alpha, a, beta, theta, d per joint and the cosines
+    and sines of alpha, beta and theta, contiguous, for the kernels (``chain``)."""
     alpha: np.ndarray
     a: np.ndarray
     beta: np.ndarray
@@ -67,13 +70,17 @@ class Kinematics:
     flange: np.ndarray = field(default_factory=lambda: np.eye(4))
 
     def __post_init__(self):
-        for name in JOINT_PARAMS:
-            object.__setattr__(self, name, np.asarray(getattr(self, name), float).reshape(-1))
-        for name in ("base", "flange"):
-            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), float))
-        packed = np.ascontiguousarray(np.stack(
-            [getattr(self, k) for k in JOINT_PARAMS] + [np.cos(self.alpha), np.sin(self.alpha),
-                                                        np.cos(self.beta), np.sin(self.beta)], -1))
+        set_ = object.__setattr__
+        columns = (self.alpha, self.a, self.beta, self.theta, self.d)
+        packed = np.empty((np.size(self.alpha), 11))
+        for k, (name, v) in enumerate(zip(JOINT_PARAMS, columns)):
+            packed[:, k] = v
+            set_(self, name, packed[:, k].copy())
+        for name, v in (("base", self.base), ("flange", self.flange)):
+            set_(self, name, np.ascontiguousarray(v, float))
+        for k, c in ((0, 5), (2, 7), (3, 9)):  # cos, sin of alpha, beta and theta
+            np.cos(packed[:, k], out=packed[:, c])
+            np.sin(packed[:, k], out=packed[:, c + 1])
         packed.flags.writeable = False
         object.__setattr__(self, "packed", packed)
 

@@ -24,11 +24,14 @@ and s = n~ . z_b,
     c_j:          the theta_j column times tau_j(q)
 
 (``planecal.model.chain.distance``; checked against central differences in the tests.)
+The kernel takes the joint angles as their cosines and sines (``Joints``): a fit holds
+them once and evaluates the model at the same joints every iteration.
 The laser does not see a roll about its own beam, so o, phi_y, phi_z are the whole
 flange-to-sensor frame.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -38,7 +41,7 @@ from planecal.model import chain as _chain
 from planecal.model.cell_params import CellParams
 from planecal.model.encoder import counts_to_joints
 from planecal.model.gravity import joint_torques
-from planecal.model.kinematics import Kinematics, fk, frame_error, rot
+from planecal.model.kinematics import Kinematics, fk, frame_error
 from planecal.model.layout import ParamLayout, level1_layout
 from planecal.model.robot import Robot
 
@@ -59,6 +62,32 @@ def sensor_rotation(phi_y: float, phi_z: float) -> np.ndarray:
     return np.array([[cz * cy, -sz, cz * sy], [sz * cy, cz, sz * sy], [-sy, 0.0, cy]])
 
 
+@dataclass(frozen=True, eq=False)
+class Joints:
+    """Joint angles ``q`` (N, n) [rad] with their cosines and sines, taken once
+    (``Joints.of``): what the distance kernel reads."""
+    q: np.ndarray
+    cos: np.ndarray
+    sin: np.ndarray
+
+    @classmethod
+    def of(cls, q) -> "Joints":
+        q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, float)))
+        c, s = np.empty_like(q), np.empty_like(q)
+        _chain.trig(q, c, s)
+        return cls(q, c, s)
+
+    def rows(self, rows) -> "Joints":
+        """The rows ``rows`` (a bool mask or indices); itself for a mask of every row."""
+        rows = np.asarray(rows)
+        if rows.dtype == bool and rows.all():
+            return self
+        return Joints(self.q[rows], self.cos[rows], self.sin[rows])
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+
 def kinematics_of(robot: Robot, params: CellParams) -> Kinematics:
     """robot.json's nominal chain with params' joint offsets, geometry and base frame
     (compliance is pose-dependent: ``effective_joints``)."""
@@ -73,8 +102,8 @@ def base_error_axes(base: np.ndarray) -> np.ndarray:
     """The rotation axes (rows rx, ry, rz) of a base frame error (x, y, z, rx, ry, rz;
     ``kinematics.frame_error``: T(t) Rz Ry Rx): rx about Rz Ry e_x, ry about Rz e_y, rz about
     e_z, each through t."""
-    Rz, Ry = rot(2, base[5]), rot(1, base[4])
-    return np.array([Rz @ Ry[:, 0], Rz[:, 1], [0.0, 0.0, 1.0]])
+    cy, sy, cz, sz = math.cos(base[4]), math.sin(base[4]), math.cos(base[5]), math.sin(base[5])
+    return np.array([[cz * cy, sz * cy, -sy], [-sz, cz, 0.0], [0.0, 0.0, 1.0]])
 
 
 def effective_joints(robot: Robot, q: np.ndarray, params: CellParams):
@@ -111,7 +140,7 @@ def predict(robot: Robot, qe: np.ndarray, params: CellParams,
     """Model distance [m] for encoder counts qe (N, 6) (or (6,)) on plane_index (default 0):
     ``predict_with_jacobian``'s distance, bit for bit, without the Jacobian."""
     one = np.ndim(qe) == 1
-    d, _ = _evaluate(robot, counts_to_joints(robot, np.atleast_2d(qe)), params,
+    d, _ = _evaluate(robot, Joints.of(counts_to_joints(robot, np.atleast_2d(qe))), params,
                      0 if plane_index is None else plane_index, None)
     return d[0] if one else d
 
@@ -123,17 +152,17 @@ def predict_with_jacobian(robot: Robot, qe: np.ndarray, params: CellParams,
     order (default: the level-1 layout of ``params``' planes): (N, len(layout)), or only
     the columns of the ``free`` mask (N, free.sum()) in their order."""
     layout = layout or level1_layout(params.n_planes)
-    q = counts_to_joints(robot, np.atleast_2d(qe))
+    q = Joints.of(counts_to_joints(robot, np.atleast_2d(qe)))
     return _evaluate(robot, q, params, 0 if plane_index is None else plane_index,
                      column_map(layout, robot.n_joints, free))
 
 
-def predict_joints_with_jacobian(robot: Robot, q: np.ndarray, params: CellParams,
+def predict_joints_with_jacobian(robot: Robot, q: np.ndarray | Joints, params: CellParams,
                                  plane_index, layout: ParamLayout, free=None):
-    """``predict_with_jacobian`` at joint angles q (N, 6) instead of counts (the fit
-    converts its counts once)."""
-    return _evaluate(robot, np.atleast_2d(q), params, plane_index,
-                     column_map(layout, robot.n_joints, free))
+    """``predict_with_jacobian`` at joint angles q (N, 6), or their ``Joints``, instead of
+    counts (the fit converts its counts and takes their sines once)."""
+    return _evaluate(robot, q if isinstance(q, Joints) else Joints.of(q), params,
+                     plane_index, column_map(layout, robot.n_joints, free))
 
 
 @dataclass(frozen=True, eq=False)
@@ -200,23 +229,26 @@ _NO_COLUMNS = ColumnMap(0, np.full((6, 5), -1, np.int64), *(np.full(k, -1, np.in
                         np.zeros(0, np.int64), ())
 
 
-def _evaluate(robot: Robot, q: np.ndarray, params: CellParams, plane_index,
+def _evaluate(robot: Robot, joints: Joints, params: CellParams, plane_index,
               cmap: ColumnMap | None):
-    """The distances at joint angles q (N, 6) and, with a column map, the Jacobian."""
-    qd, tau = effective_joints(robot, q, params)
+    """The distances at the joints and, with a column map, the Jacobian."""
+    tau = None
+    if params.compliance.any():  # the deflected joints' own sines
+        qd, tau = effective_joints(robot, joints.q, params)
+        joints = Joints.of(qd)
     kin = kinematics_of(robot, params)
-    N = len(qd)
+    N, n = joints.q.shape
     cm = cmap or _NO_COLUMNS
-    if cm.joint.shape[0] != qd.shape[1]:
-        cm = replace(cm, joint=np.full((qd.shape[1], 5), -1, np.int64))
+    if cm.joint.shape[0] != n:
+        cm = replace(cm, joint=np.full((n, 5), -1, np.int64))
     factor = np.empty((N, len(cm.extra_col)))
     if len(cm.extra_col):
-        tau = joint_torques(robot, q) if tau is None else tau
+        tau = joint_torques(robot, joints.q) if tau is None else tau
         factor[:] = tau[:, cm.extra_joint]
     d, hit = np.empty(N), np.empty((N, 3))
     J = np.zeros((N if cmap is not None else 0, cm.width))
     pidx = np.ascontiguousarray(np.broadcast_to(np.asarray(plane_index, np.int64), (N,)))
-    _chain.distance(kin.packed, kin.base, kin.flange, np.ascontiguousarray(qd),
+    _chain.distance(kin.packed, kin.base, kin.flange, joints.cos, joints.sin,
                     params.sensor_origin, beam_direction(params.phi_y, params.phi_z),
                     beam_direction_derivative(params.phi_y, params.phi_z),
                     np.ascontiguousarray(params.planes), pidx, base_error_axes(params.base),
