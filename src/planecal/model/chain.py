@@ -162,23 +162,9 @@ def _store(T, i, R, p):
 
 
 @njit(**JIT)
-def flange(K, B, F, Q, T):
-    """The flange pose of each row of Q into T (N, 4, 4)."""
-    N, n = Q.shape
-    S = np.empty((n, 15))
-    R = np.empty((3, 3))
-    p = np.empty(3)
-    c, s = np.empty(n), np.empty(n)
-    for i in range(N):
-        _row_trig(Q, i, c, s)
-        _times(_walk(K, B, c, s, S), F, R, p)
-        _store(T, i, R, p)
-
-
-@njit(**JIT)
 def flange_jacobian(K, B, F, Q, T, J):
-    """The flange pose (T, (N, 4, 4)) and its geometric Jacobian (J, (N, 6, n), rows v
-    about the flange origin, then w) of each row of Q."""
+    """The flange pose (T, (N, 4, 4)) and, unless J has no rows, its geometric Jacobian (J,
+    (N, 6, n), rows v about the flange origin, then w) of each row of Q."""
     N, n = Q.shape
     S = np.empty((n, 15))
     R = np.empty((3, 3))
@@ -188,6 +174,8 @@ def flange_jacobian(K, B, F, Q, T, J):
         _row_trig(Q, i, c, s)
         _times(_walk(K, B, c, s, S), F, R, p)
         _store(T, i, R, p)
+        if J.shape[0] == 0:
+            continue
         for j in range(n):
             z0, z1, z2 = S[j, 12], S[j, 13], S[j, 14]
             r0, r1, r2 = p[0] - S[j, 9], p[1] - S[j, 10], p[2] - S[j, 11]

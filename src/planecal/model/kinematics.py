@@ -153,11 +153,14 @@ def link_frames(kin: Kinematics, q) -> np.ndarray:
     return _homogeneous(R, p).reshape(lead + (kin.n_joints + 1, 4, 4))
 
 
+_NO_JACOBIAN = np.empty((0, 6, 0))
+
+
 def fk(kin: Kinematics, q) -> np.ndarray:
     """Flange pose in the cell frame, (..., 4, 4)."""
     Q, lead = _rows(kin, q)
     T = np.empty((len(Q), 4, 4))
-    _chain.flange(kin.packed, kin.base, kin.flange, Q, T)
+    _chain.flange_jacobian(kin.packed, kin.base, kin.flange, Q, T, _NO_JACOBIAN)
     return T.reshape(lead + (4, 4))
 
 
