@@ -107,6 +107,53 @@ def from_standard_dh(theta0, d, a, alpha) -> Kinematics:
                       np.zeros(n), theta0.copy(), d.copy(), np.eye(4), F)
 
 
+def link_site(kin: Kinematics, i: int) -> np.ndarray:
+    """Link frame i in frame i (4x4, 0-based i in 0..n): the next joint's fixed
+    Rx(alpha_{i+1}) Tx(a_{i+1}), or the flange F for i = n (``link_frames``). For a chain
+    made from a standard DH table it is Tx(a_i) Rx(alpha_i) of the table's row i: the
+    standard DH frame i in the modified-DH frame i."""
+    if i == kin.n_joints:
+        return kin.flange.copy()
+    return tx_rx(kin.a[i], kin.alpha[i])
+
+
+def tx_rx(a: float, alpha: float) -> np.ndarray:
+    """Tx(a) Rx(alpha) (= Rx(alpha) Tx(a)), entries below 1e-15 set to 0."""
+    c, s = np.cos(alpha), np.sin(alpha)
+    T = np.array([[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0],
+                  [0.0, 0.0, 0.0, 1.0]])
+    T[np.abs(T) < 1e-15] = 0.0
+    return T
+
+
+def joint_between_links(kin: Kinematics, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """Joint j (1-based) between the link frames it joins: (P, A) with
+
+        link_j = link_{j-1} P Rz(theta_j + q_j) A,   P = Ry(beta_j),   A = Tz(d_j) link_site(j)
+
+    so joint j's axis is P's z through link frame j-1's origin (which lies on it), and a
+    point x of link j sits at A x in the frame that turns with the joint. For a standard
+    DH chain P = I and A = Tz(d_j) Tx(a_j) Rx(alpha_j) (the table's row j). The collision
+    checker's bounds, the URDF's joint origins and the gravity model read joints so."""
+    i = j - 1
+    P = np.eye(4)
+    P[:3, :3] = rot(1, kin.beta[i])
+    P[np.abs(P) < 1e-15] = 0.0
+    A = link_site(kin, j)
+    Tz = np.eye(4)
+    Tz[2, 3] = kin.d[i]
+    return P, Tz @ A
+
+
+def reach_m(kin: Kinematics) -> float:
+    """An upper bound of the flange's distance from the base origin: link frame 0's origin
+    plus each joint's |A| translation (consecutive link frames' origins are that far
+    apart, whatever the joint angles: ``joint_between_links``)."""
+    r = float(np.linalg.norm((kin.base @ link_site(kin, 0))[:3, 3]))
+    return r + sum(float(np.linalg.norm(joint_between_links(kin, j)[1][:3, 3]))
+                   for j in range(1, kin.n_joints + 1))
+
+
 def parallel_pairs(kin: Kinematics, tol: float = 1e-9) -> list[int]:
     """Joints i (0-based) whose axis is parallel to the previous one's (alpha_i = 0,
     i >= 1): where Hayati's beta_i is a parameter of its own."""
