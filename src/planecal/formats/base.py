@@ -322,3 +322,14 @@ def FormatTag(*accepted: str, what: str):
     """The ``format`` field: ``name/version``; files from before it existed omit it."""
     return Annotated[Str | None, AfterValidator(_format_is(accepted, what)),
                      Field(json_schema_extra={"enum": [*accepted, None]})]
+
+
+_NUMBER_ROW = re.compile(r"\[\s+((?:-?[0-9.eE+-]+|null|true|false)(?:,\s+(?:-?[0-9.eE+-]+|null|true|false))*)\s+\]")
+
+
+def dumps(doc: Any) -> str:
+    """JSON as planecal writes the files people read: indented, a row of numbers on one
+    line."""
+    text = json.dumps(doc, indent=2)
+    return _NUMBER_ROW.sub(lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(","))
+                           + "]", text) + "\n"

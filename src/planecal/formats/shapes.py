@@ -13,6 +13,11 @@ frames for a DH table):
 * ``mesh``: ``file``, a binary STL beside shapes.json (vertices in metres, in the link's
   frame; ``planecal robot import`` writes them so).
 
+``allowed_pairs``: pairs of pieces the collision checker does not check, each with why
+(its own ``allowed_pairs`` adds to them): where the robot's structure keeps two pieces
+apart at every angle though their hulls pass within the clearance (a UR's nested wrist
+joints).
+
 ``use``: ``both`` (default; the MC70's): the visual shape is the pieces' polygons and the
 collision shape the same grown by the margin; ``visual`` or ``collision``: that one only
 (a URDF's <visual> and <collision> elements). A visual piece of one mesh is drawn as the
@@ -111,12 +116,18 @@ class Piece(Model):
         return self
 
 
+class AllowedPair(Model):
+    pieces: Vector(Name, 2, "piece names")
+    why: Annotated[Str, Field(min_length=1)]
+
+
 class ShapesFile(Model):
     """``models/<robot>/shapes.json``."""
     format: ShapesTag = None
     source: Str | None = None
     collision_margin_m: Margin | None = None
     pieces: Annotated[list[Piece], Field(min_length=1, max_length=10_000)]
+    allowed_pairs: list[AllowedPair] = []
 
     @model_validator(mode="after")
     def unique_names(self):
@@ -125,4 +136,9 @@ class ShapesFile(Model):
             if p.name in seen:
                 raise problem(f"{p.name!r}: another piece has this name", "pieces", i, "name")
             seen.add(p.name)
+        for i, pair in enumerate(self.allowed_pairs):
+            for k, name in enumerate(pair.pieces):
+                if name not in seen:
+                    raise problem(f"{name!r} is no piece of this file", "allowed_pairs", i,
+                                  "pieces", k)
         return self

@@ -171,6 +171,7 @@ class RobotShapes:
     path: Path
     pieces: tuple[ShapePiece, ...]
     margin_m: float | None
+    allowed_pairs: tuple[tuple[str, str], ...] = ()  # not checked: the robot keeps them apart
 
 
 def shapes_path(robot) -> Path:
@@ -201,7 +202,8 @@ def _load_shapes(path: Path, _mtime: int, _size: int) -> RobotShapes:
     for i, p in enumerate(doc.pieces):
         prims = tuple(_primitive(path, i, k, prim) for k, prim in enumerate(p.primitives))
         pieces.append(ShapePiece(p.name, p.link, p.use, prims))
-    return RobotShapes(path, tuple(pieces), doc.collision_margin_m)
+    return RobotShapes(path, tuple(pieces), doc.collision_margin_m,
+                       tuple(tuple(p.pieces) for p in doc.allowed_pairs))
 
 
 def _primitive(path: Path, i: int, k: int, prim):

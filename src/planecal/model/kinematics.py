@@ -213,3 +213,79 @@ def fk_jacobian(kin: Kinematics, q) -> tuple[np.ndarray, np.ndarray]:
     J = np.empty((len(Q), 6, kin.n_joints))
     _chain.flange_jacobian(kin.packed, kin.base, kin.flange, Q, T, J)
     return T.reshape(lead + (4, 4)), J.reshape(lead + (6, kin.n_joints))
+
+
+PARALLEL_SIN = 1e-3  # axes closer to parallel than this take Hayati's beta, not a normal
+
+
+def from_axes(points, axes, tip) -> Kinematics:
+    """The chain of joint axes given at q = 0 in the base frame (a point on each (n, 3),
+    its direction (n, 3), turning right-handed about it) and the flange's pose ``tip``
+    there (4x4): exactly the same forward kinematics (how a URDF becomes the model,
+    ``planecal.io.urdf_import``; docs/ROBOTS.md).
+
+    Frame by frame, frame i-1 may still turn about and slide along its own axis (its
+    theta and d are not fixed until the next axis is known; frame 0 is the base frame
+    B, which may do the same). Axis i:
+    * not parallel to axis i-1 (|sin| > PARALLEL_SIN): the common normal from axis i-1 to
+      axis i fixes frame i-1's x and origin (theta_{i-1}, d_{i-1}), then alpha_i is the
+      twist about it and a_i its length, beta_i = 0 (modified DH);
+    * parallel or nearly (Hayati): axis i meets frame i-1's xy plane at a point c; x turns
+      towards c (theta_{i-1}), a_i = |c|, and Rx(alpha_i) Ry(beta_i) tilts z onto axis i
+      (beta_i = 0 for exactly parallel axes, alpha_i = pi for opposite ones);
+    frame i starts at that point of axis i, z along it. After the last axis, theta_n and
+    d_n put frame n's origin at the foot of the flange's origin on axis n and its x
+    towards the flange's x; the flange frame F is what remains. Tolerances are 1e-12 m."""
+    P, U = np.asarray(points, float), np.asarray(axes, float)
+    U = U / np.linalg.norm(U, axis=1, keepdims=True)
+    n = len(P)
+    alpha, a, beta, theta, d = (np.zeros(n) for _ in range(5))
+    C = np.eye(4)  # frame i-1 at q = 0 (frame 0: the base, B = I so far)
+    B = np.eye(4)
+    for i in range(n):
+        z, o, u = C[:3, 2], C[:3, 3], U[i]
+        s = np.linalg.norm(np.cross(z, u))
+        if s > PARALLEL_SIN:
+            w0 = o - P[i]
+            b, dd, e = z @ u, z @ w0, u @ w0
+            slide = (b * e - dd) / (1 - b * b)
+            c1 = P[i] + ((e - b * dd) / (1 - b * b)) * u
+            c0 = o + slide * z
+            x = c1 - c0
+            x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-12 else np.cross(z, u) / s
+        else:
+            slide = 0.0
+            c1 = P[i] + (-((P[i] - o) @ z) / (u @ z)) * u
+            x = c1 - o
+            x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-12 else C[:3, 0]
+        phi = float(np.arctan2(x @ C[:3, 1], x @ C[:3, 0]))
+        C = _turn_slide(C, phi, slide)
+        if i == 0:
+            B = _turn_slide(B, phi, slide)
+        else:
+            theta[i - 1] += phi
+            d[i - 1] += slide
+        a[i] = float(np.linalg.norm(c1 - C[:3, 3]))
+        uc = C[:3, :3].T @ u  # axis i in frame i-1 (turned)
+        if s > PARALLEL_SIN:
+            alpha[i] = float(np.arctan2(np.cross([0.0, 0.0, 1.0], uc)[0], uc[2]))
+        else:
+            beta[i] = float(np.arcsin(np.clip(uc[0], -1.0, 1.0)))
+            alpha[i] = float(np.arctan2(-uc[1], uc[2]))
+        C = C @ Kinematics([alpha[i]], [a[i]], [beta[i]], [0.0], [0.0]).joint_transform(0)
+    T = np.asarray(tip, float)
+    slide = float((T[:3, 3] - C[:3, 3]) @ C[:3, 2])
+    xt = T[:3, 0] - (T[:3, 0] @ C[:3, 2]) * C[:3, 2]
+    phi = float(np.arctan2(xt @ C[:3, 1], xt @ C[:3, 0])) if np.linalg.norm(xt) > 1e-6 else 0.0
+    C = _turn_slide(C, phi, slide)
+    theta[n - 1] += phi
+    d[n - 1] += slide
+    return Kinematics(alpha, a, beta, theta, d, B, np.linalg.inv(C) @ T)
+
+
+def _turn_slide(C: np.ndarray, phi: float, slide: float) -> np.ndarray:
+    """C Rz(phi) Tz(slide)."""
+    T = np.eye(4)
+    T[:3, :3] = rot(2, phi)
+    T[2, 3] = slide
+    return C @ T

@@ -30,7 +30,8 @@ Pairs checked
   base-link1, link1-link2, ..., link5-link6) and the tool against bodies 5 and 6.
 * Environment: every moving part against every static part, except the floor against the
   base (body 0) and link 1, which are bolted to it.
-``allowed_pairs`` adds further (name, name) pairs to skip.
+``allowed_pairs`` adds further (name, name) pairs to skip, as does the robot's shapes.json
+(its ``allowed_pairs``: pieces its structure keeps apart, a UR's nested wrist joints).
 * One-joint pairs (``planecal.safety.collision_joint``): self pairs two bodies apart whose
   distance one joint decides once a part is replaced by its hull of revolution; their safe
   intervals of that joint are swept once per world (``safe_sets``), and a configuration or
@@ -252,9 +253,12 @@ class CollisionWorld:
         self.max_steps = int(max_steps)
         self.resolution_m = float(resolution_m)
         self.coarse_samples = int(coarse_samples)
-        if links is None or tools is None or static is None:
+        if links is None:  # the description's pieces, and the pairs it says never meet
             from planecal.model import geometry
-            links = geometry.robot_link_meshes(self.robot, "collision") if links is None else links
+            links = geometry.robot_link_meshes(self.robot, "collision")
+            allowed_pairs = tuple(allowed_pairs) + geometry.robot_shapes(self.robot).allowed_pairs
+        if tools is None or static is None:
+            from planecal.model import geometry
             tools = geometry.tool_meshes(scene, "collision") if tools is None else tools
             static = geometry.scene_meshes(scene) if static is None else static
 
