@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planecal.model.cell_params import CellParams
-from planecal.model.kinematics import joint_between_links, link_site, rot, tx_rx
+from planecal.model.kinematics import joint_between_links, link_site, rot, rpy_angles, tx_rx
 from planecal.model.robot import Robot
 
 LINKS = ("base", "link1", "link2", "link3", "link4", "link5", "link6", "flange", "laser")
@@ -111,13 +111,7 @@ def _xyz_rpy(T: np.ndarray, *std) -> tuple[list[float], list[float]]:
     if std:
         a, d, alpha, c = std
         return [a * np.cos(c), a * np.sin(c), d], [alpha, 0.0, c]
-    R = T[:3, :3]
-    pitch = float(np.arctan2(-R[2, 0], np.hypot(R[0, 0], R[1, 0])))
-    if np.hypot(R[0, 0], R[1, 0]) < 1e-12:  # gimbal lock: roll 0, the rest in yaw
-        roll, yaw = 0.0, float(np.arctan2(-R[0, 1], R[1, 1]))
-    else:
-        roll, yaw = float(np.arctan2(R[2, 1], R[2, 2])), float(np.arctan2(R[1, 0], R[0, 0]))
-    return [float(v) for v in T[:3, 3]], [roll, pitch, yaw]
+    return [float(v) for v in T[:3, 3]], rpy_angles(T[:3, :3])
 
 
 def origin_xyz_rpy(robot: Robot, delta, j: int) -> tuple[list[float], list[float]]:

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError, RunFailed
-from planecal.model.kinematics import Kinematics, fk, from_axes, link_frames
+from planecal.model.kinematics import Kinematics, fk, from_axes, link_frames, rpy_angles
 
 MATCH_M = 1e-9  # the imported flange's largest difference from the URDF's (m and rotation)
 N = 6
@@ -274,7 +274,7 @@ def _piece(path: Path, name: str, body: int, use: str, geom, M: np.ndarray,
     if geom.box is not None:
         return Piece(name, body, use, {"box": {"center_m": _list(M[:3, 3]),
                                                "size_m": _list(geom.box.size),
-                                               "rpy_rad": _list(rpy(M[:3, :3]))}})
+                                               "rpy_rad": _list(rpy_angles(M[:3, :3]))}})
     if geom.cylinder is not None:
         h = M[:3, 2] * float(geom.cylinder.length) / 2
         return Piece(name, body, use, {"cylinder": {"from_m": _list(M[:3, 3] - h),
@@ -330,14 +330,6 @@ def read_mesh(f: Path, where: str) -> tuple[np.ndarray, np.ndarray]:
     if len(V) < 4 or len(F) < 4:
         raise InputError(f"{where}: the mesh {f.name} holds no solid ({len(F)} triangles)")
     return V, F
-
-
-def rpy(R: np.ndarray) -> list[float]:
-    """URDF roll, pitch, yaw of R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    c = math.hypot(R[0, 0], R[1, 0])
-    if c < 1e-12:
-        return [0.0, math.atan2(-R[2, 0], c), math.atan2(-R[0, 1], R[1, 1])]
-    return [math.atan2(R[2, 1], R[2, 2]), math.atan2(-R[2, 0], c), math.atan2(R[1, 0], R[0, 0])]
 
 
 def _list(v) -> list[float]:
@@ -416,7 +408,7 @@ def _steps(path: Path, imp: Imported, gain: float, enc: EncoderSettings) -> tupl
 
 
 def _frame(T: np.ndarray) -> dict:
-    return {"xyz_m": _list(T[:3, 3]), "rpy_rad": rpy(T[:3, :3])}
+    return {"xyz_m": _list(T[:3, 3]), "rpy_rad": rpy_angles(T[:3, :3])}
 
 
 def shapes_document(path: Path, imp: Imported) -> dict:

@@ -44,6 +44,17 @@ def rot(axis: int, angle: float) -> np.ndarray:
     return R
 
 
+def rpy_angles(R) -> list[float]:
+    """URDF's roll, pitch, yaw of a rotation R = Rz(yaw) Ry(pitch) Rx(roll) (at gimbal lock,
+    pitch +-90 deg: roll 0, the rest in yaw)."""
+    R = np.asarray(R, float)
+    c = float(np.hypot(R[0, 0], R[1, 0]))
+    pitch = float(np.arctan2(-R[2, 0], c))
+    if c < 1e-12:
+        return [0.0, pitch, float(np.arctan2(-R[0, 1], R[1, 1]))]
+    return [float(np.arctan2(R[2, 1], R[2, 2])), pitch, float(np.arctan2(R[1, 0], R[0, 0]))]
+
+
 def frame_error(e) -> np.ndarray:
     """4x4 of a frame error (x, y, z [m], rx, ry, rz [rad]): T(x,y,z) Rz(rz) Ry(ry) Rx(rx)."""
     x, y, z, rx, ry, rz = np.asarray(e, float).reshape(6)
