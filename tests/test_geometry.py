@@ -205,6 +205,10 @@ def test_bad_kind_or_margin():
             tool_meshes(load_scene(), "collision", margin_m=bad)
 
 
-def test_other_robot_has_no_shapes():
-    with pytest.raises(InputError):
-        robot_link_meshes(load_robot("ur5"))
+def test_a_robot_without_shapes_json_is_told_so(tmp_path):
+    # issue 23: shapes come from the description (the UR5 has them now); a robot.json
+    # without a shapes.json beside it gets one line naming the file it lacks
+    (tmp_path / "robot.json").write_text(load_robot("ur5").source.read_text())
+    with pytest.raises(InputError, match=r"shapes.json: no link shapes for .*UR5"):
+        robot_link_meshes(load_robot(tmp_path))
+    assert len(robot_link_meshes(load_robot("ur5"))) == 7

@@ -65,7 +65,6 @@ top is at ``scene.floor_z``. Obstacles are the scene's boxes (R = Rz(yaw) Ry(pit
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -184,26 +183,38 @@ def shapes_path(robot) -> Path:
 def robot_shapes(robot) -> RobotShapes:
     """The robot's link shapes (``shapes.json``, validated; InputError when it has none)."""
     path = shapes_path(robot)
-    try:
-        st = path.stat()
-    except OSError:
+    if not path.exists():
         raise InputError(f"{path}: no link shapes for {robot.name}: the twin, the collision "
                          "checker and the views need them (docs/ROBOTS.md: shapes.json, or "
-                         "planecal robot import)") from None
-    return _load_shapes(path, st.st_mtime_ns, st.st_size)
+                         "planecal robot import)")
+    return load_shapes(path)
 
 
-@lru_cache(maxsize=8)
-def _load_shapes(path: Path, _mtime: int, _size: int) -> RobotShapes:
+_SHAPES: dict = {}  # (path, content) -> RobotShapes: read once per process, meshes included
+
+
+def load_shapes(path) -> RobotShapes:
+    """A shapes.json file, validated and its meshes read (one-line InputError otherwise)."""
+    import json
+
     from planecal.formats.base import read_json, validate
     from planecal.formats.shapes import ShapesFile
-    doc = validate(ShapesFile, read_json(path, "robot shapes"), path, "robot shapes")
-    pieces = []
-    for i, p in enumerate(doc.pieces):
-        prims = tuple(_primitive(path, i, k, prim) for k, prim in enumerate(p.primitives))
-        pieces.append(ShapePiece(p.name, p.link, p.use, prims))
-    return RobotShapes(path, tuple(pieces), doc.collision_margin_m,
-                       tuple(tuple(p.pieces) for p in doc.allowed_pairs))
+    path = Path(path)
+    raw = read_json(path, "robot shapes")
+    key = (str(path.resolve()), json.dumps(raw, sort_keys=True))
+    hit = _SHAPES.get(key)
+    if hit is None:
+        doc = validate(ShapesFile, raw, path, "robot shapes")
+        pieces = []
+        for i, p in enumerate(doc.pieces):
+            prims = tuple(_primitive(path, i, k, prim) for k, prim in enumerate(p.primitives))
+            pieces.append(ShapePiece(p.name, p.link, p.use, prims))
+        hit = RobotShapes(path, tuple(pieces), doc.collision_margin_m,
+                          tuple(tuple(p.pieces) for p in doc.allowed_pairs))
+        if len(_SHAPES) > 16:
+            _SHAPES.clear()
+        _SHAPES[key] = hit
+    return hit
 
 
 def _primitive(path: Path, i: int, k: int, prim):

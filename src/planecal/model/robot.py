@@ -78,7 +78,7 @@ def robot_path(name_or_path: str | Path, relative_to: Path | None = None) -> Pat
         return data_path("models") / str(name_or_path) / "robot.json"
     if relative_to is not None and not p.is_absolute():
         p = relative_to / p
-    return p / "robot.json" if p.is_dir() else p
+    return p / "robot.json" if p.suffix != ".json" and p.is_dir() else p
 
 
 def load_robot(name_or_path: str | Path = DEFAULT_ROBOT, relative_to: Path | None = None) -> Robot:

@@ -253,14 +253,7 @@ class CollisionWorld:
         self.max_steps = int(max_steps)
         self.resolution_m = float(resolution_m)
         self.coarse_samples = int(coarse_samples)
-        if links is None:  # the description's pieces, and the pairs it says never meet
-            from planecal.model import geometry
-            links = geometry.robot_link_meshes(self.robot, "collision")
-            allowed_pairs = tuple(allowed_pairs) + geometry.robot_shapes(self.robot).allowed_pairs
-        if tools is None or static is None:
-            from planecal.model import geometry
-            tools = geometry.tool_meshes(scene, "collision") if tools is None else tools
-            static = geometry.scene_meshes(scene) if static is None else static
+        links, tools, static, allowed_pairs = self._parts(links, tools, static, allowed_pairs)
 
         self.parts: list[_Part] = []
         for kind, group in (("link", links), ("tool", tools)):
@@ -286,10 +279,7 @@ class CollisionWorld:
             raise InputError(f"collision: part names must be unique, got {names}")
 
         self._rates = self._axis_radii()  # (n_moving, 6) r_k for each moving part
-        # joint k's axis in link frame k-1 (P_k's z): z itself unless a Hayati beta tilts it
-        axes = np.array([joint_between_links(self.robot.kinematics, k)[0][:3, 2]
-                         for k in range(1, 7)])
-        self._axes_z = None if np.array_equal(axes, np.tile([0.0, 0.0, 1.0], (6, 1))) else axes
+        self._axes_z = self._tilted_axes()
         allowed = {frozenset(p) for p in allowed_pairs}
         pairs, kinds, skipped = [], [], []
         for i in range(self.n_moving):
@@ -349,6 +339,25 @@ class CollisionWorld:
         self.counters.clear()
 
     # ----- structure -----
+
+    def _parts(self, links, tools, static, allowed_pairs):
+        """The geometry module's collision shapes where not given: the robot's pieces (and
+        the pairs its shapes.json says never meet), the tool's, the cell's."""
+        from planecal.model import geometry
+        allowed_pairs = tuple(allowed_pairs)
+        if links is None:
+            links = geometry.robot_link_meshes(self.robot, "collision")
+            allowed_pairs += geometry.robot_shapes(self.robot).allowed_pairs
+        tools = geometry.tool_meshes(self.scene, "collision") if tools is None else tools
+        static = geometry.scene_meshes(self.scene) if static is None else static
+        return links, tools, static, allowed_pairs
+
+    def _tilted_axes(self):
+        """Joint k's axis in link frame k-1 (P_k's z, rows k = 1..6), or None where every
+        one is that frame's z (no Hayati beta tilts it)."""
+        axes = np.array([joint_between_links(self.robot.kinematics, k)[0][:3, 2]
+                         for k in range(1, 7)])
+        return None if np.array_equal(axes, np.tile([0.0, 0.0, 1.0], (6, 1))) else axes
 
     @staticmethod
     def _adjacent(a: _Part, b: _Part) -> bool:

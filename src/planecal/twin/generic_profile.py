@@ -54,10 +54,14 @@ def generic_document(name: str, robot) -> tuple[dict, str]:
     path = generic_path(name)
     raw = copy.deepcopy(read_json(path, "error profile"))
     f = scaling(robot)
-    how = (f"the generic '{name}' profile ({path}), the MC70's scaled by reach "
-           f"{f['length']:.3g}" + ("" if name == "ideal" else
-           (f" and payload {f['payload']:.3g}" if f["payload"] is not None else
-            " (no payload_kg in robot.json: torques by reach alone)")))
+    if name == "ideal":
+        how = (f"the generic 'ideal' profile ({path}), used as it is (it holds no number "
+               "of the robot's own)")
+    else:
+        how = (f"the generic '{name}' profile ({path}), the MC70's scaled by reach "
+               f"{f['length']:.3g}" + (f" and payload {f['payload']:.3g}" if f["payload"]
+                                       is not None else " (no payload_kg in robot.json: "
+                                       "torques by reach alone)"))
     if name != "ideal":
         g = raw.get("geometry") or {}
         for key in ("a_m", "d_m"):
