@@ -366,12 +366,13 @@ def description(path: Path, imp: Imported, name: str, enc: EncoderSettings) -> d
             "convention": "modified DH with Hayati's beta: T = B prod_i Rx(alpha_i) Tx(a_i) "
                           "Ry(beta_i) Rz(theta0_i + q_i) Tz(d_i) F (planecal.model.kinematics); "
                           "q = the URDF's joint values",
-            "joints": [{"alpha_rad": float(kin.alpha[i]), "a_m": float(kin.a[i]),
-                        "beta_rad": float(kin.beta[i]), "theta0_rad": float(kin.theta[i]),
-                        "d_m": float(kin.d[i])} for i in range(N)],
+            "joints": [{"alpha_rad": _r(kin.alpha[i], True), "a_m": _r(kin.a[i]),
+                        "beta_rad": _r(kin.beta[i], True),
+                        "theta0_rad": _r(kin.theta[i], True), "d_m": _r(kin.d[i])}
+                       for i in range(N)],
             "base": _frame(kin.base), "flange": _frame(kin.flange)},
         "joint_names": [j.name for j in imp.joints],
-        "joint_limits_deg": [[float(np.rad2deg(lo)), float(np.rad2deg(hi))]
+        "joint_limits_deg": [[round(float(np.rad2deg(lo)), 9), round(float(np.rad2deg(hi)), 9)]
                              for lo, hi in imp.limits],
         "encoder": {"gain_counts_per_rad": [gain] * N, "offset_counts": [zero] * N,
                     "bits": enc.bits, "coupling": [],
@@ -408,7 +409,21 @@ def _steps(path: Path, imp: Imported, gain: float, enc: EncoderSettings) -> tupl
 
 
 def _frame(T: np.ndarray) -> dict:
-    return {"xyz_m": _list(T[:3, 3]), "rpy_rad": rpy_angles(T[:3, :3])}
+    return {"xyz_m": [_r(v) for v in T[:3, 3]],
+            "rpy_rad": [_r(v, True) for v in rpy_angles(T[:3, :3])]}
+
+
+def _r(v, angle: bool = False) -> float:
+    """A chain number as written: rounded to 1e-12 (m or rad; the flange moves < 1e-11 m),
+    so that 0.035 is not 0.03500000000000003 and no -6e-17 stands for 0; an angle within
+    1e-11 rad of a multiple of 90 deg is that multiple (the URDF's axes are mostly so; the
+    flange moves < 1e-10 m)."""
+    x = float(v)
+    if angle and abs(x - round(x / (np.pi / 2)) * (np.pi / 2)) < 1e-11:
+        x = round(x / (np.pi / 2)) * (np.pi / 2)
+        return 0.0 if x == 0 else x
+    x = round(x, 12)
+    return 0.0 if x == 0 else x
 
 
 def shapes_document(path: Path, imp: Imported) -> dict:
