@@ -42,6 +42,9 @@ def add_arguments(p):
                         "(visual meshes missing or too heavy) (default %(default)s)")
     p.add_argument("--counts-per-rev", type=int, default=1 << 20, metavar="N",
                    help="import: encoder counts per joint revolution (default %(default)s)")
+    p.add_argument("--coupling", metavar="ROW,COL,VALUE", action="append", default=[],
+                   help="import: a coupling entry C[row, col] = value of q = C x (1-based; "
+                        "repeatable; default: none, C = I)")
     p.add_argument("--encoder-bits", type=int, default=24, metavar="B",
                    help="import: encoder width (default %(default)s)")
     p.add_argument("--tick-s", type=float, default=0.008, metavar="S",
@@ -73,6 +76,21 @@ def _packages(items: list[str]) -> dict:
     return out
 
 
+def _coupling(items: list[str]) -> list:
+    out = []
+    for item in items:
+        parts = item.split(",")
+        try:
+            row, col, value = int(parts[0]), int(parts[1]), float(parts[2])
+        except (ValueError, IndexError):
+            raise InputError(f"--coupling {item!r}: expected ROW,COL,VALUE (e.g. 6,5,-0.0169)") from None
+        if len(parts) != 3 or not (1 <= row <= 6 and 1 <= col <= 6):
+            raise InputError(f"--coupling {item!r}: expected ROW,COL,VALUE with ROW and COL "
+                             "joint numbers 1..6")
+        out.append([row, col, value])
+    return out
+
+
 def run(args) -> int:
     return _import(args) if args.action == "import" else _show(args)
 
@@ -94,6 +112,7 @@ def _import(args) -> int:
             raise InputError(f"{what} {v}: must be positive")
     if not 0 < args.speed_fraction <= 1:
         raise InputError(f"--speed-fraction {args.speed_fraction}: must be in (0, 1]")
+    coupling = _coupling(args.coupling)
     path = Path(args.source)
     imp, u = ui.import_chain(path, args.tip)
     ui.shapes_and_masses(path, imp, u, _packages(args.package),
@@ -102,6 +121,7 @@ def _import(args) -> int:
                              args.speed_fraction, args.max_step_counts, args.trip_step_counts,
                              args.repeatability_mm, args.payload_kg, args.controller)
     doc = ui.description(path, imp, args.name or imp.name, enc)
+    doc["encoder"]["coupling"] = coupling  # checked (non-singular C) with the rest on load
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:
         ui.write(tmp, doc, ui.shapes_document(path, imp), imp)

@@ -377,8 +377,9 @@ def description(path: Path, imp: Imported, name: str, enc: EncoderSettings) -> d
         "encoder": {"gain_counts_per_rad": [gain] * N, "offset_counts": [zero] * N,
                     "bits": enc.bits, "coupling": [],
                     "coupling_note": f"not in the URDF: {enc.counts_per_rev} counts per "
-                                     "revolution of the joint, zero at mid-range, no coupling "
-                                     "(planecal robot import's settings)"},
+                                     "revolution of the joint, zero at mid-range, coupling "
+                                     "as given (planecal robot import's settings; "
+                                     "C = I but for the entries listed)"},
         "inverse_kinematics": None,
         "repeatability_mm": enc.repeatability_mm,
         "controller": {"kind": enc.controller, "tick_s": enc.tick_s,
