@@ -1,8 +1,9 @@
 """URDF of the robot, nominal or calibrated, for ROS/MoveIt, FIGAROH and any URDF tool.
 
-Tree: ``base`` (the robot base frame, DH frame 0) -> ``joint1`` .. ``joint6`` (revolute,
-links ``link1`` .. ``link6``) -> ``flange`` (fixed, DH frame 6) -> ``laser`` (fixed, the
-sensor frame: origin o in the flange frame, rotation Rz(phi_z) Ry(phi_y), z = the beam).
+Tree: ``base`` (the robot base frame: planecal's cell frame) -> ``joint1`` .. ``joint6``
+(revolute; robot.json's ``joint_names`` where it has them; links ``link1`` .. ``link6``)
+-> ``flange`` (fixed, the flange frame) -> ``laser`` (fixed, the sensor frame: origin o in
+the flange frame, rotation Rz(phi_z) Ry(phi_y), z = the beam).
 
 A URDF joint's value is planecal's joint angle q (what ``encoder.counts_to_joints``
 gives), so a URDF consumer's forward kinematics at q is ``kinematics.fk(robot.kinematics.with_offsets(delta), q)``.

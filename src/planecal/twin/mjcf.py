@@ -4,21 +4,22 @@ Robot (``robot_spec``; written to ``models/<robot>/<robot>.xml`` by scripts/buil
 ------------------------------------------------------------------------------------------
 Built from the robot's whole geometric model (``kinematics.Kinematics``: robot.json's, or
 the twin's true robot):
-* body ``base`` carries the shapes of DH frame 0, at the model's base frame;
+* body ``base`` carries the shapes of link frame 0, at the model's base frame;
 * body ``link<i>`` (i = 1..6) is the model's frame i: its pos/quat relative to its parent
   is joint i's fixed part ``Rx(alpha) Tx(a) Ry(beta) Rz(theta) Tz(d)`` and its hinge
   ``joint<i>`` turns about local z through the origin. So with ``qpos = q + delta``
   (joint angles from the encoder model plus joint offsets) the sites ``frame<i>`` (at
-  ``dh_site(robot, i)`` = Tx(a_i) Rx(alpha_i) of robot.json's standard DH on body
-  link<i>) are the standard DH frames of ``robot.fk_frames(robot, q, delta)`` for the
-  nominal model; site ``flange`` is the model's flange frame.
+  ``dh_site(robot, i)`` = ``kinematics.link_site``: Tx(a_i) Rx(alpha_i) of a standard
+  DH table's row i) are the link frames (``kinematics.link_frames``; a DH table's
+  standard DH frames) of the nominal model; site ``flange`` is the model's flange frame.
 * geoms: ``v_<piece>`` visual (group 1, contype = conaffinity = 0, massless: the model
   of the real link), ``c_<piece>`` collision (group 3: the checker's envelope around
-  it), both convex meshes from ``planecal.model.geometry``, one or more pieces per body.
-* inertials: each body's mass and centre of mass are robot.json's ``masses`` of its link
-  (the tool's: the payload); the geoms carry none. The twin's gravity model reads them
-  back from the compiled model.
-  Sites of the DH frames are in group 4.
+  it), meshes from ``planecal.model.geometry`` (the robot's shapes.json; convex but a
+  visual mesh drawn as it is), one or more pieces per body.
+* inertials: each body's mass and centre of mass (and inertia, where robot.json gives
+  one) are robot.json's ``masses`` of its link (the tool's: the payload); the geoms
+  carry none. The twin's gravity model reads them back from the compiled model.
+  Sites of the link frames are in group 4.
 
 Scene (``scene_spec``): the robot, a ``tool`` body on the flange (adapter + ZS-LD80 head,
 groups 1/3), a ``laser`` site whose +z is the beam at the sensor origin, and the cell's
