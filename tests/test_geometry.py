@@ -110,10 +110,19 @@ def test_envelope_matches_dh_dimensions():
     assert flange.vertices[:, 2].max() == pytest.approx(0.0, abs=1e-12)
 
 
+def _cylinders(name):
+    """The MC70's shapes.json cylinders of piece ``name`` (from, to, radius)."""
+    from planecal.model.geometry import robot_shapes
+    piece = [p for p in robot_shapes(ROBOT).pieces if p.name == name][0]
+    return [(np.array(c.p0), np.array(c.p1), c.r) for c in piece.primitives]
+
+
 def test_upper_arm_beside_the_forearm_plane():
     """The upper arm is a beam on the +z2 side of the arm's plane (z2 = 0, where the
     forearm swings), so the forearm passes beside it (datasheet J3 +260/-146 deg)."""
-    from planecal.model.geometry import UPPER_ARM_Z
+    (p0, p1, _), _ = _cylinders("upper_arm")
+    UPPER_ARM_Z = (p0[2], p1[2])
+    assert UPPER_ARM_Z == (0.16, 0.32)
     arm = [lm for lm in robot_link_meshes(ROBOT, "visual") if lm.name == "upper_arm"][0]
     z = arm.mesh.vertices[:, 2]
     assert z.min() == pytest.approx(UPPER_ARM_Z[0]) and z.max() == pytest.approx(UPPER_ARM_Z[1])
@@ -126,7 +135,9 @@ def test_wrist_clears_the_forearm_up_to_the_j5_limit(q5_deg):
     """Datasheet J5 +-125 deg: bent to its limit, the J6 housing and the flange (bodies 5
     and 6) stay 15 mm short of the forearm's end between the prongs (in frame 4, the
     forearm along +y4), and fit between the prongs at any angle."""
-    from planecal.model.geometry import FORK_CROTCH, FORK_INNER
+    FORK_CROTCH = _cylinders("forearm")[0][0][1]  # the forearm's end, from the J5 axis
+    FORK_INNER = _cylinders("wrist_fork_p")[0][0][2]  # the prongs' inner faces
+    assert (FORK_CROTCH, FORK_INNER) == (0.17, 0.095)
     q = np.deg2rad([0, 0, 0, 0, q5_deg, 0])
     F = link_frames(ROBOT.kinematics, q)
     to4 = np.linalg.inv(F[4])
@@ -194,6 +205,10 @@ def test_bad_kind_or_margin():
             tool_meshes(load_scene(), "collision", margin_m=bad)
 
 
-def test_other_robot_has_no_shapes():
-    with pytest.raises(InputError):
-        robot_link_meshes(load_robot("ur5"))
+def test_a_robot_without_shapes_json_is_told_so(tmp_path):
+    # issue 23: shapes come from the description (the UR5 has them now); a robot.json
+    # without a shapes.json beside it gets one line naming the file it lacks
+    (tmp_path / "robot.json").write_text(load_robot("ur5").source.read_text())
+    with pytest.raises(InputError, match=r"shapes.json: no link shapes for .*UR5"):
+        robot_link_meshes(load_robot(tmp_path))
+    assert len(robot_link_meshes(load_robot("ur5"))) == 7

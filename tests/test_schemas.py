@@ -122,7 +122,10 @@ def refused(tmp_path, reader, doc, name="f.json"):
     (("repeatability_mm",), -0.07, "repeatability_mm: -0.07 mm is not a plausible "
                                    "repeatability (in [0, 5] mm)"),
     (("inverse_kinematics",), "magic",
-     "inverse_kinematics: 'magic' is not a known solver ('spherical_wrist' or null)"),
+     "inverse_kinematics: 'magic' is not a known solver ('spherical_wrist', 'analytic', "
+     "'numeric' or null: chosen from the geometry)"),
+    (("dh",), DELETE, "dh: give the chain one way: either dh (standard DH rows) or chain "
+                      "(modified DH with Hayati's beta, base and flange), not neither"),
     (("encoder", "gains"), [1] * 6, "encoder.gains: unknown key (misspelt? the format is in "
                                     "docs/FORMATS.md)"),
     (("name",), DELETE, "name: missing (required)"),

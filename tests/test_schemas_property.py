@@ -29,7 +29,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from planecal.base.errors import InputError
 from planecal.formats import (
     ERRORS_FORMAT, MODELS, PARAMS_FORMAT, POSES_FORMAT, RESULT_FORMAT, ROBOT_FORMAT,
-    SCENE_FORMAT, SIDECAR_FORMAT, load_sidecar)
+    SCENE_FORMAT, SHAPES_FORMAT, SIDECAR_FORMAT, load_sidecar)
 from planecal.formats.params import provenance, result_document
 from planecal.io.params import load_params
 from planecal.base.paths import data_path
@@ -90,6 +90,11 @@ def _load_profile(path):
     return load_profile(path, load_robot())
 
 
+def _load_shapes(path):
+    from planecal.model.geometry import load_shapes
+    return load_shapes(path)
+
+
 def _profile_ok(prof):
     """What a twin does with it: the options, a world's geometry, all finite."""
     from planecal.model.kinematics import fk as kin_fk
@@ -111,6 +116,14 @@ def _result():
     return result_document(result, provenance([("samples", samples)], "thesis_final", "mc70"))
 
 
+def _shapes_ok(shapes):
+    """What the twin and the checker do with them: every piece's meshes, closed."""
+    from planecal.model.geometry import _piece
+    for piece in shapes.pieces:
+        for kind in ("visual", "collision"):
+            assert _piece(piece.primitives, kind, 0.004).is_watertight
+
+
 # format -> (reader, a valid document, the check of a successful read)
 READERS = {
     ROBOT_FORMAT: (load_robot, json.loads(data_path("models", "mc70", "robot.json").read_text()),
@@ -126,6 +139,9 @@ READERS = {
     ERRORS_FORMAT: (_load_profile,
                     json.loads(data_path("models", "mc70", "errors", "realistic.json").read_text()),
                     _profile_ok),
+    SHAPES_FORMAT: (_load_shapes,
+                    json.loads(data_path("models", "mc70", "shapes.json").read_text()),
+                    _shapes_ok),
 }
 
 

@@ -44,6 +44,7 @@ def stated_scene(folder, reference: str, silence_s: float | None = None):
         robot["controller"]["sessions"]["silence_s"] = silence_s
     robot_dir = folder / f"mc70-{reference}"
     shutil.copytree(mc70 / "errors", robot_dir / "errors")
+    shutil.copy(mc70 / "shapes.json", robot_dir / "shapes.json")  # its link shapes (issue 23)
     robot_path = robot_dir / "robot.json"
     robot_path.write_text(json.dumps(robot))
     scene = json.loads(data_path("scenes", "thesis_final.json").read_text())

@@ -39,6 +39,8 @@ COMMANDS = {
     "compensate": "correct a program's targets with a calibration (counts the controller plays)",
     "layouts": "identifiable parameters and predicted std for 1, 2 and 3 of a scene's plates",
     "worker-env": "the environment of a Dask worker for the studies: export $(planecal worker-env)",
+    "robot": "import a robot from a URDF (robot import), or show a robot description",
+    "scene": "write a default cell for any robot (scene new)",
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,

@@ -1,24 +1,42 @@
-"""planecal export RESULT.json [--out FD11.json] [--current-qe0 C1,..,C6] [--scene S]
+"""planecal export RESULT.json [--format fd11|offsets|ur] [--out FILE] [--current-qe0 C1,..,C6]
+[--scene S]
 
-The values an operator enters into the FD11 after a calibration: the new encoder offset
-of each joint, as the integer counts the controller takes (``encoder.encoder_zero_counts``:
-qe0' = qe0 - g (C^-1 delta), the wrist coupling applied, so a delta4 or delta5 moves the
-zero of q6 even while delta6 is fixed). Printed as a table: joint, current qe0, new qe0',
-the change in counts, the rounding residual per joint in urad, and its effect at the
-flange in um (at the scene's calibration position). ``--out`` writes them as JSON
-(``qe0_counts``: six integers).
+What a controller takes after a calibration, in one of three forms:
 
-The current values are the encoder offsets the samples were converted with: robot.json's
-(``offset_counts``), or ``--current-qe0`` when the controller already holds others.
+``fd11`` (the default, but for a UR): the values an operator enters into the FD11: the new
+encoder offset of each joint, as the integer counts the controller takes
+(``encoder.encoder_zero_counts``: qe0' = qe0 - g (C^-1 delta), the wrist coupling applied,
+so a delta4 or delta5 moves the zero of q6 even while delta6 is fixed). Printed as a
+table: joint, current qe0, new qe0', the change in counts, the rounding residual per joint
+in urad, and its effect at the flange in um (at the scene's calibration position).
+``--out`` writes them as JSON (``qe0_counts``: six integers). The current values are the
+encoder offsets the samples were converted with: robot.json's (``offset_counts``), or
+``--current-qe0`` when the controller already holds others.
 
-Only encoder offsets reach the file (``estimation.calibrate.encoder_offsets``): the joint
-offsets the calibration fitted; a joint it kept fixed (delta1 and delta6: no plane
-calibration can tell J1's zero from the plates' turn, nor J6's from the sensor's roll)
-keeps its current value, and the table says so. A result that fitted delta1 or delta6
-freely is refused (exit 2): its value is a combination of frames, not a joint zero. A
-whole-model result's geometry, base frame and compliance are no encoder offsets either:
-``planecal compensate`` corrects a program's targets with them. A result made for another
-robot than the scene's is refused.
+``offsets`` (any robot): the joint offsets in radians, JSON (``planecal-joint-offsets/1``),
+with their sign convention: the model's joint angle is theta_j = theta0_j + q_j +
+delta_j, q_j the controller's reading, so a controller whose reading grows by delta_j
+(its zero moved by -delta_j) matches the nominal model.
+
+``ur`` (a robot whose controller is a UR, robot.json ``controller.kind``): the UR ROS
+driver's kinematics file (ur_description's ``kinematics:`` YAML, as ur_calibration writes
+it): per joint the origin x y z roll pitch yaw of its segment, ``kinematics.Kinematics``'
+joint transform Rx(alpha) Tx(a) Ry(beta) Rz(theta) Tz(d) of the calibrated model (joint
+offsets, and at level full the geometry and base frame; the first segment carries the
+base frame), the URDF joint turning about z after it, and the flange (tool0) on
+wrist_3_link. A ``hash`` names planecal's calibration: the driver warns that it is not the
+robot's own factory calibration, as it is not.
+
+Only encoder offsets reach ``fd11`` and ``offsets`` (``estimation.calibrate.
+encoder_offsets``): the joint offsets the calibration fitted; a joint it kept fixed
+(delta1 and delta6: no plane calibration can tell J1's zero from the plates' turn, nor
+J6's from the sensor's roll) keeps its current value, and the table says so. A result
+that fitted delta1 or delta6 freely is refused (exit 2): its value is a combination of
+frames, not a joint zero. A whole-model result's geometry, base frame and compliance are
+no encoder offsets either: ``planecal compensate`` corrects a program's targets with them
+(``ur`` takes the geometry and base frame; compliance, which depends on the pose, stays
+out of every format). A result made for another robot than the scene's is refused. The
+calibrated URDF: ``planecal urdf --params RESULT.json``.
 """
 from __future__ import annotations
 
@@ -30,12 +48,20 @@ import numpy as np
 from planecal.base.errors import InputError
 
 FORMAT = "planecal-fd11-offsets/1"
+OFFSETS_FORMAT = "planecal-joint-offsets/1"
+FORMATS = ("fd11", "offsets", "ur")
+SIGN = ("theta_j = theta0_j + q_j + delta_j, q_j the controller's joint angle: a controller "
+        "whose reading grows by delta_j (its zero moved by -delta_j) matches the nominal model")
 
 
 def add_arguments(p):
     p.add_argument("result", metavar="RESULT.json",
                    help="a calibration result (planecal calibrate --out) or parameter file")
-    p.add_argument("--out", metavar="FD11.json", help="write the values as JSON here")
+    p.add_argument("--format", choices=FORMATS, default=None,
+                   help="fd11: encoder offset counts (default); offsets: joint offsets in rad "
+                        "(any robot); ur: the UR ROS driver's kinematics YAML (default for "
+                        "a UR)")
+    p.add_argument("--out", metavar="FILE", help="write the values here (JSON; YAML for ur)")
     p.add_argument("--current-qe0", metavar="C1,...,C6", default=None,
                    help="the encoder offsets the samples were taken with, if not robot.json's")
     p.add_argument("--scene", default="thesis_final",
@@ -93,8 +119,7 @@ def _model_corrections(params) -> str:
 
 def run(args) -> int:
     from planecal.formats.base import read_json
-    from planecal.model.encoder import counts_in_range, encoder_zero_counts
-    from planecal.io.params import load_params, save_json
+    from planecal.io.params import load_params
     from planecal.model.scene import load_scene
 
     scene = load_scene(args.scene)
@@ -103,7 +128,24 @@ def run(args) -> int:
         raise InputError(f"--out {args.out}: that is the result file (an input)")
     doc = read_json(args.result, "calibration result")
     params = load_params(args.result, robot)
+    fmt = args.format or ("ur" if robot.controller_kind == "ur" else "fd11")
+    if fmt == "ur":
+        return _ur(args, robot, params)
     delta, fitted, kept, label = _controller_offsets(doc, params, args.result)
+    extra = _model_corrections(params)
+    if extra:
+        print(f"note: {args.result} also corrects {extra} (level {label}); the controller "
+              "takes joint offsets only, so they are not in these values: correct the "
+              "program's targets with planecal compensate", file=sys.stderr)
+    if fmt == "offsets":
+        return _offsets(args, robot, delta, fitted, kept, label)
+    return _fd11(args, robot, scene, delta, fitted, kept, label)
+
+
+def _fd11(args, robot, scene, delta, fitted, kept, label) -> int:
+    from planecal.io.params import save_json
+    from planecal.model.encoder import counts_in_range, encoder_zero_counts
+
     qe0 = robot.qe0.astype(np.int64) if args.current_qe0 is None else _counts(args.current_qe0)
     q_ref = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     new, residual, tcp = encoder_zero_counts(robot, delta, qe0, q_ref)
@@ -121,11 +163,6 @@ def run(args) -> int:
               f"{change[j]:>+8d} {residual[j] * 1e6:>13.3f}  {how}")
     print(f"rounding to whole counts moves the flange by {tcp * 1e6:.2f} um at the "
           f"calibration position of {scene.name}")
-    extra = _model_corrections(params)
-    if extra:
-        print(f"note: {args.result} also corrects {extra} (level {label}); the FD11 takes "
-              "encoder offsets only, so they are not in these counts: correct the program's "
-              "targets with planecal compensate", file=sys.stderr)
     if args.out:
         save_json(args.out, {
             "format": FORMAT, "robot": robot.name, "result": str(args.result),
@@ -139,3 +176,80 @@ def run(args) -> int:
         })
         print(f"written to {args.out}")
     return 0
+
+
+def _offsets(args, robot, delta, fitted, kept, label) -> int:
+    from planecal.io.params import save_json
+    from planecal.io.urdf import joint_names
+
+    names = joint_names(robot)
+    print(f"joint offsets for {robot.name} from {args.result} (calibration level {label}); "
+          f"sign: {SIGN}")
+    print(f"{'joint':<22} {'delta_rad':>14} {'delta_mdeg':>11}  offset")
+    for j in range(6):
+        how = "calibrated" if f"delta{j + 1}" in fitted else "kept: not fitted (0)"
+        print(f"{names[j]:<22} {delta[j]:>14.9f} {np.rad2deg(delta[j]) * 1e3:>11.3f}  {how}")
+    if args.out:
+        save_json(args.out, {
+            "format": OFFSETS_FORMAT, "robot": robot.name, "sha256": robot.digest,
+            "result": str(args.result), "joint_names": names,
+            "joint_offsets_rad": [float(v) for v in delta], "sign": SIGN,
+            "calibrated": fitted, "kept": kept, "level": label})
+        print(f"written to {args.out}")
+    return 0
+
+
+def ur_kinematics(robot, params) -> dict:
+    """The UR ROS driver's kinematics (module docstring) of the calibrated model."""
+    from planecal.model.kinematics import rpy_angles
+    from planecal.model.measurement import kinematics_of
+
+    kin = kinematics_of(robot, params)
+    if not np.allclose(kin.flange, np.eye(4), atol=1e-12):
+        raise InputError(f"{robot.name}: the flange frame is not wrist 3's frame (F != I): "
+                         "not a UR kinematics file's chain")
+    out = {}
+    for i, name in enumerate(UR_SEGMENTS):
+        T = kin.joint_transform(i)
+        if i == 0:
+            T = kin.base @ T
+        x, y, z = (float(v) for v in T[:3, 3])
+        roll, pitch, yaw = rpy_angles(T[:3, :3])
+        out[name] = {"x": x, "y": y, "z": z, "roll": roll, "pitch": pitch, "yaw": yaw}
+    return out
+
+
+UR_SEGMENTS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
+
+
+def _ur(args, robot, params) -> int:
+    import hashlib
+
+    if robot.controller_kind != "ur":
+        raise InputError(f"--format ur: {robot.name}'s controller is not a UR (robot.json "
+                         "controller.kind); --format offsets is for any robot")
+    if params.compliance.any():
+        print(f"note: {args.result} also fits joint compliance: it depends on the pose and "
+              "is not in a kinematics file (planecal compensate corrects targets with it)",
+              file=sys.stderr)
+    segs = ur_kinematics(robot, params)
+    tag = hashlib.sha256(Path(args.result).read_bytes()).hexdigest()[:16]
+    lines = [f"# UR ROS driver kinematics (ur_description's kinematics file) of {robot.name},",
+             f"# calibrated by planecal from {args.result}; not the robot's factory "
+             "calibration: the driver warns that its hash differs, as it does",
+             "kinematics:"]
+    for name, v in segs.items():
+        lines.append(f"  {name}:")
+        lines += [f"    {k}: {_yaml_num(x)}" for k, x in v.items()]
+    lines.append(f"  hash: calib_planecal_{tag}")
+    text = "\n".join(lines) + "\n"
+    if args.out:
+        Path(args.out).write_text(text, encoding="utf-8")
+        print(f"UR kinematics written to {args.out}")
+    else:
+        print(text, end="")
+    return 0
+
+
+def _yaml_num(v: float) -> str:
+    return "0" if abs(v) < 1e-15 else repr(float(v))  # below that: the floating point's dust

@@ -1,4 +1,4 @@
-"""planecal scenes: the scenes (cells) planecal knows, one a line: name, plates, robot and
+"""planecal scenes: the scenes (cells) planecal knows, one a line: name, robot, plates and
 description (scenes/*.json; any other scene is given by its path)."""
 from __future__ import annotations
 
@@ -22,16 +22,19 @@ def run(args) -> int:
         raise InputError(f"{folder}: no scenes (*.json) in it")
     for path in paths:
         s = load_scene(path)
-        rows.append({"name": path.stem, "plates": len(s.plates), "robot": s.robot.name,
-                     "description": s.description or "", "path": str(path)})
+        rows.append({"name": path.stem, "plates": len(s.plates),
+                     "robot": s.robot.folder.name if s.robot.folder else s.robot.name,
+                     "robot_name": s.robot.name, "description": s.description or "",
+                     "path": str(path)})
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
     w = max(len(r["name"]) for r in rows)
+    wr = max(len(r["robot"]) for r in rows)
     for r in rows:  # the description's first sentence
         first = r["description"].split(". ")[0].rstrip(".")
-        first = first if len(first) <= 90 else first[:87] + "..."
-        print(f"{r['name']:<{w}}  {r['plates']} plate{'s' if r['plates'] != 1 else ' '}  "
-              f"{first}")
+        first = first if len(first) <= 80 else first[:77] + "..."
+        print(f"{r['name']:<{w}}  {r['robot']:<{wr}}  {r['plates']} plate"
+              f"{'s' if r['plates'] != 1 else ' '}  {first}")
     print("(any other scene: give its JSON path; planecal scenes --json for the details)")
     return 0

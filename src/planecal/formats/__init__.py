@@ -10,6 +10,7 @@ bounded reader they share, and the JSON Schemas published in docs/schemas/.
 | planecal-poses/1      | plan --out                   | poses.PosesFile        | studies.planning.load_poses |
 | planecal-run/1        | RUN.tsv.json (sidecar)       | run.SidecarFile        | load_sidecar below          |
 | planecal-errors/1     | models/<robot>/errors/*.json | errors.ErrorProfileFile | planecal.twin.profile       |
+| planecal-shapes/1     | models/<robot>/shapes.json   | shapes.ShapesFile      | planecal.model.geometry     |
 
 Every error is one line, ``FILE: field.path: problem`` (``planecal.base.errors.InputError``).
 Sample files (TSV) are read by ``planecal.io.samples``, which shares the bounds.
@@ -32,6 +33,7 @@ from planecal.formats.poses import POSES_FORMAT, PosesFile
 from planecal.formats.robot import ROBOT_FORMAT, RobotFile
 from planecal.formats.run import SIDECAR_FORMAT, SidecarFile
 from planecal.formats.scene import SCENE_FORMAT, SceneFile
+from planecal.formats.shapes import SHAPES_FORMAT, ShapesFile
 
 # format -> model
 MODELS: dict[str, type[BaseModel]] = {
@@ -42,6 +44,7 @@ MODELS: dict[str, type[BaseModel]] = {
     POSES_FORMAT: PosesFile,
     SIDECAR_FORMAT: SidecarFile,
     ERRORS_FORMAT: ErrorProfileFile,
+    SHAPES_FORMAT: ShapesFile,
 }
 
 

@@ -322,3 +322,29 @@ def FormatTag(*accepted: str, what: str):
     """The ``format`` field: ``name/version``; files from before it existed omit it."""
     return Annotated[Str | None, AfterValidator(_format_is(accepted, what)),
                      Field(json_schema_extra={"enum": [*accepted, None]})]
+
+
+def dumps(doc: Any) -> str:
+    """JSON as planecal writes the files people read: indented, a list of scalars on one
+    line, an object of scalars on one line where it fits in 120 characters."""
+    return _dump(doc, 0) + "\n"
+
+
+def _dump(v: Any, level: int) -> str:
+    pad, inner = "  " * level, "  " * (level + 1)
+    scalar = (lambda x: not isinstance(x, (dict, list)))
+    if isinstance(v, list):
+        if all(scalar(x) for x in v):
+            return "[" + ", ".join(json.dumps(x) for x in v) + "]"
+        return "[\n" + ",\n".join(inner + _dump(x, level + 1) for x in v) + "\n" + pad + "]"
+    if isinstance(v, dict):
+        if not v:
+            return "{}"
+        flat = all(scalar(x) or (isinstance(x, list) and all(scalar(y) for y in x))
+                   for x in v.values())
+        one = "{" + ", ".join(f"{json.dumps(k)}: {_dump(x, 0)}" for k, x in v.items()) + "}"
+        if flat and len(one) + len(pad) <= 120:
+            return one
+        return ("{\n" + ",\n".join(f"{inner}{json.dumps(k)}: {_dump(x, level + 1)}"
+                                    for k, x in v.items()) + "\n" + pad + "}")
+    return json.dumps(v)

@@ -1,11 +1,18 @@
 """The robot description, ``models/<robot>/robot.json`` (format ``planecal-robot/1``).
 
-Six joints (planecal's parameter vector, sample files and IK are built for six), standard
-DH rows, joint limits in degrees, the encoder model ``q = C x, x = (qe - qe0) / g`` and the
-controller's step limits, home counts and (when known) what it does with its reference
-between client sessions (``controller.sessions``, `planecal.links.sessions`). Checked: every number finite, lengths and angles
-of plausible size, non-zero gains, coupling entries on existing joints and a non-singular
-C, counts within the encoder's bits, the trip limit above the step limit.
+Six joints (planecal's parameter vector, sample files and IK are built for six). The chain
+is given one of two ways: ``dh``, standard DH rows (the MC70's and the UR5's tables), or
+``chain``, the model's own form (``planecal.model.kinematics``: modified DH with Hayati's
+beta per joint, a base and a flange frame), which ``planecal robot import`` writes from a
+URDF. Also: joint limits in degrees, the encoder model ``q = C x, x = (qe - qe0) / g``,
+the controller's step limits, home counts and (when known) what it does with its reference
+between client sessions (``controller.sessions``, `planecal.links.sessions`), and the
+link masses. Checked: every number finite, lengths and angles of plausible size, non-zero
+gains, coupling entries on existing joints and a non-singular C, counts within the
+encoder's bits, the trip limit above the step limit, exactly one of ``dh`` and ``chain``.
+The link shapes are not here but beside it (``shapes.json``, ``formats.shapes``): no
+number of a calibration depends on them, so a result's record of the description
+(``model.robot.description_digest``) does not either.
 """
 
 import math
@@ -41,11 +48,19 @@ TripLimit = Ranged(1, 1 << 20, "counts", "trip limit", base=Int)
 RobotTag = FormatTag(ROBOT_FORMAT, what="robot description")
 Repeatability = Ranged(0.0, 5.0, "mm", "repeatability")
 Name = Annotated[Str, Field(min_length=1)]
-Frame = Ranged(1, N_JOINTS, "", "standard DH frame (1-based)", base=Int)
+Frame = Ranged(1, N_JOINTS, "", "link frame (1-based)", base=Int)
 LinkMass = Ranged(0.0, 10000.0, "kg", "link mass")
 Com = Vector(Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "centre of mass coordinate", MM_AS_M), 3,
              "coordinates in the frame")
-Solver = Annotated[Str | None, Field(json_schema_extra={"enum": ["spherical_wrist", None]})]
+SOLVERS = ("spherical_wrist", "analytic", "numeric")  # planecal.model.ik; null: chosen
+Solver = Annotated[Str | None, Field(json_schema_extra={"enum": [*SOLVERS, None]})]
+CONTROLLERS = ("fd11", "ur")  # what the export formats know (commands.export)
+ControllerKind = Annotated[Str | None, Field(json_schema_extra={"enum": [*CONTROLLERS, None]})]
+JointName = Annotated[Str, Field(min_length=1, max_length=200)]
+Payload = Ranged(0.0, 10000.0, "kg", "rated payload")
+Inertia = Vector(Ranged(-1e4, 1e4, "kg m^2", "inertia"), 6, "numbers, ixx iyy izz ixy ixz iyz")
+FramePoint = Vector(Ranged(-MAX_LINK_M, MAX_LINK_M, "m", "frame origin coordinate", MM_AS_M), 3,
+                    "coordinates, x y z")
 REFERENCE_BEHAVIOURS = ("keep", "fresh_after_silence", "fresh_each_client")  # links.sessions
 SilenceS = Ranged(0.01, 3600.0, "s", "silence")
 
@@ -127,6 +142,7 @@ class Sessions(Model):
 
 
 class Controller(Model):
+    kind: ControllerKind = None  # what export formats apply (commands.export)
     tick_s: Tick
     max_step_counts: StepLimit
     trip_step_counts: TripLimit
@@ -143,12 +159,53 @@ class Controller(Model):
 
 
 class PointMass(Model):
-    """A mass of the arm, lumped at its centre of mass in standard DH frame ``frame``
-    (the link it moves with): for the gravity torque on the joints."""
+    """A mass of the arm, lumped at its centre of mass in link frame ``frame`` (the link it
+    moves with: ``kinematics.link_frames``, the standard DH frame for a ``dh`` table): for
+    the gravity torque on the joints. ``inertia_kg_m2`` (about the centre of mass, the link
+    frame's axes), where known, goes into the twin's bodies."""
     frame: Frame
     com_m: Com
     mass_kg: LinkMass
+    inertia_kg_m2: Inertia | None = None
     what: Str | None = None
+
+
+class ChainJoint(Model):
+    """One joint of the model's chain: Rx(alpha) Tx(a) Ry(beta) Rz(theta0 + q) Tz(d)."""
+    alpha_rad: Angle
+    a_m: LinkA
+    beta_rad: Angle = 0.0
+    theta0_rad: Angle
+    d_m: LinkD
+
+
+class FixedFrame(Model):
+    """A fixed frame: translation xyz, then rotation R = Rz(yaw) Ry(pitch) Rx(roll) (URDF's)."""
+    xyz_m: FramePoint = [0.0, 0.0, 0.0]
+    rpy_rad: Vector(Angle, 3, "angles, roll pitch yaw") = [0.0, 0.0, 0.0]
+
+    def matrix(self) -> np.ndarray:
+        r, p, y = self.rpy_rad
+        cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p),
+                                  math.cos(y), math.sin(y))
+        T = np.eye(4)
+        T[:3, :3] = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]]
+        T[:3, 3] = self.xyz_m
+        return T
+
+
+ChainJoints = Vector(ChainJoint, N_JOINTS, "joints, one per joint")
+
+
+class Chain(Model):
+    """The model's chain (``planecal.model.kinematics``):
+    T_flange(q) = B prod_i [Rx(alpha_i) Tx(a_i) Ry(beta_i) Rz(theta0_i + q_i) Tz(d_i)] F."""
+    convention: Str | None = None
+    joints: ChainJoints
+    base: FixedFrame = FixedFrame()
+    flange: FixedFrame = FixedFrame()
 
 
 class RobotFile(Model):
@@ -157,20 +214,33 @@ class RobotFile(Model):
     name: Name
     source: Str | None = None
     dh_convention: Str | None = None
-    dh: DHRows
+    dh: DHRows | None = None
+    chain: Chain | None = None
+    joint_names: Vector(JointName, N_JOINTS, "names, one per joint") | None = None
     joint_limits_deg: Limits
     encoder: Encoder
     inverse_kinematics: Solver = None
     repeatability_mm: Repeatability = 0.0
+    payload_kg: Payload | None = None
     controller: Controller
     masses: list[PointMass] = []
     masses_source: Str | None = None
 
     @model_validator(mode="after")
     def physical(self):
-        if self.inverse_kinematics not in (None, "spherical_wrist"):
+        if (self.dh is None) == (self.chain is None):
+            raise problem("give the chain one way: either dh (standard DH rows) or chain "
+                          "(modified DH with Hayati's beta, base and flange), not "
+                          + ("both" if self.dh is not None else "neither"), "dh")
+        if self.inverse_kinematics not in (None, *SOLVERS):
             raise problem(f"{short(self.inverse_kinematics)} is not a known solver "
-                          f"('spherical_wrist' or null)", "inverse_kinematics")
+                          f"({', '.join(map(repr, SOLVERS))} or null: chosen from the "
+                          "geometry)", "inverse_kinematics")
+        if self.controller.kind not in (None, *CONTROLLERS):
+            raise problem(f"{short(self.controller.kind)} is not a known controller "
+                          f"({', '.join(map(repr, CONTROLLERS))} or null)", "controller", "kind")
+        if self.joint_names is not None and len(set(self.joint_names)) != N_JOINTS:
+            raise problem("two joints have the same name", "joint_names")
         for j, (lo, hi) in enumerate(self.joint_limits_deg):
             if not lo < hi:
                 raise problem(f"[{lo:g}, {hi:g}] deg: the lower limit must be below the upper",
@@ -181,12 +251,16 @@ class RobotFile(Model):
                 raise problem(f"{c} is outside the {self.encoder.bits}-bit encoder range "
                               f"0..{top - 1}", "controller", "home_counts", j)
         if self.reach_m() < 0.05:
-            raise problem(f"the DH lengths add up to a reach of {self.reach_m():g} m: not an "
-                          f"arm (lengths in km?)", "dh")
+            raise problem(f"the link lengths add up to a reach of {self.reach_m():g} m: not "
+                          f"an arm (lengths in km?)", "dh" if self.dh is not None else "chain")
         return self
 
     def reach_m(self) -> float:
-        return reach_m([r.d_m for r in self.dh], [r.a_m for r in self.dh])
+        if self.dh is not None:
+            return reach_m([r.d_m for r in self.dh], [r.a_m for r in self.dh])
+        j = self.chain.joints
+        return reach_m([r.d_m for r in j], [r.a_m for r in j[1:]] + [0.0]) \
+            + math.hypot(*self.chain.flange.xyz_m) + abs(j[0].a_m)
 
 
 def reach_m(d, a) -> float:

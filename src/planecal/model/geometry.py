@@ -3,9 +3,9 @@
 Conventions
 -----------
 * Metres, watertight convex ``mesh.Mesh`` objects (convex hulls, cached: ``planecal.model.mesh``).
-* ``LinkMesh.body`` is the index of the DH frame the mesh is rigidly attached to
-  (0 = base, i = frame after joint i, 6 = flange; the flange adapter and laser head are
-  attached to frame 6). ``mesh.vertices`` are already expressed in that DH frame:
+* ``LinkMesh.body`` is the index of the link frame the mesh is rigidly attached to
+  (0 = base, i = the link joint i turns, 6 = flange; the flange adapter and laser head
+  are attached to frame 6). ``mesh.vertices`` are already expressed in that frame:
   ``T_body_mesh`` is always the identity here (kept for the contract).
 * ``StaticMesh.mesh`` vertices are in the robot base frame.
 * When a shape is exactly a box, ``box_extents`` (full extents, m) and ``box_pose``
@@ -14,47 +14,38 @@ Conventions
 
 Robot shapes: ``kind="visual"`` is the model of the real links, ``"collision"`` its envelope
 ----------------------------------------------------------------------------------------
-Every piece (``name`` unique) is convex: the convex hull of a few cylinders and boxes
-(``_Cyl``, ``_Box``) in the DH frame of its body, placed from the robot description's DH
-dimensions (models/mc70/robot.json: d1 = 0.600, a1 = 0.150, a2 = 0.900, a3 = 0.150,
-d4 = 0.990, d6 = 0.175 m) and sized by the constants below. What each size comes from:
+They come from the robot's description: ``shapes.json`` beside its robot.json (format
+``planecal-shapes/1``, ``planecal.formats.shapes``; docs/ROBOTS.md), a list of pieces, each
+in one link frame (``kinematics.link_frames``: the standard DH frames of a DH table) and
+each the convex hull of a few cylinders, boxes, spheres or STL meshes (``_Cyl``, ``_Box``,
+``_Sphere``, ``_MeshPts``). The MC70's pieces are placed from its DH dimensions and sized
+from its datasheet and estimates (docs/ROBOTS.md, "The MC70's shapes"); an imported
+robot's are its URDF's <visual> and <collision> elements (``planecal robot import``).
 
-* DH (robot.json, the seed's Table 2): where every joint axis, hub and link end is.
-* Datasheet (seed H.1): J5 +-125 deg: the flange and the J6 housing must clear the
-  forearm's end up to the limit, which places the fork's crotch (``FORK_CROTCH``: bent
-  to 125 deg the flange reaches 152 mm from the J5 axis towards the forearm, the J6
-  housing 150 mm; the crotch is at 170 mm). The wrist sits between two prongs
-  (``wrist_fork_p``, ``wrist_fork_n``), not in front of a block.
-  J3 +260/-146 deg (406 deg of travel): the forearm swings past the upper arm, so the
-  upper arm is a beam beside the forearm's plane (``UPPER_ARM_Z``, on the +z2 side, the
-  robot's right at q = 0; the side is not documented), not centred on it; issue 11
-  records the offset arm of the real MC70 as well.
-* Estimates (no public MC70 drawing was found: the datasheet's exterior-dimension figure
-  is not in the seed's text, and the stored web pages, docs and code hold no MC70
-  drawing, CAD or URDF): the radii and widths, sized for a 640 kg, 70 kg-payload arm
-  of this reach (datasheet mass and payload) and kept from the first envelope where
-  nothing better is known: base 300, turret column 260, J2 housing 200, shoulder hub
-  190, elbow hub 160, elbow housing 150/170, forearm 120, J5 hub 90, J6 housing 85,
-  flange 62.5 mm radius (a 125 mm flange), prongs 35 mm thick.
-
-``kind="visual"`` polygons circumscribe the nominal circles (``VISUAL_SECTIONS`` sides;
-they exceed a true cylinder by < 0.22 % of its radius, nothing is cut off).
-``kind="collision"`` contains the visual piece grown by ``margin_m`` in every direction
-(default ``COLLISION_MARGIN``): each cylinder's radius (the visual polygon's circumradius)
-and ends, each box's half extents grow by the margin, and the polygon of
-``COLLISION_SECTIONS`` sides circumscribes the grown circle. Since conv(A) + ball =
-conv(A + ball), the collision piece contains every point within the margin of the visual
-piece: any distance between collision pieces is at most the visual distance minus
-margins, so the checker's verdicts are conservative for the visual shapes.
+A piece used for ``both`` (the MC70's) is the visual shape, its polygons circumscribing
+the nominal circles (``VISUAL_SECTIONS`` sides; they exceed a true cylinder by < 0.22 % of
+its radius, nothing is cut off), and, grown by the margin, the collision shape. A piece
+used for ``visual`` only is drawn as given (one mesh: the mesh itself, which may be
+concave); one used for ``collision`` only is the convex hull of its primitives, grown.
+``kind="collision"`` contains each piece grown by ``margin_m`` in every direction
+(default: the file's ``collision_margin_m``, else ``COLLISION_MARGIN``): each cylinder's
+radius (the visual polygon's circumradius) and ends, each box's half extents grow by the
+margin, and the polygon of ``COLLISION_SECTIONS`` sides circumscribes the grown circle; a
+sphere's or a mesh's hull is summed with a polyhedron that holds the ball of the margin
+(a geodesic sphere, scaled to circumscribe it). Since conv(A) + ball = conv(A + ball),
+the collision piece contains every point within the margin of the piece: any distance
+between collision pieces is at most the visual distance minus margins, so the checker's
+verdicts are conservative for the visual shapes (where a URDF's collision elements
+enclose its visual ones).
 
 ``COLLISION_MARGIN`` = 4 mm: joint offsets of the size the seed identified (Table 10:
-0.76, 1.24, 0.73, 0.05 mrad on joints 2-5) move no link or tool point farther than
-3.5 mm, whatever their signs, anywhere in the workspace (1.5 mm with Table 10's own
-signs; test_geometry measures it). The planner poses the links with nominal kinematics;
-the real arm sits up to that far off. The rest (the twin's larger offset tolerance,
-sensor and plate poses, servo lag, the sizes' own uncertainty) is for the run's
-clearance (10 mm by default) to cover. The envelope is measured against the visual
-shapes by scripts/bench_collision.py.
+0.76, 1.24, 0.73, 0.05 mrad on joints 2-5) move no link or tool point of the MC70
+farther than 3.5 mm, whatever their signs, anywhere in the workspace (1.5 mm with Table
+10's own signs; test_geometry measures it); a smaller arm moves less. The planner poses
+the links with nominal kinematics; the real arm sits up to that far off. The rest (the
+twin's larger offset tolerance, sensor and plate poses, servo lag, the sizes' own
+uncertainty) is for the run's clearance (10 mm by default) to cover. The envelope is
+measured against the visual shapes by scripts/bench_collision.py.
 
 Tool (flange adapter + ZS-LD80 head)
 ------------------------------------
@@ -74,13 +65,14 @@ top is at ``scene.floor_z``. Obstacles are the scene's boxes (R = Rz(yaw) Ry(pit
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from planecal.model.cell_params import CellParams
 from planecal.model.measurement import sensor_rotation
 from planecal.base.errors import InputError
-from planecal.model.mesh import Mesh, box, convex_hull
+from planecal.model.mesh import Mesh, box, convex_hull, read_stl
 
 COLLISION_MARGIN = 0.004  # m around the visual shapes (module docstring)
 TOOL_MARGIN = COLLISION_MARGIN  # the tool's envelope: the same margin
@@ -92,23 +84,6 @@ ADAPTER_THICKNESS = 0.012
 STAND_SIDE = 0.08  # m
 FLOOR_SIZE = (6.0, 6.0, 0.05)  # m
 KINDS = ("collision", "visual")
-
-# MC70 link sizes [m] (module docstring says where each comes from)
-BASE_RADIUS, BASE_HEIGHT = 0.300, 0.300
-TURRET_RADIUS, TURRET_TOP = 0.260, 0.050  # J1 column; its top 50 mm below the J2 axis
-J2_HOUSING_RADIUS = 0.200
-J2_HOUSING_Z = (-0.240, 0.160)  # along the J2 axis; the upper arm sits beside it
-UPPER_ARM_Z = (0.160, 0.320)  # the upper arm beam, beside the forearm's plane (+z2)
-SHOULDER_HUB_RADIUS, ELBOW_HUB_RADIUS = 0.190, 0.160
-ELBOW_J3_RADIUS, ELBOW_J3_HALF = 0.170, 0.160  # elbow housing round the J3 axis
-ELBOW_RADIUS, ELBOW_BACK, ELBOW_FRONT = 0.150, 0.300, 0.350  # round the forearm axis
-FOREARM_RADIUS = 0.120
-FORK_CROTCH = 0.170  # forearm end between the prongs, from the J5 axis
-FORK_INNER, FORK_OUTER, FORK_RADIUS, FORK_ROOT = 0.095, 0.130, 0.090, 0.250
-J5_HUB_RADIUS, J5_HUB_HALF = 0.090, 0.090
-J6_HOUSING_RADIUS = 0.085
-FLANGE_RADIUS, FLANGE_THICKNESS = 0.0625, 0.035
-
 
 @dataclass
 class LinkMesh:
@@ -146,34 +121,124 @@ class _Box:
     half: tuple
 
 
-def _mc70_pieces(robot) -> list[tuple[str, int, list]]:
-    """(name, body, primitives) of the MC70's link pieces, in the DH frames; positions
-    from the robot's DH (module docstring). Frames at q = 0: frame 1 has y1 = base up and
-    z1 = the J2 axis; frame 2 (at the J3 axis) has x2 from shoulder to elbow; frame 3 has
-    z3 along the forearm and y3 = the J3 axis; frame 4 sits at the wrist centre with the
-    forearm along +y4 and z4 = the J5 axis; frame 5 has z5 to the flange and y5 = the J5
-    axis; frame 6 is the flange face."""
-    d1, d4, d6 = robot.d[0], robot.d[3], robot.d[5]
-    a1, a2, a3 = robot.a[0], robot.a[1], robot.a[2]
-    z0, z1 = UPPER_ARM_Z
-    prongs = [(f"wrist_fork_{side}", 4,
-               [_Cyl((0, 0, s * FORK_INNER), (0, 0, s * FORK_OUTER), FORK_RADIUS),
-                _Cyl((0, FORK_ROOT, s * FORK_INNER), (0, FORK_ROOT, s * FORK_OUTER), FORK_RADIUS)])
-              for side, s in (("p", 1), ("n", -1))]
-    return [
-        ("base", 0, [_Cyl((0, 0, 0), (0, 0, BASE_HEIGHT), BASE_RADIUS)]),
-        ("turret", 1, [_Cyl((-a1, BASE_HEIGHT - d1, 0), (-a1, -TURRET_TOP, 0), TURRET_RADIUS),
-                       _Cyl((0, 0, J2_HOUSING_Z[0]), (0, 0, J2_HOUSING_Z[1]), J2_HOUSING_RADIUS)]),
-        ("upper_arm", 2, [_Cyl((-a2, 0, z0), (-a2, 0, z1), SHOULDER_HUB_RADIUS),
-                          _Cyl((0, 0, z0), (0, 0, z1), ELBOW_HUB_RADIUS)]),
-        ("elbow", 3, [_Cyl((-a3, -ELBOW_J3_HALF, 0), (-a3, ELBOW_J3_HALF, 0), ELBOW_J3_RADIUS),
-                      _Cyl((0, 0, -ELBOW_BACK), (0, 0, ELBOW_FRONT), ELBOW_RADIUS)]),
-        ("forearm", 4, [_Cyl((0, FORK_CROTCH, 0), (0, d4 - ELBOW_FRONT, 0), FOREARM_RADIUS)]),
-        *prongs,
-        ("wrist", 5, [_Cyl((0, -J5_HUB_HALF, 0), (0, J5_HUB_HALF, 0), J5_HUB_RADIUS),
-                      _Cyl((0, 0, 0), (0, 0, d6 - FLANGE_THICKNESS), J6_HOUSING_RADIUS)]),
-        ("flange", 6, [_Cyl((0, 0, -FLANGE_THICKNESS), (0, 0, 0.0), FLANGE_RADIUS)]),
-    ]
+@dataclass(frozen=True)
+class _Sphere:
+    centre: tuple
+    r: float
+
+
+@dataclass(frozen=True, eq=False)
+class _MeshPts:
+    """An STL mesh's vertices (in its body's frame) and the mesh itself."""
+    mesh: Mesh
+
+
+def _geodesic(level: int) -> tuple[np.ndarray, float]:
+    """Vertices of a geodesic sphere (an icosahedron, its faces split ``level`` times) on
+    the unit sphere, and the scale that makes their hull circumscribe the unit ball."""
+    t = (1 + 5 ** 0.5) / 2
+    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]],
+                 float)
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    for _ in range(level):
+        F = convex_hull(V).faces
+        mids = np.concatenate([V[F[:, [0, 1]]].mean(1), V[F[:, [1, 2]]].mean(1),
+                               V[F[:, [2, 0]]].mean(1)])
+        V = np.unique(np.round(np.concatenate([V, mids / np.linalg.norm(mids, axis=1,
+                                                                         keepdims=True)]), 15),
+                      axis=0)
+    hull = convex_hull(V)
+    inradius = float(np.min(np.einsum("fk,fk->f", hull.face_normals, hull.triangles_center)))
+    return V, 1.0 / inradius
+
+
+SPHERE_LEVEL = 1  # 42 vertices: a sphere's polyhedron exceeds it by < 9 % of its radius
+
+
+@dataclass(frozen=True)
+class ShapePiece:
+    name: str
+    link: int
+    use: str  # 'both' | 'visual' | 'collision'
+    primitives: tuple
+
+
+@dataclass(frozen=True)
+class RobotShapes:
+    """A robot's shapes.json, its primitives read (meshes loaded)."""
+    path: Path
+    pieces: tuple[ShapePiece, ...]
+    margin_m: float | None
+    allowed_pairs: tuple[tuple[str, str], ...] = ()  # not checked: the robot keeps them apart
+
+
+def shapes_path(robot) -> Path:
+    """shapes.json beside the robot's robot.json."""
+    if robot.folder is None:
+        raise InputError(f"geometry: {robot.name} has no folder, so no shapes.json")
+    return robot.folder / "shapes.json"
+
+
+def robot_shapes(robot) -> RobotShapes:
+    """The robot's link shapes (``shapes.json``, validated; InputError when it has none)."""
+    path = shapes_path(robot)
+    if not path.exists():
+        raise InputError(f"{path}: no link shapes for {robot.name}: the twin, the collision "
+                         "checker and the views need them (docs/ROBOTS.md: shapes.json, or "
+                         "planecal robot import)")
+    return load_shapes(path)
+
+
+_SHAPES: dict = {}  # (path, content) -> RobotShapes: read once per process, meshes included
+
+
+def load_shapes(path) -> RobotShapes:
+    """A shapes.json file, validated and its meshes read (one-line InputError otherwise)."""
+    import json
+
+    from planecal.formats.base import read_json, validate
+    from planecal.formats.shapes import ShapesFile
+    path = Path(path)
+    raw = read_json(path, "robot shapes")
+    key = (str(path.resolve()), json.dumps(raw, sort_keys=True))
+    hit = _SHAPES.get(key)
+    if hit is None:
+        doc = validate(ShapesFile, raw, path, "robot shapes")
+        pieces = []
+        for i, p in enumerate(doc.pieces):
+            prims = tuple(_primitive(path, i, k, prim) for k, prim in enumerate(p.primitives))
+            pieces.append(ShapePiece(p.name, p.link, p.use, prims))
+        hit = RobotShapes(path, tuple(pieces), doc.collision_margin_m,
+                          tuple(tuple(p.pieces) for p in doc.allowed_pairs))
+        if len(_SHAPES) > 16:
+            _SHAPES.clear()
+        _SHAPES[key] = hit
+    return hit
+
+
+def _primitive(path: Path, i: int, k: int, prim):
+    if prim.cylinder is not None:
+        c = prim.cylinder
+        return _Cyl(tuple(c.from_m), tuple(c.to_m), c.radius_m)
+    if prim.box is not None:
+        b = prim.box
+        pose = np.eye(4)
+        pose[:3, :3] = _rpy_matrix(b.rpy_rad)
+        pose[:3, 3] = b.center_m
+        return _Box(pose, tuple(np.asarray(b.size_m, float) / 2))
+    if prim.sphere is not None:
+        return _Sphere(tuple(prim.sphere.center_m), prim.sphere.radius_m)
+    f = path.parent / prim.mesh.file
+    try:
+        mesh = read_stl(f)
+    except (OSError, ValueError) as e:
+        raise InputError(f"{path}: pieces[{i}].primitives[{k}].mesh.file: "
+                         f"{getattr(e, 'strerror', None) or e}") from None
+    if len(mesh.vertices) < 4:
+        raise InputError(f"{path}: pieces[{i}].primitives[{k}].mesh.file: {f.name} has "
+                         f"{len(mesh.vertices)} vertices: no solid")
+    return _MeshPts(mesh)
 
 
 def _check_kind(kind: str) -> None:
@@ -199,6 +264,16 @@ def _points(prim, kind: str, m: float) -> np.ndarray:
         corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
                             for sz in (-1, 1)]) * half
         return corners @ prim.pose[:3, :3].T + prim.pose[:3, 3]
+    if isinstance(prim, _Sphere):
+        U, scale = _geodesic(SPHERE_LEVEL)
+        return np.asarray(prim.centre, float) + U * (prim.r + m) * scale
+    if isinstance(prim, _MeshPts):
+        V = prim.mesh.vertices
+        if kind == "visual" or m == 0:
+            return V
+        U, scale = _geodesic(0)
+        H = convex_hull(V).vertices
+        return (H[:, None, :] + U[None] * m * scale).reshape(-1, 3)
     p0, p1 = np.asarray(prim.p0, float), np.asarray(prim.p1, float)
     axis = p1 - p0
     u = axis / np.linalg.norm(axis)
@@ -240,18 +315,28 @@ def _rpy_matrix(rpy) -> np.ndarray:
 
 def robot_link_meshes(robot=None, kind: str = "collision",
                       margin_m: float | None = None) -> list[LinkMesh]:
-    """Convex link pieces of the MC70, one or more per DH frame 0..6: the visual shapes
-    (the model of the real links) or the collision envelope around them, ``margin_m``
-    (default ``COLLISION_MARGIN``) out (module docstring). ``robot`` (default the MC70
-    description) places them by its DH; the sizes are the MC70's, so another robot gets
-    an InputError rather than wrong shapes."""
-    m = _margin(kind, margin_m)
+    """The robot's link pieces (its ``shapes.json``, module docstring), one or more per
+    link frame 0..6: the visual shapes (the model of the real links) or the collision
+    envelope around them, ``margin_m`` (default: the file's, else ``COLLISION_MARGIN``)
+    out. ``robot`` defaults to the MC70. A robot without shapes.json: InputError."""
+    _check_kind(kind)
     if robot is None:
         from planecal.model.robot import load_robot
         robot = load_robot()
-    if robot.n_joints != 6 or "MC70" not in robot.name:
-        raise InputError(f"geometry: no link shapes for {robot.name} (sizes are the MC70's)")
-    return [LinkMesh(name, body, _piece(prims, kind, m)) for name, body, prims in _mc70_pieces(robot)]
+    shapes = robot_shapes(robot)
+    if kind == "collision" and margin_m is None and shapes.margin_m is not None:
+        margin_m = shapes.margin_m
+    m = _margin(kind, margin_m)
+    out = []
+    for piece in shapes.pieces:
+        if piece.use not in ("both", kind):
+            continue
+        prims = piece.primitives
+        if kind == "visual" and len(prims) == 1 and isinstance(prims[0], _MeshPts):
+            out.append(LinkMesh(piece.name, piece.link, prims[0].mesh))  # drawn as it is
+        else:
+            out.append(LinkMesh(piece.name, piece.link, _piece(prims, kind, m)))
+    return out
 
 
 def sensor_pose(origin, phi_y: float, phi_z: float) -> np.ndarray:

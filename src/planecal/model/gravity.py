@@ -6,8 +6,8 @@ twin's joints (``twin.ticks``); this module builds its world ``W`` from
 robot.json without MuJoCo, the way ``twin.mjcf`` builds the twin's bodies and
 ``twin.errors.gravity_model`` reads them back: body j's pose before its hinge is the
 nominal model's joint transform (``kinematics.Kinematics.joint_transform``), each point
-mass of ``robot.masses`` sits in its standard DH frame, which is ``dh_site`` on its body
-(Tx(a_j) Rx(alpha_j) of robot.json's row j), and gravity is the twin's (-9.81 m/s^2
+mass of ``robot.masses`` sits in its link frame, ``kinematics.link_site`` on its body
+(for a standard DH table: the standard DH frame j, Tx(a_j) Rx(alpha_j) of row j), and gravity is the twin's (-9.81 m/s^2
 along the base z). A payload (mass, centre of mass in the flange frame) is optional; the
 calibration model leaves it out (the sensor's ~1 kg against the arm's ~265 kg carried by
 J2: ~1 % of tau, absorbed by c_j).
@@ -22,16 +22,10 @@ from functools import lru_cache
 
 import numpy as np
 
+from planecal.model.kinematics import link_site
 from planecal.model.robot import Robot
 
 GRAVITY = np.array([0.0, 0.0, -9.81])  # the twin's (twin.errors.GRAVITY)
-
-
-def _dh_site(robot: Robot, j: int) -> np.ndarray:
-    """Standard DH frame j (1-based) in the modified-DH frame j: Tx(a_j) Rx(alpha_j)."""
-    c, s = np.cos(robot.alpha[j - 1]), np.sin(robot.alpha[j - 1])
-    return np.array([[1.0, 0.0, 0.0, robot.a[j - 1]], [0.0, c, -s, 0.0], [0.0, s, c, 0.0],
-                     [0.0, 0.0, 0.0, 1.0]])
 
 
 def gravity_world(robot: Robot, payload=None) -> tuple:
@@ -41,8 +35,8 @@ def gravity_world(robot: Robot, payload=None) -> tuple:
     kin = robot.kinematics
     P = np.array([kin.joint_transform(i) for i in range(robot.n_joints)])
     body, com, kg = [], [], []
-    for frame, c, m in robot.masses:
-        X = _dh_site(robot, frame)
+    for frame, c, m, _ in robot.masses:
+        X = link_site(kin, frame)
         body.append(frame)
         com.append(X[:3, :3] @ np.asarray(c, float) + X[:3, 3])
         kg.append(float(m))

@@ -45,6 +45,17 @@ def rot(axis: int, angle: float) -> np.ndarray:
     return R
 
 
+def rpy_angles(R) -> list[float]:
+    """URDF's roll, pitch, yaw of a rotation R = Rz(yaw) Ry(pitch) Rx(roll) (at gimbal lock,
+    pitch +-90 deg: roll 0, the rest in yaw)."""
+    R = np.asarray(R, float)
+    c = float(np.hypot(R[0, 0], R[1, 0]))
+    pitch = float(np.arctan2(-R[2, 0], c))
+    if c < 1e-12:
+        return [0.0, pitch, float(np.arctan2(-R[0, 1], R[1, 1]))]
+    return [float(np.arctan2(R[2, 1], R[2, 2])), pitch, float(np.arctan2(R[1, 0], R[0, 0]))]
+
+
 def frame_error(e) -> np.ndarray:
     """4x4 of a frame error (x, y, z [m], rx, ry, rz [rad]): T(x,y,z) Rz(rz) Ry(ry) Rx(rx)."""
     x, y, z, rx, ry, rz = np.asarray(e, float).reshape(6)
@@ -114,6 +125,53 @@ def from_standard_dh(theta0, d, a, alpha) -> Kinematics:
                       np.zeros(n), theta0.copy(), d.copy(), np.eye(4), F)
 
 
+def link_site(kin: Kinematics, i: int) -> np.ndarray:
+    """Link frame i in frame i (4x4, 0-based i in 0..n): the next joint's fixed
+    Rx(alpha_{i+1}) Tx(a_{i+1}), or the flange F for i = n (``link_frames``). For a chain
+    made from a standard DH table it is Tx(a_i) Rx(alpha_i) of the table's row i: the
+    standard DH frame i in the modified-DH frame i."""
+    if i == kin.n_joints:
+        return kin.flange.copy()
+    return tx_rx(kin.a[i], kin.alpha[i])
+
+
+def tx_rx(a: float, alpha: float) -> np.ndarray:
+    """Tx(a) Rx(alpha) (= Rx(alpha) Tx(a)), entries below 1e-15 set to 0."""
+    c, s = np.cos(alpha), np.sin(alpha)
+    T = np.array([[1.0, 0.0, 0.0, a], [0.0, c, -s, 0.0], [0.0, s, c, 0.0],
+                  [0.0, 0.0, 0.0, 1.0]])
+    T[np.abs(T) < 1e-15] = 0.0
+    return T
+
+
+def joint_between_links(kin: Kinematics, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """Joint j (1-based) between the link frames it joins: (P, A) with
+
+        link_j = link_{j-1} P Rz(theta_j + q_j) A,   P = Ry(beta_j),   A = Tz(d_j) link_site(j)
+
+    so joint j's axis is P's z through link frame j-1's origin (which lies on it), and a
+    point x of link j sits at A x in the frame that turns with the joint. For a standard
+    DH chain P = I and A = Tz(d_j) Tx(a_j) Rx(alpha_j) (the table's row j). The collision
+    checker's bounds, the URDF's joint origins and the gravity model read joints so."""
+    i = j - 1
+    P = np.eye(4)
+    P[:3, :3] = rot(1, kin.beta[i])
+    P[np.abs(P) < 1e-15] = 0.0
+    A = link_site(kin, j)
+    Tz = np.eye(4)
+    Tz[2, 3] = kin.d[i]
+    return P, Tz @ A
+
+
+def reach_m(kin: Kinematics) -> float:
+    """An upper bound of the flange's distance from the base origin: link frame 0's origin
+    plus each joint's |A| translation (consecutive link frames' origins are that far
+    apart, whatever the joint angles: ``joint_between_links``)."""
+    r = float(np.linalg.norm((kin.base @ link_site(kin, 0))[:3, 3]))
+    return r + sum(float(np.linalg.norm(joint_between_links(kin, j)[1][:3, 3]))
+                   for j in range(1, kin.n_joints + 1))
+
+
 def parallel_pairs(kin: Kinematics, tol: float = 1e-9) -> list[int]:
     """Joints i (0-based) whose axis is parallel to the previous one's (alpha_i = 0,
     i >= 1): where Hayati's beta_i is a parameter of its own."""
@@ -176,3 +234,79 @@ def fk_jacobian(kin: Kinematics, q) -> tuple[np.ndarray, np.ndarray]:
     J = np.empty((len(Q), 6, kin.n_joints))
     _chain.flange_jacobian(kin.packed, kin.base, kin.flange, Q, T, J)
     return T.reshape(lead + (4, 4)), J.reshape(lead + (6, kin.n_joints))
+
+
+PARALLEL_SIN = 1e-3  # axes closer to parallel than this take Hayati's beta, not a normal
+
+
+def from_axes(points, axes, tip) -> Kinematics:
+    """The chain of joint axes given at q = 0 in the base frame (a point on each (n, 3),
+    its direction (n, 3), turning right-handed about it) and the flange's pose ``tip``
+    there (4x4): exactly the same forward kinematics (how a URDF becomes the model,
+    ``planecal.io.urdf_import``; docs/ROBOTS.md).
+
+    Frame by frame, frame i-1 may still turn about and slide along its own axis (its
+    theta and d are not fixed until the next axis is known; frame 0 is the base frame
+    B, which may do the same). Axis i:
+    * not parallel to axis i-1 (|sin| > PARALLEL_SIN): the common normal from axis i-1 to
+      axis i fixes frame i-1's x and origin (theta_{i-1}, d_{i-1}), then alpha_i is the
+      twist about it and a_i its length, beta_i = 0 (modified DH);
+    * parallel or nearly (Hayati): axis i meets frame i-1's xy plane at a point c; x turns
+      towards c (theta_{i-1}), a_i = |c|, and Rx(alpha_i) Ry(beta_i) tilts z onto axis i
+      (beta_i = 0 for exactly parallel axes, alpha_i = pi for opposite ones);
+    frame i starts at that point of axis i, z along it. After the last axis, theta_n and
+    d_n put frame n's origin at the foot of the flange's origin on axis n and its x
+    towards the flange's x; the flange frame F is what remains. Tolerances are 1e-12 m."""
+    P, U = np.asarray(points, float), np.asarray(axes, float)
+    U = U / np.linalg.norm(U, axis=1, keepdims=True)
+    n = len(P)
+    alpha, a, beta, theta, d = (np.zeros(n) for _ in range(5))
+    C = np.eye(4)  # frame i-1 at q = 0 (frame 0: the base, B = I so far)
+    B = np.eye(4)
+    for i in range(n):
+        z, o, u = C[:3, 2], C[:3, 3], U[i]
+        s = np.linalg.norm(np.cross(z, u))
+        if s > PARALLEL_SIN:
+            w0 = o - P[i]
+            b, dd, e = z @ u, z @ w0, u @ w0
+            slide = (b * e - dd) / (1 - b * b)
+            c1 = P[i] + ((e - b * dd) / (1 - b * b)) * u
+            c0 = o + slide * z
+            x = c1 - c0
+            x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-12 else np.cross(z, u) / s
+        else:
+            slide = 0.0
+            c1 = P[i] + (-((P[i] - o) @ z) / (u @ z)) * u
+            x = c1 - o
+            x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-12 else C[:3, 0]
+        phi = float(np.arctan2(x @ C[:3, 1], x @ C[:3, 0]))
+        C = _turn_slide(C, phi, slide)
+        if i == 0:
+            B = _turn_slide(B, phi, slide)
+        else:
+            theta[i - 1] += phi
+            d[i - 1] += slide
+        a[i] = float(np.linalg.norm(c1 - C[:3, 3]))
+        uc = C[:3, :3].T @ u  # axis i in frame i-1 (turned)
+        if s > PARALLEL_SIN:
+            alpha[i] = float(np.arctan2(np.cross([0.0, 0.0, 1.0], uc)[0], uc[2]))
+        else:
+            beta[i] = float(np.arcsin(np.clip(uc[0], -1.0, 1.0)))
+            alpha[i] = float(np.arctan2(-uc[1], uc[2]))
+        C = C @ Kinematics([alpha[i]], [a[i]], [beta[i]], [0.0], [0.0]).joint_transform(0)
+    T = np.asarray(tip, float)
+    slide = float((T[:3, 3] - C[:3, 3]) @ C[:3, 2])
+    xt = T[:3, 0] - (T[:3, 0] @ C[:3, 2]) * C[:3, 2]
+    phi = float(np.arctan2(xt @ C[:3, 1], xt @ C[:3, 0])) if np.linalg.norm(xt) > 1e-6 else 0.0
+    C = _turn_slide(C, phi, slide)
+    theta[n - 1] += phi
+    d[n - 1] += slide
+    return Kinematics(alpha, a, beta, theta, d, B, np.linalg.inv(C) @ T)
+
+
+def _turn_slide(C: np.ndarray, phi: float, slide: float) -> np.ndarray:
+    """C Rz(phi) Tz(slide)."""
+    T = np.eye(4)
+    T[:3, :3] = rot(2, phi)
+    T[2, 3] = slide
+    return C @ T

@@ -188,3 +188,39 @@ def prism(radius: float, height: float, sections: int, pose=None) -> Mesh:
     h = np.array([0.0, 0.0, height / 2])
     m = convex_hull(np.concatenate([ring - h, ring + h]))
     return m if pose is None else m.transformed(pose)
+
+
+def read_stl(path) -> Mesh:
+    """A binary STL file as a ``Mesh`` (metres as written; shared corners merged). Neither
+    convex nor closed is assumed: ``is_watertight`` says whether every edge joins exactly
+    two triangles. ValueError (one line) for a file that is not a binary STL."""
+    data = Path(path).read_bytes()
+    if len(data) < 84:
+        raise ValueError(f"{path}: too short for a binary STL ({len(data)} bytes)")
+    n = int(np.frombuffer(data, "<u4", 1, 80)[0])
+    if len(data) != 84 + 50 * n:
+        what = "an ASCII STL (convert it to binary)" if data[:5] == b"solid" else "not a binary STL"
+        raise ValueError(f"{path}: {what}: {len(data)} bytes for {n} triangles")
+    rec = np.frombuffer(data, np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]),
+                        n, 84)
+    corners = rec["v"].reshape(-1, 3).astype(float)
+    if not np.all(np.isfinite(corners)):
+        raise ValueError(f"{path}: a vertex is not a finite number")
+    V, idx = np.unique(corners, axis=0, return_inverse=True)
+    F = idx.reshape(-1, 3).astype(np.int64)
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    edges = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return Mesh(V, F, is_convex=False, is_watertight=bool(len(F) and np.all(counts == 2)))
+
+
+def write_stl(path, mesh: Mesh) -> None:
+    """``mesh`` as a binary STL file (float32 corners, outward normals)."""
+    T = mesh.triangles.astype("<f4")
+    rec = np.zeros(len(T), np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]))
+    rec["n"] = mesh.face_normals.astype("<f4")
+    rec["v"] = T
+    with open(path, "wb") as f:
+        f.write(b"planecal".ljust(80, b" "))
+        f.write(np.array([len(T)], "<u4").tobytes())
+        f.write(rec.tobytes())

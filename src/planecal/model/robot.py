@@ -1,11 +1,14 @@
 """Robot description, loaded from models/<robot>/robot.json: the nominal kinematic chain,
 joint limits, encoder model, controller limits and link masses.
 
-robot.json holds standard DH (MODEL-NOTES), ``T_i = Rz(theta_i) Tz(d_i) Tx(a_i)
-Rx(alpha_i)`` with ``theta_i = q_i + delta_i + theta0_i``; ``q`` are joint angles from the
-encoder model and ``delta`` the joint offsets that calibration identifies. The chain every
-computation uses is ``Robot.kinematics`` (``planecal.model.kinematics``: modified DH with
-Hayati's beta, made from that table exactly). SI units (m, rad).
+The chain every computation uses is ``Robot.kinematics`` (``planecal.model.kinematics``:
+modified DH with Hayati's beta, a base and a flange frame). robot.json gives it one of two
+ways: standard DH rows (``dh``; MODEL-NOTES), ``T_i = Rz(theta_i) Tz(d_i) Tx(a_i)
+Rx(alpha_i)`` with ``theta_i = q_i + delta_i + theta0_i``, made into the chain exactly
+(``from_standard_dh``; the table stays in ``Robot.theta0, d, a, alpha`` for the MC70's
+closed-form IK), or the chain itself (``chain``: what ``planecal robot import`` writes
+from a URDF; the table fields are then None). ``q`` are joint angles from the encoder
+model and ``delta`` the joint offsets that calibration identifies. SI units (m, rad).
 """
 from __future__ import annotations
 
@@ -27,10 +30,10 @@ DEFAULT_ROBOT = "mc70"
 @dataclass(frozen=True)
 class Robot:
     name: str
-    theta0: np.ndarray  # (6,) rad
-    d: np.ndarray  # (6,) m
-    a: np.ndarray  # (6,) m
-    alpha: np.ndarray  # (6,) rad
+    theta0: np.ndarray | None  # (6,) rad: the standard DH table, None for a ``chain``
+    d: np.ndarray | None  # (6,) m
+    a: np.ndarray | None  # (6,) m
+    alpha: np.ndarray | None  # (6,) rad
     limits: np.ndarray  # (6, 2) rad, [lower, upper]
     gains: np.ndarray  # (6,) counts/rad
     qe0: np.ndarray  # (6,) counts at the zero reference
@@ -43,10 +46,14 @@ class Robot:
     trip_step_counts: int
     home_counts: np.ndarray  # (6,) int64
     source: Path | None = None
-    # (standard DH frame, centre of mass in it [m] (3,), mass [kg]): the arm's masses
+    # (link frame, centre of mass in it [m] (3,), mass [kg], inertia about the centre of
+    # mass (ixx iyy izz ixy ixz iyz) or None): the arm's masses
     masses: tuple = ()
-    kinematics: Kinematics | None = None  # the nominal chain (made from the DH table)
+    kinematics: Kinematics | None = None  # the nominal chain
     digest: str = ""  # SHA-256 of the description's content (``description_digest``)
+    joint_names: tuple[str, ...] = ()  # robot.json's (an imported robot's URDF names)
+    payload_kg: float | None = None  # rated payload (the generic error profile scales by it)
+    controller_kind: str | None = None  # "fd11", "ur" or None: which exports apply
 
     def __post_init__(self):
         if self.kinematics is None:
@@ -55,23 +62,47 @@ class Robot:
 
     @property
     def n_joints(self) -> int:
-        return len(self.d)
+        return self.kinematics.n_joints
 
-def load_robot(name_or_path: str | Path = DEFAULT_ROBOT) -> Robot:
-    """Load a robot description: a name under models/ (``mc70``) or a path to robot.json.
-    Validated by ``planecal.formats.robot.RobotFile``; one-line InputError otherwise."""
+    @property
+    def folder(self) -> Path | None:
+        """The description's folder (models/<robot>/, or an imported robot's directory)."""
+        return None if self.source is None else self.source.parent
+
+
+def robot_path(name_or_path: str | Path, relative_to: Path | None = None) -> Path:
+    """robot.json of a robot given by name (models/<name>/), by its folder or by the file;
+    a relative path is taken from ``relative_to`` (a scene's folder) when given."""
     p = Path(name_or_path)
-    if not p.suffix and len(p.parts) == 1:  # a name, not a path
-        p = data_folder("models") / str(name_or_path) / "robot.json"
+    if not p.suffix and len(p.parts) == 1 and not (relative_to or Path()).joinpath(p).is_dir():
+        return data_folder("models") / str(name_or_path) / "robot.json"
+    if relative_to is not None and not p.is_absolute():
+        p = relative_to / p
+    return p / "robot.json" if p.suffix != ".json" and p.is_dir() else p
+
+
+def load_robot(name_or_path: str | Path = DEFAULT_ROBOT, relative_to: Path | None = None) -> Robot:
+    """Load a robot description: a name under models/ (``mc70``), a folder holding
+    robot.json (an imported robot) or a path to robot.json (``robot_path``). Validated by
+    ``planecal.formats.robot.RobotFile``; one-line InputError otherwise."""
+    p = robot_path(name_or_path, relative_to)
     raw = read_json(p, "robot description")
     rf = validate(RobotFile, raw, p, "robot description")
     enc, ctrl = rf.encoder, rf.controller
+    table = {}
+    kin = None
+    if rf.dh is not None:
+        table = dict(theta0=np.array([j.theta0_rad for j in rf.dh]),
+                     d=np.array([j.d_m for j in rf.dh]), a=np.array([j.a_m for j in rf.dh]),
+                     alpha=np.array([j.alpha_rad for j in rf.dh]))
+    else:
+        c = rf.chain
+        kin = Kinematics(*(np.array([getattr(j, k) for j in c.joints]) for k in
+                           ("alpha_rad", "a_m", "beta_rad", "theta0_rad", "d_m")),
+                         c.base.matrix(), c.flange.matrix())
+        table = dict(theta0=None, d=None, a=None, alpha=None)
     return Robot(
-        name=rf.name,
-        theta0=np.array([j.theta0_rad for j in rf.dh]),
-        d=np.array([j.d_m for j in rf.dh]),
-        a=np.array([j.a_m for j in rf.dh]),
-        alpha=np.array([j.alpha_rad for j in rf.dh]),
+        name=rf.name, **table,
         limits=np.deg2rad(np.array(rf.joint_limits_deg, float)),
         gains=np.array(enc.gain_counts_per_rad, float),
         qe0=np.array(enc.offset_counts, float),
@@ -84,8 +115,14 @@ def load_robot(name_or_path: str | Path = DEFAULT_ROBOT) -> Robot:
         trip_step_counts=ctrl.trip_step_counts,
         home_counts=np.array(ctrl.home_counts, np.int64),
         source=p,
-        masses=tuple((m.frame, np.array(m.com_m, float), m.mass_kg) for m in rf.masses),
+        masses=tuple((m.frame, np.array(m.com_m, float), m.mass_kg,
+                      None if m.inertia_kg_m2 is None else np.array(m.inertia_kg_m2, float))
+                     for m in rf.masses),
+        kinematics=kin,
         digest=description_digest(raw),
+        joint_names=tuple(rf.joint_names or ()),
+        payload_kg=rf.payload_kg,
+        controller_kind=ctrl.kind,
     )
 
 

@@ -20,9 +20,9 @@ from planecal.model.cell_params import CellParams
 from planecal.model.planes import point_normal_from_n_tilde
 from planecal.base.errors import InputError
 from planecal.formats.base import read_json, validate
-from planecal.formats.robot import reach_m
 from planecal.formats.scene import RobotBounds, SceneFile
 from planecal.base.paths import data_folder
+from planecal.model.kinematics import reach_m
 from planecal.model.robot import DEFAULT_ROBOT, Robot, load_robot
 
 DEFAULT_SCENE = "thesis_final"
@@ -107,10 +107,10 @@ def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
     ref = raw.get("robot", DEFAULT_ROBOT) if isinstance(raw, dict) else None
     if isinstance(ref, str) and ref:  # otherwise validation names the problem
         try:
-            robot = load_robot(ref)
+            robot = load_robot(ref, relative_to=path.parent)
         except InputError as e:
             raise InputError(f"{path}: robot: {e}") from None
-        bounds = RobotBounds(robot.name, reach_m(robot.d, robot.a), robot.encoder_bits)
+        bounds = RobotBounds(robot.name, reach_m(robot.kinematics), robot.encoder_bits)
     sf = validate(SceneFile, raw, path, "scene", {"robot": bounds})
     plates = [Plate(name=p.name or f"plate{i + 1}", n_tilde=np.array(p.n_tilde),
                     corner=np.array(p.corner_m), x_hint=np.array(p.x_axis),

@@ -30,7 +30,8 @@ Pairs checked (``collision_parts.checked_pairs``)
   base-link1, link1-link2, ..., link5-link6) and the tool against bodies 5 and 6.
 * Environment: every moving part against every static part, except the floor against the
   base (body 0) and link 1, which are bolted to it.
-``allowed_pairs`` adds further (name, name) pairs to skip.
+``allowed_pairs`` adds further (name, name) pairs to skip, as does the robot's shapes.json
+(its ``allowed_pairs``: pieces its structure keeps apart, a UR's nested wrist joints).
 * One-joint pairs (``planecal.safety.collision_joint``): self pairs two bodies apart whose
   distance one joint decides once a part is replaced by its hull of revolution; their safe
   intervals of that joint are swept once per world (``safe_sets``), and a configuration or
@@ -52,7 +53,9 @@ s in [0, 1], dq = q1 - q0. A point x on body j moves with
 Global bound: dist(x, axis k) <= r_kj over *all* configurations: for k = j the exact
 largest distance of the part's vertices from axis j (that axis is fixed in frame j); for
 k < j, r_kj = |a_k| + sum_{m=k+1..j} hypot(a_m, d_m) + max|v| (o_k is |a_k| from axis k,
-consecutive frame origins are hypot(a_m, d_m) apart, v the part's vertices in frame j).
+consecutive frame origins are hypot(a_m, d_m) apart, v the part's vertices in frame j;
+for any chain, ``kinematics.joint_between_links``: |a_k| is the xy part of A_k's
+translation and hypot(a_m, d_m) its length).
 Convex combinations of vertices move no faster than the fastest vertex, so this bounds
 every point. For a self pair (bodies i < j) the distance is measured in frame i, where
 body i is still and body j moves with joints i+1..j only; an environment pair counts
@@ -97,7 +100,7 @@ from planecal.safety.collision_path import PathCheck
 from planecal.base.errors import InputError
 from planecal.model.mesh import prism
 from planecal.model.robot import Robot, within_limits
-from planecal.model.kinematics import link_frames
+from planecal.model.kinematics import joint_between_links, link_frames
 
 REASONS = ("limits", "self", "environment", "undecided")
 
@@ -161,11 +164,7 @@ class CollisionWorld:
         self.max_steps = int(max_steps)
         self.resolution_m = float(resolution_m)
         self.coarse_samples = int(coarse_samples)
-        if links is None or tools is None or static is None:
-            from planecal.model import geometry
-            links = geometry.robot_link_meshes(self.robot, "collision") if links is None else links
-            tools = geometry.tool_meshes(scene, "collision") if tools is None else tools
-            static = geometry.scene_meshes(scene) if static is None else static
+        links, tools, static, allowed_pairs = self._parts(links, tools, static, allowed_pairs)
 
         self.parts: list[Part] = moving_parts(links, tools)
         self.n_moving = len(self.parts)
@@ -175,6 +174,7 @@ class CollisionWorld:
             raise InputError(f"collision: part names must be unique, got {names}")
 
         self._rates = self._axis_radii()  # (n_moving, 6) r_k for each moving part
+        self._axes_z = self._tilted_axes()
         pairs, kinds, skipped = checked_pairs(self.parts, self.n_moving, allowed_pairs)
         self._pairs = np.array(pairs, int).reshape(-1, 2)
         self._kinds = kinds
@@ -201,11 +201,32 @@ class CollisionWorld:
 
     # ----- structure -----
 
+    def _parts(self, links, tools, static, allowed_pairs):
+        """The geometry module's collision shapes where not given: the robot's pieces (and
+        the pairs its shapes.json says never meet), the tool's, the cell's."""
+        from planecal.model import geometry
+        allowed_pairs = tuple(allowed_pairs)
+        if links is None:
+            links = geometry.robot_link_meshes(self.robot, "collision")
+            allowed_pairs += geometry.robot_shapes(self.robot).allowed_pairs
+        tools = geometry.tool_meshes(self.scene, "collision") if tools is None else tools
+        static = geometry.scene_meshes(self.scene) if static is None else static
+        return links, tools, static, allowed_pairs
+
+    def _tilted_axes(self):
+        """Joint k's axis in link frame k-1 (P_k's z, rows k = 1..6), or None where every
+        one is that frame's z (no Hayati beta tilts it)."""
+        axes = np.array([joint_between_links(self.robot.kinematics, k)[0][:3, 2]
+                         for k in range(1, 7)])
+        return None if np.array_equal(axes, np.tile([0.0, 0.0, 1.0], (6, 1))) else axes
+
     def _axis_radii(self) -> np.ndarray:
         """r[p, k-1]: bound on the distance of moving part p's points from joint axis k,
         over all configurations (module docstring); 0 for k > body."""
-        rb = self.robot
-        ell = np.hypot(rb.a, rb.d)
+        kin = self.robot.kinematics
+        A = [None] + [joint_between_links(kin, k)[1] for k in range(1, 7)]
+        ell = np.array([0.0] + [np.linalg.norm(A[k][:3, 3]) for k in range(1, 7)])
+        off = np.array([0.0] + [np.hypot(A[k][0, 3], A[k][1, 3]) for k in range(1, 7)])
         out = np.zeros((self.n_moving, 6))
         for pi in range(self.n_moving):
             p = self.parts[pi]
@@ -213,13 +234,9 @@ class CollisionWorld:
             if j == 0:
                 continue
             rho = float(np.sqrt((p.V ** 2).sum(1).max()))
-            # axis j in frame j: x_{j-1} = Rz(theta) M x_j; distance = hypot of (M x_j)_xy
-            ca, sa = np.cos(rb.alpha[j - 1]), np.sin(rb.alpha[j - 1])
-            M = np.array([[1, 0, 0], [0, ca, -sa], [0, sa, ca]])
-            X = p.V @ M.T + [rb.a[j - 1], 0.0, rb.d[j - 1]]
-            out[pi, j - 1] = float(np.hypot(X[:, 0], X[:, 1]).max())
+            out[pi, j - 1] = axis_distance_max(p.V, A[j])
             for k in range(1, j):
-                out[pi, k - 1] = abs(rb.a[k - 1]) + ell[k:j].sum() + rho
+                out[pi, k - 1] = off[k] + ell[k + 1:j + 1].sum() + rho
         return out
 
     def _pair_rate_matrix(self) -> np.ndarray:
@@ -238,7 +255,7 @@ class CollisionWorld:
         """Safe intervals of the self pairs two bodies apart (planecal.safety.collision_joint),
         one set per hull of revolution: the upper part's about joint i+2, the lower
         part's about joint i+1."""
-        rb = self.robot
+        kin = self.robot.kinematics
         out = []
         for n, (i, j) in enumerate(self._pairs):
             if self._kinds[n] != "self":
@@ -247,17 +264,17 @@ class CollisionWorld:
             bl, bu = low.body, up.body
             if bu - bl != 2:
                 continue
-            # the upper part's hull about joint bu's axis, fixed in frame bu-1: joint bu-1
-            X = axis_coordinates(up.V, rb.alpha[bu - 1], rb.a[bu - 1], rb.d[bu - 1])
-            hull = self._hull_part(up.name, bu - 1, X, np.eye(4))
+            # the upper part's hull about joint bu's axis, fixed in frame bu-1 (by P):
+            # joint bu-1 alone moves it
+            P, A = joint_between_links(kin, bu)
+            X = axis_coordinates(up.V, A)
+            hull = self._hull_part(up.name, bu - 1, X, P)
             out.append(self._sweep_pair(n, low, hull, bu - 1, up.name))
-            # the lower part's hull about joint bl+1's axis (z of frame bl), carried into
-            # frame bl+1 (it is round about that axis): joint bu
-            ca, sa = np.cos(rb.alpha[bl]), np.sin(rb.alpha[bl])
-            B = np.eye(4)
-            B[:3, :3] = [[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]]
-            B[:3, 3] = [rb.a[bl], 0.0, rb.d[bl]]
-            hull = self._hull_part(low.name, bl + 1, low.V, np.linalg.inv(B))
+            # the lower part's hull about joint bl+1's axis (P's z in frame bl), carried
+            # into frame bl+1 (it is round about that axis): joint bu alone moves against it
+            P, A = joint_between_links(kin, bl + 1)
+            X = axis_coordinates(low.V, np.linalg.inv(P))
+            hull = self._hull_part(low.name, bl + 1, X, np.linalg.inv(A))
             out.append(self._sweep_pair(n, hull, up, bu, low.name))
         return [s for s in out if len(s.lo)]
 
@@ -274,16 +291,18 @@ class CollisionWorld:
         """Sweep joint m (1-based), which alone moves ``moving`` (body m) against
         ``fixed`` (body m-1), over its limits."""
         rb = self.robot
-        rho = axis_distance_max(moving.V, rb.alpha[m - 1], rb.a[m - 1], rb.d[m - 1])
+        P, A = joint_between_links(rb.kinematics, m)
+        rho = axis_distance_max(moving.V, A)
         q = np.zeros(6)
-        F = self._frames(q)  # only frame m changes with joint m: F[m] = F[m-1] Rz(t) B
-        B = np.linalg.inv(F[m - 1]) @ F[m]
+        F = self._frames(q)  # only frame m changes with joint m: F[m] = F[m-1] P Rz(t) B
+        B = np.linalg.inv(P) @ np.linalg.inv(F[m - 1]) @ F[m]
+        FP = F[m - 1] @ P
         Rz = np.eye(4)
 
         def distance(t: float) -> float:
             c, s_ = np.cos(t), np.sin(t)
             Rz[:2, :2] = [[c, -s_], [s_, c]]
-            F[m] = F[m - 1] @ Rz @ B
+            F[m] = FP @ Rz @ B
             return self._distance(fixed, moving, F)
 
         lo, hi = rb.limits[m - 1]
@@ -439,8 +458,9 @@ class CollisionWorld:
         W = self._W[idx]  # (E, 6) global axis radii of the upper part, masked to its joints
         up = self._upper[idx]
         r = np.arange(len(idx)) if rows is None else rows
-        o = F[r, :6, :3, 3]  # axis k passes through o_{k-1} along z_{k-1}
-        z = F[r, :6, :3, 2]
+        o = F[r, :6, :3, 3]  # axis k passes through o_{k-1} along z_{k-1} (P_k z with beta)
+        z = F[r, :6, :3, 2] if self._axes_z is None else np.einsum(
+            "nkab,kb->nka", F[r, :6, :3, :3], self._axes_z)
         v = cu[:, None, :] - o
         dist = np.linalg.norm(v - np.sum(v * z, -1, keepdims=True) * z, axis=-1)
         D = np.minimum(dist + self._radii[up][:, None], W)  # current distance from axis k

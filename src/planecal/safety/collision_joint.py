@@ -67,18 +67,18 @@ class SafeSet:
         return float(np.sum(self.hi - self.lo))
 
 
-def axis_distance_max(V: np.ndarray, alpha: float, a: float, d: float) -> float:
-    """Largest distance of points V (frame m) from joint m's axis (z_{m-1} through
-    o_{m-1}); x_{m-1} = Rz(q) (Rx(alpha) x_m + (a, 0, d)) and Rz leaves it unchanged."""
-    X = axis_coordinates(V, alpha, a, d)
+def axis_distance_max(V: np.ndarray, A: np.ndarray) -> float:
+    """Largest distance of points V (link frame m) from joint m's axis: in the frame that
+    turns with joint m (z the axis, origin on it) they sit at A V
+    (``kinematics.joint_between_links``), and the turn about z leaves the distance."""
+    X = axis_coordinates(V, A)
     return float(np.hypot(X[:, 0], X[:, 1]).max())
 
 
-def axis_coordinates(V: np.ndarray, alpha: float, a: float, d: float) -> np.ndarray:
-    """Points V of frame m in frame m-1 at joint angle 0 (Rx(alpha) V + (a, 0, d))."""
-    ca, sa = np.cos(alpha), np.sin(alpha)
-    M = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
-    return V @ M.T + np.array([a, 0.0, d])
+def axis_coordinates(V: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """Points V of link frame m in joint m's turning frame at joint angle 0: A V (for a
+    standard DH row, Rx(alpha) V + (a, 0, d))."""
+    return V @ A[:3, :3].T + A[:3, 3]
 
 
 def hull_of_revolution(X: np.ndarray) -> tuple[float, float, float]:

@@ -81,10 +81,12 @@ class RunSettings:
 
     @classmethod
     def for_scene(cls, scene: Scene, samples: int = 150, seed: int = 0) -> "RunSettings":
-        """Defaults with the scene's own sampling cone and distance range."""
+        """Defaults with the scene's own sampling cone and distance range, and steps one
+        count below the robot's step limit (the MC70's FD11: 50 of 51)."""
         return cls(scene=str(scene.path), samples=samples, seed=seed,
                    pose=PoseSettings(cone_deg=scene.cone_deg,
-                                     distance_mm=tuple(scene.distance_mm)))
+                                     distance_mm=tuple(scene.distance_mm)),
+                   nominal_step_counts=max(1, scene.robot.max_step_counts - 1))
 
     def to_dict(self) -> dict:
         d = asdict(self)

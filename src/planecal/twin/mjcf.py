@@ -4,21 +4,22 @@ Robot (``robot_spec``; written to ``models/<robot>/<robot>.xml`` by scripts/buil
 ------------------------------------------------------------------------------------------
 Built from the robot's whole geometric model (``kinematics.Kinematics``: robot.json's, or
 the twin's true robot):
-* body ``base`` carries the shapes of DH frame 0, at the model's base frame;
+* body ``base`` carries the shapes of link frame 0, at the model's base frame;
 * body ``link<i>`` (i = 1..6) is the model's frame i: its pos/quat relative to its parent
   is joint i's fixed part ``Rx(alpha) Tx(a) Ry(beta) Rz(theta) Tz(d)`` and its hinge
   ``joint<i>`` turns about local z through the origin. So with ``qpos = q + delta``
   (joint angles from the encoder model plus joint offsets) the sites ``frame<i>`` (at
-  ``dh_site(robot, i)`` = Tx(a_i) Rx(alpha_i) of robot.json's standard DH on body
-  link<i>) are the standard DH frames of ``robot.fk_frames(robot, q, delta)`` for the
-  nominal model; site ``flange`` is the model's flange frame.
+  ``dh_site(robot, i)`` = ``kinematics.link_site``: Tx(a_i) Rx(alpha_i) of a standard
+  DH table's row i) are the link frames (``kinematics.link_frames``; a DH table's
+  standard DH frames) of the nominal model; site ``flange`` is the model's flange frame.
 * geoms: ``v_<piece>`` visual (group 1, contype = conaffinity = 0, massless: the model
   of the real link), ``c_<piece>`` collision (group 3: the checker's envelope around
-  it), both convex meshes from ``planecal.model.geometry``, one or more pieces per body.
-* inertials: each body's mass and centre of mass are robot.json's ``masses`` of its link
-  (the tool's: the payload); the geoms carry none. The twin's gravity model reads them
-  back from the compiled model.
-  Sites of the DH frames are in group 4.
+  it), meshes from ``planecal.model.geometry`` (the robot's shapes.json; convex but a
+  visual mesh drawn as it is), one or more pieces per body.
+* inertials: each body's mass and centre of mass (and inertia, where robot.json gives
+  one) are robot.json's ``masses`` of its link (the tool's: the payload); the geoms
+  carry none. The twin's gravity model reads them back from the compiled model.
+  Sites of the link frames are in group 4.
 
 Scene (``scene_spec``): the robot, a ``tool`` body on the flange (adapter + ZS-LD80 head,
 groups 1/3), a ``laser`` site whose +z is the beam at the sensor origin, and the cell's
@@ -38,7 +39,7 @@ import numpy as np
 
 from planecal.model.cell_params import CellParams
 from planecal.model.geometry import robot_link_meshes, scene_meshes, sensor_pose, tool_meshes
-from planecal.model.kinematics import Kinematics
+from planecal.model.kinematics import Kinematics, link_site
 from planecal.model.robot import Robot
 
 GROUP_ENV = 0  # plates, stands, floor, obstacles: visible and seen by the laser
@@ -67,36 +68,43 @@ def link_body_name(i: int) -> str:
 
 
 def dh_site(robot: Robot, i: int) -> np.ndarray:
-    """Standard DH frame i in the model's frame i (1-based i; identity for 0):
-    Tx(a_i) Rx(alpha_i) of robot.json's row i. The link shapes (``geometry``, in standard
-    DH frames) hang off their body by it."""
-    if i == 0:
-        return np.eye(4)
-    c, s = np.cos(robot.alpha[i - 1]), np.sin(robot.alpha[i - 1])
-    T = np.array([[1.0, 0.0, 0.0, robot.a[i - 1]], [0.0, c, -s, 0.0], [0.0, s, c, 0.0],
-                  [0.0, 0.0, 0.0, 1.0]])
-    T[np.abs(T) < 1e-15] = 0.0
-    return T
+    """Link frame i in the model's frame i (``kinematics.link_site`` of the nominal
+    chain; for a standard DH table Tx(a_i) Rx(alpha_i) of row i, identity for 0 when the
+    chain starts at its base). The link shapes (``geometry``, in link frames) hang off
+    their body by it."""
+    return link_site(robot.kinematics, i)
 
 
 MIN_MASS_KG = 1e-9  # MuJoCo needs a moving body to have some mass
 
 
 def set_inertial(body, masses) -> None:
-    """The body's inertial from point masses ``(position in the body frame, mass)``: their
-    total mass at their centre of mass (and their inertia about it); MIN_MASS_KG when
-    there are none. The body's geoms add nothing."""
-    pts = [(np.asarray(p, float), float(m)) for p, m in masses if m > 0]
-    M = sum(m for _, m in pts)
+    """The body's inertial from masses ``(position in the body frame, mass[, inertia about
+    their centre (3, 3) in the body's axes, or None])``: their total mass at their centre
+    of mass and their inertia about it (point masses but for the inertias given);
+    MIN_MASS_KG when there are none. The body's geoms add nothing."""
+    pts = [(np.asarray(p[0], float), float(p[1]), p[2] if len(p) > 2 else None)
+           for p in masses if p[1] > 0]
+    M = sum(m for _, m, _ in pts)
     body.explicitinertial = True
     if not M:
         body.mass, body.ipos, body.inertia = MIN_MASS_KG, [0, 0, 0], [MIN_MASS_KG] * 3
         return
-    c = sum(m * p for p, m in pts) / M
-    I = sum(m * (np.dot(p - c, p - c) * np.eye(3) - np.outer(p - c, p - c)) for p, m in pts)
+    c = sum(m * p for p, m, _ in pts) / M
+    I = sum(m * (np.dot(p - c, p - c) * np.eye(3) - np.outer(p - c, p - c))
+            + (np.zeros((3, 3)) if J is None else J) for p, m, J in pts)
     body.mass, body.ipos = M, c.tolist()
     body.fullinertia = (np.array([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
                         + np.array([1, 1, 1, 0, 0, 0]) * 1e-6 * M).tolist()
+
+
+def _inertia_in(R: np.ndarray, six) -> np.ndarray | None:
+    """robot.json's inertia (ixx iyy izz ixy ixz iyz, link frame axes) in axes R x."""
+    if six is None:
+        return None
+    xx, yy, zz, xy, xz, yz = six
+    J = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+    return R @ J @ R.T
 
 
 def _clean(T: np.ndarray) -> np.ndarray:
@@ -156,8 +164,8 @@ def robot_spec(robot: Robot, kin: Kinematics | None = None) -> mujoco.MjSpec:
         b = parent.add_body(name=link_body_name(i + 1),
                             **_pose_kwargs(_clean(kin.joint_transform(i))))
         X = dh_site(robot, i + 1)
-        set_inertial(b, [(X[:3, :3] @ com + X[:3, 3], m) for frame, com, m in robot.masses
-                         if frame == i + 1])
+        set_inertial(b, [(X[:3, :3] @ com + X[:3, 3], m, _inertia_in(X[:3, :3], J))
+                         for frame, com, m, J in robot.masses if frame == i + 1])
         b.add_joint(name=f"joint{i + 1}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1],
                     range=robot.limits[i].tolist(), limited=mujoco.mjtLimited.mjLIMITED_TRUE,
                     damping=100.0, armature=1.0)

@@ -80,7 +80,12 @@ def profile_path(name_or_path: str | Path, robot: Robot) -> Path:
 
 
 def load_profile(name_or_path: str | Path, robot: Robot) -> ErrorProfile:
-    """A named profile or a profile file, validated (one-line InputError otherwise)."""
+    """A named profile or a profile file, validated (one-line InputError otherwise). A
+    robot without a named profile of its own gets the generic one, scaled to it
+    (``planecal.twin.generic_profile``)."""
+    if str(name_or_path) in PROFILES and not _own(str(name_or_path), robot):
+        from planecal.twin.generic_profile import generic_profile
+        return generic_profile(str(name_or_path), robot)
     p = profile_path(name_or_path, robot)
     doc = validate(ErrorProfileFile, read_json(p, "error profile"), p, "error profile")
     return ErrorProfile(doc.name, p, doc)
@@ -204,3 +209,15 @@ def truth_file_errors(path) -> str | None:
     w = doc.get("world") if isinstance(doc, dict) else None
     e = w.get("errors") if isinstance(w, dict) else None
     return e if isinstance(e, str) else None
+
+
+def _own(name: str, robot: Robot) -> bool:
+    return robot.source is not None and (robot.source.parent / "errors" / f"{name}.json").exists()
+
+
+def profile_source(name: str, robot: Robot) -> str:
+    """Where the robot's profile ``name`` comes from (its own file, or the generic one)."""
+    if _own(name, robot):
+        return str(profile_path(name, robot))
+    from planecal.twin.generic_profile import generic_document
+    return generic_document(name, robot)[1]

@@ -1,0 +1,95 @@
+"""The generic error profiles, for a robot without its own ``models/<robot>/errors/<name>.json``
+(an imported robot, one written by hand): ``models/generic/errors/{ideal,realistic}.json``,
+the MC70's, scaled to the robot by its size and payload (docs/ERRORS.md, "The generic
+profile"):
+
+* lengths (the geometry's a and d stds, the base and flange frame translations) by the
+  robot's reach over the MC70's (``kinematics.reach_m``: 2.83 m);
+* joint stiffness and the torque that holds a loaded joint on one flank (backlash
+  preload) by reach times payload over the MC70's (2.83 m, 70 kg): the torque class a
+  joint is built for; without ``payload_kg`` in robot.json, by reach alone (it says so);
+* the joints' repeatability by robot.json's datasheet repeatability over the MC70's
+  0.07 mm (the same 0.81 share of it), by reach where robot.json has none;
+* angles (twists, Hayati's beta, gear errors, lost motion) and the cell's tolerances (the
+  sensor's mounting, the plates) as they are: they belong to the reducer class and to
+  the cell, not to the arm's size.
+
+``ideal`` holds no number of the robot's own (its repeatability is robot.json's) and is
+used as it is. A profile made so says so: its description starts with GENERIC, and the
+command that loads it says once which scaling it used (a warning on stderr).
+"""
+from __future__ import annotations
+
+import copy
+import logging
+
+from planecal.base.paths import data_folder
+from planecal.formats import read_json, validate
+from planecal.formats.error_profile import ErrorProfileFile
+from planecal.model.kinematics import reach_m
+
+REFERENCE_REACH_M = 2.8334658438426485  # the MC70: kinematics.reach_m of its robot.json
+REFERENCE_PAYLOAD_KG = 70.0  # MC70 datasheet (seed H.1)
+REFERENCE_REPEATABILITY_MM = 0.07  # MC70 datasheet (seed H.1), JIS B 8432
+_told: set = set()
+log = logging.getLogger(__name__)
+
+
+def generic_path(name: str):
+    return data_folder("models") / "generic" / "errors" / f"{name}.json"
+
+
+def scaling(robot) -> dict:
+    """The factors a generic profile uses for ``robot`` (module docstring)."""
+    length = reach_m(robot.kinematics) / REFERENCE_REACH_M
+    payload = None if robot.payload_kg is None else robot.payload_kg / REFERENCE_PAYLOAD_KG
+    torque = length * (payload if payload is not None else 1.0)
+    rep = (robot.repeatability_m * 1e3 / REFERENCE_REPEATABILITY_MM if robot.repeatability_m > 0
+           else length)
+    return {"length": length, "payload": payload, "torque": torque, "repeatability": rep}
+
+
+def generic_document(name: str, robot) -> tuple[dict, str]:
+    """(the profile's JSON document scaled for ``robot``, a one-line note saying how)."""
+    path = generic_path(name)
+    raw = copy.deepcopy(read_json(path, "error profile"))
+    f = scaling(robot)
+    if name == "ideal":
+        how = (f"the generic 'ideal' profile ({path}), used as it is (it holds no number "
+               "of the robot's own)")
+    else:
+        how = (f"the generic '{name}' profile ({path}), the MC70's scaled by reach "
+               f"{f['length']:.3g}" + (f" and payload {f['payload']:.3g}" if f["payload"]
+                                       is not None else " (no payload_kg in robot.json: "
+                                       "torques by reach alone)"))
+    if name != "ideal":
+        g = raw.get("geometry") or {}
+        for key in ("a_m", "d_m"):
+            if key in g:
+                g[key] = [v * f["length"] for v in g[key]]
+        for frame in ("base", "flange"):
+            if frame in g:
+                g[frame]["translation_m"] *= f["length"]
+        j = raw["joints"]
+        j["stiffness_nm_per_rad"] = [None if k is None else k * f["torque"]
+                                     for k in j["stiffness_nm_per_rad"]]
+        if j.get("backlash_preload_nm"):
+            j["backlash_preload_nm"] = [None if t is None else t * f["torque"]
+                                        for t in j["backlash_preload_nm"]]
+        if j.get("repeatability_mm") is not None:
+            j["repeatability_mm"] *= f["repeatability"]
+    raw["description"] = f"GENERIC for {robot.name}: {how}. " + raw.get("description", "")
+    return raw, how
+
+
+def generic_profile(name: str, robot):
+    """The ErrorProfile of the generic ``name`` for ``robot`` (warns once how it is made)."""
+    from planecal.twin.profile import ErrorProfile
+    raw, how = generic_document(name, robot)
+    path = generic_path(name)
+    doc = validate(ErrorProfileFile, raw, path, "error profile")
+    key = (robot.digest, name)
+    if key not in _told:
+        _told.add(key)
+        log.warning(f"{robot.name} has no '{name}' error profile of its own: {how}")
+    return ErrorProfile(doc.name, path, doc)
