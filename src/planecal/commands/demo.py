@@ -163,8 +163,11 @@ def _position_error(args, scene, samples, cal, run_file, truth_file):
     print(f"\n== position error in the calibrated region (ISO 9283 AP: the worst of five poses "
           f"in a {iso['edge_m'] * 1e3:.0f} mm cube over the samples, {DEMO_CYCLES} cycles, on "
           "the same twin, at the flange)")
+    ratio = v["ap_ratio"]
+    change = (f"{ratio:.1f}x smaller" if ratio >= 1 else
+              f"{1 / ratio:.1f}x LARGER: the calibration made it worse" if ratio > 0 else "")
     print(f"before calibration {v['ap_before_mm']:.3f} mm, after {v['ap_after_mm']:.3f} mm "
-          f"(x{v['ap_ratio']:.1f} smaller); repeatability RP {v['rp_mm']:.3f} mm")
+          f"({change}); repeatability RP {v['rp_mm']:.3f} mm")
     return world, opts, v
 
 

@@ -191,8 +191,7 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, layout: ParamLayout, free: np.nda
     if weights is not None:
         Jf, r = Jf * weights[:, None], r * weights
     free_names = layout.names_of(free)
-    squared = np.einsum("ij,ij->j", Jf, Jf)
-    norms = np.sqrt(squared)
+    norms = np.sqrt(np.einsum("ij,ij->j", Jf, Jf))
     no_effect = [free_names[j] for j in np.flatnonzero(norms <= 1e-10 * norms.max())]
     S = column_scales(Jf)
     A = Jf * S

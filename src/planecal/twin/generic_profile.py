@@ -82,9 +82,9 @@ def generic_document(name: str, robot) -> tuple[dict, str]:
     return raw, how
 
 
-def generic_profile(name: str, robot):
-    """The ErrorProfile of the generic ``name`` for ``robot`` (warns once how it is made)."""
-    from planecal.twin.profile import ErrorProfile
+def generic_file(name: str, robot):
+    """The validated generic ``name`` for ``robot`` and its path (warns once how it is
+    made); ``twin.profile.load_profile`` makes the ErrorProfile of it."""
     raw, how = generic_document(name, robot)
     path = generic_path(name)
     doc = validate(ErrorProfileFile, raw, path, "error profile")
@@ -92,4 +92,4 @@ def generic_profile(name: str, robot):
     if key not in _told:
         _told.add(key)
         log.warning(f"{robot.name} has no '{name}' error profile of its own: {how}")
-    return ErrorProfile(doc.name, path, doc)
+    return doc, path

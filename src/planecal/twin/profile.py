@@ -23,6 +23,7 @@ from planecal.formats.error_profile import N_JOINTS, ErrorProfileFile
 from planecal.model.kinematics import Kinematics, frame_error, parallel_pairs
 from planecal.model.robot import Robot
 from planecal.model.scene import Scene
+from planecal.twin.generic_profile import generic_document, generic_file
 from planecal.twin.options import TwinOptions
 from planecal.twin.truth import Tolerances, Truth, draw_truth
 
@@ -84,8 +85,8 @@ def load_profile(name_or_path: str | Path, robot: Robot) -> ErrorProfile:
     robot without a named profile of its own gets the generic one, scaled to it
     (``planecal.twin.generic_profile``)."""
     if str(name_or_path) in PROFILES and not _own(str(name_or_path), robot):
-        from planecal.twin.generic_profile import generic_profile
-        return generic_profile(str(name_or_path), robot)
+        doc, p = generic_file(str(name_or_path), robot)
+        return ErrorProfile(doc.name, p, doc)
     p = profile_path(name_or_path, robot)
     doc = validate(ErrorProfileFile, read_json(p, "error profile"), p, "error profile")
     return ErrorProfile(doc.name, p, doc)
@@ -219,5 +220,4 @@ def profile_source(name: str, robot: Robot) -> str:
     """Where the robot's profile ``name`` comes from (its own file, or the generic one)."""
     if _own(name, robot):
         return str(profile_path(name, robot))
-    from planecal.twin.generic_profile import generic_document
     return generic_document(name, robot)[1]
