@@ -13,7 +13,7 @@ __version__ = "0.1.0"
 # The notebook API (planecal.api), loaded on first use so that `import planecal` stays
 # cheap (no numpy, scipy or MuJoCo until a call needs them).
 __all__ = ["load_samples", "rehearse", "calibrate", "validate", "SampleSet", "Rehearsal",
-           "Calibration", "Validation", "__version__"]
+           "CalibratedCell", "Validation", "__version__"]
 _API = frozenset(__all__) - {"__version__"}
 
 

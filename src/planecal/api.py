@@ -2,7 +2,7 @@
 
     import planecal
     run = planecal.rehearse(samples=60, seed=1)          # a short run on the twin
-    cal = planecal.calibrate(run.samples)                # -> Calibration; print(cal)
+    cal = planecal.calibrate(run.samples)                # -> CalibratedCell; print(cal)
     val = planecal.validate(cal, run)                    # ISO 9283 AP/RP, gauge block
     s = planecal.load_samples("RUN.tsv")                 # a sample file (mm on disk, m here)
 
@@ -138,8 +138,10 @@ def rehearse(scene=None, samples: int = 30, seed: int = 0, *, truth_seed: int | 
 # ----- calibration ---------------------------------------------------------------------------
 
 @dataclass(repr=False)
-class Calibration:
-    """An identified cell (``planecal.estimation.calibrate``): ``params`` (``CellParams``,
+class CalibratedCell:
+    """An identified cell, as the notebook sees it: the one calibration's result
+    (``planecal.estimation.calibrate.Calibration``, in ``calibration``) with its scene and
+    its result document, and the numbers a user asks first: ``params`` (``CellParams``,
     SI), per parameter ``values``, ``std`` (NaN where fixed, excluded or not identifiable)
     and ``units``; model error RMS before and after [m] (predicted - measured);
     ``calibration`` is the full ``estimation.calibrate.Calibration`` (result, base set,
@@ -173,7 +175,7 @@ class Calibration:
 
 def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
               compliance: bool = False, free=None, weighted: bool = False,
-              max_iter: int = 30) -> Calibration:
+              max_iter: int = 30) -> CalibratedCell:
     """Identify the cell from ``samples`` (a ``SampleSet``, a ``Rehearsal`` or a sample
     file path) with the one calibration (``planecal.estimation.calibrate``, as ``planecal
     calibrate``), starting from ``initial`` (``CellParams``, a parameter file, or None: the
@@ -215,7 +217,7 @@ def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
     res = cal.result
     layout = res.layout
     x, sd = res.params.to_vector(layout), res.std
-    return Calibration(
+    return CalibratedCell(
         params=res.params, values=dict(zip(layout.names, map(float, x))),
         std=dict(zip(layout.names, map(float, sd))), units=dict(zip(layout.names, layout.units)),
         rms_before_m=res.rms_mm(True) * 1e-3, rms_after_m=res.rms_mm() * 1e-3,
@@ -243,7 +245,7 @@ class Validation:
         return "Validation on the twin, in the rehearsal's world\n" + format_validation(self.details)
 
 
-def validate(calibration: Calibration, rehearsal: Rehearsal, *, cycles: int = 30,
+def validate(calibration: CalibratedCell, rehearsal: Rehearsal, *, cycles: int = 30,
              gauge_repeats: int = 10, seed: int = 0) -> Validation:
     """Validate ``calibration`` on the twin of the world ``rehearsal`` was made in (its
     truth, the robot's true geometry, the twin's error sources: as ``planecal validate
@@ -253,8 +255,8 @@ def validate(calibration: Calibration, rehearsal: Rehearsal, *, cycles: int = 30
     from planecal.studies.validation import ValidationSettings
     from planecal.studies.validation import validate as run_validation
 
-    if not isinstance(calibration, Calibration) or not isinstance(rehearsal, Rehearsal):
-        raise InputError("validate: needs a Calibration (planecal.calibrate) and the "
+    if not isinstance(calibration, CalibratedCell) or not isinstance(rehearsal, Rehearsal):
+        raise InputError("validate: needs a CalibratedCell (planecal.calibrate) and the "
                          "Rehearsal (planecal.rehearse) it was made from")
     st = ValidationSettings(cycles=int(cycles), gauge_repeats=int(gauge_repeats), seed=int(seed))
     st.check()
