@@ -1,11 +1,11 @@
 """The calibration's options, the same on every command that calibrates (calibrate, demo,
 bootstrap, montecarlo, validate, plan, layouts; sweep's spec has the same keys):
 
-    --level offsets|full|1|2   what is calibrated (planecal.model.levels)
-    --compliance               also J2 and J3's joint compliance
+    --level offsets|full|nonkinematic|1|2|3   what is calibrated (planecal.model.levels)
+    --compliance               also J2 and J3's joint compliance (level 3 has it always)
     --free NAMES               the candidates (default: the level's)
-    --geometry-prior MM,MRAD   --level full: pull the joint geometry towards robot.json's
-    --free-scale               --level full: also free the arm's scale
+    --geometry-prior MM,MRAD   levels 2, 3: pull the joint geometry towards robot.json's
+    --free-scale               levels 2, 3: also free the arm's scale
     --weighted                 weighted least squares with the noise model
 
 ``add_fit_arguments`` adds the solver's own options (calibrate and bootstrap).
@@ -24,18 +24,22 @@ def add_calibration_arguments(p, weighted_help: str | None = None) -> None:
     g.add_argument("--level", choices=list(LEVELS) + list(ALIASES), default="offsets",
                    help="offsets (the seed's level 1, default): joint offsets, sensor, planes; "
                         "full (level 2): the whole kinematic model, its identifiable base set "
-                        "chosen from the samples")
+                        "chosen from the samples; nonkinematic (level 3): the whole model "
+                        "with compliance, each joint's gear harmonics and backlash (by the "
+                        "samples' recorded approach direction, or the gravity torque)")
     g.add_argument("--compliance", action="store_true",
                    help="also fit the joint compliance of J2 and J3 (gravity torque from "
-                        "robot.json's link masses; seed 5.4)")
+                        "robot.json's link masses; seed 5.4; part of level 3)")
     g.add_argument("--free", default=None, metavar="NAMES",
                    help="comma-separated parameters to fit (default: all but delta1, delta6 "
                         "and the arm's scale; at level full the candidates of the base set)")
     g.add_argument("--geometry-prior", metavar="MM,MRAD", default=None,
-                   help="with --level full: pull the joint geometry towards robot.json's with "
+                   help="with --level full or nonkinematic: pull the joint geometry towards "
+                        "robot.json's with "
                         "these stds (a maximum a posteriori fit; e.g. 0.5,0.5)")
     g.add_argument("--free-scale", action="store_true",
-                   help="with --level full: also free the arm's scale (its two longest link "
+                   help="with --level full or nonkinematic: also free the arm's scale (its "
+                        "two longest link "
                         "lengths), which a laser on planes reads only through its own gain")
     g.add_argument("--weighted", action="store_true",
                    help=weighted_help or "weighted least squares with the robot's "

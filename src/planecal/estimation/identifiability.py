@@ -38,10 +38,12 @@ Which member of a degenerate family stays is a choice, not a physical claim: the
 rotation about the base z axis, delta1 and the base frame's rotation, say, are one
 direction. The choice made here, in tiers (``TIERS``), each pivoted on what the tiers before
 leave unexplained: the cell's frames first (the planes and the sensor pose), then the joint
-offsets, then the rest of the model. So the planes carry delta1 and the base frame (which
-turn or move every plane alike) and the sensor pose carries delta6 (its roll): a joint
-offset in the base set is one a plane calibration can see, and a level-2 parameter enters
-only for what level 1 cannot express.
+offsets, then the kinematic model (geometry, base frame, compliance), then level 3's gear
+harmonics and backlash. So the planes carry delta1 and the base frame (which turn or move
+every plane alike) and the sensor pose carries delta6 (its roll): a joint offset in the
+base set is one a plane calibration can see, a level-2 parameter enters only for what level
+1 cannot express, and a gear harmonic (J1-J3's once-per-revolution term trades with the
+geometry) only for what the kinematic model cannot.
 """
 from __future__ import annotations
 
@@ -298,7 +300,8 @@ class BaseSet:
         return layout.mask(self.base)
 
 
-TIERS = (("plane", "sensor_origin", "sensor_angles"), ("joint_offsets",))
+TIERS = (("plane", "sensor_origin", "sensor_angles"), ("joint_offsets",),
+         ("joint_geometry", "base_frame", "compliance"))
 
 
 def _pivoted(A: np.ndarray):

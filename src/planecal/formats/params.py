@@ -77,6 +77,40 @@ class KinematicCorrections(Model):
     compliance_rad_per_nm: Compliances = [0.0] * 6
 
 
+GearAmplitude = Ranged(-0.01, 0.01, "rad", "gear harmonic amplitude")
+JointNumber = Ranged(1, 6, "", "joint (1-based)", base=Int)
+Cycles = Ranged(1, 1000, "", "cycles", base=Int)
+Backlash = Ranged(-0.01, 0.01, "rad", "backlash")
+LaserAmplitude = Ranged(-0.001, 0.001, "m", "laser linearity amplitude")
+RangeEnd = Ranged(0.0, 10.0, "m", "measuring range end")
+
+
+class GearHarmonic(Model):
+    """theta_j += sin_rad sin(f q_j) + cos_rad cos(f q_j), f = cycles_per_rev."""
+    joint: JointNumber
+    cycles_per_rev: Cycles
+    sin_rad: GearAmplitude
+    cos_rad: GearAmplitude
+
+
+class LaserHarmonic(Model):
+    """reading += sin_m sin(2 pi k x) + cos_m cos(2 pi k x), x the reading's place in
+    ``laser_range_m``, k = cycles_per_range."""
+    cycles_per_range: Cycles
+    sin_m: LaserAmplitude
+    cos_m: LaserAmplitude
+
+
+class NonKinematic(Model):
+    """Level 3 (seed 5.4, ``model.measurement``): each joint's gear harmonics and backlash
+    (full width; theta_j -= b_j/2 side_j), and the laser's linearity over its measuring
+    range."""
+    gear: Annotated[list[GearHarmonic], Field(max_length=48)] = []
+    backlash_rad: Vector(Backlash, 6, "values, one per joint") = [0.0] * 6
+    laser_linearity: Annotated[list[LaserHarmonic], Field(max_length=8)] = []
+    laser_range_m: Vector(RangeEnd, 2, "ends, near and far") = [0.065, 0.095]
+
+
 class ParamsFile(Record):
     """Unknown top-level keys are allowed: every result file is a parameter file."""
     format: ParamsTag = None
@@ -85,6 +119,7 @@ class ParamsFile(Record):
                       Field(max_length=MAX_PLANES, json_schema_extra={"minItems": 1})]
     sensor: SensorParams
     kinematics: KinematicCorrections | None = None
+    nonkinematic: NonKinematic | None = None
 
 
 # ----- result files --------------------------------------------------------------------------
@@ -115,11 +150,31 @@ class KinematicsStd(Model):
     compliance_rad_per_nm: Std6
 
 
+class GearStd(Model):
+    joint: JointNumber
+    cycles_per_rev: Cycles
+    sin_rad: Std
+    cos_rad: Std
+
+
+class LaserStd(Model):
+    cycles_per_range: Cycles
+    sin_m: Std
+    cos_m: Std
+
+
+class NonKinematicStd(Model):
+    gear: list[GearStd] = []
+    backlash_rad: Std6 = [None] * 6
+    laser_linearity: list[LaserStd] = []
+
+
 class StdBlock(Model):
     joint_offsets_rad: Std6
     planes: list[PlaneStd]
     sensor: SensorStd
     kinematics: KinematicsStd | None = None
+    nonkinematic: NonKinematicStd | None = None
 
 
 class InputFile(Model):

@@ -208,6 +208,32 @@ class Chain(Model):
     flange: FixedFrame = FixedFrame()
 
 
+Order = Ranged(1, 1000, "cycles per revolution", "gear harmonic order", base=Int)
+Preload = Ranged(0.0, 1e6, "N m", "backlash preload torque")
+DEFAULT_HARMONICS = (1, 2)  # cycles per output revolution, a robot that gives none
+
+
+class Transmission(Model):
+    """What level 3 (``--level nonkinematic``) models of each joint's reducer:
+    ``harmonics_cycles_per_rev``, the periods of its transmission error per output
+    revolution (an RV reducer's 1 and its pin count, a harmonic drive's 1 and 2), and
+    ``backlash_preload_nm``: the gravity torque above which the joint rests on the flank
+    gravity pushes it to, whichever way it came (null: never; the flank is the one its last
+    motion left it on, a sample file's direction columns)."""
+    harmonics_cycles_per_rev: Vector(Annotated[list[Order], Field(max_length=8)], N_JOINTS,
+                                     "lists, one per joint")
+    backlash_preload_nm: Vector(Preload | None, N_JOINTS, "torques, one per joint") = \
+        [None] * N_JOINTS
+    source: Str | None = None
+
+    @model_validator(mode="after")
+    def distinct(self):
+        for j, fs in enumerate(self.harmonics_cycles_per_rev):
+            if len(set(fs)) != len(fs):
+                raise problem(f"{fs}: an order given twice", "harmonics_cycles_per_rev", j)
+        return self
+
+
 class RobotFile(Model):
     """``models/<robot>/robot.json``."""
     format: RobotTag = None
@@ -225,6 +251,7 @@ class RobotFile(Model):
     controller: Controller
     masses: list[PointMass] = []
     masses_source: Str | None = None
+    transmission: Transmission | None = None  # None: DEFAULT_HARMONICS, no preload
 
     @model_validator(mode="after")
     def physical(self):

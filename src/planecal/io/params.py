@@ -36,6 +36,27 @@ def params_to_dict(p: CellParams) -> dict:
     }
     if p.has_corrections:
         out["kinematics"] = kinematics_to_dict(p.geometry, p.base, p.compliance)
+    if p.gear.any() or p.backlash.any() or p.laser.any():
+        out["nonkinematic"] = nonkinematic_to_dict(p)
+    return out
+
+
+def _num(e):
+    return None if e is None or not np.isfinite(e) else float(e)
+
+
+def nonkinematic_to_dict(p: CellParams, std: CellParams | None = None) -> dict:
+    """The ``nonkinematic`` object (level 3) of ``p``'s gear harmonics, backlash and laser
+    linearity; with ``std`` (the same fields holding standard deviations, NaN where none)
+    the std block's, without the measuring range."""
+    v = p if std is None else std
+    out = {"gear": [{"joint": j + 1, "cycles_per_rev": f, "sin_rad": _num(a[0]),
+                     "cos_rad": _num(a[1])} for (j, f), a in zip(p.gear_terms, v.gear)],
+           "backlash_rad": [_num(b) for b in v.backlash],
+           "laser_linearity": [{"cycles_per_range": k, "sin_m": _num(a[0]), "cos_m": _num(a[1])}
+                               for k, a in zip(p.laser_orders, v.laser)]}
+    if std is None:
+        out["laser_range_m"] = [float(e) for e in p.laser_range_m]
     return out
 
 
@@ -59,6 +80,14 @@ def params_from_dict(d, path: str = "<params>") -> CellParams:
     extra = {} if k is None else {
         "geometry": np.array([k.alpha_rad, k.a_m, k.beta_rad, k.d_m], float).T,
         "base": k.base, "compliance": k.compliance_rad_per_nm}
+    nk = pf.nonkinematic
+    if nk is not None:
+        extra.update(gear_terms=tuple((g.joint - 1, g.cycles_per_rev) for g in nk.gear),
+                     gear=np.array([[g.sin_rad, g.cos_rad] for g in nk.gear], float),
+                     backlash=nk.backlash_rad,
+                     laser_orders=tuple(h.cycles_per_range for h in nk.laser_linearity),
+                     laser=np.array([[h.sin_m, h.cos_m] for h in nk.laser_linearity], float),
+                     laser_range_m=tuple(nk.laser_range_m))
     return CellParams(pf.joint_offsets_rad, s.origin_m, s.phi_y_rad, s.phi_z_rad,
                       [p.n_tilde for p in pf.planes], **extra)
 

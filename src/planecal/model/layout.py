@@ -23,6 +23,7 @@ This module sits low in the data path: it knows names and positions, not the mod
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Iterable, Sequence
@@ -41,6 +42,9 @@ class Param:
     display_unit: str
     practical_std: float  # a std above this: not identifiable in practice (SI unit)
     free_by_default: bool = True
+    # a prior's std (SI unit) about the initial value: what the robot's class makes likely
+    # (level 3's terms: the fit is a maximum a posteriori one); None: none
+    prior_std: float | None = None
 
 
 @dataclass(frozen=True)
@@ -331,22 +335,118 @@ def level2_layout(n_planes: int, parallel: tuple[int, ...] = (3,),
     return ParamLayout(groups)
 
 
+# ----- level 3: non-kinematic errors (seed 5.4) ---------------------------------------------
+
+# a gear harmonic's amplitude [rad]: a reducer's transmission error is below 1 arcmin (291
+# urad) peak to peak, so an amplitude is about 1e-4 rad (the prior's std); a std above 1 mrad
+# is no harmonic the data has seen. Backlash alike (lost motion below 1 arcmin).
+GEAR = dict(unit="rad", display_scale=1e6, display_unit="urad", practical_std=1e-3,
+            prior_std=1e-4)
+BACKLASH = dict(unit="rad", display_scale=1e6, display_unit="urad", practical_std=1e-3,
+                prior_std=1e-4)
+_GEAR_NAME = re.compile(r"h(\d+)_(\d+)([sc])")
+
+
+def gear_name(joint: int, order: int, trig: str) -> str:
+    """The name of joint ``joint``'s (1-based) harmonic of ``order`` cycles per output
+    revolution: ``h3_40s`` is J3's sin(40 q3) amplitude, ``h3_40c`` its cos(40 q3)'s."""
+    return f"h{joint}_{order}{trig}"
+
+
+def gear_term(name: str) -> tuple[int, int, str]:
+    """(joint 1-based, order, "s" or "c") of a gear harmonic's name (``gear_name``)."""
+    m = _GEAR_NAME.fullmatch(name)
+    if m is None:
+        raise KeyError(f"{name!r} is not a gear harmonic's name")
+    return int(m.group(1)), int(m.group(2)), m.group(3)
+
+
+def gear_group(orders: tuple[tuple[int, ...], ...]) -> Group:
+    """The gear transmission error of every joint (level 3): theta_j += sum_f h{j}_{f}s
+    sin(f q_j) + h{j}_{f}c cos(f q_j), q_j the joint angle from the encoder model, f the
+    reducer's periods per output revolution (``orders[j - 1]``, robot.json's
+    ``transmission``)."""
+    name = "gear"
+    return Group(name, "gear", 0, tuple(
+        Param(gear_name(j, f, t), group=name, **GEAR)
+        for j, fs in enumerate(orders, 1) for f in fs for t in "sc"))
+
+
+def backlash_group(n_joints: int = 6) -> Group:
+    """b1..b6 [rad], each joint's lost motion (full width): theta_j -= b_j / 2 * side_j,
+    side_j the flank the joint rests on (+1, -1; 0 unknown: the middle), from the recorded
+    approach direction or the gravity torque (``planecal.model.measurement.backlash_sides``)."""
+    name = "backlash"
+    return Group(name, "backlash", 0, tuple(
+        Param(f"b{j}", group=name, **BACKLASH) for j in range(1, n_joints + 1)))
+
+
+# the laser's linearity: the ZS-LD80's is +-0.1 % of its 30 mm full scale (30 um, the
+# prior's std)
+LASER = dict(unit="m", display_scale=1e6, display_unit="um", practical_std=1e-4,
+             prior_std=3e-5)
+LASER_ORDERS = (1, 2)  # cycles over the laser's measuring range
+_LASER_NAME = re.compile(r"lin(\d+)([sc])")
+
+
+def laser_name(order: int, trig: str) -> str:
+    """``lin1s``: the laser's linearity error's sin(2 pi x) amplitude, x the reading's place
+    in the sensor's measuring range (0 at its near end, 1 at its far end)."""
+    return f"lin{order}{trig}"
+
+
+def laser_term(name: str) -> tuple[int, str]:
+    """(order, "s" or "c") of a laser linearity parameter's name (``laser_name``)."""
+    m = _LASER_NAME.fullmatch(name)
+    if m is None:
+        raise KeyError(f"{name!r} is not a laser linearity parameter's name")
+    return int(m.group(1)), m.group(2)
+
+
+def laser_group(orders: tuple[int, ...] = LASER_ORDERS) -> Group:
+    """The laser's linearity error (level 3): a reading is d + sum_k lin{k}s sin(2 pi k x)
+    + lin{k}c cos(2 pi k x), x = (d - near) / (far - near) over the sensor's measuring
+    range (the scene's ``sensor.range_mm``; the ZS-LD80: +-0.1 % of its 30 mm)."""
+    name = "laser"
+    return Group(name, "laser", 0, tuple(
+        Param(laser_name(k, t), group=name, **LASER) for k in orders for t in "sc"))
+
+
+@lru_cache(maxsize=None)
+def level3_layout(n_planes: int, parallel: tuple[int, ...],
+                  orders: tuple[tuple[int, ...], ...]) -> ParamLayout:
+    """Non-kinematic calibration (seed 5.4, level 3): the whole model with compliance
+    (``level2_layout``), then every joint's gear harmonics and backlash, and the laser's
+    linearity."""
+    groups = list(level2_layout(n_planes, parallel, True).groups)
+    return ParamLayout(groups + [gear_group(orders), backlash_group(len(orders)),
+                                 laser_group()])
+
+
 _KIND_OF_NAME = (  # a parameter's name -> its quantity (the groups above name them so)
     (r"delta\d+|phi_[yz]|alpha\d+|beta\d+|base_r[xyz]", RAD),
     (r"o_[xyz]|a\d+|d\d+|base_[xyz]", METRE),
     (r"n\d+_[xyz]", PER_METRE),
     (r"c\d+", COMPLIANCE),
+    (r"h\d+_\d+[sc]", GEAR),
+    (r"b\d+", BACKLASH),
+    (r"lin\d+[sc]", LASER),
 )
+
+
+def layout_prior(layout: ParamLayout) -> tuple:
+    """((name, std), ...): the prior of every parameter the layout gives one
+    (``Param.prior_std``: level 3's gear harmonics, backlash and laser linearity)."""
+    return tuple((p.name, p.prior_std) for p in layout.params if p.prior_std is not None)
 
 
 def quantity_of(name: str) -> dict:
     """The unit, display scale and unit and practical std of a parameter named as the
     groups above name them (for files that hold names only: study results); KeyError for
     a name no group gives."""
-    import re
     for pattern, q in _KIND_OF_NAME:
         if re.fullmatch(pattern, name):
-            return dict(q)
+            return {k: v for k, v in q.items() if k != "prior_std"}
     raise KeyError(f"no parameter group names a parameter {name!r}")
 
 

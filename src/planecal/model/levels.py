@@ -7,8 +7,12 @@ has and which are free by default), never a branch in the code that fits or uses
                        (where axes are parallel), d; the base frame; the sensor; the planes
     compliance         J2 and J3's joint compliance (gravity torque from robot.json's link
                        masses; seed 5.4), at either level
+    nonkinematic       (level 3, seed 5.4) the whole model with compliance, each joint's
+                       gear harmonics (robot.json's ``transmission`` orders) and backlash
+                       (its flank from the recorded approach direction or the gravity
+                       torque: ``measurement.backlash_sides``)
 
-The seed's names "1" and "2" are accepted for offsets and full. The arm's scale (its two
+The seed's names "1", "2" and "3" are accepted for offsets, full and nonkinematic. The arm's scale (its two
 longest link lengths, ``scale_lengths``) is in the whole model's layout but is kept fixed
 unless a length reference fixes the scale (a plane and a laser see it only through the
 laser's gain).
@@ -17,16 +21,33 @@ from __future__ import annotations
 
 from planecal.base.errors import InputError
 from planecal.model.kinematics import parallel_pairs
-from planecal.model.layout import ParamLayout, compliance_group, level1_layout, level2_layout
+from planecal.model.layout import (ParamLayout, compliance_group, level1_layout,
+                                   level2_layout, level3_layout)
 from planecal.model.robot import Robot
 
-LEVELS = ("offsets", "full")
-ALIASES = {"1": "offsets", "2": "full"}
+LEVELS = ("offsets", "full", "nonkinematic")
+ALIASES = {"1": "offsets", "2": "full", "3": "nonkinematic"}
 PLANE_BLIND_OFFSETS = ("delta1", "delta6")  # turns of the plates / the sensor's roll
 
 
+# level 3's terms trade with the joint geometry (J1-J3's once-per-revolution harmonics
+# above all): its fit pulls the geometry towards robot.json's with a machining and assembly
+# tolerance class (0.2 mm, 0.2 mrad; --geometry-prior changes it)
+DEFAULT_GEOMETRY_PRIOR = {"nonkinematic": (2e-4, 2e-4)}
+
+
+def whole_model(level: str) -> bool:
+    """Whether a level frees the kinematic model beyond the joint offsets (levels 2, 3)."""
+    return level_name(level) != "offsets"
+
+
+def with_compliance(level: str, compliance: bool) -> bool:
+    """Whether a level's model has the joint compliance: asked for, or level 3's."""
+    return compliance or level_name(level) == "nonkinematic"
+
+
 def level_name(level: str) -> str:
-    """"offsets" or "full" from a level or the seed's number; InputError otherwise."""
+    """A level's name (``LEVELS``) from a level or the seed's number; InputError otherwise."""
     name = ALIASES.get(str(level), str(level))
     if name not in LEVELS:
         raise InputError(f"unknown level {level!r}: one of {', '.join(LEVELS)} "
@@ -36,12 +57,15 @@ def level_name(level: str) -> str:
 
 def layout_for(robot: Robot, n_planes: int, level: str = "offsets",
                compliance: bool = False) -> ParamLayout:
-    """The parameter layout of a level (module docstring)."""
-    if level_name(level) == "offsets":
+    """The parameter layout of a level (module docstring); level 3 always has compliance."""
+    name = level_name(level)
+    if name == "offsets":
         base = level1_layout(n_planes)
         return base if not compliance else ParamLayout(list(base.groups) + [compliance_group()])
     parallel = tuple(i + 1 for i in parallel_pairs(robot.kinematics))
-    return level2_layout(n_planes, parallel, compliance)
+    if name == "full":
+        return level2_layout(n_planes, parallel, compliance)
+    return level3_layout(n_planes, parallel, robot.gear_orders)
 
 
 def scale_lengths(robot: Robot, k: int = 2) -> list[str]:

@@ -54,6 +54,12 @@ class Robot:
     joint_names: tuple[str, ...] = ()  # robot.json's (an imported robot's URDF names)
     payload_kg: float | None = None  # rated payload (the generic error profile scales by it)
     controller_kind: str | None = None  # "fd11", "ur" or None: which exports apply
+    # level 3 (robot.json's ``transmission``): each joint's gear harmonic orders (cycles
+    # per output revolution) and the gravity torque [N m] above which its backlash rests
+    # on gravity's flank (inf: never, the flank of its last motion)
+    gear_orders: tuple[tuple[int, ...], ...] = ((1, 2),) * 6
+    backlash_preload_nm: tuple[float, ...] = (float("inf"),) * 6
+    transmission_given: bool = False  # False: the defaults above (the robot gives none)
 
     def __post_init__(self):
         if self.kinematics is None:
@@ -123,7 +129,22 @@ def load_robot(name_or_path: str | Path = DEFAULT_ROBOT, relative_to: Path | Non
         joint_names=tuple(rf.joint_names or ()),
         payload_kg=rf.payload_kg,
         controller_kind=ctrl.kind,
+        **transmission(rf),
     )
+
+
+def transmission(rf: RobotFile) -> dict:
+    """The Robot's level-3 fields from robot.json's ``transmission`` (or the defaults)."""
+    from planecal.formats.robot import DEFAULT_HARMONICS
+    t = rf.transmission
+    if t is None:
+        return dict(gear_orders=(DEFAULT_HARMONICS,) * 6,
+                    backlash_preload_nm=(float("inf"),) * 6, transmission_given=False)
+    return dict(gear_orders=tuple(tuple(int(f) for f in fs)
+                                  for fs in t.harmonics_cycles_per_rev),
+                backlash_preload_nm=tuple(float("inf") if v is None else float(v)
+                                          for v in t.backlash_preload_nm),
+                transmission_given=True)
 
 
 def description_digest(raw) -> str:

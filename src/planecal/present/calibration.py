@@ -17,7 +17,7 @@ import numpy as np
 from planecal.base.errors import InputError
 from planecal.estimation.calibrate import Calibration, encoder_offsets
 from planecal.estimation.identifiability import Excluded
-from planecal.io.params import kinematics_to_dict, params_to_dict
+from planecal.io.params import kinematics_to_dict, nonkinematic_to_dict, params_to_dict
 
 MODEL_ERROR = "predicted - measured"
 
@@ -57,6 +57,9 @@ def _std_blocks(res) -> dict:
         comp = (std[layout.slice("compliance")] if layout.groups_of("compliance")
                 else np.full(6, np.nan))
         out["kinematics"] = kinematics_to_dict(g, base, comp)
+    if layout.groups_of("gear") or layout.groups_of("backlash") or layout.groups_of("laser"):
+        sd = res.params.with_vector(std, layout)  # the same fields, holding stds
+        out["nonkinematic"] = nonkinematic_to_dict(res.params, sd)
     return out
 
 
@@ -109,6 +112,8 @@ def document(cal: Calibration, robot=None) -> dict:
     if "kinematics" in out["std"] and "kinematics" not in out:  # still a whole-model result
         out["kinematics"] = kinematics_to_dict(res.params.geometry, res.params.base,
                                                res.params.compliance)
+    if "nonkinematic" in out["std"] and "nonkinematic" not in out:  # still level 3's
+        out["nonkinematic"] = nonkinematic_to_dict(res.params)
     out["parameters"] = _parameters(cal)
     out["model_error"] = MODEL_ERROR
     out["residual_rms_mm"] = res.rms_mm()

@@ -247,11 +247,16 @@ def frame_error_of(T: np.ndarray) -> np.ndarray:
     return np.array([*T[:3, 3], rx, ry, rz])
 
 
-def true_params(robot, world: Truth, options: TwinOptions):
+def true_params(robot, world: Truth, options: TwinOptions, fold_flange: bool = False):
     """A world's truth in the calibration's parameters (``CellParams``): the cell's joint
     offsets, sensor and planes, the true geometry as corrections of robot.json's modified
-    DH, the true base frame and the joint compliance 1/k. The true flange frame has no
-    parameter of its own (a plane calibration puts it in the sensor pose)."""
+    DH, the true base frame, the joint compliance 1/k, and level 3's terms: each gear
+    harmonic A sin(f q + phi) as its sin and cos amplitudes (A cos phi, A sin phi), each
+    joint's backlash and the laser's linearity (``twin.laser``: 0.7 and 0.3 of its
+    amplitude at one and two cycles over the measuring range). The true flange frame has no parameter of its own (a plane
+    calibration puts it in the sensor pose): ``fold_flange`` does the same, the sensor's
+    origin and beam expressed in robot.json's flange frame, so the parameters give the
+    twin's beam exactly (its flange stays robot.json's)."""
     p = world.params.copy()
     kin = world.kinematics
     if kin is not None:
@@ -259,8 +264,33 @@ def true_params(robot, world: Truth, options: TwinOptions):
         p.geometry = np.stack([kin.alpha - nom.alpha, kin.a - nom.a, kin.beta - nom.beta,
                                kin.d - nom.d], -1)
         p.base = frame_error_of(kin.base @ np.linalg.inv(nom.base))
+        if fold_flange:
+            _fold_flange(p, np.linalg.inv(nom.flange) @ kin.flange)
     if options.stiffness_nm_per_rad is not None:
         k = list(options.stiffness_nm_per_rad)
         k = [None, *k, None, None, None] if len(k) == 2 else k  # J2, J3 only
         p.compliance = np.array([0.0 if v is None or v == 0 else 1.0 / v for v in k], float)
+    amp: dict = {}
+    phases = world.gear_phases or (0.0,) * len(options.gear)
+    for (joint, a, f), phi in zip(options.gear, phases):
+        key = (int(joint) - 1, int(f))
+        amp[key] = amp.get(key, np.zeros(2)) + a * np.array([np.cos(phi), np.sin(phi)])
+    p.gear_terms, p.gear = tuple(amp), np.array(list(amp.values()), float).reshape(-1, 2)
+    if options.backlash_rad is not None:
+        p.backlash = np.asarray(options.backlash_rad, float)
+    if options.laser_linearity_mm > 0:  # a sin(2 pi k x + phi): (a cos phi, a sin phi) [m]
+        a = options.laser_linearity_mm * 1e-3 * np.array([0.7, 0.3])
+        ph = np.asarray(world.laser_phases, float)
+        p.laser_orders = (1, 2)
+        p.laser = np.stack([a * np.cos(ph), a * np.sin(ph)], -1)
     return p
+
+
+def _fold_flange(p, T: np.ndarray) -> None:
+    """The sensor of ``p`` on a flange T (4x4, in robot.json's flange frame) as a sensor on
+    robot.json's flange."""
+    from planecal.model.measurement import beam_direction
+    z = T[:3, :3] @ beam_direction(p.phi_y, p.phi_z)
+    p.sensor_origin = T[:3, :3] @ p.sensor_origin + T[:3, 3]
+    p.phi_y = float(np.arccos(np.clip(z[2], -1.0, 1.0)))
+    p.phi_z = float(np.arctan2(z[1], z[0]))
