@@ -27,15 +27,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from planecal.base.errors import InputError
-from planecal.estimation.fit import FitOptions, Problem, Result, solve
+from planecal.estimation.fit import FitOptions, FitPrior, Problem, Result, reference_rows, solve
 from planecal.estimation.identifiability import DEFAULT_TOL, BaseSet, Excluded, select_base
 from planecal.estimation.noise import row_weights
 from planecal.model.cell_params import CellParams
-from planecal.model.encoder import counts_to_joints
 from planecal.model.layout import ParamLayout
-from planecal.model.levels import (LEVELS, PLANE_BLIND_OFFSETS, layout_for, level_name,
-                                   pinned_scale)
-from planecal.model.measurement import Joints, predict_joints_with_jacobian
+from planecal.model.layout import layout_prior
+from planecal.model.levels import (DEFAULT_GEOMETRY_PRIOR, LEVELS, PLANE_BLIND_OFFSETS,
+                                   layout_for, level_name, pinned_scale, whole_model,
+                                   with_compliance)
+from planecal.model.measurement import Joints, joints_of_counts, predict_joints_with_jacobian
 from planecal.model.robot import Robot
 
 
@@ -55,24 +56,29 @@ class CalibrationSettings:
 
     def __post_init__(self):
         object.__setattr__(self, "level", level_name(self.level))
+        object.__setattr__(self, "compliance", with_compliance(self.level, self.compliance))
+        if self.geometry_prior is None:
+            object.__setattr__(self, "geometry_prior", DEFAULT_GEOMETRY_PRIOR.get(self.level))
         if isinstance(self.free, list):
             object.__setattr__(self, "free", tuple(self.free))
 
     def check(self) -> None:
         """InputError naming the option for a combination that cannot be calibrated."""
         if self.geometry_prior is not None:
-            if self.level != "full":
-                raise InputError("--geometry-prior needs --level full")
+            if not whole_model(self.level):
+                raise InputError("--geometry-prior needs --level full or nonkinematic")
             if not all(np.isfinite(v) and v > 0 for v in self.geometry_prior):
                 raise InputError(f"--geometry-prior: both stds must be > 0, got "
                                  f"{self.geometry_prior}")
-        if self.free_scale and self.level != "full":
-            raise InputError("--free-scale needs --level full")
+        if self.free_scale and not whole_model(self.level):
+            raise InputError("--free-scale needs --level full or nonkinematic")
 
     @property
     def label(self) -> str:
-        """'offsets', 'full + compliance', ...: what the result says it is."""
-        return self.level + (" + compliance" if self.compliance else "")
+        """'offsets', 'full + compliance', 'nonkinematic' (compliance is part of level 3):
+        what the result says it is."""
+        return self.level + (" + compliance" if self.compliance and
+                             not with_compliance(self.level, False) else "")
 
     def to_dict(self) -> dict:
         return {"level": self.level, "compliance": self.compliance,
@@ -145,31 +151,42 @@ def encoder_offsets(layout: ParamLayout, free: np.ndarray, params: CellParams,
     return (out, [n for n in names if n in fitted], [n for n in names if n not in fitted])
 
 
-def candidates(robot: Robot, layout: ParamLayout, settings: CalibrationSettings):
+def candidates(robot: Robot, layout: ParamLayout, settings: CalibrationSettings,
+               references: tuple = ()):
     """The parameters a calibration may fit (a mask over ``layout``) and the scale lengths
     it keeps (module docstring): the settings' ``free`` or the layout's default, without
-    the arm's scale unless ``free`` names it or ``free_scale``."""
+    the arm's scale unless ``free`` names it, ``free_scale``, or a known length
+    (``references``) fixes the scale."""
     mask = layout.free_mask(settings.free)
-    pinned = ([] if (settings.free is not None or settings.free_scale)
+    pinned = ([] if (settings.free is not None or settings.free_scale or references)
               else pinned_scale(robot, layout))
     return mask & ~layout.mask(pinned), pinned
 
 
 def base_set(robot: Robot, qe, initial: CellParams, plate, settings: CalibrationSettings,
-             options: FitOptions | None = None,
-             joints: Joints | None = None) -> tuple[ParamLayout, BaseSet]:
+             options: FitOptions | None = None, joints: Joints | None = None,
+             direction=None, references: tuple = ()) -> tuple[ParamLayout, BaseSet]:
     """The layout of the settings' level and the base set of the parameters these poses
-    (counts ``qe``, 0-based ``plate``) can identify, at ``initial`` (module docstring):
-    what ``calibrate`` fits, and what ``planecal layouts`` and ``plan`` predict."""
+    (counts ``qe``, 0-based ``plate``, approach ``direction`` or None) and the scene's
+    known lengths (``references``: their rows join the Jacobian) can identify, at
+    ``initial`` (module docstring): what ``calibrate`` fits, and what ``planecal layouts``
+    and ``plan`` predict."""
     st = settings
     layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
     options = options or st.options
-    mask, pinned = candidates(robot, layout, st)
+    mask, pinned = candidates(robot, layout, st, references)
     if joints is None:
-        joints = Joints.of(counts_to_joints(robot, np.asarray(qe, np.int64)))
+        joints = joints_of_counts(robot, np.asarray(qe, np.int64), direction)
     _, J = predict_joints_with_jacobian(robot, joints, initial, plate, layout)
     w = row_weights(J[:, layout.slice("joint_offsets")], options.joint_sigma_rad,
                     options.distance_sigma_m)
+    if references:
+        prior = FitPrior(None, initial.to_vector(layout), np.ones(len(layout), bool),
+                         tuple(reference_rows(layout, r, options.prior_sigma_m)
+                               for r in references))
+        P, _ = prior.rows(initial.to_vector(layout), len(layout))
+        J = np.vstack([J, P])
+        w = None if w is None else np.concatenate([w, np.ones(len(P))])
     bs = select_base(J, layout, mask, st.base_tolerance, w)
     if pinned:
         bs = replace(bs, excluded=sorted(
@@ -179,26 +196,32 @@ def base_set(robot: Robot, qe, initial: CellParams, plate, settings: Calibration
 
 
 def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
-              settings: CalibrationSettings = CalibrationSettings()) -> Calibration:
+              settings: CalibrationSettings = CalibrationSettings(),
+              direction=None, references: tuple = ()) -> Calibration:
     """Calibrate (module docstring) from encoder counts ``qe`` (N, 6), measured distances
-    ``d_m`` (N,) [m] and 0-based ``plate`` (N,) (default all 0), starting at ``initial``.
-    InputError for a problem that cannot be solved (too few samples, unknown names, ...)."""
+    ``d_m`` (N,) [m], 0-based ``plate`` (N,) (default all 0) and each sample's recorded
+    approach ``direction`` (N, 6) in -1, 0, +1 (None: not recorded; level 3's backlash)
+    and the scene's known lengths (``references``), starting at ``initial``. InputError for
+    a problem that cannot be solved (too few samples, unknown names, ...)."""
     st = settings
     st.check()
     options = st.options
     layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
-    if st.geometry_prior is not None:
-        options = replace(options, prior=geometry_prior(layout, *st.geometry_prior))
+    prior = layout_prior(layout) + (() if st.geometry_prior is None
+                                    else geometry_prior(layout, *st.geometry_prior))
+    if prior:
+        options = replace(options, prior=prior + tuple(options.prior))
     n = len(np.asarray(d_m))
     pidx = np.zeros(n, int) if plate is None else np.asarray(plate, int)
     try:
         # the samples checked (shapes, plates) before the Jacobian; the free set after
         probe = Problem(robot, qe, d_m, pidx, initial, layout, np.zeros(len(layout), bool),
-                        options)
-        n_cand = int(candidates(robot, layout, st)[0].sum())
+                        options, direction=direction, references=tuple(references))
+        n_cand = int(candidates(robot, layout, st, references)[0].sum())
         if n <= n_cand:
             raise ValueError(f"{n} samples cannot determine {n_cand} free parameters")
-        _, bs = base_set(robot, probe.qe, initial, pidx, st, options, probe.joints)
+        _, bs = base_set(robot, probe.qe, initial, pidx, st, options, probe.joints,
+                         references=tuple(references))
         problem = replace(probe, free=bs.mask(layout))
     except ValueError as e:
         raise InputError(str(e)) from None

@@ -29,9 +29,9 @@ from planecal.estimation.identifiability import Covariance, Identifiability, unc
 from planecal.estimation.noise import row_weights
 from planecal.estimation.solver import Iteration, Prior, SolverOptions, Status, least_squares
 from planecal.model.cell_params import CellParams
-from planecal.model.encoder import counts_to_joints
 from planecal.model.layout import ParamLayout, level1_layout
-from planecal.model.measurement import Joints, predict, predict_joints_with_jacobian
+from planecal.model.measurement import (Joints, joints_of_counts, predict,
+                                        predict_joints_with_jacobian)
 from planecal.model.robot import Robot
 from planecal.io.samples import Samples
 
@@ -73,6 +73,11 @@ class Problem:
     free: np.ndarray
     options: FitOptions = field(default_factory=FitOptions)
     joints: Joints | None = None  # the counts as joint angles with their sines (derived)
+    # the recorded approach direction of each joint into each sample (N, 6) in -1, 0, +1
+    # (a sample file's direction columns), or None: level 3's backlash flanks
+    direction: np.ndarray | None = None
+    # the scene's known lengths (``model.scene.LengthReference``): prior rows on the planes
+    references: tuple = ()
 
     def __post_init__(self):
         qe = np.asarray(self.qe, np.int64)
@@ -104,8 +109,15 @@ class Problem:
                 and np.isfinite(opt.distance_sigma_m) and opt.distance_sigma_m > 0):
             raise ValueError("weighted fit: joint_sigma_rad must be finite and >= 0, "
                              "distance_sigma_m finite and > 0")
+        if self.direction is not None:
+            dirs = np.asarray(self.direction)
+            if dirs.shape != (N, 6) or not np.isin(dirs, (-1, 0, 1)).all():
+                raise ValueError(f"samples: approach directions of {dirs.shape} (N, 6) in "
+                                 "-1, 0, +1 expected")
+            object.__setattr__(self, "direction", dirs.astype(np.int8))
         if self.joints is None or len(self.joints) != N:
-            object.__setattr__(self, "joints", Joints.of(counts_to_joints(self.robot, qe)))
+            object.__setattr__(self, "joints",
+                               joints_of_counts(self.robot, qe, self.direction))
 
     @classmethod
     def from_arrays(cls, robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
@@ -138,7 +150,8 @@ class Problem:
     def subset(self, idx) -> "Problem":
         """The same problem on the samples ``idx``."""
         return replace(self, qe=self.qe[idx], d_m=self.d_m[idx], plate=self.plate[idx],
-                       joints=self.joints.rows(idx))
+                       joints=self.joints.rows(idx),
+                       direction=None if self.direction is None else self.direction[idx])
 
 
 # ----- the result -----------------------------------------------------------------------------
@@ -212,7 +225,7 @@ def _residuals(pb: Problem):
         x = x_all.copy()
         x[free] = xf
         d, J = predict_joints_with_jacobian(pb.robot, joints.rows(rows),
-                                            CellParams.from_vector(x, layout), pb.plate[rows],
+                                            pb.initial.with_vector(x, layout), pb.plate[rows],
                                             layout, need)
         if not weighted:
             return d - pb.d_m[rows], J, None
@@ -222,15 +235,62 @@ def _residuals(pb: Problem):
     return fun
 
 
-def _prior(pb: Problem) -> Prior | None:
-    """``FitOptions.prior`` as the solver's prior rows over the free parameters."""
+@dataclass(frozen=True, eq=False)
+class FitPrior:
+    """The solver's prior rows (``solver.PriorRows``) of a problem: ``FitOptions.prior``
+    over the free parameters, and each known length (``model.planes.parallel_rows``: two
+    plates' tilt and gap), every row weighed as a distance of std ``prior_sigma_m``."""
+    param: Prior | None
+    x_all: np.ndarray  # the initial values over the layout
+    free: np.ndarray  # the free mask
+    references: tuple  # (plane a's and b's layout positions (3,) each, separation, weights (4,))
+
+    def rows(self, x: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+        from planecal.model.planes import parallel_rows
+        P, r = (np.zeros((0, width)), np.zeros(0)) if self.param is None \
+            else self.param.rows(x, width)
+        if not self.references:
+            return P, r
+        xa = self.x_all.copy()
+        xa[self.free] = x
+        col = np.where(self.free, np.cumsum(self.free) - 1, -1)
+        Ps, rs = [P], [r]
+        for ia, ib, sep, w in self.references:
+            g, Ga, Gb = parallel_rows(xa[ia], xa[ib], sep)
+            R = np.zeros((4, width))
+            for idx, G in ((ia, Ga), (ib, Gb)):
+                for k in range(3):
+                    if col[idx[k]] >= 0:
+                        R[:, col[idx[k]]] += G[:, k]
+            Ps.append(R * w[:, None])
+            rs.append(g * w)
+        return np.vstack(Ps), np.concatenate(rs)
+
+
+def _prior(pb: Problem) -> FitPrior | None:
+    """``FitOptions.prior`` and the problem's known lengths as the solver's prior rows."""
     names = pb.layout.names_of(pb.free)
     given = [(names.index(n), sd) for n, sd in pb.options.prior if n in names]
-    if not given:
+    x_all = pb.initial.to_vector(pb.layout)
+    param = None
+    if given:
+        idx = np.array([i for i, _ in given], int)
+        param = Prior(idx, np.array([pb.options.prior_sigma_m / sd for _, sd in given]),
+                      x_all[pb.free][idx])
+    refs = tuple(reference_rows(pb.layout, ref, pb.options.prior_sigma_m)
+                 for ref in pb.references)
+    if param is None and not refs:
         return None
-    idx = np.array([i for i, _ in given], int)
-    x0 = pb.initial.to_vector(pb.layout)[pb.free]
-    return Prior(idx, np.array([pb.options.prior_sigma_m / sd for _, sd in given]), x0[idx])
+    return FitPrior(param, x_all, pb.free, refs)
+
+
+def reference_rows(layout: ParamLayout, ref, sigma_m: float) -> tuple:
+    """(plane a's and b's positions in the layout, the separation, the row weights) of a
+    known length (``model.scene.LengthReference``), its rows weighed as distances of std
+    ``sigma_m``: the tilt rows by the parallelism std, the gap row by the length's."""
+    cols = layout.columns("plane")
+    w = sigma_m / np.array([ref.parallel_std_rad] * 3 + [ref.std_m], float)
+    return cols[ref.plates[0]], cols[ref.plates[1]], float(ref.separation_m), w
 
 
 def solve(problem: Problem) -> Result:
@@ -242,10 +302,11 @@ def solve(problem: Problem) -> Result:
                         opt, prior)
     x = pb.initial.to_vector(layout)
     x[free] = sol.x
-    params = CellParams.from_vector(x, layout)
+    params = pb.initial.with_vector(x, layout)
     r, J, w = sol.r, sol.J, sol.w
     # residuals over all samples (outliers included), for reporting
-    final_r = r if sol.used.all() else predict(pb.robot, pb.qe, params, pb.plate) - pb.d_m
+    final_r = r if sol.used.all() else predict(pb.robot, pb.qe, params, pb.plate,
+                                               pb.direction) - pb.d_m
     if prior is not None:  # the posterior covariance: the prior rows join the data's
         P, rp = prior.rows(sol.x, J.shape[1])
         Jw, rw = (J, r) if w is None else (J * w[:, None], r * w)

@@ -3,7 +3,8 @@ pseudo-inverse (seed 6.2.1, 7.2) or Levenberg-Marquardt, column scaling, optiona
 rows, and k-sigma outlier elimination over the rows (MuJoCo's ``minimize.py`` has the same
 shape: a residual function in, the solution, a status and an iteration log out).
 
-The residual function ``fun(x, rows) -> (r, J, w)`` gives, at the free parameters x, the
+Prior rows (``PriorRows``: a parameter prior, a known length) join the weighted residuals
+of every iteration. The residual function ``fun(x, rows) -> (r, J, w)`` gives, at the free parameters x, the
 residuals r of the rows ``rows`` (a bool mask over all rows), their Jacobian J (len(r),
 len(x)) and row weights w (None: unweighted; held for one iteration, re-evaluated at the
 next). One iteration solves W J dx = -W r in the least-squares sense; iteration stops when
@@ -35,10 +36,15 @@ class SolverOptions:
     lm_lambda0: float = 1e-3
 
 
+class PriorRows(Protocol):
+    """Rows that join the weighted residuals (a maximum a posteriori fit, gn only):
+    ``rows(x, width) -> (P (k, width), r (k,))``, their Jacobian and values at x."""
+    def rows(self, x: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]: ...
+
+
 @dataclass(frozen=True)
 class Prior:
-    """Prior rows (a maximum a posteriori fit, gn only): rows ``weight * (x[index] -
-    center)`` join the weighted residuals."""
+    """Prior rows ``weight * (x[index] - center)`` (``PriorRows``)."""
     index: np.ndarray  # positions among the free parameters
     weight: np.ndarray
     center: np.ndarray
@@ -119,11 +125,13 @@ def _normal_equations(Jw: np.ndarray, rw: np.ndarray, scale: bool):
     return G * S[:, None] * S[None, :], S * (Jw.T @ rw), S
 
 
-def _with_prior(J, r, w, x, prior: Prior | None):
+def _with_prior(J, r, w, x, prior: PriorRows | None):
     Jw, rw = (J, r) if w is None else (J * w[:, None], r * w)
-    if prior is None or not prior.index.size:
+    if prior is None:
         return Jw, rw
     P, rp = prior.rows(x, Jw.shape[1])
+    if not len(rp):
+        return Jw, rw
     return np.vstack([Jw, P]), np.concatenate([rw, rp])
 
 
@@ -158,12 +166,12 @@ def _log(it, r, used, dx=None) -> Iteration:
 
 def least_squares(fun: Callable, x0: np.ndarray, n_rows: int,
                   options: SolverOptions = SolverOptions(),
-                  prior: Prior | None = None) -> Solution:
+                  prior: PriorRows | None = None) -> Solution:
     """Minimise |W r(x)|^2 (+ the prior's rows) from x0 (module docstring)."""
     opt = options
     if opt.method not in ("gn", "lm"):
         raise ValueError(f"unknown method {opt.method!r} (gn or lm)")
-    if prior is not None and prior.index.size and opt.method != "gn":
+    if prior is not None and opt.method != "gn":
         raise ValueError("a prior needs method 'gn'")
     x = np.array(x0, float)
     used = np.ones(n_rows, bool)

@@ -18,7 +18,7 @@ from pydantic import AfterValidator, Field, ValidationInfo, model_validator
 
 from planecal.formats.base import (
     M_AS_MM, MM_AS_M, Angle, Bool, FormatTag, Int, Interval, Model, Num, Point,
-    Positive, Ranged, Str, Vector, problem)
+    Positive, Ranged, Str, Vector, problem, short)
 from planecal.formats.robot import N_JOINTS
 
 SCENE_FORMAT = "planecal-scene/1"
@@ -145,6 +145,30 @@ class Sampling(Model):
     distance_mm: Distances = [70.0, 90.0]
 
 
+Separation = Ranged(0.001, CELL_M, "m", "separation", MM_AS_M)
+LengthStd = Ranged(1e-9, 0.01, "m", "length std", MM_AS_M)
+ParallelStd = Ranged(1e-9, 0.01, "rad", "parallelism std")
+
+
+class Reference(Model):
+    """A known length (``model.scene.LengthReference``): plate ``plates[1]`` parallel to
+    plate ``plates[0]`` (by name), ``separation_m`` further from the base origin along its
+    normal, measured with the std ``std_m``, the faces parallel within
+    ``parallel_std_rad``."""
+    kind: Annotated[Str, Field(json_schema_extra={"enum": ["parallel_plates"]})] = \
+        "parallel_plates"
+    plates: Vector(Str, 2, "plate names")
+    separation_m: Separation
+    std_m: LengthStd
+    parallel_std_rad: ParallelStd = 1e-5
+    source: Str | None = None
+
+    def plate_indices(self, plates) -> list[int]:
+        """0-based indices of the two plates among ``plates`` (anything with a ``name``)."""
+        names = [p.name or f"plate{i + 1}" for i, p in enumerate(plates)]
+        return [names.index(n) for n in self.plates]
+
+
 class SceneFile(Model):
     """``scenes/<name>.json``."""
     format: SceneTag = None
@@ -158,6 +182,7 @@ class SceneFile(Model):
     floor_z_m: FloorZ = 0.0
     positions: Positions = Positions()
     sampling: Sampling = Sampling()
+    references: Annotated[list[Reference], Field(max_length=100)] = []
 
     @model_validator(mode="after")
     def physical(self, info: ValidationInfo):
@@ -166,10 +191,23 @@ class SceneFile(Model):
         if not lo <= a < b <= hi:
             raise problem(f"[{a:g}, {b:g}] mm is not within the laser window "
                           f"[{lo:g}, {hi:g}] mm (sensor.range_mm)", "sampling", "distance_mm")
+        for i, r in enumerate(self.references):
+            self._check_reference(r, i)
         bounds = (info.context or {}).get("robot")
         if bounds is not None:
             self._check_robot(bounds)
         return self
+
+    def _check_reference(self, r: "Reference", i: int) -> None:
+        """The reference names two of the scene's plates (``model.scene.load_scene`` checks
+        that their nominal planes are as parallel and as far apart as it says)."""
+        names = [p.name or f"plate{k + 1}" for k, p in enumerate(self.plates)]
+        for n in r.plates:
+            if n not in names:
+                raise problem(f"no plate named {short(n)} (the plates: {', '.join(names)})",
+                              "references", i, "plates")
+        if r.plates[0] == r.plates[1]:
+            raise problem("a plate and itself are no length", "references", i, "plates")
 
     def _check_robot(self, robot: RobotBounds) -> None:
         top = 1 << robot.encoder_bits

@@ -67,6 +67,20 @@ class Box:
     rpy: np.ndarray  # (3,) rad, R = Rz(yaw) Ry(pitch) Rx(roll)
 
 
+@dataclass(frozen=True)
+class LengthReference:
+    """A known length in the cell (issue 22): plate ``plates[1]`` parallel to plate
+    ``plates[0]`` (0-based), ``separation_m`` further from the base origin along its normal
+    (a stepped artefact, measured), with the measurement's std and the faces' parallelism
+    std. The fit takes it as prior rows (``planes.parallel_rows``), and the arm's scale,
+    which a laser on planes cannot see otherwise, is then free."""
+    plates: tuple[int, int]
+    separation_m: float
+    std_m: float
+    parallel_std_rad: float
+    source: str = ""
+
+
 @dataclass
 class Scene:
     name: str
@@ -84,6 +98,7 @@ class Scene:
     calibration_q: np.ndarray | None = None  # rad, a configuration near the plates
     cone_deg: float = 30.0
     distance_mm: tuple[float, float] = (70.0, 90.0)
+    references: tuple[LengthReference, ...] = ()
 
 
 def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
@@ -129,10 +144,36 @@ def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
         calibration_q=(None if pos.calibration_deg is None
                        else np.deg2rad(np.array(pos.calibration_deg))),
         cone_deg=sf.sampling.cone_deg, distance_mm=tuple(sf.sampling.distance_mm),
+        references=tuple(_reference(path, i, r, plates) for i, r in enumerate(sf.references)),
     )
 
 
+# a reference's nominal planes agree with it within these (a scene's drawing)
+REFERENCE_TILT_RAD = 1e-3
+REFERENCE_GAP_M = 0.001
+
+
+def _reference(path: Path, i: int, r, plates: list[Plate]) -> LengthReference:
+    """A scene file's reference, its plates' nominal planes checked against it: parallel
+    and as far apart as it says, within a drawing's rounding."""
+    from planecal.model.planes import parallel_rows
+    ia, ib = r.plate_indices([p for p in plates])
+    g, _, _ = parallel_rows(plates[ia].n_tilde, plates[ib].n_tilde, r.separation_m)
+    where = f"{path}: references.{i}"
+    if np.linalg.norm(g[:3]) > REFERENCE_TILT_RAD:
+        raise InputError(f"{where}: {r.plates[0]} and {r.plates[1]} are "
+                         f"{np.linalg.norm(g[:3]):.3g} rad from parallel: not one stepped "
+                         "artefact")
+    if abs(g[3]) > REFERENCE_GAP_M:
+        raise InputError(f"{where}.separation_m: the plates' n~ put them "
+                         f"{g[3] + r.separation_m:.6g} m apart, not {r.separation_m:g} m")
+    return LengthReference((ia, ib), r.separation_m, r.std_m, r.parallel_std_rad,
+                           r.source or "")
+
+
 def nominal_params(scene: Scene) -> CellParams:
-    """The scene's nominal parameters: zero offsets, the measured sensor pose and planes."""
+    """The scene's nominal parameters: zero offsets, the measured sensor pose and planes,
+    and the laser's measuring range (what its linearity error is a function of)."""
     return CellParams(np.zeros(6), scene.sensor_origin, scene.phi_y, scene.phi_z,
-                      np.array([p.n_tilde for p in scene.plates]))
+                      np.array([p.n_tilde for p in scene.plates]),
+                      laser_range_m=tuple(v * 1e-3 for v in scene.laser_range_mm))

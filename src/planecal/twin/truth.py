@@ -13,6 +13,9 @@ Default tolerances (``Tolerances``), each a hard bound, drawn uniformly:
   moves by <= 0.05 rad.
 * each plane: its point (the plate centre on the nominal plane) moved by <= 10 mm, its
   normal tilted by <= 0.05 rad about a random in-plane axis; n~ recomputed from those.
+* a known length (the scene's ``references``: a stepped artefact) moves as one body: its
+  second plate is its first's true plane moved by the separation (plus a draw of its std)
+  and tilted by a draw of its parallelism std.
 """
 from __future__ import annotations
 
@@ -87,7 +90,21 @@ def draw_truth(scene: Scene, seed: int = 0, tol: Tolerances = Tolerances()) -> C
         _, nhat = point_normal_from_n_tilde(plate.n_tilde)
         p = plate.center() + _ball(rng, tol.plane_point_m)
         planes.append(n_tilde_from_point_normal(p, _tilt(rng, nhat, tol.plane_normal_rad)))
-    return CellParams(delta, origin, phi_y, phi_z, np.array(planes))
+    for ref in scene.references:  # a stepped artefact moves as one body
+        a, b = ref.plates
+        planes[b] = _step(rng, planes[a], ref)
+    return CellParams(delta, origin, phi_y, phi_z, np.array(planes),
+                      laser_range_m=nom.laser_range_m)
+
+
+def _step(rng, n_a: np.ndarray, ref) -> np.ndarray:
+    """Plate b of a known length (``model.scene.LengthReference``) as the artefact makes it:
+    plate a's true plane moved by the true separation (the reference's, plus a draw of its
+    std) along a's normal, tilted by a draw of the parallelism std."""
+    p_a, n = point_normal_from_n_tilde(n_a)
+    gap = ref.separation_m + rng.normal(0.0, ref.std_m)
+    return n_tilde_from_point_normal(p_a + gap * n,
+                                     _tilt(rng, n, abs(rng.normal(0.0, ref.parallel_std_rad))))
 
 
 def load_truth(scene: Scene, path) -> CellParams:
