@@ -58,6 +58,10 @@ def test_load_samples_reads_mm_as_metres(tmp_path, synthetic):
     assert f"{d_mm.min():.2f} to {d_mm.max():.2f} mm" in text and "plate 1: 40" in text
     with pytest.raises(InputError):
         planecal.load_samples(tmp_path / "missing.tsv")
+    assert got.direction is None  # a file without the direction group
+    signs = np.random.default_rng(0).integers(-1, 2, (len(s), 6))
+    write_samples(path, s.counts, d_mm, s.plate, direction=signs)
+    np.testing.assert_array_equal(planecal.load_samples(path).direction, signs)
 
 
 def test_calibrate_recovers_the_truth_and_wraps_fit_solve(scene, synthetic, tmp_path):

@@ -27,7 +27,7 @@ def cell():
 def _calibrated(scene, errors, truth_seed=0):
     st = RehearsalSettings(scene=SCENE, samples=150, errors=errors, truth_seed=truth_seed)
     world, opts = st.world(0)
-    qe, d, plate, _ = twin_samples(scene, world, st, 100 + truth_seed, opts)
+    qe, d, plate, _, _ = twin_samples(scene, world, st, 100 + truth_seed, opts)
     fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate).result
     return world, opts, qe, fit
 

@@ -28,6 +28,8 @@ def test_the_api_and_the_cli_give_the_same_numbers(cli_run):
     run = planecal.rehearse(samples=60, seed=1)
     s = read_samples(d / "r.tsv")
     np.testing.assert_array_equal(run.samples.counts, s.qe)
+    assert run.samples.direction is not None
+    np.testing.assert_array_equal(run.samples.direction, s.direction)
     np.testing.assert_allclose(run.samples.distance_m, s.d_mm * 1e-3, rtol=0, atol=5e-10)
     cal = planecal.calibrate(run)
     doc = json.loads((d / "c.json").read_text())

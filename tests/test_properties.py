@@ -7,8 +7,9 @@
 * Random and near-valid sample files (tab-separated rows of a valid run with one field
   replaced by junk, both decimal marks): ``read_samples`` gives samples with finite
   values in range or a one-line InputError naming the file.
-* Decimal comma: whatever ``write_samples`` writes with either mark, ``read_samples``
-  reads back exactly (to the 6 written decimals).
+* Decimal comma: whatever ``write_samples`` writes with either mark (with or without the
+  plate column and the direction group), ``read_samples`` reads back exactly (to the 6
+  written decimals).
 
 The JSON readers (robot, scene, parameters, result, poses, sidecar, error profile) get
 random bytes, random JSON and near-valid documents in tests/test_schemas_property.py.
@@ -151,15 +152,17 @@ def test_random_bytes_as_sample_file(data):
 
 @settings(max_examples=60, **SETTINGS)
 @given(st.lists(st.tuples(st.lists(st.integers(0, COUNT_LIMIT - 1), min_size=6, max_size=6),
-                          st.floats(0.001, 9999.0), st.integers(0, 2)),
+                          st.floats(0.001, 9999.0), st.integers(0, 2),
+                          st.lists(st.integers(-1, 1), min_size=6, max_size=6)),
                 min_size=2, max_size=20, unique_by=lambda r: tuple(r[0])),
-       st.booleans(), st.booleans())
-def test_decimal_comma_round_trip(rows, comma, plates):
+       st.booleans(), st.booleans(), st.booleans())
+def test_decimal_comma_round_trip(rows, comma, plates, dirs):
     path = DIR / "rt.tsv"
     qe = np.array([r[0] for r in rows])
     d = np.array([r[1] for r in rows])
     plate = np.array([r[2] for r in rows]) if plates else None
-    write_samples(path, qe, d, plate, decimal_comma=comma)
+    direction = np.array([r[3] for r in rows]) if dirs else None
+    write_samples(path, qe, d, plate, decimal_comma=comma, direction=direction)
     text = path.read_text()
     data = text.splitlines()[1:]
     assert all(("," in line.split("\t")[6]) == comma for line in data)
@@ -169,6 +172,10 @@ def test_decimal_comma_round_trip(rows, comma, plates):
     np.testing.assert_array_equal(s.d_mm, [float(f"{x:.6f}") for x in d])
     if plates:
         np.testing.assert_array_equal(s.plate, plate)
+    if dirs:
+        np.testing.assert_array_equal(s.direction, direction)
+    else:
+        assert s.direction is None
 
 
 def test_appended_file_keeps_its_decimal_mark(tmp_path):

@@ -174,7 +174,7 @@ def test_montecarlo_blueprint_and_histograms(scene, tmp_path):
     res = analyze(run_many(st, 1, quiet=True), st)
     res["settings"]["scene"] = scene.name
     world, _ = st.world(0)
-    qe, d, plate, _ = synthetic_noisy_samples(scene, world.params, st, st.seed)
+    qe, d, plate, _, _ = synthetic_noisy_samples(scene, world.params, st, st.seed)
     poses = order_pose_set(qe, d, plate, world.params, "run 0's samples")
     path = log_montecarlo(tmp_path / "mc.rrd", res, scene, poses)
     views = check_views(path, {"3D": 1, "TextDocument": 1, "BarChart": len(res["free"])})

@@ -212,3 +212,99 @@ def test_large_file_is_stored_compactly(tmp_path):
     np.testing.assert_array_equal(s.qe, qe)
     np.testing.assert_allclose(s.d_mm, dm, atol=5e-7)
     assert s.qe.dtype == np.int64 and s.lines[0] == 2 and s.lines[-1] == 20_001
+
+
+# ----- the approach direction group dir1..dir6 (issue 22) ------------------------------------
+
+DIRS = np.array([[1, -1, 0, 1, 1, -1], [-1, -1, 1, 0, 1, 1], [0, 0, 0, 0, 0, 0],
+                 [1, 1, 1, 1, 1, 1], [-1, -1, -1, -1, -1, -1]], np.int8)
+HEAD = "q1\tq2\tq3\tq4\tq5\tq6\tDm"
+GROUP = "\tdir1\tdir2\tdir3\tdir4\tdir5\tdir6"
+
+
+@pytest.mark.parametrize("plate", [None, np.array([0, 1, 2, 1, 0])])
+def test_direction_group_round_trip(tmp_path, plate):
+    p = tmp_path / "d.tsv"
+    write_samples(p, SEED_QE, SEED_DM, plate, direction=DIRS)
+    head, first = p.read_text().splitlines()[:2]
+    assert head == HEAD + ("\tplate" if plate is not None else "") + GROUP
+    assert first.split("\t")[-6:] == ["1", "-1", "0", "1", "1", "-1"]
+    s = read_samples(p)
+    assert s.direction.dtype == np.int8
+    np.testing.assert_array_equal(s.direction, DIRS)
+    np.testing.assert_array_equal(s.qe, SEED_QE)
+    np.testing.assert_array_equal(s.d_mm, SEED_DM)
+    if plate is not None:
+        np.testing.assert_array_equal(s.plate, plate)
+    sub = s.subset(np.array([3, 1]))
+    np.testing.assert_array_equal(sub.direction, DIRS[[3, 1]])
+
+
+def test_files_without_the_group_read_as_before(tmp_path):
+    for path in (repo_path("examples", "seed_samples.tsv"),
+                 repo_path("tests", "corpus", "base", "run.tsv"),
+                 repo_path("tests", "corpus", "base", "run3.tsv")):
+        s = read_samples(path)
+        assert s.direction is None and s.subset(np.arange(2)).direction is None
+    p = tmp_path / "old.tsv"
+    write_samples(p, SEED_QE, SEED_DM, np.array([0, 1, 2, 1, 0]))  # no direction: no group
+    assert p.read_text().splitlines()[0] == HEAD + "\tplate"
+    assert read_samples(p).direction is None
+
+
+def test_read_many_carries_the_group_unknown_where_a_file_lacks_it(tmp_path):
+    from planecal.io.samples import read_many
+    write_samples(tmp_path / "a.tsv", SEED_QE, SEED_DM, direction=DIRS)
+    write_samples(tmp_path / "b.tsv", SEED_QE[:2] + 7, SEED_DM[:2])
+    s = read_many([tmp_path / "a.tsv", tmp_path / "b.tsv"])
+    np.testing.assert_array_equal(s.direction, np.vstack([DIRS, np.zeros((2, 6))]))
+    assert read_many([tmp_path / "b.tsv"]).direction is None
+
+
+def test_a_continued_file_keeps_its_columns(tmp_path):
+    """append (--resume) keeps the columns the file has, whatever the new writer asks."""
+    with_group, without = tmp_path / "g.tsv", tmp_path / "n.tsv"
+    with SampleWriter(with_group, with_direction=True) as w:
+        w.write(SEED_QE[0], SEED_DM[0], None, DIRS[0])
+    with SampleWriter(with_group, append=True) as w:  # not asked: the file has it
+        w.write(SEED_QE[1], SEED_DM[1], None, DIRS[1])
+        with pytest.raises(ValueError, match="direction group"):
+            w.write(SEED_QE[2], SEED_DM[2])  # a sample without its direction
+    np.testing.assert_array_equal(read_samples(with_group).direction, DIRS[:2])
+    with SampleWriter(without) as w:
+        w.write(SEED_QE[0], SEED_DM[0])
+    with SampleWriter(without, append=True, with_direction=True) as w:  # begun without
+        w.write(SEED_QE[1], SEED_DM[1], None, DIRS[1])
+    s = read_samples(without)
+    assert len(s) == 2 and s.direction is None
+
+
+LINE = "8416544\t8371251\t8443192\t8360940\t8321861\t8334082\t80,5"
+D6 = "\t1\t-1\t0\t1\t1\t-1"
+
+
+@pytest.mark.parametrize("content, message", [
+    (HEAD + GROUP + "\n" + LINE + "\t1\t-1\t2\t1\t1\t-1\n",
+     r"x.tsv:2: column dir3 must be -1, 0 or 1 .*got '2'"),
+    (HEAD + GROUP + "\n" + LINE + "\t1\t-1\t+\t1\t1\t-1\n", r"x.tsv:2: column dir3 must be"),
+    (HEAD + GROUP + "\n" + LINE + "\t1\t-1\t0.0\t1\t1\t-1\n", r"x.tsv:2: column dir3 must be"),
+    (HEAD + GROUP + "\n" + LINE + D6 + "\n" + LINE + "\n",  # the group on some lines only
+     r"x.tsv:3: 7 columns, but the header \(line 1\) names 13: .*dir1..dir6, on every line"),
+    (HEAD + GROUP + "\n" + LINE + "\t1\t-1\t0\n",  # a partial group on a line
+     r"x.tsv:2: 10 columns, but the header \(line 1\) names 13"),
+    (HEAD + "\tplate" + GROUP + "\n" + LINE + D6 + "\n",  # the plate missing
+     r"x.tsv:2: 13 columns, but the header \(line 1\) names 14: q1..q6, Dm, plate and"),
+    (HEAD + "\tdir1\tdir2\tdir3\n" + LINE + "\t1\t1\t1\n",  # a partial group in the header
+     r"x.tsv:1: header columns after Dm must be plate and/or the whole direction group "
+     r"dir1..dir6, found 'dir1 dir2 dir3'"),
+    (HEAD + GROUP + "\tplate\n" + LINE + D6 + "\t1\n", r"x.tsv:1: header columns after Dm"),
+    (LINE + D6 + "\n",  # no header: 13 columns are not read by position
+     r"x.tsv:1: 13 columns without a header naming them: the direction columns dir1..dir6 "
+     r"are read only under a header line"),
+    (HEAD + "\n" + LINE + "\t2" + D6 + "\n", r"x.tsv:2: 14 columns without a header naming"),
+])
+def test_direction_group_refusals_name_file_and_line(tmp_path, content, message):
+    p = tmp_path / "x.tsv"
+    p.write_text(content)
+    with pytest.raises(InputError, match=message):
+        read_samples(p)

@@ -64,6 +64,25 @@ def test_rehearse_resume_extends_the_run(tmp_path, capsys):
     assert len({tuple(r) for r in s.qe}) == 5
     summary = json.loads(stdout)
     assert summary["sessions"] == 2 and summary["samples"] == 5
+    # the file's direction group goes on (the new session's own directions after it)
+    assert s.direction.shape == (5, 6) and np.array_equal(s.direction[:3], first.direction)
+
+
+def test_resume_continues_a_file_begun_without_the_direction_group(tmp_path, capsys):
+    """A run begun by a planecal that recorded no approach direction (its file without
+    dir1..dir6) is continued without it: one file, one set of columns."""
+    out = tmp_path / "RUN.tsv"
+    assert run_cli(["rehearse", "--samples", "2", "--seed", "5", "--out", str(out)],
+                   capsys)[0] == 0
+    lines = out.read_text().splitlines()
+    assert lines[0].endswith("Dm\tdir1\tdir2\tdir3\tdir4\tdir5\tdir6")
+    out.write_text("".join("\t".join(ln.split("\t")[:7]) + "\n" for ln in lines))
+    code, _, stderr = run_cli(["rehearse", "--resume", "--samples", "3", "--out", str(out)],
+                              capsys)
+    assert code == 0, stderr
+    s = read_samples(out)
+    assert len(s) == 3 and s.direction is None
+    assert all(len(ln.split("\t")) == 7 for ln in out.read_text().splitlines())
 
 
 @pytest.mark.parametrize("argv, msg", [

@@ -27,10 +27,14 @@ def test_twin_mode_reproduces_the_rehearsal_sample_for_sample():
     st = MCSettings(samples=4)
     scene = cached_scene(st.scene)
     truth = truth_for(st, 0)
-    qe_r, d_r, p_r, _ = rehearse_samples(scene, truth, st, 11)
-    qe_t, d_t, p_t, _ = twin_samples(scene, truth, st, 11)
+    qe_r, d_r, p_r, dir_r, _ = rehearse_samples(scene, truth, st, 11)
+    qe_t, d_t, p_t, dir_t, _ = twin_samples(scene, truth, st, 11)
     np.testing.assert_array_equal(qe_r, qe_t)
     np.testing.assert_array_equal(p_r, p_t)
+    # the ideal world's twin mode sets the twin at rest (no path-dependent error): it
+    # drives no path, so every approach direction is unknown; the rehearsal drove there
+    assert dir_t.shape == (4, 6) and not dir_t.any()
+    assert dir_r.shape == (4, 6) and np.all(dir_r[1:] != 0)
     # the sample file keeps 6 decimals of a mm
     np.testing.assert_allclose(d_r, d_t, atol=1e-9, rtol=0)
 
@@ -125,7 +129,7 @@ def test_pose_draw_settings_reach_the_runs():
 
     def q(**kw):
         st = MCSettings(samples=40, **kw)
-        qe, _, _, _ = twin_samples(scene, truth_for(st, 0), st, 5)
+        qe, _, _, _, _ = twin_samples(scene, truth_for(st, 0), st, 5)
         return counts_to_joints(scene.robot, qe)
 
     flips = {c: int(np.sum(np.diff(np.sign(q(ik_choice=c)[:, 4])) != 0))

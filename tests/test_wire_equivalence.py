@@ -28,3 +28,7 @@ def test_sample_over_udp_and_serial_equals_rehearsal_in_process(tmp_path, capsys
     # same readings: the serial frame carries 1e-6 mm, the sample file 1e-6 mm, and the
     # twin draws its laser noise on the same ticks either way
     np.testing.assert_array_equal(a.d_mm, b.d_mm)
+    # the same approach directions (issue 22): `sample` follows the counts the FD11's
+    # replies carry as `rehearse` follows the twin's, through the same driver
+    assert a.direction is not None and np.all(a.direction != 0)
+    np.testing.assert_array_equal(a.direction, b.direction)

@@ -39,12 +39,14 @@ def _mm(x_m: float) -> str:
 @dataclass(repr=False)
 class SampleSet:
     """Samples in SI: encoder counts ``counts`` (N, 6) int64, measured distances
-    ``distance_m`` (N,) [m], plate indices ``plate`` (N,) (0-based) and where they came
-    from."""
+    ``distance_m`` (N,) [m], plate indices ``plate`` (N,) (0-based), where they came from,
+    and ``direction`` (N, 6) int8: per joint the sign of its last motion into the pose (0:
+    unknown; ``planecal.sampling.approach``), or None (a file without it)."""
     counts: np.ndarray
     distance_m: np.ndarray
     plate: np.ndarray
     source: str = ""
+    direction: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.distance_m)
@@ -68,7 +70,7 @@ def load_samples(path, scene=None) -> SampleSet:
 
     s = read_samples(path, None if scene is None else _scene(scene))
     return SampleSet(np.asarray(s.qe, np.int64), np.asarray(s.d_mm, float) * 1e-3,
-                     np.asarray(s.plate, int), str(path))
+                     np.asarray(s.plate, int), str(path), s.direction)
 
 
 # ----- rehearsal on the twin -----------------------------------------------------------------
@@ -126,11 +128,11 @@ def rehearse(scene=None, samples: int = 30, seed: int = 0, *, truth_seed: int | 
                            truth_seed=int(truth_seed), errors=errors)
     st.check()
     try:
-        qe, d_m, plate, rejected, world, opts = sample_run(st, 0)
+        qe, d_m, plate, direction, rejected, world, opts = sample_run(st, 0)
     except RuntimeError as e:  # the run gave up
         raise InputError(f"rehearse: {e}") from None
     s = SampleSet(np.asarray(qe, np.int64), np.asarray(d_m, float), np.asarray(plate, int),
-                  f"a rehearsal on {sc.name} (seed {seed})")
+                  f"a rehearsal on {sc.name} (seed {seed})", direction)
     return Rehearsal(s, world, opts, sc, errors, int(seed), int(truth_seed), dict(rejected),
                      tick_by_tick)
 

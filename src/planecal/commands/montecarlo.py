@@ -149,7 +149,7 @@ def run(args) -> int:
         from planecal.present.rerun.studies import log_montecarlo, order_pose_set
         from planecal.studies.rehearsal import twin_samples
         world, opts = st.world(0)  # the 3D view: run 0's world, the twin mode's draw
-        qe, d, plate, _ = twin_samples(scene, world, st, st.seed, opts)
+        qe, d, plate, _, _ = twin_samples(scene, world, st, st.seed, opts)
         poses = order_pose_set(qe, d, plate, world.params,
                                f"run 0's samples (twin mode draw, seed {st.seed})")
         print(f"plots written to {log_montecarlo(args.rrd, res, scene, poses)}")

@@ -11,6 +11,12 @@ Acquire:
   as after a move) and reads the laser the same way. For studies: the same plans,
   rejections, counts and readings as driving there, without the ticks of the move.
 
+Each sample carries its approach direction (``approach``): per joint the sign of its last
+joint-side motion in the measured counts, over the whole path, detour legs included
+(``Driver.direction`` when the laser reading is taken). An acquirer that moves no robot
+(``RestAcquirer``: a jump, which leaves the twin's backlash where it was; ``PlansOnly``;
+the synthetic model's) records 0 for every joint: the side is unknown.
+
 Account: each plan's rejected draws are reported in order (``collision``,
 ``unreachable``), then a laser that gives up is a ``laser`` rejection (the robot stays
 where it moved to); ``max_attempts`` rejections in a row give up the run. With
@@ -35,6 +41,7 @@ REJECT_KINDS = ("collision", "laser", "unreachable")
 class Acquired:
     counts: np.ndarray  # the robot's encoder counts when the laser was read
     laser: LaserResult
+    direction: np.ndarray | None = None  # int8 signs then (module docstring); None: unknown
 
 
 class Acquirer(Protocol):
@@ -62,8 +69,7 @@ class DriveAcquirer:
             q0 = q
         self._leg("sample", q0, plan.q, plan.qe_goal, self.dwell)
         lr = drv.read_laser(self.laser)
-        return Acquired(drv.current.copy(), lr)
-
+        return Acquired(drv.current.copy(), lr, drv.direction)
 
     def _leg(self, kind, q0, q, counts, dwell) -> None:
         rows = plan_move(self.driver, counts, self.nominal, dwell)
@@ -98,9 +104,11 @@ class PlansOnly:
 
 
 class Recorder(Protocol):
-    """Where accepted samples and rejections go (a sample file, lists in memory)."""
+    """Where accepted samples and rejections go (a sample file, lists in memory).
+    ``direction``: the sample's approach direction, int8 (n_joints,), 0 where unknown."""
 
-    def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan) -> None: ...
+    def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan,
+               direction: np.ndarray) -> None: ...
 
     def reject(self, kind: str, q: np.ndarray | None, reason: str) -> None: ...
 
@@ -171,7 +179,9 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
             continue
         tally.samples += 1
         tally.in_a_row = 0
-        recorder.sample(tally.samples - 1, got.counts, got.laser.value_mm, plan)
+        direction = (np.zeros(len(got.counts), np.int8) if got.direction is None
+                     else got.direction)
+        recorder.sample(tally.samples - 1, got.counts, got.laser.value_mm, plan, direction)
         if on_progress:
             on_progress(tally)
     tally.status = "complete"
@@ -185,16 +195,19 @@ class MemoryRecorder:
         self.counts: list[np.ndarray] = []
         self.d_mm: list[float] = []
         self.plates: list[int] = []
+        self.directions: list[np.ndarray] = []
 
-    def sample(self, index, counts, d_mm, plan):
+    def sample(self, index, counts, d_mm, plan, direction):
         self.counts.append(np.asarray(counts, np.int64).copy())
         self.d_mm.append(float(d_mm))
         self.plates.append(int(plan.plate))
+        self.directions.append(np.asarray(direction, np.int8).copy())
 
     def reject(self, kind, q, reason):
         pass
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(qe (N,6) int64, d (N,) m, plate (N,))."""
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(qe (N,6) int64, d (N,) m, plate (N,), direction (N,6) int8: the approach
+        direction, 0 where unknown)."""
         return (np.array(self.counts, np.int64).reshape(-1, 6), np.array(self.d_mm) * 1e-3,
-                np.array(self.plates, int))
+                np.array(self.plates, int), np.array(self.directions, np.int8).reshape(-1, 6))

@@ -6,7 +6,8 @@ can take it in one call (``MoveLink``: the twin, with an enable signal known ahe
 sends it tick by tick otherwise (``RobotLink`` + ``Laser``: the FD11 and the ZS-LD80),
 checking the enable signal before every tick; either way the same ticks go out and a
 dropped enable signal stops the move before the tick it would have sent
-(``EnableDropped``).
+(``EnableDropped``). Every tick's measured counts go through the driver, so it follows
+each joint's approach direction (``approach.ApproachTracker``: ``Driver.direction``).
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import numpy as np
 from planecal.model.encoder import counts_to_joints, joints_to_counts
 from planecal.links.base import EnableAhead, MoveLink
 from planecal.model.robot import Robot, within_limits
+from planecal.sampling.approach import ApproachTracker
 from planecal.sampling.laserread import NO_READING_MM, LaserResult, LaserSettings, read_stable
 from planecal.sampling.observer import NullObserver, Observer
 from planecal.sampling.steps import COUNT_LIMIT, DWELL_TICKS, NOMINAL_STEP, max_step, step_path
@@ -84,7 +86,9 @@ class _TickCell:
 
 class Driver:
     """Sends deltas to the robot link and remembers the last one sent. ``laser`` is read
-    during ``read_laser``; ``enable`` is checked before every tick."""
+    during ``read_laser``; ``enable`` is checked before every tick. ``direction``: each
+    joint's approach direction from the measured counts of every tick since this driver's
+    first (``approach``)."""
 
     def __init__(self, link, laser, enable, robot: Robot, observer: Observer | None = None):
         self.robot = robot
@@ -97,6 +101,7 @@ class Driver:
         self.delta = np.zeros(robot.n_joints, np.int64)
         self.reference: np.ndarray | None = None
         self.current: np.ndarray | None = None
+        self.approach = ApproachTracker.for_robot(robot)
         self.ticks = 0
         self.max_step_counts = 0
 
@@ -110,6 +115,7 @@ class Driver:
                 seen = np.where(seen == NO_READING_MM, np.nan, seen)
             self.observer.on_ticks(self.ticks + 1, rows[:b.sent], b.reference, b.current,
                                    seen)
+            self.approach.follow(b.current)
             self.ticks += b.sent
             self.delta = rows[b.sent - 1].copy()
             self.reference = b.reference
@@ -151,6 +157,12 @@ class Driver:
         hold = self.delta[None]
         return read_stable(lambda n: self._send(np.repeat(hold, n, axis=0), read=True),
                            settings)
+
+    @property
+    def direction(self) -> np.ndarray:
+        """Per joint the sign (-1, 0 unknown, +1) of its last joint-side motion in the
+        measured counts (int8, a copy)."""
+        return self.approach.side
 
     @property
     def commanded_counts(self) -> np.ndarray:

@@ -1,7 +1,9 @@
 """The sampling run (seed 7.1), shared by the twin rehearsal and the real cell: the collect
 core (``collect``: plan -> drive -> laser -> account) writing a sample file and its
-sidecar, resumable. Each sample (the current counts and the distance in mm) is appended
-to the sample file (``SampleWriter``: flushed and fsynced), then the sidecar is updated.
+sidecar, resumable. Each sample (the current counts, the distance in mm and the approach
+direction, ``approach``) is appended to the sample file (``SampleWriter``: flushed and
+fsynced; a new file has the direction group dir1..dir6, a resumed one keeps its own
+columns), then the sidecar is updated.
 When the enable signal drops no further delta is sent; the run stops cleanly with
 ``status = "stopped"``: the sample file holds every sample taken, the sidecar is current.
 
@@ -33,6 +35,8 @@ sample and when the run ends; the commands add ``"twin"`` or ``"real_cell"``)::
 ``--resume`` reads the sidecar, takes scene and settings from it, counts the samples in the
 file (the file wins if a run died between writing a sample and the sidecar), restores the
 random generator, and goes on until ``samples_target`` -- from wherever the robot is.
+The approach direction starts unknown (0) again: a new session's driver has seen no motion
+until each joint moves.
 """
 from __future__ import annotations
 
@@ -256,13 +260,14 @@ class SamplingRun:
         st.read_ticks = self._read0 + self._clock.read_ticks
 
     # -- Recorder (the collect core's)
-    def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan) -> None:
+    def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan,
+               direction: np.ndarray) -> None:
         # the sidecar first (with the random state past this sample's plan), then the line:
         # a kill between the two leaves the sidecar one ahead of the file, and the resumed
         # run (the file's count wins) plans a new pose instead of drawing this one again
         self._account()
         self._save()
-        self._writer.write(counts, d_mm, plan.plate)
+        self._writer.write(counts, d_mm, plan.plate, direction)
         self.observer.on_sample(index, counts, d_mm, plan.plate)
 
     def reject(self, kind: str, q, reason: str) -> None:
@@ -286,7 +291,8 @@ class SamplingRun:
         try:
             self._writer = SampleWriter(self.out, append=self.resume,
                                         with_plate=len(self.scene.plates) > 1,
-                                        decimal_comma=self.settings.decimal_comma)
+                                        decimal_comma=self.settings.decimal_comma,
+                                        with_direction=True)
         except BaseException:
             if own_lock:
                 own_lock.close()

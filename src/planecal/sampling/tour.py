@@ -149,7 +149,7 @@ class _Moves:
     def __init__(self):
         self.visits: list[Visit] = []
 
-    def sample(self, index, counts, d_mm, plan) -> None:
+    def sample(self, index, counts, d_mm, plan, direction) -> None:
         self.visits.append(Visit(np.asarray(plan.qe_goal, np.int64).copy(),
                                  [np.asarray(c, np.int64).copy() for _, c in plan.via],
                                  int(plan.plate)))

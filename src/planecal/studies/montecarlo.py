@@ -112,7 +112,7 @@ def run_one(job) -> dict:
     robot = scene.robot
     seed = st.seed + k
     try:
-        qe, d, plate, rejected, world, opts = sample_run(st, k)
+        qe, d, plate, direction, rejected, world, opts = sample_run(st, k)
     except RuntimeError as e:  # the run gave up (e.g. 500 poses rejected in a row)
         return {"k": k, "seed": seed, "failed": str(e)}
     s, sample_sigma = st.joint_sigma(), st.sample_sigma_m()

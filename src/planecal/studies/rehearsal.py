@@ -23,6 +23,10 @@ Sampling modes:
   numpy (``estimation.noise``): Gaussian joint repeatability, buffer-mean laser noise and,
   optionally, the encoder's quantisation (uniform +-0.5 count per actuator). For fast tests.
 
+Every mode gives the samples as (qe, d_m, plate, direction, rejected): ``direction`` (N, 6)
+int8 is each sample's approach direction (``sampling.approach``): recorded where the twin
+is driven tick by tick, 0 (unknown) where it is set at rest or the model measures.
+
 World: the twin's error profile (``errors``: ``ideal`` or ``realistic`` or a profile file)
 and a seed make a world (``twin.world.study_world``). The settings' noise fields override
 the profile's (None: the profile's). By default one world for every run k, drawn from
@@ -120,8 +124,8 @@ class RehearsalSettings:
 
 
 def sample_run(st: RehearsalSettings, k: int):
-    """Run k of the settings: (qe, d_m, plate, rejected dict, world, options); RuntimeError
-    when the run gives up (e.g. 500 poses rejected in a row)."""
+    """Run k of the settings: (qe, d_m, plate, direction, rejected dict, world, options);
+    RuntimeError when the run gives up (e.g. 500 poses rejected in a row)."""
     scene = cached_scene(st.scene)
     seed = st.seed + k
     world, opts = st.world(k)
@@ -159,8 +163,8 @@ def _twin_and_settings(scene, world, st: RehearsalSettings, seed: int, options=N
 def _collect(scene, planner, twin, rs, seed: int):
     """The collect core with the twin set at rest at each target (``RestAcquirer``), or,
     where the twin's joint errors depend on the path, driven there tick by tick
-    (``DriveAcquirer``, as ``rehearse``): (qe, d_m, plate, rejected dict); RuntimeError
-    when the run gives up."""
+    (``DriveAcquirer``, as ``rehearse``): (qe, d_m, plate, direction, rejected dict);
+    RuntimeError when the run gives up."""
     from planecal.model.encoder import counts_to_joints
     from planecal.links.base import AlwaysEnabled
     from planecal.sampling.collect import (Cursor, DriveAcquirer, MemoryRecorder,
@@ -179,14 +183,13 @@ def _collect(scene, planner, twin, rs, seed: int):
     collect(planner, acq, rec, rs.samples, cursor, tally, rs.max_attempts)
     if tally.status != "complete":
         raise RuntimeError(f"run with seed {seed}: {tally.reason}")
-    qe, d, plate = rec.arrays()
-    return qe, d, plate, dict(tally.rejected)
+    return (*rec.arrays(), dict(tally.rejected))
 
 
 def twin_samples(scene, world, st: RehearsalSettings, seed: int, options=None):
     """The ``twin`` mode (module docstring) in ``world`` (a ``Truth`` from ``world_for`` or
     ``twin.profile.draw_world``, or a ``CellParams``) with ``options`` (default: the
-    settings' profile and noise): (qe, d_m, plate, rejected dict)."""
+    settings' profile and noise): (qe, d_m, plate, direction, rejected dict)."""
     from planecal.sampling.planner import Planner
 
     twin, rs = _twin_and_settings(scene, world, st, seed, options)
@@ -223,7 +226,7 @@ def rehearse_samples(scene, world, st: RehearsalSettings, seed: int, options=Non
         if stats.status != "complete":
             raise RuntimeError(f"rehearsal with seed {seed}: {stats.status} ({stats.reason})")
         s = read_samples(out)
-    return s.qe, s.d_mm * 1e-3, s.plate, dict(stats.rejected)
+    return s.qe, s.d_mm * 1e-3, s.plate, s.direction, dict(stats.rejected)
 
 
 def synthetic_noisy_samples(scene, truth, st: RehearsalSettings, seed: int):
@@ -245,4 +248,5 @@ def synthetic_noisy_samples(scene, truth, st: RehearsalSettings, seed: int):
     o_b, z_b = sensor_in_base(robot, q, truth)
     d = plane_distance(truth.planes[plate], o_b, z_b)
     d = d + rng.normal(0.0, sample_sigma_m(st.options().laser_noise_mm), len(d))
-    return qe, d, plate, {"collision": 0, "laser": 0, "unreachable": 0}
+    return (qe, d, plate, np.zeros(qe.shape, np.int8),
+            {"collision": 0, "laser": 0, "unreachable": 0})

@@ -309,7 +309,7 @@ def run_one(item: Item) -> dict:
         rej = ", ".join(f"{k} {v}" for k, v in tally.rejected.items() if v)
         return {"failed": f"sampling gave up after {tally.samples} of {rs.samples} samples "
                           f"(rejected: {rej or 'none'}): {tally.reason}"}
-    qe, d, plate = rec.arrays()
+    qe, d, plate, direction = rec.arrays()
     try:
         fit = calibrate(robot, qe, d, nominal_params(scene), plate,
                         calibration_of(cell["level"])).result

@@ -48,5 +48,5 @@ def synthetic_samples(scene: Scene, truth: CellParams, n: int, rng: np.random.Ge
             tally, max_attempts=20 * n)
     if tally.status != "complete":
         raise RuntimeError(f"synthetic samples: {tally.reason}")
-    qe, d, plate = rec.arrays()
+    qe, d, plate, _ = rec.arrays()  # the model moves no robot: the direction is unknown (0)
     return qe, d + rng.normal(0.0, noise_m, n), plate

@@ -69,7 +69,7 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
     world, opts = without(*reh.world(0), job.off)
     try:
         sample = pose_list_samples if job.poses else twin_samples
-        qe, d, plate, rejected = sample(scene, world, reh, job.seed, opts)
+        qe, d, plate, direction, rejected = sample(scene, world, reh, job.seed, opts)
     except RuntimeError as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
     fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate, job.calibration).result
