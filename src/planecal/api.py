@@ -215,7 +215,7 @@ def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
                                    else tuple(free),
                                    options=FitOptions(**opts))
     cal = calibrate_cell(sc.robot, samples.counts, samples.distance_m, initial, samples.plate,
-                         settings)
+                         settings, samples.direction, sc.references)
     res = cal.result
     layout = res.layout
     x, sd = res.params.to_vector(layout), res.std

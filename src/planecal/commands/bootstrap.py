@@ -66,7 +66,8 @@ def run(args) -> int:
     sizes = None if args.sizes is None else tuple(parse_int_list(args.sizes, "--sizes"))
     samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
     cal = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
-    pool = Pool(scene.robot, samples.qe, samples.d_mm * 1e-3, samples.plate, initial, cal)
+    pool = Pool(scene.robot, samples.qe, samples.d_mm * 1e-3, samples.plate, initial, cal,
+                samples.direction, scene.references)
     settings = check_settings(pool, BootstrapSettings(sizes, args.repeats, args.seed))
     engine = engine_from_args(args)  # its options checked before any file
     results = results_path(args)

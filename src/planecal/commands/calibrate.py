@@ -63,7 +63,7 @@ def run(args) -> int:
                                                  RESULT_FORMAT, args.force)
     samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
     settings = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
-    cal = calibrate_samples(scene.robot, samples, initial, settings)
+    cal = calibrate_samples(scene.robot, samples, initial, settings, scene.references)
     doc = result_document(document(cal, scene.robot), provenance(
         inputs + [("scene", scene.path), ("robot", scene.robot.source)], scene.name,
         scene.robot.name))

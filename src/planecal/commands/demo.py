@@ -129,7 +129,8 @@ def _calibrate(args, scene, settings, run_file, truth_file, result_file):
     samples = read_samples(run_file)
     print(f"\n== calibration (level {settings.label}) from the scene's nominal values "
           f"({len(samples)} samples)")
-    cal = calibrate_samples(scene.robot, samples, nominal_params(scene), settings)
+    cal = calibrate_samples(scene.robot, samples, nominal_params(scene), settings,
+                            scene.references)
     doc = result_document(document(cal, scene.robot), provenance(
         [("samples", run_file), ("scene", scene.path), ("robot", scene.robot.source)],
         scene.name, scene.robot.name))

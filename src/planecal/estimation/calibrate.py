@@ -229,9 +229,12 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
 
 
 def calibrate_samples(robot: Robot, samples, initial: CellParams,
-                      settings: CalibrationSettings = CalibrationSettings()) -> Calibration:
-    """``calibrate`` on a sample file's ``Samples`` (mm -> m here)."""
-    return calibrate(robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate, settings)
+                      settings: CalibrationSettings = CalibrationSettings(),
+                      references: tuple = ()) -> Calibration:
+    """``calibrate`` on a sample file's ``Samples`` (mm -> m here; their recorded approach
+    directions, where the file has them) with the scene's known lengths."""
+    return calibrate(robot, samples.qe, samples.d_mm * 1e-3, initial, samples.plate, settings,
+                     samples.direction, references)
 
 
 __all__ = ["LEVELS", "Calibration", "CalibrationSettings", "base_set", "calibrate", "candidates",

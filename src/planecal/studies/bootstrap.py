@@ -61,6 +61,8 @@ class Pool:
     plate: np.ndarray
     initial: CellParams
     calibration: CalibrationSettings
+    direction: np.ndarray | None = None  # the samples' approach directions (level 3)
+    references: tuple = ()  # the scene's known lengths
 
     def __len__(self) -> int:
         return len(self.d_m)
@@ -77,7 +79,8 @@ class Pool:
 
     def subset(self, idx) -> "Pool":
         return Pool(self.robot, self.qe[idx], self.d_m[idx], self.plate[idx], self.initial,
-                    self.calibration)
+                    self.calibration,
+                    None if self.direction is None else self.direction[idx], self.references)
 
 
 def default_sizes(n: int, p: int) -> tuple:
@@ -110,11 +113,15 @@ def pool_digest(pool: Pool) -> str:
     """sha256 of what the fits depend on (samples, initial parameters, calibration
     settings): a results file written for another pool is refused."""
     h = hashlib.sha256()
-    for a in (pool.qe, pool.d_m, pool.plate, pool.free, pool.initial.to_vector(pool.layout)):
+    extra = () if pool.direction is None else (pool.direction,)
+    for a in (pool.qe, pool.d_m, pool.plate, pool.free, pool.initial.to_vector(pool.layout),
+              *extra):
         a = np.ascontiguousarray(a)
         h.update(f"{a.dtype.str}{a.shape}".encode())
         h.update(a.tobytes())
     h.update(repr(pool.calibration).encode())
+    if pool.references:  # (a pool without any hashes as before: its results still resume)
+        h.update(repr(pool.references).encode())
     h.update(",".join(pool.layout.names).encode())
     return h.hexdigest()
 
@@ -122,7 +129,7 @@ def pool_digest(pool: Pool) -> str:
 def _fit_one(pool: Pool):
     try:
         res = calibrate(pool.robot, pool.qe, pool.d_m, pool.initial, pool.plate,
-                        pool.calibration).result
+                        pool.calibration, pool.direction, pool.references).result
     except (InputError, np.linalg.LinAlgError) as e:
         return {"ok": False, "error": str(e)}
     return {"ok": True, "x": res.params.to_vector(res.layout), "std": res.std,

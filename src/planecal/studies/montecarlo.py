@@ -119,7 +119,7 @@ def run_one(job) -> dict:
     weights = {"joint_sigma_rad": s, "distance_sigma_m": max(sample_sigma, 1e-9)} \
         if st.weighted else {}
     cal = calibrate(robot, qe, d, nominal_params(scene), plate,
-                    st.calibration(FitOptions(**weights)))
+                    st.calibration(FitOptions(**weights)), direction, scene.references)
     fit = cal.result
     layout, free = fit.layout, fit.free
     truth = true_params(robot, world, opts)

@@ -312,7 +312,7 @@ def run_one(item: Item) -> dict:
     qe, d, plate, direction = rec.arrays()
     try:
         fit = calibrate(robot, qe, d, nominal_params(scene), plate,
-                        calibration_of(cell["level"])).result
+                        calibration_of(cell["level"]), direction, scene.references).result
     except InputError as e:
         return {"failed": f"calibration refused: {e}"}
     layout = fit.layout

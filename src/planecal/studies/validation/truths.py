@@ -72,7 +72,8 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
         qe, d, plate, direction, rejected = sample(scene, world, reh, job.seed, opts)
     except RuntimeError as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
-    fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate, job.calibration).result
+    fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate, job.calibration,
+                    direction, scene.references).result
     v = validate(scene, world, fit.params, qe, st, cached_world(job.scene, st.clearance_m), fit,
                  opts)
     v["truth_seed"] = job.truth_seed
