@@ -77,7 +77,7 @@ def test_scenes_lists_the_cells(capsys):
     out = capsys.readouterr().out
     for name in ("thesis_final", "three_plates", "appendix_d"):
         assert name in out
-    assert "3 plates" in out
+    assert "4 plates + length" in out  # three_plates and its stepped block
 
 
 def test_completion_script_knows_the_commands(capsys):

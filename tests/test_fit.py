@@ -189,7 +189,9 @@ def three_plate_design():
     from planecal.sampling.poses import PoseSettings
     from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import draw_truth
-    scene = load_scene("three_plates")
+    from dataclasses import replace
+    scene = load_scene("three_plates")  # its three plates, without the stepped block
+    scene = replace(scene, plates=scene.plates[:3], references=())
     truth = draw_truth(scene, 3)
     pose = PoseSettings(cone_deg=scene.cone_deg, distance_mm=tuple(scene.distance_mm),
                         roll_deg=180.0, ik_choice="nearest")
@@ -244,7 +246,7 @@ def test_weighted_fit_reports_honest_std_where_the_unweighted_does_not(three_pla
     scene, truth, qe, plate, s, q0 = three_plate_design
     rng = np.random.default_rng(7)
     init = nominal_params(scene)
-    free = level1_layout(3).default_free
+    free = level1_layout(truth.n_planes).default_free
     want = truth.to_vector()[free][:4]  # delta2..delta5
     err = {"u": [], "w": []}
     rep = {"u": [], "w": []}

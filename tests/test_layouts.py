@@ -103,7 +103,9 @@ def test_layout_study_figures(three):
     scene, checker = three
     res = layout_study(scene, CalibrationSettings(), samples=150, seed=0, checker=checker)
     rows = {"+".join(r["plates"]): r for r in res["layouts"]}
-    assert len(rows) == 7 and [len(r["plates"]) for r in res["layouts"]] == [1, 1, 1, 2, 2, 2, 3]
+    # 1, 2 and 3 of its four plates (three plates and the stepped block's top)
+    assert len(rows) == 14
+    assert [len(r["plates"]) for r in res["layouts"]] == [1] * 4 + [2] * 6 + [3] * 4
     for r in rows.values():  # the default free set (delta1, delta6 fixed) is identifiable
         assert r["excluded"] == [] and r["rank"] == len(r["free"]) == 9 + 3 * len(r["plates"])
         assert r["samples"] == 150
@@ -124,7 +126,7 @@ def test_free_all_names_the_lost_directions(three, capsys, tmp_path):
     text = capsys.readouterr().out
     assert "plate_a: rank 12 of 14" in text and "a combination of others" in text
     doc = json.loads(out.read_text())
-    assert doc["format"] == "planecal-layouts/1" and len(doc["layouts"]) == 7
+    assert doc["format"] == "planecal-layouts/1" and len(doc["layouts"]) == 14
     assert all(r["rank"] == len(r["free"]) - 2 for r in doc["layouts"])
     assert main(["layouts", "--samples", "30", "--out", str(out)]) == 0  # its own: replaced
     (tmp_path / "x.json").write_text("{}")
@@ -199,14 +201,16 @@ def test_every_plate_of_three_plates_is_reachable_from_clear_poses(reach):
 
 def test_three_plates_random_draws_mostly_reachable(reach):
     """The sampling run's own draws: measured 95-99.5 % of them have a clear pose whose
-    beam hits the plate in the window (200 draws per plate)."""
+    beam hits the plate in the window (100 draws per plate); plate_a's far part is shadowed
+    by the stepped block behind it (64 of 100), plate_d, the block's top, 80-85 of 100."""
     scene, gen, clear_hit = reach
     rng = np.random.default_rng(0)
-    for k in range(3):
+    least = {"plate_a": 55, "plate_d": 70}
+    for k, plate in enumerate(scene.plates):
         ok = sum(any(clear_hit(q, k) for q in gen.branch_targets(gen.draw(rng, k),
                                                                  scene.calibration_q))
                  for _ in range(100))
-        assert ok >= 90, f"{scene.plates[k].name}: {ok} of 100 draws reachable"
+        assert ok >= least.get(plate.name, 90), f"{plate.name}: {ok} of 100 draws reachable"
 
 
 @pytest.mark.parametrize("plates", [(0, 1), (0, 1, 2)])

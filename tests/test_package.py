@@ -129,7 +129,7 @@ def test_planecal_home_is_a_shops_own_data(tmp_path, monkeypatch, capsys):
     assert main(["scenes", "--json"]) == 0
     import json
     rows = json.loads(capsys.readouterr().out)
-    assert [(r["name"], r["plates"]) for r in rows] == [("cell7", 3)]
+    assert [(r["name"], r["plates"]) for r in rows] == [("cell7", 4)]
     # a scene given by path is read from its path, wherever the data root is
     from planecal.model.scene import load_scene
     assert len(load_scene(REPO / "scenes" / "thesis_final.json").plates) == 1

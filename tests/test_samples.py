@@ -134,8 +134,8 @@ def test_plate_numbers_the_scene_lacks(tmp_path):
     from planecal.io.samples import read_many
     from planecal.model.scene import load_scene
     p = tmp_path / "k.tsv"
-    p.write_text(_rows([80, 81, 82], [1, 3, 4]))
-    with pytest.raises(InputError, match=r"k.tsv:3: plate 4, but scene three_plates has 3 plates$"):
+    p.write_text(_rows([80, 81, 82], [1, 3, 5]))
+    with pytest.raises(InputError, match=r"k.tsv:3: plate 5, but scene three_plates has 4 plates$"):
         read_many([repo_path("examples", "seed_samples.tsv"), p], load_scene("three_plates"))
     with pytest.raises(InputError, match=r"k.tsv:2: plate 3, but scene thesis_final has 1 plate$"):
         read_samples(p, load_scene("thesis_final"))

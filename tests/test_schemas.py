@@ -252,8 +252,10 @@ def test_scene_robot_that_does_not_exist(tmp_path):
 
 def test_shipped_scenes_load_unchanged():
     s = load_scene("three_plates")
-    assert [p.name for p in s.plates] == ["plate_a", "plate_b", "plate_c"]
-    assert [p.face for p in s.plates] == [1, -1, -1]
+    assert [p.name for p in s.plates] == ["plate_a", "plate_b", "plate_c", "plate_d"]
+    assert [p.face for p in s.plates] == [1, -1, -1, 1]
+    ref, = s.references  # the stepped block: plate_d 200 mm beyond plate_a, parallel
+    assert ref.plates == (0, 3) and ref.separation_m == 0.2 and ref.std_m == 5e-6
     assert s.laser_range_mm == (65.0, 95.0) and s.distance_mm == (70.0, 90.0)
     np.testing.assert_array_equal(s.plates[2].x_hint, [0.9684, 0.2055, 0.1413])
     assert load_scene("appendix_d").cone_deg == 25.0

@@ -107,8 +107,9 @@ def test_three_planes_do_not_free_delta1_delta6():
     res = analyze(runs, st)
     bad = res["not_identifiable_all_free"]
     assert "delta1" in bad and "delta6" in bad
-    # everything fitted by default is identifiable, one n~ per plate
-    assert len(res["free"]) == 4 + 5 + 9 and not any(r["not_identifiable"] for r in runs)
+    # everything fitted by default is identifiable, one n~ per plate (three plates and the
+    # stepped block's top)
+    assert len(res["free"]) == 4 + 5 + 12 and not any(r["not_identifiable"] for r in runs)
 
 
 def test_plots_go_to_a_rerun_recording(tmp_path, capsys):

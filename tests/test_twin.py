@@ -6,7 +6,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from planecal.model.planes import point_normal_from_n_tilde
+from planecal.model.planes import parallel_rows, point_normal_from_n_tilde
 from planecal.model.measurement import predict  # noqa: E402
 from planecal.model.encoder import counts_to_joints, joints_to_counts  # noqa: E402
 from planecal.base.errors import InputError  # noqa: E402
@@ -311,12 +311,19 @@ def test_truth_bounds_and_seed():
         assert np.abs(t.joint_offsets).max() <= 3e-3
         assert np.linalg.norm(t.sensor_origin - nom.sensor_origin) <= 0.010
         assert abs(t.phi_y - nom.phi_y) <= 0.035 and abs(t.phi_z - nom.phi_z) <= 0.035
+        stepped = {ref.plates[1] for ref in scene.references}
         for k, plate in enumerate(scene.plates):
             _, n0 = point_normal_from_n_tilde(plate.n_tilde)
             _, n1 = point_normal_from_n_tilde(t.planes[k])
+            if k in stepped:  # the block's top: its base's draw, moved as one body
+                continue
             assert np.arccos(min(1.0, abs(n0 @ n1))) <= 0.05 + 1e-12
             # the plate centre moved by <= 10 mm off its nominal plane
             assert abs(t.planes[k] @ plate.center() - 1) / np.linalg.norm(t.planes[k]) <= 0.0101
+        for ref in scene.references:  # the stepped block: parallel, 200 mm +- its 5 um
+            a, b = ref.plates
+            g, _, _ = parallel_rows(t.planes[a], t.planes[b], ref.separation_m)
+            assert np.linalg.norm(g[:3]) < 6 * ref.parallel_std_rad and abs(g[3]) < 6 * ref.std_m
     assert np.array_equal(draw_truth(scene, 3).to_vector(), draw_truth(scene, 3).to_vector())
     t = draw_truth(scene, 3, Tolerances(offsets_all=True))
     assert t.joint_offsets[0] != 0 and t.joint_offsets[5] != 0

@@ -367,8 +367,8 @@ case("samples-json-given", "calibrate {base}/params.json", {}, 2, "params.json")
 case("samples-three-plate-column-missing",
      "calibrate {d}/s.tsv --scene three_plates",
      {"s.tsv": Rows(base="run3.tsv", drop_plate=(3, 4, 5, 6))}, 2, "plate column")
-case("samples-three-plate-number-4", "calibrate {d}/s.tsv --scene three_plates",
-     {"s.tsv": Rows(base="run3.tsv", edit=((2, 7, "4"),))}, 2, "plate 4")
+case("samples-three-plate-number-5", "calibrate {d}/s.tsv --scene three_plates",
+     {"s.tsv": Rows(base="run3.tsv", edit=((2, 7, "5"),))}, 2, "plate 5")
 case("samples-plate-zero", "calibrate {d}/s.tsv --scene three_plates",
      {"s.tsv": Rows(base="run3.tsv", edit=((2, 7, "0"),))}, 2, "plate")
 case("samples-decimal-comma-valid", CS, {"s.tsv": Rows(comma=True)}, 0)

@@ -1,4 +1,5 @@
-"""planecal scenes: the scenes (cells) planecal knows, one a line: name, robot, plates and
+"""planecal scenes: the scenes (cells) planecal knows, one a line: name, robot, plates (and
+"+ length" where a length reference fixes the arm's scale) and
 description (scenes/*.json; any other scene is given by its path)."""
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ def run(args) -> int:
     for path in paths:
         s = load_scene(path)
         rows.append({"name": path.stem, "plates": len(s.plates),
+                     "length_references": len(s.references),
                      "robot": s.robot.folder.name if s.robot.folder else s.robot.name,
                      "robot_name": s.robot.name, "description": s.description or "",
                      "path": str(path)})
@@ -34,7 +36,8 @@ def run(args) -> int:
     for r in rows:  # the description's first sentence
         first = r["description"].split(". ")[0].rstrip(".")
         first = first if len(first) <= 80 else first[:77] + "..."
+        ref = "+ length" if r["length_references"] else "        "
         print(f"{r['name']:<{w}}  {r['robot']:<{wr}}  {r['plates']} plate"
-              f"{'s' if r['plates'] != 1 else ' '}  {first}")
+              f"{'s' if r['plates'] != 1 else ' '} {ref}  {first}")
     print("(any other scene: give its JSON path; planecal scenes --json for the details)")
     return 0

@@ -145,7 +145,7 @@ class Sampling(Model):
     distance_mm: Distances = [70.0, 90.0]
 
 
-Separation = Ranged(0.001, CELL_M, "m", "separation", MM_AS_M)
+Separation = Ranged(-CELL_M, CELL_M, "m", "separation", MM_AS_M)
 LengthStd = Ranged(1e-9, 0.01, "m", "length std", MM_AS_M)
 ParallelStd = Ranged(1e-9, 0.01, "rad", "parallelism std")
 
@@ -153,7 +153,7 @@ ParallelStd = Ranged(1e-9, 0.01, "rad", "parallelism std")
 class Reference(Model):
     """A known length (``model.scene.LengthReference``): plate ``plates[1]`` parallel to
     plate ``plates[0]`` (by name), ``separation_m`` further from the base origin along its
-    normal, measured with the std ``std_m``, the faces parallel within
+    normal (negative: nearer), measured with the std ``std_m``, the faces parallel within
     ``parallel_std_rad``."""
     kind: Annotated[Str, Field(json_schema_extra={"enum": ["parallel_plates"]})] = \
         "parallel_plates"

@@ -71,8 +71,8 @@ class Box:
 class LengthReference:
     """A known length in the cell (issue 22): plate ``plates[1]`` parallel to plate
     ``plates[0]`` (0-based), ``separation_m`` further from the base origin along its normal
-    (a stepped artefact, measured), with the measurement's std and the faces' parallelism
-    std. The fit takes it as prior rows (``planes.parallel_rows``), and the arm's scale,
+    (negative: nearer; a stepped artefact, measured), with the measurement's std and the
+    faces' parallelism std. The fit takes it as prior rows (``planes.parallel_rows``), and the arm's scale,
     which a laser on planes cannot see otherwise, is then free."""
     plates: tuple[int, int]
     separation_m: float
@@ -160,6 +160,9 @@ def _reference(path: Path, i: int, r, plates: list[Plate]) -> LengthReference:
     ia, ib = r.plate_indices([p for p in plates])
     g, _, _ = parallel_rows(plates[ia].n_tilde, plates[ib].n_tilde, r.separation_m)
     where = f"{path}: references.{i}"
+    if abs(r.separation_m) < REFERENCE_GAP_M:
+        raise InputError(f"{where}.separation_m: {r.separation_m:g} m: two faces of a stepped "
+                         "block are more than a millimetre apart")
     if np.linalg.norm(g[:3]) > REFERENCE_TILT_RAD:
         raise InputError(f"{where}: {r.plates[0]} and {r.plates[1]} are "
                          f"{np.linalg.norm(g[:3]):.3g} rad from parallel: not one stepped "
