@@ -1,0 +1,144 @@
+"""How accurate the calibrated robot is, estimated from its own samples (issue 22): the
+position error a calibration leaves at the tool, with the model's mismatch in it, beside
+the noise-only figure the covariance alone gives.
+
+Where: the calibrated tool's point, the laser's beam point at its nominal standoff (the
+middle of the scene's measuring range, 80 mm for the ZS-LD80), in the robot's own frame
+(J1's axis and zero: ``compensate.registered_frame``, what ``planecal validate`` measures
+AP in), at the calibration samples' poses.
+
+    tool-point error  = sqrt(mean over the poses of tr(T_i C T_i^T))
+
+with T_i the tool point's derivative by the calibrated parameters at pose i (central
+differences of ``measurement.sensor_in_base``) and C the calibration's covariance: the
+posterior one of the fit (its priors, the scene's known lengths, the base set), scaled
+
+* by the noise level the fit's own residuals show (``Result.sigma_m``: what the model does
+  not explain, the robot's mismatch with it included): **the estimate**;
+* by the noise model's (``estimation.noise``: the repeatability and the laser, as the
+  robot's datasheet gives them): **noise only**, what a model that fitted the robot exactly
+  would leave.
+
+Beside them, the held-out residual: ``folds``-fold cross-validation over the samples, each
+fold's distances predicted by a calibration (the same settings) of the other samples. Its
+rms against the fit's own residual rms says how much of the fit is the samples' noise.
+A plane sees a position error only along its normal, so neither residual alone is a
+position error; the covariance carries it to the tool in every direction, and a direction
+no sample sees (J1's angle at a plate, the arm's scale without a known length) keeps its
+prior's uncertainty.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from planecal.estimation.calibrate import Calibration, calibrate
+from planecal.estimation.noise import repeatability_sigma, sample_variance
+from planecal.model.encoder import counts_to_joints
+from planecal.model.measurement import (backlash_sides, joints_of_counts, kinematics_of,
+                                        predict, sensor_in_base)
+from planecal.model.robot import Robot
+
+FOLDS = 10
+FD_STEP = 1e-7  # central differences (SI units: rad, m, 1/m; compliance scaled below)
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """The accuracy figures of one calibration (module docstring), mm."""
+    tool_point_mm: float  # predicted, the model's mismatch in it
+    noise_only_mm: float  # predicted from the noise model alone
+    residual_sigma_mm: float  # the fit's own (unbiased) residual std
+    noise_sigma_mm: float  # the noise model's rms sample std
+    cv_residual_rms_mm: float  # held-out residuals of the cross-validation
+    in_sample_rms_mm: float
+    folds: int
+    standoff_mm: float
+    where: str = ("the laser's beam point at its nominal standoff, in the robot's frame, rms "
+                  "over the calibration samples' poses")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def tool_point(robot: Robot, q: np.ndarray, params, side, standoff_m: float) -> np.ndarray:
+    """(N, 3): the beam point at ``standoff_m`` in the model's robot frame (its frame of
+    joint 1 at q = 0 mapped onto robot.json's: ``compensate.registered_frame``)."""
+    from planecal.estimation.compensate import registered_frame
+    o, z = sensor_in_base(robot, q, params, side)
+    F = np.linalg.inv(registered_frame(robot, kinematics_of(robot, params)))
+    return (o + standoff_m * z) @ F[:3, :3].T + F[:3, 3]
+
+
+def tool_jacobian(robot: Robot, q: np.ndarray, side, cal: Calibration,
+                  standoff_m: float) -> np.ndarray:
+    """(N, 3, p): the tool point's derivative by the calibration's free parameters
+    (``Covariance.names`` order), by central differences."""
+    res = cal.result
+    layout, p0 = res.layout, res.params
+    x0 = p0.to_vector(layout)
+    names = list(res.covariance.names)
+    T = np.empty((len(q), 3, len(names)))
+    for k, name in enumerate(names):
+        i = layout.index(name)
+        h = FD_STEP * (1e-3 if layout.param(name).unit == "rad/(N m)" else 1.0)
+        xp, xm = x0.copy(), x0.copy()
+        xp[i] += h
+        xm[i] -= h
+        T[:, :, k] = (tool_point(robot, q, p0.with_vector(xp, layout), side, standoff_m)
+                      - tool_point(robot, q, p0.with_vector(xm, layout), side, standoff_m)) \
+            / (2 * h)
+    return T
+
+
+def cross_validate(robot: Robot, qe, d_m, initial, plate, settings, direction=None,
+                   references: tuple = (), folds: int = FOLDS, seed: int = 0) -> np.ndarray:
+    """(N,) held-out residuals [m] (predicted - measured): each of ``folds`` folds (a
+    random partition, ``seed``) predicted by a calibration of the other samples."""
+    qe, d_m = np.asarray(qe), np.asarray(d_m, float)
+    n = len(d_m)
+    plate = np.zeros(n, int) if plate is None else np.asarray(plate, int)
+    out = np.empty(n)
+    for f in np.array_split(np.random.default_rng(seed).permutation(n), folds):
+        keep = np.setdiff1d(np.arange(n), f)
+        dk = None if direction is None else np.asarray(direction)[keep]
+        cal = calibrate(robot, qe[keep], d_m[keep], initial, plate[keep], settings, dk,
+                        references)
+        df = None if direction is None else np.asarray(direction)[f]
+        out[f] = predict(robot, qe[f], cal.params, plate[f], df) - d_m[f]
+    return out
+
+
+def accuracy(robot: Robot, cal: Calibration, qe, d_m, plate=None, direction=None,
+             references: tuple = (), laser_range_mm=(65.0, 95.0), laser_noise_mm: float = 0.001,
+             folds: int = FOLDS) -> Accuracy:
+    """The accuracy figures of ``cal``, a calibration of these samples (module docstring).
+    ``laser_noise_mm``: a reading's noise (the noise model's; the repeatability is
+    robot.json's)."""
+    from planecal.estimation.noise import sample_sigma_m
+    res = cal.result
+    qe = np.asarray(qe)
+    n = len(qe)
+    plate = np.zeros(n, int) if plate is None else np.asarray(plate, int)
+    standoff = 0.5e-3 * (laser_range_mm[0] + laser_range_mm[1])
+    q = counts_to_joints(robot, qe)
+    side = backlash_sides(robot, q, direction)
+    C = np.nan_to_num(res.covariance.matrix)
+    T = tool_jacobian(robot, q, side, cal, standoff)
+    per_pose = np.einsum("nik,kl,nil->n", T, C, T)
+    tool_rms = float(np.sqrt(max(per_pose.mean(), 0.0)))
+    # the noise model at these poses: the repeatability on the beam, the laser, the counts
+    joints = joints_of_counts(robot, qe, direction)
+    from planecal.model.measurement import predict_joints_with_jacobian
+    _, J = predict_joints_with_jacobian(robot, joints, res.params, plate, res.layout)
+    v = sample_variance(robot, J[:, res.layout.slice("joint_offsets")],
+                        repeatability_sigma(robot), sample_sigma_m(laser_noise_mm), True)
+    noise_sigma = float(np.sqrt(v.mean()))
+    scale = noise_sigma / res.sigma_m if res.sigma_m > 0 else 0.0
+    cv = cross_validate(robot, qe, d_m, res.initial, plate, cal.settings, direction,
+                        references, folds)
+    return Accuracy(tool_point_mm=tool_rms * 1e3, noise_only_mm=tool_rms * scale * 1e3,
+                    residual_sigma_mm=res.sigma_m * 1e3, noise_sigma_mm=noise_sigma * 1e3,
+                    cv_residual_rms_mm=float(np.sqrt(np.mean(cv ** 2)) * 1e3),
+                    in_sample_rms_mm=res.rms_mm(), folds=folds, standoff_mm=standoff * 1e3)
