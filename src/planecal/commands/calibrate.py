@@ -54,6 +54,7 @@ def add_arguments(p):
 
 
 def run(args) -> int:
+    from planecal.estimation.accuracy import of_samples
     from planecal.estimation.calibrate import calibrate_samples
     from planecal.present.calibration import document, text
 
@@ -64,7 +65,7 @@ def run(args) -> int:
     samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
     settings = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
     cal = calibrate_samples(scene.robot, samples, initial, settings, scene.references)
-    doc = result_document(document(cal, scene.robot), provenance(
+    doc = result_document(document(cal, scene.robot, of_samples(scene, cal, samples)), provenance(
         inputs + [("scene", scene.path), ("robot", scene.robot.source)], scene.name,
         scene.robot.name))
     print(text(doc, samples.n_zero))

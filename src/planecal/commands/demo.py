@@ -122,6 +122,7 @@ def _calibrate(args, scene, settings, run_file, truth_file, result_file):
     from planecal.estimation.calibrate import calibrate_samples
     from planecal.formats.params import provenance, result_document
     from planecal.io.params import save_json
+    from planecal.estimation.accuracy import of_samples
     from planecal.io.samples import read_samples
     from planecal.model.scene import nominal_params
     from planecal.present.calibration import document, text
@@ -131,7 +132,7 @@ def _calibrate(args, scene, settings, run_file, truth_file, result_file):
           f"({len(samples)} samples)")
     cal = calibrate_samples(scene.robot, samples, nominal_params(scene), settings,
                             scene.references)
-    doc = result_document(document(cal, scene.robot), provenance(
+    doc = result_document(document(cal, scene.robot, of_samples(scene, cal, samples)), provenance(
         [("samples", run_file), ("scene", scene.path), ("robot", scene.robot.source)],
         scene.name, scene.robot.name))
     print(text(doc, samples.n_zero))

@@ -110,6 +110,13 @@ def cross_validate(robot: Robot, qe, d_m, initial, plate, settings, direction=No
     return out
 
 
+def of_samples(scene, cal: Calibration, samples, folds: int = FOLDS) -> Accuracy:
+    """``accuracy`` of a calibration of a sample file's ``Samples`` in ``scene`` (its laser
+    range and known lengths)."""
+    return accuracy(scene.robot, cal, samples.qe, samples.d_mm * 1e-3, samples.plate,
+                    samples.direction, scene.references, scene.laser_range_mm, folds=folds)
+
+
 def accuracy(robot: Robot, cal: Calibration, qe, d_m, plate=None, direction=None,
              references: tuple = (), laser_range_mm=(65.0, 95.0), laser_noise_mm: float = 0.001,
              folds: int = FOLDS) -> Accuracy:

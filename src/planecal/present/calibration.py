@@ -99,13 +99,14 @@ def _controller_offsets(cal: Calibration) -> dict:
             "kept_initial": kept, "reason": None}
 
 
-def document(cal: Calibration, robot=None) -> dict:
+def document(cal: Calibration, robot=None, accuracy=None) -> dict:
     """The result file's keys (docs/FORMATS.md): the parameter file's (the identified
     values), ``std`` in the same shape, ``parameters`` (every parameter by name, with its
     status), the fit's figures, ``identifiability``, ``free``, ``covariance``,
     ``history``, ``initial``, ``calibration`` (the settings: level, compliance, ...),
     ``base_set`` and ``excluded``, ``encoder_offsets`` (what a controller can take) and,
-    with ``robot``, the robot's name and description hash."""
+    with ``robot``, the robot's name and description hash; with ``accuracy``
+    (``estimation.accuracy.Accuracy``) its figures."""
     res = cal.result
     out = params_to_dict(res.params)
     out["std"] = _std_blocks(res)
@@ -140,6 +141,8 @@ def document(cal: Calibration, robot=None) -> dict:
     out["encoder_offsets"] = _controller_offsets(cal)
     if robot is not None:
         out["robot"] = {"name": robot.name, "sha256": robot.digest}
+    if accuracy is not None:
+        out["accuracy"] = accuracy.to_dict()
     return out
 
 
@@ -191,8 +194,12 @@ def parameter_rows(doc: dict) -> list[Row]:
 
 
 def label(doc: dict) -> str:
-    """What the result is: 'offsets', 'full + compliance', ... (older results: offsets)."""
-    return (doc.get("level") or "offsets") + (" + compliance" if doc.get("compliance") else "")
+    """What the result is: 'offsets', 'full + compliance', 'nonkinematic' (level 3 has the
+    compliance always), ... (older results: offsets)."""
+    from planecal.model.levels import LEVELS, with_compliance
+    level = doc.get("level") if doc.get("level") in LEVELS else "offsets"
+    plus = doc.get("compliance") and not with_compliance(level, False)
+    return level + (" + compliance" if plus else "")
 
 
 @dataclass(frozen=True)
@@ -277,4 +284,19 @@ def text(doc: dict, n_zero: int = 0) -> str:
     eo = doc.get("encoder_offsets")
     if isinstance(eo, dict) and eo.get("reason"):
         lines.append(f"NOTE no encoder offsets for a controller: {eo['reason']}")
+    lines.extend(accuracy_lines(doc))
     return "\n".join(lines)
+
+
+def accuracy_lines(doc: dict) -> list[str]:
+    """The result's accuracy estimate (``estimation.accuracy``), labelled: where, and what
+    it includes."""
+    a = doc.get("accuracy")
+    if not isinstance(a, dict):
+        return []
+    return [f"predicted position error at the tool {a['tool_point_mm']:.3f} mm rms ({a['where']}; "
+            f"the fit's residual level {a['residual_sigma_mm']:.4f} mm, the model's mismatch in "
+            "it); from the noise model alone "
+            f"{a['noise_only_mm']:.3f} mm ({a['noise_sigma_mm']:.4f} mm a sample)",
+            f"held-out residuals ({a['folds']}-fold cross-validation) rms "
+            f"{a['cv_residual_rms_mm']:.4f} mm against {a['in_sample_rms_mm']:.4f} mm in the fit"]
