@@ -77,20 +77,27 @@ class CalibratedModel:
     params: CellParams
     level: str = "offsets"
 
-    def flange(self, q: np.ndarray) -> np.ndarray:
+    def flange(self, q: np.ndarray, side: np.ndarray | None = None) -> np.ndarray:
         """q (N, 6) rad (joint angles from the encoder model) -> (N, 4, 4) flange (standard
-        DH frame 6) in the base frame."""
+        DH frame 6) in the base frame; ``side`` (N, 6) the backlash flanks (level 3:
+        ``measurement.backlash_sides``; None: the middle)."""
         from planecal.model.measurement import flange_pose
-        return flange_pose(self.robot, np.atleast_2d(q), self.params)
+        return flange_pose(self.robot, np.atleast_2d(q), self.params, side)
 
-    def jacobian(self, q: np.ndarray) -> np.ndarray:
+    def jacobian(self, q: np.ndarray, side: np.ndarray | None = None) -> np.ndarray:
         """The geometric Jacobian (N, 6, 6) of the flange at q, rows (v, w) in the base
-        frame (the gravity deflection's own derivative, ~1e-4 of it, left out: Newton's
-        steps converge all the same)."""
+        frame (the joint errors' own derivatives -- the gravity deflection's ~1e-4, a gear
+        harmonic's f A ~4e-3 -- left out: Newton's steps converge all the same)."""
         from planecal.model.kinematics import jacobian
         from planecal.model.measurement import effective_joints, kinematics_of
-        qd, _ = effective_joints(self.robot, np.atleast_2d(q), self.params)
+        qd, _ = effective_joints(self.robot, np.atleast_2d(q), self.params, side)
         return jacobian(kinematics_of(self.robot, self.params), qd)
+
+    def sides(self, q: np.ndarray, direction: np.ndarray | None) -> np.ndarray:
+        """(N, 6): the backlash flanks at q after motions of ``direction`` (N, 6) in -1, 0,
+        +1 (``measurement.backlash_sides``)."""
+        from planecal.model.measurement import backlash_sides
+        return backlash_sides(self.robot, np.atleast_2d(q), direction)
 
     def robot_frame(self) -> np.ndarray:
         """4x4: the model's frame of joint 1 at q = 0 in its base frame, times the inverse
@@ -179,20 +186,24 @@ def pose_error(T: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def solve_poses(model: CalibratedModel, T: np.ndarray, q0: np.ndarray,
-                tol_m: float = TOL_M, tol_rad: float = TOL_RAD, max_iter: int = MAX_ITER):
+                tol_m: float = TOL_M, tol_rad: float = TOL_RAD, max_iter: int = MAX_ITER,
+                direction: np.ndarray | None = None):
     """Joint angles q (N, 6) with model.flange(q) = T (N, 4, 4), by Newton from q0 with the
-    model's own Jacobian (``CalibratedModel.jacobian``): (q, iterations (N,), converged
-    (N,), position residual [m] (N,), rotation residual [rad] (N,))."""
+    model's own Jacobian (``CalibratedModel.jacobian``), each target approached with
+    ``direction`` (N, 6) in -1, 0, +1 (level 3's backlash; None: not known, the middle):
+    (q, iterations (N,), converged (N,), position residual [m] (N,), rotation residual
+    [rad] (N,))."""
     q = np.array(q0, float, copy=True)
     n = len(q)
     its = np.zeros(n, int)
     for _ in range(max_iter + 1):
-        e = pose_error(T, model.flange(q))
+        side = model.sides(q, direction)
+        e = pose_error(T, model.flange(q, side))
         rp, rw = np.linalg.norm(e[:, :3], axis=1), np.linalg.norm(e[:, 3:], axis=1)
         todo = ~((rp < tol_m) & (rw < tol_rad))
         if not todo.any() or its.max() >= max_iter:
             break
-        J = model.jacobian(q[todo])
+        J = model.jacobian(q[todo], side[todo])
         q[todo] += np.einsum("nij,nj->ni", np.linalg.pinv(J, rcond=1e-12), e[todo])
         its[todo] += 1
     return q, its, ~todo, rp, rw
@@ -282,6 +293,21 @@ def nominal_solutions(robot: Robot, targets: Targets, q_start: np.ndarray):
 FRAMES = ("robot", "cell")
 
 
+def approach_directions(q: np.ndarray, q_start: np.ndarray | None = None) -> np.ndarray:
+    """(N, 6) in -1, 0, +1: the sign of each joint's motion into each of the poses q (N, 6)
+    played in order from ``q_start`` (None: the first pose's is not known, 0); a joint that
+    does not move keeps the side its last motion left it on (level 3's backlash)."""
+    q = np.atleast_2d(np.asarray(q, float))
+    prev = q[:1] if q_start is None else np.atleast_2d(q_start)
+    step = np.sign(np.diff(np.vstack([prev, q]), axis=0))
+    out = np.zeros_like(step)
+    side = np.zeros(q.shape[1])
+    for i, s in enumerate(step):
+        side = np.where(s != 0, s, side)
+        out[i] = side
+    return out.astype(np.int8)
+
+
 def compensate(model: CalibratedModel, targets: Targets, region: Region,
                q_start: np.ndarray | None = None, frame: str = "robot") -> Compensation:
     """Corrected joint targets (module docstring). ``q_start``: where the first Cartesian
@@ -296,7 +322,8 @@ def compensate(model: CalibratedModel, targets: Targets, region: Region,
     q_start = (region.lower + region.upper) / 2 if q_start is None else q_start
     q_nom, T = nominal_solutions(robot, targets, q_start)
     Tm = model.robot_frame() @ T if frame == "robot" else T  # in the model's base frame
-    q_c, its, ok, rp, rw = solve_poses(model, Tm, q_nom)
+    direction = approach_directions(q_nom)  # the program's motions into its targets
+    q_c, its, ok, rp, rw = solve_poses(model, Tm, q_nom, direction=direction)
     bad = np.flatnonzero(ok & ~within_limits(robot, q_c))
     if len(bad):
         i = bad[0]
@@ -304,7 +331,8 @@ def compensate(model: CalibratedModel, targets: Targets, region: Region,
                          "joints leave the joint limits")
     c_nom = joints_to_counts(robot, q_nom)
     c_cor = joints_to_counts(robot, np.where(ok[:, None], q_c, q_nom))
-    e = pose_error(Tm, model.flange(counts_to_joints(robot, c_cor)))
+    qr = counts_to_joints(robot, c_cor)
+    e = pose_error(Tm, model.flange(qr, model.sides(qr, direction)))
     return Compensation(list(targets.names), list(targets.where), T, q_nom, q_c, c_nom, c_cor,
                         its, ok, rp, rw, np.linalg.norm(e[:, :3], axis=1),
                         np.linalg.norm(e[:, 3:], axis=1), region.outside(q_c),
