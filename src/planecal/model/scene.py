@@ -67,6 +67,13 @@ class Box:
     rpy: np.ndarray  # (3,) rad, R = Rz(yaw) Ry(pitch) Rx(roll)
 
 
+@dataclass(frozen=True)
+class NamedTcp:
+    """A TCP a scene names (``tools``): its position in the flange frame [m]."""
+    name: str
+    tcp: np.ndarray  # (3,)
+
+
 @dataclass
 class Scene:
     name: str
@@ -84,6 +91,14 @@ class Scene:
     calibration_q: np.ndarray | None = None  # rad, a configuration near the plates
     cone_deg: float = 30.0
     distance_mm: tuple[float, float] = (70.0, 90.0)
+    tools: list[NamedTcp] = field(default_factory=list)
+
+    @property
+    def standoff_m(self) -> float:
+        """The laser's measuring centre [m]: the middle of its window (``sensor.range_mm``;
+        80 mm for the ZS-LD80's 65-95 mm, the distance its serial field counts from). The
+        tool point is the beam point there (``measurement.beam_point``)."""
+        return 0.5e-3 * (self.laser_range_mm[0] + self.laser_range_mm[1])
 
 
 def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
@@ -129,6 +144,7 @@ def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
         calibration_q=(None if pos.calibration_deg is None
                        else np.deg2rad(np.array(pos.calibration_deg))),
         cone_deg=sf.sampling.cone_deg, distance_mm=tuple(sf.sampling.distance_mm),
+        tools=[NamedTcp(t.name, np.array(t.tcp_m, float)) for t in sf.tools],
     )
 
 
