@@ -77,16 +77,19 @@ class CalibratedModel:
     params: CellParams
     level: str = "offsets"
 
-    def flange(self, q: np.ndarray) -> np.ndarray:
+    def flange(self, q: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
         """q (N, 6) rad (joint angles from the encoder model) -> (N, 4, 4) flange (standard
-        DH frame 6) in the base frame."""
+        DH frame 6) in the base frame. ``direction`` (N, 6) or (6,) int, -1/0/+1: the
+        direction each joint last moved in to get there (``validation.Mover.approach``),
+        for a model of what depends on it (backlash); no parameter of this model does, so
+        it is not read."""
         from planecal.model.measurement import flange_pose
         return flange_pose(self.robot, np.atleast_2d(q), self.params)
 
-    def jacobian(self, q: np.ndarray) -> np.ndarray:
+    def jacobian(self, q: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
         """The geometric Jacobian (N, 6, 6) of the flange at q, rows (v, w) in the base
         frame (the gravity deflection's own derivative, ~1e-4 of it, left out: Newton's
-        steps converge all the same)."""
+        steps converge all the same); ``direction`` as ``flange``'s."""
         from planecal.model.kinematics import jacobian
         from planecal.model.measurement import effective_joints, kinematics_of
         qd, _ = effective_joints(self.robot, np.atleast_2d(q), self.params)
@@ -179,20 +182,23 @@ def pose_error(T: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def solve_poses(model: CalibratedModel, T: np.ndarray, q0: np.ndarray,
-                tol_m: float = TOL_M, tol_rad: float = TOL_RAD, max_iter: int = MAX_ITER):
+                tol_m: float = TOL_M, tol_rad: float = TOL_RAD, max_iter: int = MAX_ITER,
+                direction: np.ndarray | None = None):
     """Joint angles q (N, 6) with model.flange(q) = T (N, 4, 4), by Newton from q0 with the
     model's own Jacobian (``CalibratedModel.jacobian``): (q, iterations (N,), converged
-    (N,), position residual [m] (N,), rotation residual [rad] (N,))."""
+    (N,), position residual [m] (N,), rotation residual [rad] (N,)). ``direction`` (N, 6):
+    each target's approach direction per joint, handed to the model (``flange``)."""
     q = np.array(q0, float, copy=True)
     n = len(q)
     its = np.zeros(n, int)
+    d = None if direction is None else np.broadcast_to(np.asarray(direction), (n, 6))
     for _ in range(max_iter + 1):
-        e = pose_error(T, model.flange(q))
+        e = pose_error(T, model.flange(q, direction=d))
         rp, rw = np.linalg.norm(e[:, :3], axis=1), np.linalg.norm(e[:, 3:], axis=1)
         todo = ~((rp < tol_m) & (rw < tol_rad))
         if not todo.any() or its.max() >= max_iter:
             break
-        J = model.jacobian(q[todo])
+        J = model.jacobian(q[todo], direction=None if d is None else d[todo])
         q[todo] += np.einsum("nij,nj->ni", np.linalg.pinv(J, rcond=1e-12), e[todo])
         its[todo] += 1
     return q, its, ~todo, rp, rw

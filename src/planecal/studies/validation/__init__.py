@@ -61,19 +61,28 @@ family of ``montecarlo.SOURCES`` on alone (or switched off in turn) and reports 
 calibration per variant: what each source leaves. The truths and the variants run on
 ``studies.distributed.Engine`` (``run_jobs``).
 """
+from planecal.studies.validation.cube import (SamplePoses, default_edge, medoid, medoid_order,
+                                              nearest_sample_m)
 from planecal.studies.validation.gauge import (gauge_block, gauge_block_geometry, gauge_length,
                                                laser_reading_mm, length_from, predicted_spread)
-from planecal.studies.validation.iso9283 import (Mover, cube_from_flanges, iso9283, iso_points,
-                                                 robot_frame)
-from planecal.studies.validation.run import validate
-from planecal.studies.validation.settings import ANCHORS, FORMAT, ValidationSettings
-from planecal.studies.validation.truths import (TRUTH_KEYS, TruthJob, breakdown,
-                                                breakdown_variants, cannot_remove, run_jobs,
+from planecal.studies.validation.iso9283 import (IsoPlan, Mover, ap_rp, iso9283, iso_points,
+                                                 plan_iso, robot_frame)
+from planecal.studies.validation.run import CUBE_RULE, figures, named_tcps, validate
+from planecal.studies.validation.settings import (ANCHORS, FIGURE_KEYS, FORMAT, OLD_FORMATS,
+                                                  ROLES, WHERE, ValidationSettings,
+                                                  figure_keys)
+from planecal.studies.validation.truths import (BREAKDOWN_KEYS, LEVEL_KEYS, TRUTH_KEYS,
+                                                TruthJob, breakdown, breakdown_variants,
+                                                cannot_remove, levels_beside, run_jobs,
                                                 summarize, truth_row, truth_run,
                                                 validate_truth)
 
-__all__ = ["ANCHORS", "FORMAT", "Mover", "TRUTH_KEYS", "TruthJob", "ValidationSettings",
-           "breakdown", "breakdown_variants", "cannot_remove", "cube_from_flanges",
+__all__ = ["ANCHORS", "BREAKDOWN_KEYS", "CUBE_RULE", "FIGURE_KEYS", "FORMAT", "IsoPlan",
+           "LEVEL_KEYS", "Mover", "OLD_FORMATS", "ROLES", "SamplePoses", "TRUTH_KEYS",
+           "TruthJob", "ValidationSettings", "WHERE", "ap_rp", "breakdown",
+           "breakdown_variants", "cannot_remove", "default_edge", "figure_keys", "figures",
            "gauge_block", "gauge_block_geometry", "gauge_length", "iso9283", "iso_points",
-           "laser_reading_mm", "length_from", "predicted_spread", "robot_frame", "run_jobs",
+           "laser_reading_mm", "length_from", "levels_beside", "medoid", "medoid_order",
+           "named_tcps",
+           "nearest_sample_m", "plan_iso", "predicted_spread", "robot_frame", "run_jobs",
            "summarize", "truth_row", "truth_run", "validate", "validate_truth"]
