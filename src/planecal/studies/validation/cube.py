@@ -12,7 +12,7 @@ from planecal.model.kinematics import fk
 from planecal.model.measurement import beam_point
 
 EDGE_MAX_M = 0.25  # the default edge: at most this ...
-EDGE_SHARE = 0.8  # ... and this share of the samples' smallest 10-90 % range
+EDGE_SHARE = 0.8  # ... and this share of the samples' flanges' smallest 10-90 % range
 SHRINK = 0.75  # a cube that does not fit shrinks by this ...
 SHRINKS = 9  # ... at most this many times (0.75^9 = 0.075 of the first edge)
 CENTRES = 20  # the centre: the first of this many samples nearest the middle that the
@@ -53,7 +53,9 @@ def medoid(points: np.ndarray) -> int:
 
 def default_edge(points: np.ndarray) -> float:
     """The first edge tried [m]: ``EDGE_SHARE`` of the points' smallest range between
-    their 10th and 90th percentiles, at most ``EDGE_MAX_M``."""
+    their 10th and 90th percentiles, at most ``EDGE_MAX_M``. Of the samples' flange
+    positions, whose hull the calibrated region is (their tool points lie within the
+    sampling distances of the plates: one plate's are a slab a few cm thin)."""
     rng = np.percentile(points, 90, axis=0) - np.percentile(points, 10, axis=0)
     return float(min(EDGE_MAX_M, EDGE_SHARE * rng.min()))
 

@@ -14,7 +14,8 @@ from planecal.studies.validation.settings import WHERE, ValidationSettings
 CUBE_RULE = ("centred on the tool point of the samples' medoid (the sample whose tool point "
              "is nearest all the others in sum; the next nearer the middle where the robot "
              "has no path there from its start), with that sample's flange orientation; "
-             "edge 80 % of the sample tool points' smallest 10-90 % range (at most 250 mm), "
+             "edge 80 % of the sample flange positions' smallest 10-90 % range (at most "
+             "250 mm), "
              "shrunk by 0.75 until every model's five poses are reachable, collision-free "
              "and inside the calibrated region (the samples' flange hull + 50 mm, their "
              "joint ranges + 2 deg)")
@@ -71,6 +72,7 @@ def validate(scene, world, calibrated, sample_counts: np.ndarray,
     robot = scene.robot
     twin = Twin(scene, truth=world, seed=st.seed, options=options)
     mover = Mover(twin, robot, checker, _detour(scene, checker))
+    start = mover.drv.commanded_counts
     frame = robot_frame(robot, world)
     standoff = scene.standoff_m
     true_model = TrueModel(twin, standoff)
@@ -99,7 +101,9 @@ def validate(scene, world, calibrated, sample_counts: np.ndarray,
            "settings": {k: getattr(st, k) for k in st.__dataclass_fields__}}
     b, a = out["ap_before_tool_mm"], out["ap_after_tool_mm"]
     out["ap_tool_ratio"] = b / a if a > 0 else float("inf")
-    if st.gauge:
+    if st.gauge:  # from where the robot started, the way it came (its paths are known)
+        mover.go(samples.counts[centre], "back to the cube's centre sample")
+        mover.go(start, "back to the start")
         _gauge(out, twin, scene, world, after, st, checker, mover, options, fit, plan)
     return out
 
@@ -123,7 +127,7 @@ def _place(scene, commanders, samples, st, mover, region, checker):
              int(order[0]))
     center, R, q_ref = samples.tool[k], samples.flange[k, :3, :3], samples.q[k]
     given = st.cube_edge_m is not None
-    edge = st.cube_edge_m if given else default_edge(samples.tool)
+    edge = st.cube_edge_m if given else default_edge(samples.flange[:, :3, 3])
     for attempt in range(SHRINKS + 1):
         try:
             return plan_iso(scene, commanders, center, edge, R, q_ref, mover, region, checker,
