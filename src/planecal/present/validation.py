@@ -100,8 +100,10 @@ def _gauge_lines(v: dict) -> list[str]:
                    f"to {r['delta1_share_mm']:.3f} mm at these poses in the cell frame (none in "
                    f"the robot's frame, which J1's zero defines); delta6 (a roll of the sensor, "
                    f"absorbed by its pose at the tool point) leaves "
-                   f"{r['delta6_share_mm']:.3f} mm at the named TCPs. Neither changes a "
-                   "distance the laser measures, so the gauge length does not see them.")
+                   + (f"{r['delta6_share_mm']:.3f} mm at the named TCPs" if v["tcps"]
+                      else "nothing there (no other TCP is named)")
+                   + ". Neither changes a distance the laser measures, so the gauge length "
+                     "does not see them.")
     return out
 
 
