@@ -135,8 +135,14 @@ def test_validate_command(tmp_path, capsys):
     out = tmp_path / "V.json"
     assert main(["validate", "--errors", "ideal", "--truth-seeds", "0", "--breakdown", "none",
                  "--samples", "40", "--cycles", "3", "--gauge-repeats", "2",
-                 "--out", str(out)]) == 0
+                 "--tcp-mm", "0,100,150", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
     v = json.loads(out.read_text())
+    tcp = v["truths"][0]["tcps"][0]
+    assert tcp["name"] == "tcp" and tcp["tcp_m"] == pytest.approx([0, 0.1, 0.15])
+    assert (f"at the named TCP tcp (the calibration has no better estimate of it than the "
+            f"nominal one), AP before -> after (true model) per truth: 0: "
+            f"{tcp['ap_before_tcp_mm']:.2f} -> {tcp['ap_after_tcp_mm']:.3f}") in text
     for k in ("ap_before_tool_mm", "ap_after_tool_mm", "ap_oracle_tool_mm",
               "rp_after_tool_mm", "gauge_error_before_mm", "gauge_error_after_mm"):
         assert np.isfinite(v[k])

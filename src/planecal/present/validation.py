@@ -155,6 +155,13 @@ def format_truths(summary: dict, world: str, level: str = "offsets") -> str:
         f"{r['ap_after_tool_worst_mm']:.3f} mm" for r in summary["levels_summary"])
         + f"; the twin's own true model median {summary['ap_oracle_tool_median_mm']:.3f}, "
           f"worst {summary['ap_oracle_tool_worst_mm']:.3f} mm")
+    for k, tcp in enumerate(truths[0]["tcps"] if truths else []):
+        out.append(f"at the named TCP {tcp['name']} (the calibration has no better estimate "
+                   "of it than the nominal one), AP before -> after (true model) per truth: "
+                   + "; ".join(f"{t['truth_seed']}: {t['tcps'][k]['ap_before_tcp_mm']:.2f} -> "
+                               f"{t['tcps'][k]['ap_after_tcp_mm']:.3f} "
+                               f"({t['tcps'][k]['ap_oracle_tcp_mm']:.3f})" for t in truths)
+                   + " mm")
     for f in summary["failed_truths"]:
         out.append(f"truth {f['truth_seed']} left out: {f['reason']}")
     return "\n".join(out)
