@@ -24,6 +24,7 @@ print(cal)
 err = cal.params.joint_offsets - run.truth.joint_offsets
 print("offset error [mrad]:", np.array2string(err * 1e3, precision=4))
 
-# %% Validate on the twin: ISO 9283 pose accuracy, nominal vs calibrated
+# %% Validate on the twin: ISO 9283 pose accuracy at the tool point, nominal vs calibrated
+#    vs the twin's own true model (the floor)
 val = planecal.validate(cal, run, cycles=5, gauge_repeats=3)
 print(val)

@@ -13,8 +13,9 @@ each is judged by
     frame, which no plane calibration sees: it moves the planes with it);
   * beam_rms_mm / beam_max_mm   the same for the beam's point 80 mm from the sensor (the
     middle of the laser's window: where the samples touch the plates);
-  * flange_rms_mm   the same for the flange origin (validate's default TCP; the flange
-    frame's own error is absorbed by the sensor's parameters: no plane sees it).
+  * flange_rms_mm   the same for the flange origin (where validate measured AP before
+    issue 22; the flange frame's own error is absorbed by the sensor's parameters: no
+    plane sees it).
 Gear error, backlash, repeatability and the laser's linearity stay in the world and set
 the floor. Writes a TSV and a PNG.
 

@@ -130,10 +130,10 @@ def test_validate_compares_nominal_and_calibrated(rehearsal):
                                             "n1_x,n1_y,n1_z")
     val = planecal.validate(cal, rehearsal, cycles=2, gauge_repeats=1)
     d = val.details
-    assert val.ap_nominal_m == d["ap_before_mm"] * 1e-3
-    assert val.ap_calibrated_m == d["ap_after_mm"] * 1e-3
-    assert val.ap_calibrated_m < 0.5 * val.ap_nominal_m  # the calibration helps
+    assert val.ap_tool_nominal_m == d["ap_before_tool_mm"] * 1e-3
+    assert val.ap_tool_calibrated_m == d["ap_after_tool_mm"] * 1e-3
+    assert val.ap_tool_calibrated_m < 0.5 * val.ap_tool_nominal_m  # the calibration helps
     text = repr(val)
-    assert f"AP before {val.ap_nominal_m * 1e3:.4f} mm" in text and "2 cycles" in text
+    assert f"before {val.ap_tool_nominal_m * 1e3:.4f} mm" in text and "2 cycles" in text
     with pytest.raises(InputError):
         planecal.validate(cal, rehearsal.samples)

@@ -89,5 +89,7 @@ def test_validate_of_the_demos_calibration_gives_its_figures(demos, tmp_path):
                  "--cycles", "10", "--gauge-repeats", "2", "--out", str(f)]) == 0
     v = json.loads(f.read_text())
     assert v["errors"] == "realistic"
-    assert round(v["ap_before_mm"], 3) == before and round(v["ap_after_mm"], 3) == after
-    assert v["truths"][0]["ap_after_mm"] == v["ap_after_median_mm"] == v["ap_after_mm"]
+    assert (round(v["ap_before_tool_mm"], 3) == before
+            and round(v["ap_after_tool_mm"], 3) == after)
+    assert (v["truths"][0]["ap_after_tool_mm"] == v["ap_after_tool_median_mm"]
+            == v["ap_after_tool_mm"])

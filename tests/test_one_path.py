@@ -42,10 +42,15 @@ def test_the_api_and_the_cli_give_the_same_numbers(cli_run):
                  "--run", str(d / "r.tsv"), "--cycles", "3", "--gauge-repeats", "1",
                  "--out", str(out), "-q"]) == 0
     v = json.loads(out.read_text())
-    assert val.ap_nominal_m * 1e3 == pytest.approx(v["ap_before_mm"], rel=1e-12)
-    assert val.ap_calibrated_m * 1e3 == pytest.approx(v["ap_after_mm"], rel=1e-12)
+    # the same tool point AP, and the flange's and the oracle's beside it
+    assert val.ap_tool_nominal_m * 1e3 == pytest.approx(v["ap_before_tool_mm"], rel=1e-12)
+    assert val.ap_tool_calibrated_m * 1e3 == pytest.approx(v["ap_after_tool_mm"], rel=1e-12)
+    assert val.ap_tool_oracle_m * 1e3 == pytest.approx(v["ap_oracle_tool_mm"], rel=1e-12)
+    assert val.ap_flange_calibrated_m * 1e3 == pytest.approx(v["ap_after_flange_mm"],
+                                                            rel=1e-12)
     # the realistic world's figures: the nominal robot's AP is mm, the calibration's less
-    assert v["ap_after_mm"] < v["ap_before_mm"]
+    assert v["ap_after_tool_mm"] < v["ap_before_tool_mm"]
+    assert v["truths"][0]["ap_after_tool_mm"] == v["ap_after_tool_median_mm"]
     assert v["world"]["truth_file"] == str(d / "t.json")
 
 

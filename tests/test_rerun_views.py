@@ -209,6 +209,7 @@ def test_bootstrap_blueprint_lays_out_every_parameter(scene, data, tmp_path):
 
 
 def test_validate_blueprint(scene, truth, data, tmp_path):
+    from planecal.estimation.compensate import CalibratedModel
     from planecal.safety.collision import CollisionWorld
     from planecal.present.rerun.studies import log_validate
     from planecal.studies.validation import ValidationSettings, validate
@@ -216,15 +217,17 @@ def test_validate_blueprint(scene, truth, data, tmp_path):
 
     st = ValidationSettings(cycles=2, gauge_repeats=1)
     res = data["fit"]
-    v = validate(scene, truth, res.params, data["qe"], st, CollisionWorld(scene, 0.01), res)
+    v = validate(scene, truth, CalibratedModel(scene.robot, res.params), data["qe"], st,
+                 CollisionWorld(scene, 0.01), res)
     path = log_validate(tmp_path / "val.rrd", v, scene, res.params, data["qe"], data["d_m"],
                         data["plate"])
     views = check_views(path, {"3D": 1, "TextDocument": 1, "BarChart": 3})
     check_space_view(views, scene, path)
     rec = read_rrd(path)
-    for model, m in v["iso"]["models"].items():
+    assert set(v["iso"]["models"]) == {"nominal", "offsets", "oracle"}
+    for model, m in v["iso"]["models"].items():  # at the tool point
         np.testing.assert_allclose(tensor(rec[f"/ap/{model}"]["rows"][-1]["BarChart:values"]),
-                                   m["ap_mm"])
+                                   m["tool"]["ap_mm"])
         arrows = np.array(rec[f"/iso/ap_x100/{model}"]["rows"][-1]["Arrows3D:vectors"])
-        np.testing.assert_allclose(arrows, 100 * np.asarray(m["ap_xyz_mm"]) * 1e-3, rtol=1e-6,
-                                   atol=1e-7)
+        np.testing.assert_allclose(arrows, 100 * np.asarray(m["tool"]["ap_xyz_mm"]) * 1e-3,
+                                   rtol=1e-6, atol=1e-7)

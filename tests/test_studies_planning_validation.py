@@ -97,27 +97,37 @@ def test_equivalent_parameters_predict_the_same_distances(scene):
 
 
 def test_validation_with_a_perfect_and_a_nominal_calibration(scene, world):
+    from planecal.estimation.compensate import CalibratedModel
     from planecal.twin.synthetic import synthetic_samples
     from planecal.twin.truth import Tolerances, draw_truth
     truth = draw_truth(scene, 4)
     qe, _, _ = synthetic_samples(scene, truth, 30, np.random.default_rng(0))
-    st = ValidationSettings(cycles=5, gauge_repeats=2, seed=1)
-    v = validate(scene, truth, truth, qe, st, world)
-    # calibrated = truth: only repeatability (0.07 mm 3-sigma) is left
-    assert v["ap_after_mm"] < 0.05 and v["rp_mm"] < 0.1
-    assert v["ap_before_mm"] > 5 * v["ap_after_mm"]
+    st = ValidationSettings(cycles=5, gauge_repeats=2, seed=1, tcp_m=(0.0, 0.1, 0.15))
+    v = validate(scene, truth, CalibratedModel(scene.robot, truth, "truth"), qe, st, world)
+    # calibrated = truth: only repeatability (0.07 mm 3-sigma) is left, at the tool point,
+    # the flange and a named TCP alike; the oracle is the same model by other code
+    for k in ("ap_after_tool_mm", "ap_after_flange_mm", "ap_oracle_tool_mm"):
+        assert v[k] < 0.05, k
+    assert v["tcps"][0]["name"] == "tcp" and v["tcps"][0]["ap_after_tcp_mm"] < 0.05
+    assert v["rp_after_tool_mm"] < 0.1
+    assert v["ap_before_tool_mm"] > 5 * v["ap_after_tool_mm"]
     assert abs(v["gauge_error_after_mm"]) < 0.03
     assert abs(v["gauge_error_before_mm"]) > 5 * abs(v["gauge_error_after_mm"])
     # delta1 != 0 and not calibrated: a turn about the base axis is left in the cell
     # frame's AP, not in the robot frame's (ISO 9283's, registered to J1's axis and zero),
-    # and the gauge length does not see it
+    # and the gauge length does not see it; delta6 (absorbed by the sensor's roll) leaves
+    # nothing at the tool point and its turn at a named TCP off the flange axis
     t2 = draw_truth(scene, 4, Tolerances(offsets_all=True))
     cal = equivalent_without_delta1_delta6(t2)
-    v2 = validate(scene, t2, cal, qe, st, world)
+    v2 = validate(scene, t2, CalibratedModel(scene.robot, cal, "equivalent"), qe, st, world)
     left = v2["residual_offset_error"]
     assert left["delta1_error_rad"] == pytest.approx(-t2.joint_offsets[0])
-    assert v2["ap_after_cell_mm"] == pytest.approx(left["delta1_share_mm"], rel=0.2, abs=0.03)
-    assert v2["ap_after_mm"] < 0.05
+    assert v2["ap_after_tool_cell_mm"] == pytest.approx(left["delta1_share_mm"], rel=0.2,
+                                                        abs=0.03)
+    assert v2["ap_after_tool_mm"] < 0.05
+    assert left["delta6_share_mm"] == pytest.approx(abs(t2.joint_offsets[5]) * 100, rel=1e-9)
+    assert v2["tcps"][0]["ap_after_tcp_mm"] == pytest.approx(left["delta6_share_mm"],
+                                                             rel=0.2, abs=0.03)
     assert abs(v2["gauge_error_after_mm"]) < 0.03
 
 
@@ -125,12 +135,18 @@ def test_validate_command(tmp_path, capsys):
     out = tmp_path / "V.json"
     assert main(["validate", "--errors", "ideal", "--truth-seeds", "0", "--breakdown", "none",
                  "--samples", "40", "--cycles", "3", "--gauge-repeats", "2",
-                 "--out", str(out)]) == 0
+                 "--tcp-mm", "0,100,150", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
     v = json.loads(out.read_text())
-    for k in ("ap_before_mm", "ap_after_mm", "rp_mm", "gauge_error_before_mm",
-              "gauge_error_after_mm"):
+    tcp = v["truths"][0]["tcps"][0]
+    assert tcp["name"] == "tcp" and tcp["tcp_m"] == pytest.approx([0, 0.1, 0.15])
+    assert (f"at the named TCP tcp (the calibration has no better estimate of it than the "
+            f"nominal one), AP before -> after (true model) per truth: 0: "
+            f"{tcp['ap_before_tcp_mm']:.2f} -> {tcp['ap_after_tcp_mm']:.3f}") in text
+    for k in ("ap_before_tool_mm", "ap_after_tool_mm", "ap_oracle_tool_mm",
+              "rp_after_tool_mm", "gauge_error_before_mm", "gauge_error_after_mm"):
         assert np.isfinite(v[k])
     # 40 samples only: the offsets are known to ~0.2 mrad, AP after a few 0.1 mm at most
-    assert v["ap_after_mm"] < 0.5 and v["ap_before_mm"] > 5 * v["ap_after_mm"]
+    assert v["ap_after_tool_mm"] < 0.5 and v["ap_before_tool_mm"] > 5 * v["ap_after_tool_mm"]
     assert main(["validate", "--tcp-mm", "1,2"]) == 2
     assert main(["validate", "--truth", "x.json"]) == 2

@@ -3,7 +3,7 @@
     import planecal
     run = planecal.rehearse(samples=60, seed=1)          # a short run on the twin
     cal = planecal.calibrate(run.samples)                # -> CalibratedCell; print(cal)
-    val = planecal.validate(cal, run)                    # ISO 9283 AP/RP, gauge block
+    val = planecal.validate(cal, run)                    # ISO 9283 AP/RP at the tool point
     s = planecal.load_samples("RUN.tsv")                 # a sample file (mm on disk, m here)
 
 Each call wraps the code the commands use (``planecal.io.samples``, ``planecal.estimation.fit``,
@@ -181,7 +181,8 @@ def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
     """Identify the cell from ``samples`` (a ``SampleSet``, a ``Rehearsal`` or a sample
     file path) with the one calibration (``planecal.estimation.calibrate``, as ``planecal
     calibrate``), starting from ``initial`` (``CellParams``, a parameter file, or None: the
-    scene's nominal values). ``level``: "offsets" or "full" (the seed's 1, 2);
+    scene's nominal values). ``level``: one of ``planecal.model.levels.LEVELS`` (offsets,
+    full, ...; the seed's 1, 2);
     ``compliance``: J2 and J3's too; ``free``: parameter names (None: the level's default);
     ``weighted``: the weighted fit with the robot's repeatability noise model. ``scene``
     defaults to the rehearsal's or the default."""
@@ -232,12 +233,19 @@ def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
 
 @dataclass(repr=False)
 class Validation:
-    """ISO 9283 pose accuracy (AP) and repeatability (RP) over P1..P5, and the gauge-block
-    length error, with the nominal and the calibrated model [m]; ``details`` is the dict
-    of ``planecal.studies.validation.validate`` (mm, as ``planecal validate`` writes)."""
-    ap_nominal_m: float
-    ap_calibrated_m: float
-    rp_m: float
+    """ISO 9283 pose accuracy (AP) and repeatability (RP) [m], the worst of P1..P5 in the
+    robot's frame: at the tool point (the laser's beam point at its measuring centre) and
+    at the flange, each for the nominal model, the calibration (any level) and the twin's
+    own whole true model (the floor: what backlash, repeatability and whole counts leave);
+    the gauge-block length error; ``details`` is the dict of
+    ``planecal.studies.validation.validate`` (mm, as ``planecal validate`` writes)."""
+    ap_tool_nominal_m: float
+    ap_tool_calibrated_m: float
+    ap_tool_oracle_m: float
+    ap_flange_nominal_m: float
+    ap_flange_calibrated_m: float
+    ap_flange_oracle_m: float
+    rp_tool_calibrated_m: float
     gauge_error_nominal_m: float
     gauge_error_calibrated_m: float
     details: dict
@@ -249,10 +257,11 @@ class Validation:
 
 def validate(calibration: CalibratedCell, rehearsal: Rehearsal, *, cycles: int = 30,
              gauge_repeats: int = 10, seed: int = 0) -> Validation:
-    """Validate ``calibration`` on the twin of the world ``rehearsal`` was made in (its
-    truth, the robot's true geometry, the twin's error sources: as ``planecal validate
-    --calibrated --truth --run``): ISO 9283 AP/RP in a cube placed by the rehearsal's
-    samples, and the gauge block (``planecal.studies.validation``)."""
+    """Validate ``calibration`` (any level) on the twin of the world ``rehearsal`` was made
+    in (its truth, the robot's true geometry, the twin's error sources: as ``planecal
+    validate --calibrated --truth --run``): ISO 9283 AP/RP in a cube placed among the
+    rehearsal's samples, and the gauge block (``planecal.studies.validation``)."""
+    from planecal.estimation.compensate import CalibratedModel
     from planecal.safety.collision import CollisionWorld
     from planecal.studies.validation import ValidationSettings
     from planecal.studies.validation import validate as run_validation
@@ -264,7 +273,10 @@ def validate(calibration: CalibratedCell, rehearsal: Rehearsal, *, cycles: int =
     st.check()
     sc = rehearsal.scene
     checker = CollisionWorld(sc, clearance_m=st.clearance_m)
-    v = run_validation(sc, rehearsal.world, calibration.params, rehearsal.samples.counts, st,
-                       checker, calibration.result, rehearsal.options)
-    return Validation(v["ap_before_mm"] * 1e-3, v["ap_after_mm"] * 1e-3, v["rp_mm"] * 1e-3,
-                      v["gauge_error_before_mm"] * 1e-3, v["gauge_error_after_mm"] * 1e-3, v)
+    model = CalibratedModel(sc.robot, calibration.params, calibration.level)
+    v = run_validation(sc, rehearsal.world, model, rehearsal.samples.counts, st, checker,
+                       calibration.result, rehearsal.options)
+    return Validation(*(v[k] * 1e-3 for k in (
+        "ap_before_tool_mm", "ap_after_tool_mm", "ap_oracle_tool_mm", "ap_before_flange_mm",
+        "ap_after_flange_mm", "ap_oracle_flange_mm", "rp_after_tool_mm",
+        "gauge_error_before_mm", "gauge_error_after_mm")), v)

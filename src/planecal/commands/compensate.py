@@ -25,7 +25,7 @@ def add_arguments(p):
                                    "rz_deg or q1_deg..q6_deg or q1..q6; optional name) or "
                                    "JSON (planecal-targets/1)")
     p.add_argument("--params", required=True,
-                   help="calibration result (planecal calibrate --out; level offsets or full)")
+                   help="calibration result (planecal calibrate --out; any level)")
     p.add_argument("--out", required=True,
                    help="corrected targets: .json for the whole record, else a tab-separated "
                         "table name, q1..q6 (counts)")

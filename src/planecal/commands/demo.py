@@ -153,23 +153,26 @@ def _calibrate(args, scene, settings, run_file, truth_file, result_file):
 def _position_error(args, scene, samples, cal, run_file, truth_file):
     """ISO 9283 AP before and after, in the world the run was made in (its files say
     which): (world, twin options, the validation)."""
+    from planecal.estimation.compensate import CalibratedModel
+    from planecal.present.validation import change, where_text
     from planecal.safety.collision import CollisionWorld
     from planecal.studies.validation import ValidationSettings, validate
     from planecal.twin.world import recorded_world
 
     world, opts = recorded_world(scene, run_file, truth_file).build(scene)
     st = ValidationSettings(cycles=DEMO_CYCLES, seed=args.seed, gauge=False)
-    v = validate(scene, world, cal.params, samples.qe, st,
-                 CollisionWorld(scene, clearance_m=st.clearance_m), options=opts)
-    iso = v["iso"]
+    v = validate(scene, world, CalibratedModel(scene.robot, cal.params, cal.settings.label),
+                 samples.qe, st, CollisionWorld(scene, clearance_m=st.clearance_m),
+                 options=opts)
     print(f"\n== position error in the calibrated region (ISO 9283 AP: the worst of five poses "
-          f"in a {iso['edge_m'] * 1e3:.0f} mm cube over the samples, {DEMO_CYCLES} cycles, on "
-          "the same twin, at the flange)")
-    ratio = v["ap_ratio"]
-    change = (f"{ratio:.1f}x smaller" if ratio >= 1 else
-              f"{1 / ratio:.1f}x LARGER: the calibration made it worse" if ratio > 0 else "")
-    print(f"before calibration {v['ap_before_mm']:.3f} mm, after {v['ap_after_mm']:.3f} mm "
-          f"({change}); repeatability RP {v['rp_mm']:.3f} mm")
+          f"in a {v['cube']['edge_m'] * 1e3:.0f} mm cube among the samples, {DEMO_CYCLES} "
+          f"cycles, on the same twin, at {where_text(v)}, robot frame)")
+    b, a = v["ap_before_tool_mm"], v["ap_after_tool_mm"]
+    worse = ": the calibration made it worse" if a > b else ""
+    print(f"before calibration {b:.3f} mm, after {a:.3f} mm ({change(b, a)}{worse}); the "
+          f"twin's own true model {v['ap_oracle_tool_mm']:.3f} mm (backlash, repeatability); "
+          f"at the flange {v['ap_before_flange_mm']:.3f} -> {v['ap_after_flange_mm']:.3f} mm; "
+          f"repeatability RP {v['rp_after_tool_mm']:.3f} mm")
     return world, opts, v
 
 

@@ -1,12 +1,18 @@
 """planecal validate [--scene S] [--out V.json] [--errors ideal|realistic|FILE.json]
 [--truth-seeds 0,1,2,3,4] [--samples N] [--seed K] [--offsets-all] [--cycles 30]
 [--cube-mm E] [--tcp-mm X,Y,Z] [--block-mm L] [--poses POSES.json]
-[--breakdown alone|off|none] [--breakdown-truth T] [--jobs J] [--level offsets|full]
+[--breakdown alone|off|none] [--breakdown-truth T] [--jobs J] [--level L]
 [--compliance] [--free NAMES] [--calibrated R.json --truth T.json --run RUN.tsv]
 
-ISO 9283 pose accuracy AP and repeatability RP (P1..P5 in a cube over the calibrated
-region, 30 cycles) and the gauge-block test (seed 9.3) on the twin, with the nominal and
-the calibrated model, in the world of an error profile (--errors, default realistic).
+ISO 9283 pose accuracy AP and repeatability RP (P1..P5 in a cube inside the calibrated
+region, 30 cycles) and the gauge-block test (seed 9.3) on the twin, in the world of an
+error profile (--errors, default realistic). AP is measured where the tool is: at the
+tool point (the laser's beam point at its measuring centre; each model commands its own
+estimate of it onto the ISO point), with the flange and the scene's named TCPs (and
+--tcp-mm's) beside it, in the robot's frame and the cell frame. Every truth is commanded
+by the nominal model, the calibration at --level and at each level below it (on the same
+poses), and the twin's own whole true model (the oracle: the floor no calibration of
+this world can go below; backlash, repeatability and whole counts are what it leaves).
 
 With no calibration given: for each truth seed, draw that world, rehearse a calibration
 set on its twin (the sampling run's planner with collision checks), calibrate it from the
@@ -17,18 +23,19 @@ Prints the per-truth figures with the median and the worst truth, then (--breakd
 default alone) the first truth again with each error source of the profile on alone (off:
 switched off in turn): what the calibration leaves of each, and which sources it cannot
 remove (docs/ERRORS.md).
-AP is measured in the robot's frame (ISO 9283's base coordinate system, registered to the
-robot's first axis and its zero); the cell frame adds the robot's placement and delta1,
-which no plane calibration sees (both are printed).
 
-With --calibrated, --truth and --run: validate an existing calibration result in the
-world it was made in: the truth file of ``rehearse --truth`` holds that world (the robot's
-true geometry, the gear and laser phases), the run's sidecar names its error profile.
+With --calibrated, --truth and --run: validate an existing calibration result (any level)
+in the world it was made in: the truth file of ``rehearse --truth`` holds that world (the
+robot's true geometry, the gear and laser phases), the run's sidecar names its error
+profile.
 
---out writes JSON (format planecal-validate/1): ``truths`` (truth_seed, ap_before_mm,
-ap_after_mm, ... per truth), ``ap_after_median_mm`` and the other medians and worsts,
-``breakdown``, ``level``, and the median truth's details under the single-truth keys (ap_before_mm,
-ap_after_mm, rp_mm, gauge_error_before_mm, gauge_error_after_mm, iso, gauge, ...).
+--out writes JSON (format planecal-validate/2; a /1 file, whose ``ap_after_mm`` was the
+flange's, is refused by ``planecal report``): ``truths`` (per truth ``ap_before_tool_mm``,
+``ap_after_tool_mm``, ``ap_oracle_tool_mm``, ``rp_after_tool_mm``, the same ``_flange_``,
+``_cell_``, each level's under ``levels``, the named TCPs', the ISO points' distances to
+the nearest sample), their medians and worsts (``ap_after_tool_median_mm``, ...),
+``breakdown``, ``level``, and the median truth's details under the single-truth keys
+(``iso``, ``cube``, ``gauge``, ...).
 """
 from __future__ import annotations
 
@@ -62,7 +69,9 @@ def add_arguments(p):
                         "one has them)")
     p.add_argument("--cycles", type=int, default=30, help="ISO cycles (default 30)")
     p.add_argument("--cube-mm", type=float, default=None, help="ISO cube edge (default: from the samples)")
-    p.add_argument("--tcp-mm", default="0,0,0", help="TCP in the flange frame, mm (default flange)")
+    p.add_argument("--tcp-mm", default=None, metavar="X,Y,Z",
+                   help="a TCP in the flange frame [mm] to measure AP at too (named 'tcp'), "
+                        "besides the tool point, the flange and the scene's named TCPs")
     p.add_argument("--block-mm", type=float, default=100.0, help="gauge block length (default 100)")
     p.add_argument("--gauge-repeats", type=int, default=10)
     p.add_argument("--poses", help="rehearse through this planned pose list (planecal plan) "
@@ -84,6 +93,8 @@ def add_arguments(p):
 
 
 def _tcp(text):
+    if text is None:
+        return None
     try:
         v = [float(x) * 1e-3 for x in text.split(",")]
     except ValueError:
@@ -95,17 +106,21 @@ def _tcp(text):
 
 CELL_FRAME_NOTE = (
     "AP is measured as ISO 9283 does, in the robot's base coordinate system (registered to "
-    "its first axis and that axis's zero). The cell frame adds the robot's placement in the "
-    "cell and J1's zero offset delta1: a plane calibration cannot see them (the plates move "
-    "with the robot), so they stay in any position taken from a drawing of the cell, but "
-    "not in work located by the calibrated plates.")
+    "its first axis and that axis's zero), at the tool point. After a plane calibration the "
+    "flange's AP also holds the flange frame's error, which the calibrated sensor pose "
+    "absorbs at the tool point (right for the laser, not for another tool on the flange). "
+    "The cell frame "
+    "adds the robot's placement in the cell and J1's zero offset delta1: a plane "
+    "calibration cannot see them (the plates move with the robot), so they stay in any "
+    "position taken from a drawing of the cell, but not in work located by the calibrated "
+    "plates.")
 
 
 def run(args) -> int:
     from planecal.io.outputs import check_output
     from planecal.io.params import save_json
     from planecal.model.scene import load_scene
-    from planecal.studies.validation import FORMAT, TruthJob, ValidationSettings
+    from planecal.studies.validation import FORMAT, OLD_FORMATS, TruthJob, ValidationSettings
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile
 
     from planecal.commands.calibration_options import calibration_settings
@@ -114,7 +129,7 @@ def run(args) -> int:
     if given and len(given) != 3:
         raise InputError("--calibrated, --truth and --run go together")
     if args.out:
-        check_output(args.out, given, FORMAT, args.force)
+        check_output(args.out, given, (FORMAT, *OLD_FORMATS), args.force)
     scene = load_scene(args.scene)
     cal = calibration_settings(args, scene.robot)
     st = ValidationSettings(cycles=args.cycles,
@@ -222,34 +237,35 @@ def _detail(v: dict) -> dict:
 
 
 def _validate_given(args, scene, st) -> dict:
-    """--calibrated/--truth/--run: one calibration in the world it was made in: the truth
-    file's world, with the error profile the truth file or the run's sidecar records
-    (``twin.world.recorded_world``; --errors only where neither does, and never against
-    them)."""
+    """--calibrated/--truth/--run: one calibration (any level) in the world it was made in:
+    the truth file's world, with the error profile the truth file or the run's sidecar
+    records (``twin.world.recorded_world``; --errors only where neither does, and never
+    against them)."""
+    from planecal.estimation.compensate import load_calibrated
     from planecal.safety.collision import CollisionWorld
-    from planecal.io.params import load_params
     from planecal.io.samples import read_samples
     from planecal.twin.world import recorded_world, sources_on
-    from planecal.studies.validation import FORMAT, truth_row, validate
+    from planecal.studies.validation import FORMAT, summarize, validate
     from planecal.present.validation import format_validation
     from planecal.twin.profile import load_profile
 
-    calibrated = load_params(args.calibrated, scene.robot)
+    model, _ = load_calibrated(scene.robot, args.calibrated)
     qe = read_samples(args.run).qe
     ref = recorded_world(scene, args.run, args.truth, args.errors, None, default="ideal")
     world, opts = ref.build(scene)
     profile = load_profile(ref.errors, scene.robot)
     checker = CollisionWorld(scene, clearance_m=st.clearance_m)
-    v = validate(scene, world, calibrated, qe, st, checker, None, opts)
+    v = validate(scene, world, model, qe, st, checker, None, opts)
     v["scene"] = scene.name
     v["calibration"] = {}
     v["truth_offsets_rad"] = world.params.joint_offsets
-    v["calibrated_offsets_rad"] = calibrated.joint_offsets
+    v["calibrated_offsets_rad"] = model.params.joint_offsets
     v["sources"] = sources_on(scene.robot, world, opts)
     v["world"] = ref.to_dict()
+    v["level"] = model.level
     print(f"{ref.describe()}; error sources: {', '.join(v['sources']) or 'none'}")
     print(format_validation(v))
-    row = {**truth_row({**v, "truth_seed": None}), "truth_file": str(args.truth)}
+    summary, _, _ = summarize([{**v, "truth_seed": None}])
+    summary["truths"][0]["truth_file"] = str(args.truth)
     return {"format": FORMAT, "errors": profile.name, "profile": str(profile.path),
-            "truths": [row], "ap_after_median_mm": v["ap_after_mm"],
-            "ap_before_median_mm": v["ap_before_mm"], **v}
+            **v, **summary}

@@ -196,8 +196,9 @@ def solve_poses(model: CalibratedModel, T: np.ndarray, q0: np.ndarray,
     q = np.array(q0, float, copy=True)
     n = len(q)
     its = np.zeros(n, int)
+    d = None if direction is None else np.broadcast_to(np.asarray(direction), (n, 6))
     for _ in range(max_iter + 1):
-        side = model.sides(q, direction)
+        side = model.sides(q, d)
         e = pose_error(T, model.flange(q, side))
         rp, rw = np.linalg.norm(e[:, :3], axis=1), np.linalg.norm(e[:, 3:], axis=1)
         todo = ~((rp < tol_m) & (rw < tol_rad))

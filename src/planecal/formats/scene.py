@@ -135,6 +135,29 @@ class Obstacle(Model):
     rpy_rad: Angles = [0.0, 0.0, 0.0]
 
 
+RESERVED_TCP_NAMES = ("tool", "flange")  # the beam point and the flange: validate's own
+
+
+class Tool(Model):
+    """A TCP the scene names besides the laser's beam point (``planecal validate`` measures
+    ISO 9283 AP there too): its position in the flange frame."""
+    name: Annotated[Str, Field(min_length=1, max_length=100)]
+    tcp_m: Annotated[Point(1.0, "TCP"),
+                     Field(description="m: the TCP in the flange frame (standard DH frame 6)")]
+
+
+def _tools_ok(v):
+    names = [t.name for t in v]
+    for i, n in enumerate(names):
+        if n in RESERVED_TCP_NAMES:
+            raise problem(f"{n!r} is validate's own name for the "
+                          f"{'beam point' if n == 'tool' else 'flange'}: choose another",
+                          i, "name")
+        if n in names[:i]:
+            raise problem(f"{n!r} is named twice", i, "name")
+    return v
+
+
 class Positions(Model):
     home_counts: JointCounts | None = None
     calibration_deg: JointDegrees | None = None
@@ -180,6 +203,7 @@ class SceneFile(Model):
                       Field(max_length=100, json_schema_extra={"minItems": 1})]
     obstacles: Annotated[list[Obstacle], Field(max_length=10_000)] = []
     floor_z_m: FloorZ = 0.0
+    tools: Annotated[list[Tool], AfterValidator(_tools_ok), Field(max_length=100)] = []
     positions: Positions = Positions()
     sampling: Sampling = Sampling()
     references: Annotated[list[Reference], Field(max_length=100)] = []

@@ -60,6 +60,12 @@ def beam_direction_derivative(phi_y: float, phi_z: float) -> np.ndarray:
     return np.array([[cz * cy, -sz * sy], [sz * cy, cz * sy], [-sy, 0.0]])
 
 
+def beam_point(sensor_origin, phi_y: float, phi_z: float, standoff_m: float) -> np.ndarray:
+    """The tool point of a laser (3,): the point on its beam at ``standoff_m`` from its
+    origin (the measuring centre, ``Scene.standoff_m``), in the flange frame."""
+    return np.asarray(sensor_origin, float) + standoff_m * beam_direction(phi_y, phi_z)
+
+
 def sensor_rotation(phi_y: float, phi_z: float) -> np.ndarray:
     """Flange->sensor rotation Rz(phi_z) Ry(phi_y) (seed 6.7); its z column is the beam."""
     sy, cy, sz, cz = np.sin(phi_y), np.cos(phi_y), np.sin(phi_z), np.cos(phi_z)

@@ -72,13 +72,20 @@ class LengthReference:
     """A known length in the cell (issue 22): plate ``plates[1]`` parallel to plate
     ``plates[0]`` (0-based), ``separation_m`` further from the base origin along its normal
     (negative: nearer; a stepped artefact, measured), with the measurement's std and the
-    faces' parallelism std. The fit takes it as prior rows (``planes.parallel_rows``), and the arm's scale,
-    which a laser on planes cannot see otherwise, is then free."""
+    faces' parallelism std. The fit takes it as prior rows (``planes.parallel_rows``), and
+    the arm's scale, which a laser on planes cannot see otherwise, is then free."""
     plates: tuple[int, int]
     separation_m: float
     std_m: float
     parallel_std_rad: float
     source: str = ""
+
+
+@dataclass(frozen=True)
+class NamedTcp:
+    """A TCP a scene names (``tools``): its position in the flange frame [m]."""
+    name: str
+    tcp: np.ndarray  # (3,)
 
 
 @dataclass
@@ -99,6 +106,14 @@ class Scene:
     cone_deg: float = 30.0
     distance_mm: tuple[float, float] = (70.0, 90.0)
     references: tuple[LengthReference, ...] = ()
+    tools: list[NamedTcp] = field(default_factory=list)
+
+    @property
+    def standoff_m(self) -> float:
+        """The laser's measuring centre [m]: the middle of its window (``sensor.range_mm``;
+        80 mm for the ZS-LD80's 65-95 mm, the distance its serial field counts from). The
+        tool point is the beam point there (``measurement.beam_point``)."""
+        return 0.5e-3 * (self.laser_range_mm[0] + self.laser_range_mm[1])
 
 
 def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
@@ -145,6 +160,7 @@ def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
                        else np.deg2rad(np.array(pos.calibration_deg))),
         cone_deg=sf.sampling.cone_deg, distance_mm=tuple(sf.sampling.distance_mm),
         references=tuple(_reference(path, i, r, plates) for i, r in enumerate(sf.references)),
+        tools=[NamedTcp(t.name, np.array(t.tcp_m, float)) for t in sf.tools],
     )
 
 

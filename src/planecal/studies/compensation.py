@@ -9,10 +9,10 @@ compensated counts (``compensate.compensate`` with the calibration's model):
   (the joint box of the calibration's samples), kept where the collision checker clears
   them; each is the flange pose the nominal model gives it (a program taught on the
   nominal model). The calibration never saw them.
-* ISO 9283: P1..P5 of the cube over the calibrated region (``validation.iso_points``,
-  ``cube_from_flanges``) at the orientation of the scene's calibration position, as
-  ``planecal validate`` commands them. For a level-1 model the compensated counts are
-  exactly ``validate``'s calibrated ones (the same IK with the offsets).
+* ISO 9283: P1..P5 (``validation.iso_points``) of a cube placed by ``validate``'s rule
+  (``validation.cube``) on flange targets: centred on the samples' medoid flange
+  position, at that sample's flange orientation, the default edge. (``validate`` itself
+  commands the tool point onto its ISO points; these are flange targets, as a program's.)
 
 Targets whose solve does not converge (the calibrated model cannot reach them: the
 command refuses them) are counted in ``not_converged`` and left out of the AP. Each
@@ -32,8 +32,6 @@ import numpy as np
 
 from planecal.estimation.compensate import CalibratedModel, Region, compensate
 from planecal.io.targets import Targets
-from planecal.model.encoder import counts_to_joints
-from planecal.model.kinematics import fk
 from planecal.model.robot import within_limits
 
 
@@ -97,7 +95,8 @@ def compensation_study(scene, world, options, model: CalibratedModel, sample_cou
     (a ``twin.truth.Truth``) with the twin's ``options`` (module docstring). Figures in
     mm; keys ``validation_{nominal,compensated}[_cell]_{median,max}_mm`` and
     ``iso_...`` alike, plus the arrays per target."""
-    from planecal.studies.validation import cube_from_flanges, iso_points, robot_frame
+    from planecal.studies.validation import (SamplePoses, default_edge, iso_points, medoid,
+                                             robot_frame)
     from planecal.twin import Twin
 
     robot = scene.robot
@@ -106,17 +105,18 @@ def compensation_study(scene, world, options, model: CalibratedModel, sample_cou
     q = draw_targets(robot, region, n_targets, rng, checker)
     val = Targets([f"V{i + 1}" for i in range(n_targets)], np.full((n_targets, 4, 4), np.nan),
                   q, ["validation"] * n_targets, "validation set")
-    flanges = fk(robot.kinematics, counts_to_joints(robot, sample_counts))[:, :3, 3]
-    center, edge = cube_from_flanges(flanges, None)
-    q_cal = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    T_iso = np.repeat(fk(robot.kinematics, q_cal)[None], 5, axis=0)
-    T_iso[:, :3, 3] = iso_points(center, edge)
+    sp = SamplePoses.of(scene, sample_counts)
+    flanges = sp.flange[:, :3, 3]
+    k = medoid(flanges)
+    edge = default_edge(flanges)
+    T_iso = np.repeat(sp.flange[k][None], 5, axis=0)
+    T_iso[:, :3, 3] = iso_points(flanges[k], edge)
     iso = Targets([f"P{i + 1}" for i in range(5)], T_iso, np.full((5, 6), np.nan),
                   ["ISO 9283"] * 5, "ISO 9283 P1..P5")
     frame = robot_frame(robot, world)
     twin = Twin(scene, truth=world, seed=seed, options=options)
     comp_val = compensate(model, val, region)
-    comp_iso = compensate(model, iso, region, q_start=q_cal)
+    comp_iso = compensate(model, iso, region, q_start=sp.q[k])
     out = {"targets": n_targets, "cycles": cycles, "iso_edge_mm": edge * 1e3,
            "converged": int(comp_val.converged.sum() + comp_iso.converged.sum()),
            "not_converged": [n for c in (comp_val, comp_iso)

@@ -120,6 +120,7 @@ class Twin:
         self.model = self.spec.compile()
         self._data = mujoco.MjData(self.model)
         self._data_synced = False
+        self._aside: mujoco.MjData | None = None  # ``site_poses_at``'s own
         self.laser_site = self.model.site(LASER_SITE).id
         self.flange_site = self.model.site(FLANGE_SITE).id
         self.tool_body = self.model.body(TOOL_BODY).id
@@ -408,8 +409,34 @@ class Twin:
         """True sensor frame in the base frame (z = beam)."""
         return self._site_pose(self.laser_site)
 
-    def _site_pose(self, sid: int) -> np.ndarray:
-        d = self.data
+    # ----- the twin's own deterministic map (``twin.oracle``: the floor of validate) -----
+    def joint_map(self, counts) -> np.ndarray:
+        """The joint row (qpos, rad) the tick computes at ``counts`` (6,) -- fractional
+        counts allowed -- without what depends on the path or the rest (backlash,
+        repeatability, the motors' sub-count draw): the true offsets, gear error and
+        compliance of this world, by the tick's own ``joint_row``."""
+        c = np.asarray(counts, float)
+        whole = np.floor(c)
+        S, F = self._S.copy(), self._F.copy()
+        S[T.CUR:T.CUR + 6] = whole.astype(np.int64)
+        F[T.U:T.U + 6] = c - whole  # the sub-count position: fractional counts
+        S[T.FLAGS] = (S[T.FLAGS] | T.QUANT) & ~(T.REPEAT | T.BACKLASH | T.PRELOADED)
+        out = np.empty(6)
+        self._t.refresh(S, F, self._W, out)
+        return out
+
+    def site_poses_at(self, qpos) -> tuple[np.ndarray, np.ndarray]:
+        """(flange, sensor) 4x4 in the base frame at joint row ``qpos``: MuJoCo's sites on
+        an MjData of their own (the twin's state is untouched)."""
+        if self._aside is None:
+            self._aside = mujoco.MjData(self.model)
+        d = self._aside
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(self.model, d)
+        return self._site_pose(self.flange_site, d), self._site_pose(self.laser_site, d)
+
+    def _site_pose(self, sid: int, d=None) -> np.ndarray:
+        d = self.data if d is None else d
         P = np.eye(4)
         P[:3, :3] = np.reshape(d.site_xmat[sid], (3, 3))
         P[:3, 3] = d.site_xpos[sid]

@@ -37,7 +37,11 @@ FORMATS = {"planecal-result": "calibration", "planecal-montecarlo": "montecarlo"
            "planecal-bootstrap": "bootstrap", "planecal-validation": "validation",
            "planecal-validate": "validation", "planecal-poses": "plan", "planecal-plan": "plan",
            "planecal-sweep": "sweep"}
-READ_VERSIONS = {1}
+READ_VERSIONS = {"planecal-validate": {2}}  # the versions reported (default: 1 only)
+# why a version is no longer read, in one line
+_FLANGE_AP = ("written before AP was measured at the tool point (its ap_after_mm is the "
+              "flange's): run planecal validate again")
+RETIRED = {"planecal-validate/1": _FLANGE_AP, "planecal-validation/1": _FLANGE_AP}
 
 
 def detect_kind(doc, where: str = "result") -> str:
@@ -48,10 +52,16 @@ def detect_kind(doc, where: str = "result") -> str:
     if fmt is not None:
         name, _, version = str(fmt).partition("/")
         if name in FORMATS:
-            if not version.isdigit() or int(version) not in READ_VERSIONS:
+            if str(fmt) in RETIRED:
+                raise InputError(f"{where}: format {fmt}: {RETIRED[str(fmt)]}")
+            versions = READ_VERSIONS.get(name, {1})
+            if not version.isdigit() or int(version) not in versions:
                 raise InputError(f"{where}: format {fmt}: this planecal reports version(s) "
-                                 f"{', '.join(map(str, sorted(READ_VERSIONS)))} of {name}")
+                                 f"{', '.join(map(str, sorted(versions)))} of {name}")
             return FORMATS[name]
+    if "iso" in doc and "gauge" in doc:  # a validation from before the format field
+        raise InputError(f"{where}: a validate result without a format field: "
+                         + RETIRED["planecal-validate/1"])
     kind = _kind_from_content(doc)
     if kind is None:
         what = f"format {fmt}" if fmt is not None else "its content"
@@ -61,8 +71,6 @@ def detect_kind(doc, where: str = "result") -> str:
 
 
 def _kind_from_content(doc: dict) -> str | None:
-    if "iso" in doc and "gauge" in doc:
-        return "validation"
     if "run_errors" in doc or "chi2_offsets_reported" in doc:
         return "montecarlo"
     if "sizes" in doc and "pool" in doc:

@@ -258,9 +258,11 @@ def validate_blueprint(scene=None, eye=None):
                          rrb.TextDocumentView(name="validation info and legend", origin="/info"),
                          row_shares=[3, 2]),
             rrb.Vertical(
-                rrb.BarChartView(name="AP per ISO pose P1..P5 [mm]: nominal (red), "
-                                      "calibrated (blue)", origin="/ap"),
-                rrb.BarChartView(name="RP per ISO pose P1..P5 [mm]", origin="/rp"),
+                rrb.BarChartView(name="AP at the tool point per ISO pose P1..P5 [mm]: nominal "
+                                      "(red), calibrated (blue), true model (green)",
+                                 origin="/ap"),
+                rrb.BarChartView(name="RP at the tool point per ISO pose P1..P5 [mm]",
+                                 origin="/rp"),
                 rrb.BarChartView(name="gauge block length error [mm]: nominal, calibrated, "
                                       "calibrated sensor + nominal offsets", origin="/gauge",
                                  plot_legend=rrb.PlotLegend(visible=False))),
@@ -269,14 +271,17 @@ def validate_blueprint(scene=None, eye=None):
         collapse_panels=False)
 
 
-MODEL_RGBA = {"nominal": (220, 70, 60, 255), "calibrated": (70, 140, 230, 255)}
+MODEL_RGBA = {"nominal": (220, 70, 60, 255), "oracle": (60, 170, 70, 255)}
+CALIBRATED_RGBA = (70, 140, 230, 255)  # every calibrated level
 
 
 def log_validate(path_arg, v: dict, scene, calibrated, qe=None, d_m=None, plate=None):
-    """The validation recording: the ISO 9283 poses P1..P5 and their AP vectors (from the
-    pose to the barycentre of the attained poses, 100x) for the nominal and the
-    calibrated model; AP, RP and the gauge-block errors as bar charts; the calibration's
-    samples (``qe``, ``d_m``, ``plate``) on the plate with the calibrated parameters."""
+    """The validation recording: the ISO 9283 poses P1..P5 (tool points) and their AP
+    vectors at the tool point (from the pose to the barycentre of the attained tool
+    points, 100x) for every model (nominal, each calibrated level, the twin's own true
+    model); AP and RP at the tool point and the gauge-block errors as bar charts; the
+    calibration's samples (``qe``, ``d_m``, ``plate``) on the plate with the calibrated
+    parameters."""
     import rerun as rr
 
     path = recording_path(path_arg, "validate", scene.name)
@@ -292,18 +297,19 @@ def log_validate(path_arg, v: dict, scene, calibrated, qe=None, d_m=None, plate=
                                           labels=[f"P{i + 1}" for i in range(len(P))],
                                           show_labels=True), static=True)
         x = np.arange(1, len(P) + 1, dtype=float)
+        w = 0.8 / len(iso["models"])
         for k, (name, m) in enumerate(iso["models"].items()):
-            col = MODEL_RGBA.get(name, (200, 200, 200, 255))
-            ap = np.asarray(m["ap_xyz_mm"], float) * 1e-3
+            col = MODEL_RGBA.get(name, CALIBRATED_RGBA)
+            tool = m["tool"]
+            ap = np.asarray(tool["ap_xyz_mm"], float) * 1e-3
             rec.log(f"/iso/ap_x100/{name}", rr.Arrows3D(origins=P, vectors=AP_SCALE * ap,
                                                         colors=col, radii=0.002), static=True)
-            rec.log(f"/ap/{name}", rr.BarChart(np.asarray(m["ap_mm"], float),
-                                               abscissa=x + (k - 0.5) * 0.4,
-                                               widths=np.full(len(x), 0.4, np.float32),
+            at = x + (k - (len(iso["models"]) - 1) / 2) * w
+            rec.log(f"/ap/{name}", rr.BarChart(np.asarray(tool["ap_mm"], float), abscissa=at,
+                                               widths=np.full(len(x), w, np.float32),
                                                color=col), static=True)
-            rec.log(f"/rp/{name}", rr.BarChart(np.asarray(m["rp_mm"], float),
-                                               abscissa=x + (k - 0.5) * 0.4,
-                                               widths=np.full(len(x), 0.4, np.float32),
+            rec.log(f"/rp/{name}", rr.BarChart(np.asarray(tool["rp_mm"], float), abscissa=at,
+                                               widths=np.full(len(x), w, np.float32),
                                                color=col), static=True)
         g = [v.get("gauge_error_before_mm"), v.get("gauge_error_after_mm"),
              v.get("gauge_error_offsets_only_mm")]
@@ -314,13 +320,17 @@ def log_validate(path_arg, v: dict, scene, calibrated, qe=None, d_m=None, plate=
         _pose_part(rec, scene, poses)
         log_info(rec, "/info", "\n".join([
             f"# Validation (ISO 9283, gauge block), scene `{scene.name}`", "",
-            f"* AP: nominal **{v['ap_before_mm']:.4f} mm**, calibrated "
-            f"**{v['ap_after_mm']:.4f} mm** (max over P1..P5); RP {v['rp_mm']:.4f} mm",
+            f"* AP at the tool point (max over P1..P5, robot frame): nominal "
+            f"**{v['ap_before_tool_mm']:.4f} mm**, calibrated ({v['model_after']}) "
+            f"**{v['ap_after_tool_mm']:.4f} mm**, the twin's own true model "
+            f"{v['ap_oracle_tool_mm']:.4f} mm; at the flange {v['ap_before_flange_mm']:.4f}, "
+            f"{v['ap_after_flange_mm']:.4f}, {v['ap_oracle_flange_mm']:.4f} mm; RP "
+            f"{v['rp_after_tool_mm']:.4f} mm",
             f"* gauge block error: nominal {g[0]:+.4f} mm, calibrated {g[1]:+.4f} mm, "
             f"calibrated sensor with nominal offsets {g[2]:+.4f} mm",
-            "* 3D: white spheres P1..P5 = the ISO poses (TCP); arrows = AP vectors (pose -> "
-            f"barycentre of the attained poses) drawn {AP_SCALE:g}x: red nominal model, blue "
-            "calibrated",
+            "* 3D: white spheres P1..P5 = the ISO poses (tool points); arrows = AP vectors "
+            f"(pose -> barycentre of the attained tool points) drawn {AP_SCALE:g}x: red "
+            "nominal model, blue calibrated (each level), green the twin's true model",
             *([f"* {poses.legend}; robot and green beam at the first sample (calibrated "
                f"parameters)"] if poses is not None else []),
             "* bar charts: x = pose number 1..5 (AP, RP) or 1 nominal, 2 calibrated, "

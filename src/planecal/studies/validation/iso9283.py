@@ -1,14 +1,14 @@
 """ISO 9283 pose accuracy AP and repeatability RP on the twin (seed 3.2-3.3; the
-package docstring says where the cube goes, how each model commands it and in which frame
-AP is measured)."""
+package docstring says where the cube goes, how each model commands it, and where (tool
+point, flange, named TCPs) and in which frame AP is measured)."""
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from planecal.base.errors import InputError
-from planecal.model.cell_params import CellParams
-from planecal.model.encoder import counts_to_joints, joints_to_counts
-from planecal.model.ik import ik_nearest
+from planecal.model.encoder import counts_to_joints
 from planecal.studies.validation.settings import ValidationSettings
 
 
@@ -19,52 +19,78 @@ def iso_points(center: np.ndarray, edge: float) -> np.ndarray:
     return np.vstack([center, center + 0.8 * corners])
 
 
-def cube_from_flanges(flange_pos: np.ndarray, edge: float | None) -> tuple[np.ndarray, float]:
-    c = flange_pos.mean(0)
-    if edge is None:
-        rng = np.percentile(flange_pos, 90, axis=0) - np.percentile(flange_pos, 10, axis=0)
-        edge = float(min(0.25, 0.8 * rng.min()))
-    return c, edge
+def ap_rp(attained: np.ndarray, commanded: np.ndarray):
+    """ISO 9283 per pose from ``attained`` (cycles, n, 3) positions of ``commanded`` (n, 3):
+    AP = |barycentre - commanded| (7.2.1; the figure of a pose set is the worst pose's,
+    not the mean), RP = l_bar + 3 S_l with l the distances from the barycentre (7.2.2):
+    (AP (n,), its vector (n, 3), RP (n,)), in the positions' unit."""
+    bary = attained.mean(0)
+    lj = np.linalg.norm(attained - bary[None], axis=2)
+    return (np.linalg.norm(bary - commanded, axis=1), bary - commanded,
+            lj.mean(0) + 3 * lj.std(0, ddof=1))
 
 
 class Mover:
     """Moves the twin to counts as the robot moves there: the sampling run's step path
     (``sampling.driver``), each path collision-checked once (``checker``; None: not
-    checked), then held until the robot is at rest on the counts (it settles: a fresh
-    repeatability draw). A joint's backlash follows the direction it came from."""
+    checked) and, where the straight one is blocked, the sampling run's detour
+    (``detour``: a ``sampling.planner.Detour``, backing out along the beam), then held
+    until the robot is at rest on the counts (it settles: a fresh repeatability draw). A
+    joint's backlash follows the direction it came from."""
 
-    def __init__(self, twin, robot, checker=None):
+    def __init__(self, twin, robot, checker=None, detour=None):
         from planecal.links.base import AlwaysEnabled
         from planecal.sampling.driver import Driver
-        self.twin, self.robot, self.checker = twin, robot, checker
+        self.twin, self.robot, self.checker, self.detour = twin, robot, checker, detour
         self.drv = Driver(twin, twin, AlwaysEnabled(), robot)
         self.drv.start()
-        self._clear: dict = {}
+        self._routes: dict = {}
+
+    def approach(self, c0, c1) -> np.ndarray:
+        """Each joint's direction of motion (6,) int -1/0/+1 on the straight path from counts
+        c0 to c1 (joint side: the wrist coupling applied), the side its backlash takes."""
+        dq = (self.robot.coupling / self.robot.gains[None, :]) @ (
+            np.asarray(c1, float) - np.asarray(c0, float))
+        return np.sign(dq).astype(np.int64)
+
+    def route(self, c0, c1) -> list | None:
+        """The counts to pass from c0 to c1: ``[c1]`` where the straight path is clear, the
+        detour's via-points and c1 where only a detour is, None where neither is."""
+        c1 = np.asarray(c1, np.int64)
+        if self.checker is None:
+            return [c1]
+        key = (np.asarray(c0, np.int64).tobytes(), c1.tobytes())
+        if key not in self._routes:
+            q0, q1 = counts_to_joints(self.robot, np.array([c0, c1]))
+            way = None
+            if self.checker.check_path(q0, q1).ok:
+                way = [c1]
+            elif self.detour is not None:
+                via = self.detour.find(q0, q1)
+                way = None if via is None else [np.asarray(c, np.int64) for _, c in via] + [c1]
+            self._routes[key] = way
+        return self._routes[key]
 
     def path_ok(self, c0, c1) -> bool:
-        if self.checker is None:
-            return True
-        key = (np.asarray(c0, np.int64).tobytes(), np.asarray(c1, np.int64).tobytes())
-        if key not in self._clear:
-            q0, q1 = counts_to_joints(self.robot, np.array([c0, c1]))
-            self._clear[key] = bool(self.checker.check_path(q0, q1).ok)
-        return self._clear[key]
+        return self.route(c0, c1) is not None
 
     def go(self, counts, what: str = "pose") -> None:
         from planecal.sampling.driver import plan_move
         c = np.asarray(counts, np.int64)
-        if not self.path_ok(self.drv.commanded_counts, c):
+        way = self.route(self.drv.commanded_counts, c)
+        if way is None:
             raise InputError(f"{what}: the path there is not collision-free")
-        rows = plan_move(self.drv, c)
-        if rows is None:
-            raise InputError(f"{what}: counts outside the encoder range")
-        self.drv.follow(rows)
-        for _ in range(1000):  # the servo's lag: a few tens of ticks at most
-            if np.array_equal(self.drv.current, c):
-                break
-            self.drv.hold()
-        else:
-            raise RuntimeError(f"{what}: the twin did not come to rest on its counts")
+        for target in way:
+            rows = plan_move(self.drv, target)
+            if rows is None:
+                raise InputError(f"{what}: counts outside the encoder range")
+            self.drv.follow(rows)
+            for _ in range(1000):  # the servo's lag: a few tens of ticks at most
+                if np.array_equal(self.drv.current, target):
+                    break
+                self.drv.hold()
+            else:
+                raise RuntimeError(f"{what}: the twin did not come to rest on its counts")
 
 
 def robot_frame(robot, world) -> np.ndarray:
@@ -76,78 +102,124 @@ def robot_frame(robot, world) -> np.ndarray:
     return registered_frame(robot, kin.with_offsets(world.params.joint_offsets))
 
 
-def commanded_counts(robot, T, q_ref, model: CellParams):
-    """Joint angles and counts that put the flange at T (in the robot's frame) by
-    ``model`` (any level: the calibrated model, ``compensate.CalibratedModel``): the
-    closed-form IK with its joint offsets nearest ``q_ref``, then Newton on the whole model
-    (``compensate.solve_poses``; no step where the model is robot.json's with offsets).
-    (None, None) where the pose is not reachable."""
-    from planecal.estimation.compensate import CalibratedModel, solve_poses
-    q0 = ik_nearest(robot, T, q_ref, delta=model.joint_offsets, weights=np.abs(robot.gains))
-    if q0 is None:
-        return None, None
-    full = CalibratedModel(robot, model)
-    # T is in the robot's frame (J1's axis and zero): the model's own base frame is
-    # registered to it, as compensate does
-    q, _, ok, _, _ = solve_poses(full, (full.robot_frame() @ T)[None], q0[None])
-    if not ok[0]:
-        return None, None
-    return q[0], joints_to_counts(robot, q[0])
 
 
-def iso9283(twin, scene, models: dict, center, edge, R, st: ValidationSettings,
-            checker=None, frame: np.ndarray | None = None, mover: Mover | None = None) -> dict:
-    """AP and RP per pose for each model in ``models`` (name -> ``CellParams``, any level:
-    ``commanded_counts``): AP in the robot's frame ``frame`` (a 4x4 in the cell frame,
-    ``robot_frame``; None: the cell frame) and in the cell frame."""
+@dataclass(frozen=True, eq=False)
+class IsoPlan:
+    """The ISO poses and what each model commands there: ``points_m`` P1..P5 (5, 3) (tool
+    points, robot frame), the cube, the flange orientation ``R`` and the joints whose IK
+    branch each pose takes (``q_ref``), per model (``counts``
+    name -> (5, 6) int64) and its tool point in its flange frame (``tool_in_flange``), and
+    how far each pose's commanded joints lie outside the calibrated region (the worst
+    model's: ``outside_mm`` beyond the flange hull's margin, ``outside_deg`` beyond a
+    joint's sampled range and margin; 0 inside)."""
+    points_m: np.ndarray
+    center_m: np.ndarray
+    edge_m: float
+    R: np.ndarray
+    q_ref: np.ndarray
+    counts: dict
+    tool_in_flange: dict
+    outside_mm: np.ndarray
+    outside_deg: np.ndarray
+
+
+def _pose(R, p) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def plan_iso(scene, commanders: list, center, edge: float, R, q_ref, mover: "Mover",
+             region=None, checker=None, inside: bool = True) -> IsoPlan:
+    """Each model's counts for P1..P5 of the cube (``commanders``: ``Commander``s, the
+    first the nominal model, whose path gives every model the joints' approach
+    directions). InputError (what to shrink) where a pose is not reachable by a model, not
+    collision-free, a path of the cycles is not, or (``inside``) a pose lies outside the
+    calibrated ``region`` (``compensate.Region``)."""
     robot = scene.robot
-    q_ref = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    tcp = np.asarray(st.tcp_m, float)
     P = iso_points(center, edge)
-    targets = []
-    for i, p in enumerate(P):
-        T = np.eye(4)
-        T[:3, :3] = R
-        T[:3, 3] = p - R @ tcp  # the TCP at p
-        targets.append(T)
-    counts = {}
-    for name, model in models.items():
+    counts, tools = {}, {}
+    direction = None
+    for cmd in commanders:
+        t = np.asarray(cmd.tool_in_flange, float)
         cs = []
-        for i, T in enumerate(targets):
-            q, c = commanded_counts(robot, T, q_ref, model)
-            if q is None:
-                raise InputError(f"ISO pose P{i + 1} is not reachable; give a smaller --cube-mm")
-            if checker is not None and not checker.check_config(q).ok:
-                raise InputError(f"ISO pose P{i + 1} is not collision-free; give a smaller --cube-mm")
+        for i, p in enumerate(P):
+            c = cmd.command(_pose(R, p - R @ t), q_ref,
+                            None if direction is None else direction[i])
+            if c is None:
+                raise InputError(f"ISO pose P{i + 1} is not reachable by the {cmd.name} "
+                                 "model; give a smaller --cube-mm")
+            if checker is not None and not checker.check_config(
+                    counts_to_joints(robot, c)).ok:
+                raise InputError(f"ISO pose P{i + 1} is not collision-free; give a smaller "
+                                 "--cube-mm")
             cs.append(c)
-        counts[name] = cs
-    mover = mover or Mover(twin, robot, checker)
+        if direction is None:  # the cycle P1 .. P5, P1: each pose approached from the last
+            direction = [mover.approach(cs[i - 1], cs[i]) for i in range(5)]
+        counts[cmd.name], tools[cmd.name] = np.array(cs, np.int64), t
+    out_mm, out_deg = np.zeros(5), np.zeros(5)
+    if region is not None:
+        for cs in counts.values():
+            q = counts_to_joints(robot, cs)
+            out_mm = np.maximum(out_mm, region.distance_m(q, robot) * 1e3)
+            out_deg = np.maximum(out_deg, np.degrees(region.outside(q).max(1)))
+        far = int(np.argmax(np.maximum(out_mm, out_deg)))
+        if inside and (out_mm[far] > 0 or out_deg[far] > 0):
+            raise InputError(f"ISO pose P{far + 1} lies outside the calibrated region "
+                             f"({out_mm[far]:.0f} mm, {out_deg[far]:.1f} deg); give a "
+                             "smaller --cube-mm")
     prev = mover.drv.commanded_counts  # every path of the cycles, before any is driven
-    for name in models:
-        cs = counts[name]
+    for name, cs in counts.items():
         for i, c in enumerate([cs[0]] + list(cs[1:]) + [cs[0]]):
             if not mover.path_ok(prev, c):
                 raise InputError(f"ISO pose P{i % 5 + 1} ({name} model): the path there is "
                                  "not collision-free; give a smaller --cube-mm")
             prev = c
         prev = cs[-1]
+    return IsoPlan(P, np.asarray(center, float), float(edge), np.asarray(R, float),
+                   np.asarray(q_ref, float), counts, tools, out_mm, out_deg)
+
+
+def iso9283(twin, plan: IsoPlan, st: ValidationSettings, mover: "Mover", standoff_m: float,
+            tcps: dict | None = None, frame: np.ndarray | None = None) -> dict:
+    """Drive each model's plan ``st.cycles`` times and measure, per model, AP and RP (mm)
+    at the tool point (``tool``: the true sensor's beam point at ``standoff_m``), at the
+    flange (``flange``) and at each named TCP (``tcps``: name -> (3,) in the flange
+    frame), against what that model commanded there; in the robot's frame ``frame`` (a
+    4x4 in the cell frame, ``robot_frame``; None: the cell's) and in the cell frame; with
+    each model's ``counts`` (5, 6) and ``tool_in_flange_m``."""
+    tcps = tcps or {}
     F = np.eye(4) if frame is None else np.asarray(frame, float)
     Finv = np.linalg.inv(F)
-    out = {"points_m": P, "edge_m": edge, "center_m": center, "robot_frame": F, "models": {}}
-    for name in models:
-        att = np.zeros((st.cycles, 5, 3))
+    P, R = plan.points_m, plan.R
+    out = {"points_m": P, "edge_m": plan.edge_m, "center_m": plan.center_m,
+           "flange_rotation": R, "robot_frame": F, "models": {}}
+    for name, cs in plan.counts.items():
+        n = 2 + len(tcps)  # tool point, flange, each named TCP
+        att = np.zeros((st.cycles, 5, n, 3))
         for j in range(st.cycles):
             for i in range(5):
-                mover.go(counts[name][i], f"ISO pose P{i + 1}")
-                Tt = twin.flange_pose()
-                att[j, i] = Tt[:3, :3] @ tcp + Tt[:3, 3]
-        bary = att.mean(0)
-        lj = np.linalg.norm(att - bary[None], axis=2)
-        rp = lj.mean(0) + 3 * lj.std(0, ddof=1)
-        ap_cell_xyz = bary - P
-        ap_xyz = (Finv[:3, :3] @ bary.T).T + Finv[:3, 3] - P
-        out["models"][name] = {
-            "ap_mm": np.linalg.norm(ap_xyz, axis=1) * 1e3, "ap_xyz_mm": ap_xyz * 1e3,
-            "rp_mm": rp * 1e3, "ap_cell_mm": np.linalg.norm(ap_cell_xyz, axis=1) * 1e3,
-            "ap_xyz_cell_mm": ap_cell_xyz * 1e3}
+                mover.go(cs[i], f"ISO pose P{i + 1}")
+                Tf, Ts = twin.flange_pose(), twin.sensor_pose()
+                att[j, i, 0] = Ts[:3, 3] + standoff_m * Ts[:3, 2]
+                att[j, i, 1] = Tf[:3, 3]
+                for k, tcp in enumerate(tcps.values()):
+                    att[j, i, 2 + k] = Tf[:3, :3] @ tcp + Tf[:3, 3]
+        t = plan.tool_in_flange[name]
+        commanded = [P, P - R @ t] + [P + (R @ (tcp - t)) for tcp in tcps.values()]
+        at = [_figures(att[:, :, k], commanded[k], Finv) for k in range(n)]
+        out["models"][name] = {"tool": at[0], "flange": at[1],
+                               "tcps": dict(zip(tcps, at[2:])), "counts": cs,
+                               "tool_in_flange_m": t}
     return out
+
+
+def _figures(att: np.ndarray, commanded: np.ndarray, Finv: np.ndarray) -> dict:
+    """AP, its vector and RP per pose [mm] in the robot's frame (``Finv``: the cell frame
+    into it) and AP in the cell frame, of positions ``att`` (cycles, 5, 3) [m] in the cell
+    frame."""
+    ap, ap_xyz, rp = ap_rp(att @ Finv[:3, :3].T + Finv[:3, 3], commanded)
+    ap_c, ap_xyz_c, _ = ap_rp(att, commanded)
+    return {"ap_mm": ap * 1e3, "ap_xyz_mm": ap_xyz * 1e3, "rp_mm": rp * 1e3,
+            "ap_cell_mm": ap_c * 1e3, "ap_xyz_cell_mm": ap_xyz_c * 1e3}

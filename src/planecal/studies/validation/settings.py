@@ -5,7 +5,11 @@ from dataclasses import dataclass
 
 from planecal.base.errors import InputError
 
-FORMAT = "planecal-validate/1"
+FORMAT = "planecal-validate/2"
+# /1 (before issue 22) measured AP at the flange under ``ap_after_mm``: refused, not misread
+OLD_FORMATS = ("planecal-validate/1",)
+ROLES = ("before", "after", "oracle")  # the nominal model, the validated one, the twin's own
+WHERE = ("tool", "flange")  # the laser's beam point at its measuring centre, the flange
 # the published figures the twin's are read against (docs/STUDIES.md, ERROR-MODEL.md 2.9)
 ANCHORS = ("published after calibration: SCALAR 0.09 mm (simulation, three planes); KUKA "
            "Absolute Accuracy 1-3 mm -> 0.1-0.3 mm (vendor, secondary source); RoboDK "
@@ -17,7 +21,7 @@ ANCHORS = ("published after calibration: SCALAR 0.09 mm (simulation, three plane
 class ValidationSettings:
     cycles: int = 30
     cube_edge_m: float | None = None
-    tcp_m: tuple = (0.0, 0.0, 0.0)
+    tcp_m: tuple | None = None  # a TCP in the flange frame besides the scene's (named "tcp")
     block_length_m: float = 0.100
     face_height_m: float = 0.040
     point_spacing_m: float = 0.020
@@ -37,3 +41,14 @@ class ValidationSettings:
             raise InputError(f"--block-mm must be in (0, 300], got {self.block_length_m * 1e3}")
         if self.gauge_repeats < 1:
             raise InputError("--gauge-repeats must be at least 1")
+
+
+def figure_keys(role: str) -> list[str]:
+    """The JSON keys of one model's figures (``role`` one of ``ROLES``), each saying where
+    (``WHERE``) and in which frame (none: the robot's; ``_cell``): AP and RP, worst of P1..P5,
+    mm."""
+    return [k for w in WHERE for k in (f"ap_{role}_{w}_mm", f"ap_{role}_{w}_cell_mm",
+                                       f"rp_{role}_{w}_mm")]
+
+
+FIGURE_KEYS = tuple(k for r in ROLES for k in figure_keys(r))

@@ -8,7 +8,7 @@ import numpy as np
 from planecal.base.errors import InputError
 from planecal.estimation.calibrate import CalibrationSettings
 from planecal.studies.validation.run import validate
-from planecal.studies.validation.settings import ValidationSettings
+from planecal.studies.validation.settings import FIGURE_KEYS, ValidationSettings
 from planecal.twin.world import SOURCES
 
 
@@ -25,8 +25,8 @@ def run_jobs(fn, items: list, engine=1, label: str = "validate", quiet: bool = T
 class TruthJob:
     """One truth of ``validate_truth``: the world (scene, error profile, truth seed, the
     error families switched ``off``), the calibration set (rehearsal ``samples`` and
-    ``seed``, or a planned pose list ``poses``), how it is calibrated and the validation
-    settings."""
+    ``seed``, or a planned pose list ``poses``), how it is calibrated (and, ``beside``,
+    each lower level too: ``levels_beside``) and the validation settings."""
     scene: str
     errors: str
     truth_seed: int
@@ -37,6 +37,7 @@ class TruthJob:
     settings: ValidationSettings = field(default_factory=ValidationSettings)
     off: tuple = ()
     calibration: CalibrationSettings = field(default_factory=CalibrationSettings)
+    beside: bool = True
 
     def rehearsal(self):
         """The calibration set's rehearsal (``studies.rehearsal``): run 0 of these settings."""
@@ -47,17 +48,31 @@ class TruthJob:
                                  poses=self.poses, clearance_m=self.settings.clearance_m)
 
 
+def levels_beside(cal: CalibrationSettings) -> list[CalibrationSettings]:
+    """The calibrations a validation at ``cal`` commands side by side on the same poses:
+    each level of ``model.levels.LEVELS`` below ``cal``'s -- the lowest as it is (offsets
+    only: what a controller takes as encoder offsets), the others with ``cal``'s
+    compliance -- with the same fit options, then ``cal`` itself."""
+    from planecal.model.levels import LEVELS
+    below = LEVELS[:LEVELS.index(cal.level)]
+    return [CalibrationSettings(level=lv, compliance=cal.compliance and k > 0,
+                                options=cal.options, base_tolerance=cal.base_tolerance)
+            for k, lv in enumerate(below)] + [cal]
+
+
 def validate_truth(job: TruthJob) -> dict:
     """Draw the world, sample a calibration set on its twin, calibrate it from the nominal
-    values (the one calibration, at the job's level), validate on the same world (package
-    docstring). A set the sampling run gives up on: ``{"truth_seed", "failed"}``."""
+    values (the one calibration, at the job's level and, ``beside``, each lower one),
+    validate them all on the same world and poses (package docstring). A set the sampling
+    run gives up on: ``{"truth_seed", "failed"}``."""
     return truth_run(job)[0]
 
 
 def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
-    """``validate_truth``'s result, the calibration (``fit.Result``, None if the sampling
-    gave up) and its samples ``(qe, d_m, plate)``: what a recording of the run draws."""
+    """``validate_truth``'s result, the validated calibration (``fit.Result``, None if the
+    sampling gave up) and its samples ``(qe, d_m, plate)``: what a recording draws."""
     from planecal.estimation.calibrate import calibrate
+    from planecal.estimation.compensate import CalibratedModel
     from planecal.model.scene import nominal_params
     from planecal.studies.common import cached_scene, cached_world
     from planecal.studies.rehearsal import pose_list_samples, twin_samples
@@ -72,10 +87,16 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
         qe, d, plate, direction, rejected = sample(scene, world, reh, job.seed, opts)
     except RuntimeError as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
-    fit = calibrate(scene.robot, qe, d, nominal_params(scene), plate, job.calibration,
-                    direction, scene.references).result
-    v = validate(scene, world, fit.params, qe, st, cached_world(job.scene, st.clearance_m), fit,
-                 opts)
+    fits = [(s.label, calibrate(scene.robot, qe, d, nominal_params(scene), plate, s,
+                                direction, scene.references).result)
+            for s in (levels_beside(job.calibration) if job.beside else [job.calibration])]
+    fit = fits[-1][1]
+    v = validate(scene, world, [CalibratedModel(scene.robot, f.params, label)
+                                for label, f in fits], qe, st,
+                 cached_world(job.scene, st.clearance_m), fit, opts)
+    for row, (_, f) in zip(v["levels"], fits):
+        row["max_model_error_mm"] = float(np.abs(f.residuals_m).max() * 1e3)
+        row["converged"] = bool(f.converged)
     v["truth_seed"] = job.truth_seed
     v["level"] = job.calibration.level
     v["compliance"] = job.calibration.compliance
@@ -91,50 +112,67 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
     return v, fit, (qe, d, plate)
 
 
-TRUTH_KEYS = ("truth_seed", "ap_before_mm", "ap_after_mm", "ap_before_cell_mm",
-              "ap_after_cell_mm", "rp_mm", "rp_before_mm", "rp_after_mm",
-              "gauge_error_before_mm", "gauge_error_after_mm")
+TRUTH_KEYS = ("truth_seed", *FIGURE_KEYS, "ap_tool_ratio", "gauge_error_before_mm",
+              "gauge_error_after_mm")
+LEVEL_KEYS = ("ap_after_tool_mm", "ap_after_flange_mm", "ap_after_tool_cell_mm",
+              "rp_after_tool_mm")
 
 
 def truth_row(v: dict) -> dict:
-    """The per-truth entry of a validation over truths (``truths`` in its JSON)."""
+    """The per-truth entry of a validation over truths (``truths`` in its JSON): every
+    model's figures (``FIGURE_KEYS``), each level's beside (``levels``), the named TCPs',
+    the ISO poses' distances to the nearest sample and the fit's largest residual."""
     row = {k: v.get(k) for k in TRUTH_KEYS}
     cal = v.get("calibration") or {}
     row["max_model_error_mm"] = cal.get("max_model_error_mm")
     row["samples"] = cal.get("samples")
     row["offset_error_rad"] = (v.get("residual_offset_error") or {}).get("offset_error_rad")
+    row["levels"] = v.get("levels") or []
+    row["tcps"] = v.get("tcps") or []
+    cube = v.get("cube") or {}
+    row["cube_edge_mm"] = None if "edge_m" not in cube else cube["edge_m"] * 1e3
+    row["nearest_sample_mm"] = cube.get("nearest_sample_mm")
     return row
+
+
+def _stat(rows: list[dict], key: str, f):
+    vals = [r[key] for r in rows if r.get(key) is not None]
+    return float(f(vals)) if vals else None
 
 
 def summarize(results: list[dict]) -> tuple[dict, dict, dict]:
     """(summary, the median truth's result, the worst truth's): median and worst over the
-    truths of each figure (the worst truth: the largest AP after calibration; the median
-    truth: the one whose AP after is the median, the lower one of an even count)."""
+    truths of each figure, and of each level's beside (``levels_summary``: label, median
+    and worst of ``LEVEL_KEYS``); the worst truth: the largest AP after calibration at the tool
+    point; the median truth: the one whose AP after is the median, the lower one of an
+    even count."""
     ok = [v for v in results if "failed" not in v]
     if not ok:
         raise InputError("no truth could be validated: "
                          + "; ".join(f"truth {v['truth_seed']}: {v['failed']}" for v in results))
-    after = np.array([v["ap_after_mm"] for v in ok])
+    after = np.array([v["ap_after_tool_mm"] for v in ok])
     order = np.argsort(after, kind="stable")
     med = ok[int(order[(len(ok) - 1) // 2])]
     worst = ok[int(order[-1])]
-
-    def stat(key, f):
-        vals = [v[key] for v in ok if v.get(key) is not None]
-        return float(f(vals)) if vals else None
-    out = {"truths": [truth_row(v) for v in results if "failed" not in v],
+    out = {"truths": [truth_row(v) for v in ok],
            "failed_truths": [{"truth_seed": v["truth_seed"], "reason": v["failed"]}
                              for v in results if "failed" in v],
            "median_truth_seed": med["truth_seed"], "worst_truth_seed": worst["truth_seed"]}
-    for key in ("ap_before_mm", "ap_after_mm", "ap_before_cell_mm", "ap_after_cell_mm", "rp_mm",
-                "rp_before_mm", "rp_after_mm"):
+    for key in FIGURE_KEYS:
         base = key[:-3]
-        out[f"{base}_median_mm"] = stat(key, np.median)
-        out[f"{base}_worst_mm"] = stat(key, np.max)
+        out[f"{base}_median_mm"] = _stat(ok, key, np.median)
+        out[f"{base}_worst_mm"] = _stat(ok, key, np.max)
     for key in ("gauge_error_before_mm", "gauge_error_after_mm"):
         base = key[:-3]
-        out[f"{base}_median_mm"] = stat(key, np.median)
-        out[f"{base}_worst_mm"] = stat(key, lambda x: max(x, key=abs))
+        out[f"{base}_median_mm"] = _stat(ok, key, np.median)
+        out[f"{base}_worst_mm"] = _stat(ok, key, lambda x: max(x, key=abs))
+    levels = []
+    for k, row in enumerate(ok[0]["levels"]):
+        rows = [v["levels"][k] for v in ok]
+        levels.append({"level": row["level"], **{
+            f"{key[:-3]}_{what}_mm": _stat(rows, key, f) for key in LEVEL_KEYS
+            for what, f in (("median", np.median), ("worst", np.max))}})
+    out["levels_summary"] = levels
     return out, med, worst
 
 
@@ -152,10 +190,14 @@ def breakdown_variants(sources: list[str], mode: str = "alone") -> list[tuple[st
     return rows
 
 
+BREAKDOWN_KEYS = ("ap_before_tool_mm", "ap_after_tool_mm", "ap_after_tool_cell_mm",
+                  "ap_after_flange_mm", "ap_oracle_tool_mm", "rp_after_tool_mm")
+
+
 def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) -> dict:
     """``job``'s truth repeated with each error family switched off (``mode`` 'off') or on
-    alone ('alone'), the gauge block skipped: AP after calibration per variant (the same
-    rehearsal seed: the same pose draws)."""
+    alone ('alone'), the gauge block and the lower levels skipped: per variant the
+    figures of ``BREAKDOWN_KEYS`` (the same rehearsal seed: the same pose draws)."""
     from dataclasses import replace
 
     from planecal.studies.common import cached_scene
@@ -163,7 +205,7 @@ def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) 
     on = sources_on(cached_scene(job.scene).robot, *job.rehearsal().world(0))
     variants = breakdown_variants(on, mode)
     st = replace(job.settings, gauge=False)
-    res = run_jobs(validate_truth, [replace(job, off=off, settings=st)
+    res = run_jobs(validate_truth, [replace(job, off=off, settings=st, beside=False)
                                     for _, off in variants], engine, "breakdown", quiet)
     rows = []
     for (label, off), v in zip(variants, res):
@@ -171,16 +213,16 @@ def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) 
         if "failed" in v:
             row["failed"] = v["failed"]
         else:
-            row.update({k: v[k] for k in ("ap_before_mm", "ap_after_mm", "ap_after_cell_mm",
-                                          "rp_mm")})
+            row.update({k: v[k] for k in BREAKDOWN_KEYS})
             row["max_model_error_mm"] = v["calibration"]["max_model_error_mm"]
         rows.append(row)
     return {"truth_seed": job.truth_seed, "mode": mode, "sources": on, "variants": rows}
 
 
 def cannot_remove(bd: dict) -> list[dict]:
-    """From a breakdown: per error family, what it leaves in AP after calibration (with
-    all on minus with it off; or, alone, with it alone minus with none), largest first."""
+    """From a breakdown: per error family, what it leaves in AP after calibration at the
+    tool point (with all on minus with it off; or, alone, with it alone minus with none),
+    largest first."""
     rows = {r["variant"]: r for r in bd["variants"] if "failed" not in r}
     allr, none = rows.get("all sources"), rows.get("none (cell only)")
     out = []
@@ -189,12 +231,12 @@ def cannot_remove(bd: dict) -> list[dict]:
             r = rows.get(f"without {f}")
             if r is None or allr is None:
                 continue
-            share = allr["ap_after_mm"] - r["ap_after_mm"]
+            share = allr["ap_after_tool_mm"] - r["ap_after_tool_mm"]
         else:
             r = rows.get(f"{f} alone")
             if r is None or none is None:
                 continue
-            share = r["ap_after_mm"] - none["ap_after_mm"]
-        out.append({"source": f, "what": SOURCES[f], "ap_after_share_mm": float(share),
-                    "ap_after_variant_mm": r["ap_after_mm"]})
-    return sorted(out, key=lambda x: -x["ap_after_share_mm"])
+            share = r["ap_after_tool_mm"] - none["ap_after_tool_mm"]
+        out.append({"source": f, "what": SOURCES[f], "ap_after_tool_share_mm": float(share),
+                    "ap_after_tool_variant_mm": r["ap_after_tool_mm"]})
+    return sorted(out, key=lambda x: -x["ap_after_tool_share_mm"])
