@@ -27,7 +27,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from planecal.base.errors import InputError
-from planecal.estimation.fit import FitOptions, FitPrior, Problem, Result, reference_rows, solve
+from planecal.estimation.fit import (SIGMA_START_M, FitOptions, FitPrior, Problem, Result,
+                                     reference_rows, solve)
 from planecal.estimation.identifiability import DEFAULT_TOL, BaseSet, Excluded, select_base
 from planecal.estimation.noise import row_weights
 from planecal.model.cell_params import CellParams
@@ -182,7 +183,7 @@ def base_set(robot: Robot, qe, initial: CellParams, plate, settings: Calibration
                     options.distance_sigma_m)
     if references:
         prior = FitPrior(None, initial.to_vector(layout), np.ones(len(layout), bool),
-                         tuple(reference_rows(layout, r, options.prior_sigma_m)
+                         tuple(reference_rows(layout, r, options.prior_sigma_m or SIGMA_START_M)
                                for r in references))
         P, _ = prior.rows(initial.to_vector(layout), len(layout))
         J = np.vstack([J, P])

@@ -114,12 +114,19 @@ class Detour:
     """Via-points around a blocked straight path (module docstring): the sensor backed out
     by ``RETRACT_M`` along its beam at both ends, each by the IK solution nearest to its
     end (same wrist branch), so the legs are: back out, move, approach. Aimed with the
-    pose generator's model."""
+    pose generator's model. Where neither backs out clear (an arm reaching over one plate to
+    another behind it), through the scene's calibration position, a clear pose near the
+    plates, or else its home position: two legs, there and on."""
 
     def __init__(self, poses: PoseGenerator, checker: Checker):
         self.robot, self.poses, self.checker = poses.robot, poses, checker
         self.T_sf = poses.T_sf
         self.T_fs = np.linalg.inv(poses.T_sf)
+        scene = poses.scene  # the clear poses a detour may pass through, in turn
+        self.hubs = [q for q in (scene.calibration_q,
+                                 None if scene.home_counts is None
+                                 else counts_to_joints(self.robot, scene.home_counts))
+                     if q is not None]
 
     def _retract(self, q: np.ndarray, d: float):
         """(joint angles, counts) of the sensor backed out by d from where q puts it."""
@@ -142,6 +149,12 @@ class Detour:
             if (c.check_config(qa).ok and c.check_config(qb).ok and c.check_path(q0, qa).ok
                     and c.check_path(qa, qb).ok and c.check_path(qb, q1).ok):
                 return [a, b]
+        c = self.checker
+        for hub in self.hubs:
+            ch = self.poses.counts_target(hub)
+            if (counts_in_range(self.robot, ch) and c.check_config(hub).ok
+                    and c.check_path(q0, hub).ok and c.check_path(hub, q1).ok):
+                return [(np.array(hub, float), ch)]
         return None
 
 
