@@ -44,11 +44,12 @@ def test_ideal_world_compensation_is_exact_up_to_noise(cell):
     r = compensation_study(scene, world, opts, OffsetsModel(scene.robot, fit.params.joint_offsets),
                            qe, n_targets=30, cycles=10, seed=0, checker=checker)
     assert r["converged"] == 35
-    # measured: nominal 4.98 mm median; compensated 0.016 (max 0.042); ISO P1..P5 0.020 max
+    # measured: nominal 4.98 mm median; compensated 0.016 (max 0.042); ISO P1..P5 0.038
+    # max (the cube at the samples' medoid, validate's rule; 0.020 at their mean before)
     assert r["validation_nominal_median_mm"] > 3.0
     assert r["validation_compensated_median_mm"] < 0.03
     assert r["validation_compensated_max_mm"] < 0.06
-    assert r["iso_compensated_max_mm"] < 0.03
+    assert r["iso_compensated_max_mm"] < 0.05
     assert r["ratio_median"] > 100
     # with the truth's own offsets only the noise is left: repeatability (0.07 mm 3-sigma,
     # 10 visits averaged) and the counts' rounding (<= 0.03 mm)
@@ -70,8 +71,9 @@ def test_realistic_world_compensation_lands_within_the_iso_ap(cell):
     # compensated 1.11 median, 1.135 max. Level 1 leaves the link geometry's share.
     assert r["validation_compensated_median_mm"] < r["validation_nominal_median_mm"] / 5
     assert 0.3 < r["validation_compensated_median_mm"] < 0.9
-    # the unseen targets land within the calibration's own ISO AP (over truths 0-4 and
-    # both scenes: median <= 1.25 x the ISO max)
-    assert r["validation_compensated_median_mm"] <= 1.25 * r["iso_compensated_max_mm"]
+    # the unseen targets land at the calibration's own ISO AP's order (docs/COMPENSATE.md:
+    # median 0.55 against an ISO max of 0.35 mm here; with the cube at the samples' medoid,
+    # validate's rule, its poses sit nearer the samples than the region's 30 targets)
+    assert r["validation_compensated_median_mm"] <= 2.0 * r["iso_compensated_max_mm"]
     # in the cell frame the robot's placement and J1's zero (no plane sees them) stay
     assert r["validation_compensated_cell_median_mm"] > 2.0
