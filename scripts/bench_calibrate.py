@@ -15,6 +15,9 @@ least_squares on the same base set (handed to it), once with its numeric Jacobia
 then planecal alone on 10,000. Lines: ``level2_speedup_vs_scipy_numeric: X`` (target
 >= 10), ``level2_vs_scipy_analytic: X`` (>= 1), ``level2_10k_s: X`` (< 0.5).
 
+Level 3 (issue 22): a fit of 10,000 samples on three_plates with every level-3 term and
+the scene's known length: ``level3_10k_s: X`` (< 0.5).
+
 One pose's flange and geometric Jacobian (``model.kinematics.fk_jacobian``, what IK,
 planning and compensation's Newton steps pay per pose): ``fk_jacobian_one_pose_us: X``
 (target < 20). Times are CPU times (``best_of``); report them with ``uptime``.
@@ -91,11 +94,15 @@ def main():
         assert offsets_diff < 1e-9, f"solutions differ by {offsets_diff:.3e} rad at n={n}"
     print(f"speedup_vs_scipy_1000: {ratios[1000]:.1f}")
     level2()
+    level3()
     one_pose(robot)
 
 
 def one_pose(robot):
-    """One pose's flange and geometric Jacobian, called one pose at a time."""
+    """Level 3 (issue 22): a fit of 10,000 samples on three_plates with every level-3 term and
+the scene's known length: ``level3_10k_s: X`` (< 0.5).
+
+One pose's flange and geometric Jacobian, called one pose at a time."""
     from planecal.model.kinematics import fk_jacobian
     q = np.radians([28.7, -15.2, -44.5, -66.1, 73.3, -92.5])
     kin = robot.kinematics
@@ -166,6 +173,38 @@ def level2():
     print(f"level2_speedup_vs_scipy_numeric: {t_num / t_ours:.1f}")
     print(f"level2_vs_scipy_analytic: {t_an / t_ours:.2f}")
     print(f"level2_10k_s: {t10:.3f}")
+
+
+def level3():
+    """Level 3 (issue 22) on three_plates with its stepped block, 10,000 samples: a truth
+    with every level-3 term drawn (the realistic profile's magnitudes), each sample's
+    approach direction drawn, 2 um noise; the one calibrate with the scene's known length
+    (the prior rows re-weighed until they agree with the residuals: several solves)."""
+    from planecal.estimation.calibrate import calibrate
+    from planecal.model.levels import layout_for
+
+    scene = load_scene("three_plates")
+    robot = scene.robot
+    nominal = nominal_params(scene)
+    rng = np.random.default_rng(17)
+    layout = layout_for(robot, len(scene.plates), "nonkinematic")
+    x = draw_truth(scene, rng).to_vector(layout)
+    for g in layout.groups:
+        sd = {"joint_geometry": 7e-5, "gear": 5e-5, "backlash": 1e-4, "laser": 1e-5}.get(g.kind)
+        if sd:
+            x[layout.slice(g.name)] += rng.normal(0.0, sd, len(g))
+    x[layout.slice("compliance")] = [0, 2e-7, 3.3e-7, 0, 0, 0]
+    truth = nominal.with_vector(x, layout)
+    qe, _, plate = synthetic_samples(scene, truth, 10000, rng)
+    direction = rng.choice([-1, 1], size=qe.shape).astype(np.int8)
+    d = predict(robot, qe, truth, plate, direction) + rng.normal(0.0, 2e-6, len(qe))
+    st = CalibrationSettings(level="nonkinematic")
+    t, cal = best_of(lambda: calibrate(robot, qe, d, nominal, plate, st, direction,
+                                       scene.references), 2)
+    print(f"level 3, three_plates, 10000 samples: {t:.3f} s, {len(cal.base_set.base)} base "
+          f"parameters, {cal.result.iterations} iterations, rms "
+          f"{cal.result.rms_mm() * 1e3:.3f} um")
+    print(f"level3_10k_s: {t:.3f}")
 
 
 if __name__ == "__main__":
