@@ -37,7 +37,8 @@ from planecal.model.layout import layout_prior
 from planecal.model.levels import (DEFAULT_GEOMETRY_PRIOR, LEVELS, PLANE_BLIND_OFFSETS,
                                    layout_for, level_name, pinned_scale, whole_model,
                                    with_compliance)
-from planecal.model.measurement import Joints, joints_of_counts, predict_joints_with_jacobian
+from planecal.model.measurement import (Joints, has_backlash, joints_of_counts,
+                                        predict_joints_with_jacobian)
 from planecal.model.robot import Robot
 
 
@@ -166,19 +167,24 @@ def candidates(robot: Robot, layout: ParamLayout, settings: CalibrationSettings,
 
 def base_set(robot: Robot, qe, initial: CellParams, plate, settings: CalibrationSettings,
              options: FitOptions | None = None, joints: Joints | None = None,
-             direction=None, references: tuple = ()) -> tuple[ParamLayout, BaseSet]:
+             direction=None, references: tuple = (),
+             jacobian: np.ndarray | None = None) -> tuple[ParamLayout, BaseSet]:
     """The layout of the settings' level and the base set of the parameters these poses
     (counts ``qe``, 0-based ``plate``, approach ``direction`` or None) and the scene's
     known lengths (``references``: their rows join the Jacobian) can identify, at
     ``initial`` (module docstring): what ``calibrate`` fits, and what ``planecal layouts``
-    and ``plan`` predict."""
+    and ``plan`` predict. ``jacobian``: the distances' Jacobian at ``initial`` over the
+    level's whole layout, where the caller has it."""
     st = settings
     layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
     options = options or st.options
     mask, pinned = candidates(robot, layout, st, references)
-    if joints is None:
-        joints = joints_of_counts(robot, np.asarray(qe, np.int64), direction)
-    _, J = predict_joints_with_jacobian(robot, joints, initial, plate, layout)
+    if jacobian is None:
+        if joints is None:
+            joints = joints_of_counts(robot, np.asarray(qe, np.int64), direction,
+                                      has_backlash(layout) or bool(initial.backlash.any()))
+        _, jacobian = predict_joints_with_jacobian(robot, joints, initial, plate, layout)
+    J = jacobian
     w = row_weights(J[:, layout.slice("joint_offsets")], options.joint_sigma_rad,
                     options.distance_sigma_m)
     if references:
@@ -221,9 +227,12 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
         n_cand = int(candidates(robot, layout, st, references)[0].sum())
         if n <= n_cand:
             raise ValueError(f"{n} samples cannot determine {n_cand} free parameters")
+        # the distances and Jacobian at the initial values: the base set's, and the fit's
+        # first evaluation
+        at_initial = predict_joints_with_jacobian(robot, probe.joints, initial, pidx, layout)
         _, bs = base_set(robot, probe.qe, initial, pidx, st, options, probe.joints,
-                         references=tuple(references))
-        problem = replace(probe, free=bs.mask(layout))
+                         references=tuple(references), jacobian=at_initial[1])
+        problem = replace(probe, free=bs.mask(layout), at_initial=at_initial)
     except ValueError as e:
         raise InputError(str(e)) from None
     return Calibration(st, solve(problem), bs)

@@ -30,7 +30,7 @@ from planecal.estimation.noise import row_weights
 from planecal.estimation.solver import Iteration, Prior, SolverOptions, Status, least_squares
 from planecal.model.cell_params import CellParams
 from planecal.model.layout import ParamLayout, level1_layout
-from planecal.model.measurement import (Joints, joints_of_counts, predict,
+from planecal.model.measurement import (Joints, has_backlash, joints_of_counts, predict,
                                         predict_joints_with_jacobian)
 from planecal.model.robot import Robot
 from planecal.io.samples import Samples
@@ -81,6 +81,9 @@ class Problem:
     direction: np.ndarray | None = None
     # the scene's known lengths (``model.scene.LengthReference``): prior rows on the planes
     references: tuple = ()
+    # (d (N,), J (N, len(layout))) at ``initial``, where the caller has it (derived: the
+    # fit's first evaluation is then not repeated)
+    at_initial: tuple | None = None
 
     def __post_init__(self):
         qe = np.asarray(self.qe, np.int64)
@@ -119,8 +122,9 @@ class Problem:
                                  "-1, 0, +1 expected")
             object.__setattr__(self, "direction", dirs.astype(np.int8))
         if self.joints is None or len(self.joints) != N:
-            object.__setattr__(self, "joints",
-                               joints_of_counts(self.robot, qe, self.direction))
+            object.__setattr__(self, "joints", joints_of_counts(
+                self.robot, qe, self.direction,
+                has_backlash(self.layout) or bool(self.initial.backlash.any())))
 
     @classmethod
     def from_arrays(cls, robot: Robot, qe, d_m, initial: CellParams, plate=None, *,
@@ -154,7 +158,8 @@ class Problem:
         """The same problem on the samples ``idx``."""
         return replace(self, qe=self.qe[idx], d_m=self.d_m[idx], plate=self.plate[idx],
                        joints=self.joints.rows(idx),
-                       direction=None if self.direction is None else self.direction[idx])
+                       direction=None if self.direction is None else self.direction[idx],
+                       at_initial=None)
 
 
 # ----- the result -----------------------------------------------------------------------------
@@ -223,8 +228,14 @@ def _residuals(pb: Problem):
     need = free | offsets if weighted else free
     cols_f = np.flatnonzero(free[need])
     cols_o = np.flatnonzero(offsets[need])
+    first = [pb.at_initial if pb.at_initial is not None and not weighted else None]
 
     def fun(xf, rows):
+        if first[0] is not None:  # the first call: at the initial values, every row
+            d, J = first[0]
+            first[0] = None
+            if np.array_equal(xf, x_all[free]) and np.asarray(rows).all():
+                return d - pb.d_m, J[:, free], None
         x = x_all.copy()
         x[free] = xf
         d, J = predict_joints_with_jacobian(pb.robot, joints.rows(rows),

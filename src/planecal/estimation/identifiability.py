@@ -151,10 +151,10 @@ class Covariance:
     def correlated_pairs(self, threshold: float) -> list[CorrelatedPair]:
         """The pairs whose |correlation| exceeds ``threshold``, rho rounded to 5 digits."""
         c = self.correlation()
-        p = len(self.names)
+        with np.errstate(invalid="ignore"):
+            big = np.triu(np.abs(np.nan_to_num(c, nan=0.0)) > threshold, 1)
         return [CorrelatedPair(self.names[i], self.names[j], round(float(c[i, j]), 5))
-                for i in range(p) for j in range(i + 1, p)
-                if np.isfinite(c[i, j]) and abs(c[i, j]) > threshold]
+                for i, j in zip(*np.nonzero(big))]
 
     def to_dict(self) -> dict:
         """{"names": [...], "matrix": [[...]]} with null where not identifiable."""

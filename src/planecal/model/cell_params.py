@@ -165,11 +165,12 @@ class CellParams:
             raise ValueError(f"the cell model has no parameters of kind {g.kind!r}")
 
     def copy(self) -> "CellParams":
-        return CellParams(self.joint_offsets.copy(), self.sensor_origin.copy(), self.phi_y,
-                          self.phi_z, self.planes.copy(), self.geometry.copy(),
-                          self.base.copy(), self.compliance.copy(), self.gear_terms,
-                          self.gear.copy(), self.backlash.copy(), self.laser_orders,
-                          self.laser.copy(), self.laser_range_m)
+        """A copy whose arrays are its own (its fields already checked: no __post_init__,
+        the fit copies once an iteration)."""
+        p = object.__new__(CellParams)
+        for name, v in self.__dict__.items():
+            p.__dict__[name] = v.copy() if isinstance(v, np.ndarray) else v
+        return p
 
     def with_vector(self, x: np.ndarray, layout: ParamLayout) -> "CellParams":
         """A copy with the values of a vector in ``layout``'s order (what the layout does

@@ -183,12 +183,18 @@ def plane_distance(n_tilde: np.ndarray, o_b: np.ndarray, z_b: np.ndarray) -> np.
     return (1.0 - np.sum(n_tilde * o_b, -1)) / np.sum(n_tilde * z_b, -1)
 
 
-def joints_of_counts(robot: Robot, qe: np.ndarray, direction: np.ndarray | None = None
-                     ) -> Joints:
+def joints_of_counts(robot: Robot, qe: np.ndarray, direction: np.ndarray | None = None,
+                     sides: bool = True) -> Joints:
     """The ``Joints`` of encoder counts qe (N, 6), with the backlash flanks of the recorded
-    approach ``direction`` (N, 6) or None (``backlash_sides``)."""
+    approach ``direction`` (N, 6) or None (``backlash_sides``) where ``sides`` (a model
+    with a backlash; the flanks cost a gravity torque per sample)."""
     q = counts_to_joints(robot, np.atleast_2d(qe))
-    return Joints.of(q, backlash_sides(robot, q, direction))
+    return Joints.of(q, backlash_sides(robot, q, direction) if sides else None)
+
+
+def has_backlash(layout: ParamLayout) -> bool:
+    """Whether a layout's model has a backlash (its Jacobian needs the flanks)."""
+    return bool(layout.groups_of("backlash"))
 
 
 def predict(robot: Robot, qe: np.ndarray, params: CellParams,
@@ -198,8 +204,8 @@ def predict(robot: Robot, qe: np.ndarray, params: CellParams,
     with the samples' recorded approach ``direction`` (level 3's backlash; None: not
     recorded): ``predict_with_jacobian``'s distance, bit for bit, without the Jacobian."""
     one = np.ndim(qe) == 1
-    d, _ = _evaluate(robot, joints_of_counts(robot, qe, direction), params,
-                     0 if plane_index is None else plane_index, None)
+    d, _ = _evaluate(robot, joints_of_counts(robot, qe, direction, bool(params.backlash.any())),
+                     params, 0 if plane_index is None else plane_index, None)
     return d[0] if one else d
 
 
@@ -211,7 +217,8 @@ def predict_with_jacobian(robot: Robot, qe: np.ndarray, params: CellParams,
     order (default: the level-1 layout of ``params``' planes): (N, len(layout)), or only
     the columns of the ``free`` mask (N, free.sum()) in their order."""
     layout = layout or level1_layout(params.n_planes)
-    return _evaluate(robot, joints_of_counts(robot, qe, direction), params,
+    sides = bool(params.backlash.any()) or has_backlash(layout)
+    return _evaluate(robot, joints_of_counts(robot, qe, direction, sides), params,
                      0 if plane_index is None else plane_index,
                      column_map(layout, robot.n_joints, free))
 
