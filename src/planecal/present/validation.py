@@ -127,7 +127,8 @@ def format_truths(summary: dict, world: str, level: str = "offsets") -> str:
                        _mm(t["ap_oracle_flange_mm"]), _mm(t["ap_after_tool_cell_mm"]),
                        _mm(t["rp_after_tool_mm"]), _mm(t["gauge_error_before_mm"], "+.3f"),
                        _mm(t["gauge_error_after_mm"], "+.3f"), _mm(t["max_model_error_mm"]),
-                       "-" if near is None else f"{max(near):.0f}"])
+                       "-" if near is None else f"{max(near):.0f}",
+                       _mm(t.get("predicted_tool_mm"))])
     out = [f"ISO 9283 and gauge block on the twin, {world} world, {len(rows)} truth(s); "
            f"calibration at level {level} from the nominal values (and below it, on the "
            "same poses); AP at the tool point (the laser's beam point at its measuring "
@@ -135,9 +136,13 @@ def format_truths(summary: dict, world: str, level: str = "offsets") -> str:
            "or cell; oracle: the twin's own true model (the floor)",
            table(["truth", "AP nominal"] + [f"AP {lb}" for lb in labels]
                  + ["AP oracle", f"flange {level}", "flange oracle", f"cell {level}",
-                    "RP", "gauge before", "gauge after", "max model err", "nearest"], rows),
+                    "RP", "gauge before", "gauge after", "max model err", "nearest",
+                    "predicted"], rows),
            "(mm; max model err: the validated fit's largest |residual|, seed Table 9's "
-           "figure; nearest: the ISO points' largest distance to a sample's tool point)", ""]
+           "figure; nearest: the ISO points' largest distance to a sample's tool point; "
+           f"predicted: what the {level} calibration says of its own tool-point error, rms "
+           "over its samples' poses, the fit's residual level in it, before any validation "
+           "(estimation.accuracy))", ""]
     by_seed = {t["truth_seed"]: t for t in truths}
     for what, key in (("median", "median_truth_seed"), ("worst", "worst_truth_seed")):
         t = by_seed[summary[key]]

@@ -87,9 +87,10 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
         qe, d, plate, direction, rejected = sample(scene, world, reh, job.seed, opts)
     except RuntimeError as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
-    fits = [(s.label, calibrate(scene.robot, qe, d, nominal_params(scene), plate, s,
-                                direction, scene.references).result)
+    cals = [(s.label, calibrate(scene.robot, qe, d, nominal_params(scene), plate, s,
+                                direction, scene.references))
             for s in (levels_beside(job.calibration) if job.beside else [job.calibration])]
+    fits = [(label, c.result) for label, c in cals]
     fit = fits[-1][1]
     v = validate(scene, world, [CalibratedModel(scene.robot, f.params, label)
                                 for label, f in fits], qe, st,
@@ -109,11 +110,17 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
                         "offsets_std_rad": fit.std[fit.layout.slice("joint_offsets")]}
     v["truth_offsets_rad"] = world.params.joint_offsets
     v["calibrated_offsets_rad"] = fit.params.joint_offsets
+    if not job.off:  # what the calibration says of itself, beside what the twin measures
+        from planecal.estimation.accuracy import accuracy
+        acc = accuracy(scene.robot, cals[-1][1], qe, d, plate, direction, scene.references,
+                       scene.laser_range_mm)
+        v["accuracy"] = acc.to_dict()
+        v["predicted_tool_mm"] = acc.tool_point_mm
     return v, fit, (qe, d, plate)
 
 
 TRUTH_KEYS = ("truth_seed", *FIGURE_KEYS, "ap_tool_ratio", "gauge_error_before_mm",
-              "gauge_error_after_mm")
+              "gauge_error_after_mm", "predicted_tool_mm")
 LEVEL_KEYS = ("ap_after_tool_mm", "ap_after_flange_mm", "ap_after_tool_cell_mm",
               "rp_after_tool_mm")
 
