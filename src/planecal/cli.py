@@ -272,6 +272,19 @@ def _logging(args) -> None:
     set_quiet(quiet)
 
 
+def _check_files(module, args) -> None:
+    """The command's outputs against its inputs (``--config`` included), before it runs:
+    its ``files(args)`` declaration (``planecal.commands.io_options``) through the output
+    guard (``planecal.io.outputs.check_files``)."""
+    declare = getattr(module, "files", None)
+    if declare is None:
+        return
+    from planecal.io.outputs import check_files
+    files = declare(args)
+    files.read(args.config, role="--config")
+    check_files(files, bool(getattr(args, "force", False)))
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
@@ -289,6 +302,7 @@ def main(argv: list[str] | None = None) -> int:
     module = _module(args.command)
     from planecal.base.interrupts import exit_code, interrupt_on_signals, signal_name
     try:
+        _check_files(module, args)
         with interrupt_on_signals():  # SIGTERM, SIGHUP end a command as Ctrl-C does
             return int(module.run(args) or 0)
     except InputError as e:
