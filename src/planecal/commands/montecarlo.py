@@ -141,9 +141,10 @@ def run(args) -> int:
         t0 = time.perf_counter()
         runs = run_many(st, engine, results=results, resume=args.resume)
         dt = time.perf_counter() - t0
-        print(f"runs: {st.runs} in {dt:.2f} s ({st.runs / dt:.4f} runs/s), "
-              f"{engine.describe()}" + (f"; each written to {results}" if results else ""),
-              file=sys.stderr, flush=True)
+        if not args.quiet:
+            print(f"runs: {st.runs} in {dt:.2f} s ({st.runs / dt:.4f} runs/s), "
+                  f"{engine.describe()}" + (f"; each written to {results}" if results else ""),
+                  file=sys.stderr, flush=True)
         res = analyze(runs, st)
         res["settings"]["scene"] = scene.name
         print(format_montecarlo(res))
