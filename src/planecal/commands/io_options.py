@@ -13,8 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from planecal.base.errors import InputError
-from planecal.io.outputs import (HTML_MARK, PNG_MARK, RRD_MAGIC, Files, Output, check_files,
-                                 file_format)
+from planecal.io.outputs import HTML_MARK, PNG_MARK, RRD_MAGIC, Files, Output, file_format
 
 SIDECAR_FORMAT = "planecal-run/1"
 RESULTS_FORMAT = "planecal-results/1"
@@ -146,10 +145,6 @@ def results_output(files: Files, path, resume: bool) -> None:
     lock_output(files, path, "--results")
 
 
-def check(files: Files, force: bool) -> None:
-    check_files(files, force)
-
-
-__all__ = ["Files", "Output", "check", "lock_output", "profile_inputs", "report_output",
+__all__ = ["Files", "Output", "lock_output", "profile_inputs", "report_output",
            "recorded_inputs", "results_output", "rrd_output", "sample_file_is_ours", "scene_inputs",
            "with_sidecars"]
