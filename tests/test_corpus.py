@@ -7,7 +7,9 @@ peak RSS is the command's own. Every case checks:
 * on failure, exactly one line on stderr, holding the case's fragment (the file or field
   and the problem), and no traceback;
 * no input touched: every file in the case's directory and in tests/corpus/base has the
-  same SHA-256 afterwards, and a failed case leaves no new file behind.
+  same SHA-256 afterwards (a symbolic or hard link too: it still links to what it did),
+  and a refused case leaves no new file behind;
+* no JSON file a case writes holds NaN or Infinity.
 """
 from __future__ import annotations
 
@@ -25,7 +27,8 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from corpus.cases import CASES, Bytes, Case, Dir, Json, Mut, Nest, Rows, Text  # noqa: E402
+from corpus.cases import (CASES, Bytes, Case, Dir, Json, Link, Mut, Nest, Raw,  # noqa: E402
+                          Rows, Text, Tmpl)
 
 from planecal.cli import main  # noqa: E402
 
@@ -85,9 +88,18 @@ def _rows(r: Rows) -> str:
 
 
 def build(d: Path, files: dict) -> None:
+    import os
     for name, spec in files.items():
         p = d / name
-        if isinstance(spec, Text):
+        if isinstance(spec, Tmpl):
+            p.write_text(spec.text.replace("{d}", str(d)).replace("{base}", str(BASE)))
+        elif isinstance(spec, Link) and spec.hard:
+            os.link(spec.target.format(d=d, base=BASE), p)
+        elif isinstance(spec, Link):
+            p.symlink_to(spec.target.format(d=d, base=BASE))
+        elif isinstance(spec, Raw):
+            p.write_bytes(spec.data)
+        elif isinstance(spec, Text):
             p.write_bytes(spec.text.encode("utf-8", "surrogateescape"))
         elif isinstance(spec, Json):
             p.write_text(json.dumps(spec.value))
@@ -106,12 +118,24 @@ def build(d: Path, files: dict) -> None:
 
 
 def hashes(*dirs: Path) -> dict[str, str]:
+    """Each file's SHA-256; a symbolic link's also names its target."""
+    import os
     out = {}
     for d in dirs:
         for p in sorted(d.rglob("*")):
             if p.is_file():
-                out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
+                link = f" -> {os.readlink(p)}" if p.is_symlink() else ""
+                out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest() + link
     return out
+
+
+def assert_standard_json(path: Path) -> None:
+    """A JSON (or JSON-lines) file without NaN or Infinity: standard JSON throughout."""
+    def bare(name):
+        raise AssertionError(f"{path} holds {name}")
+    text = path.read_text(encoding="utf-8")
+    for doc in (text.splitlines() if path.suffix == ".jsonl" else [text]):
+        json.loads(doc, parse_constant=bare)
 
 
 def argv_of(c: Case, d: Path) -> list[str]:
@@ -206,6 +230,9 @@ def test_case(c: Case, tmp_path: Path, base_hashes):
     after = hashes(d)
     for path, digest in before.items():
         assert after.get(path) == digest, f"input {path} was modified"
+    for path in set(after) - set(before):
+        if path.endswith((".json", ".jsonl")):
+            assert_standard_json(Path(path))
     if c.code == 0:
         if c.pipe:
             assert err == "", err

@@ -46,7 +46,7 @@ def sample(port, tty, out, *extra, capsys):
     (["--boot-silence-s", "-1"], "--boot-silence-s must be a number >= 0"),
     (["--session-gap-s", "0"], "--silence-s must be a positive number"),
     (["--silence-s", "-1"], "--silence-s must be a positive number"),
-    (["--laser-silent-every", "-2"], "--laser-silent-every must be >= 0"),
+    (["--laser-silent-every", "-2"], "--laser-silent-every: -2 is not a count (0 .. 1_000_000)"),
     (["--errors", "nosuch"], "--errors nosuch: no such profile"),
 ])
 def test_emulate_fault_flags_are_checked_in_one_line(flags, message, capsys):

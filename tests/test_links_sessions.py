@@ -77,7 +77,9 @@ def test_an_unstated_behaviour_asks_in_one_line_unless_both_agree():
 def test_the_operators_statement_wins(behaviour):
     fresh = plan_contact(behaviour, last(sent_at=NOW), "fresh", "x:1", NOW)
     keep = plan_contact(behaviour, last(sent_at=NOW), "keep", "x:1", NOW)
-    assert fresh.kind == "fresh" and fresh.wait_s == 0 and "--rt-fresh" in fresh.why
+    # a controller that takes a fresh reference only after its silence: still waited for
+    wait = 2.0 + SILENCE_MARGIN_S if behaviour is SILENCE else 0
+    assert fresh.kind == "fresh" and fresh.wait_s == wait and "--rt-fresh" in fresh.why
     assert keep.kind == "kept" and np.array_equal(keep.held, L) and "--rt-keep" in keep.why
 
 
@@ -111,3 +113,34 @@ def test_a_behaviour_is_checked_when_made():
         SessionBehaviour("keep", 2.0)
     with pytest.raises(ValueError):
         SessionBehaviour("fresh_after_silence")
+
+
+@pytest.mark.parametrize("silent_s, wait_s", [(0.3, 2.2), (10.0, 0.0), (None, 2.5)])
+def test_rt_fresh_on_a_cell_fresh_after_silence_waits_the_rest(silent_s, wait_s):
+    """--rt-fresh right after a stop, on a cell whose controller takes a fresh reference
+    only after 2 s of silence: the first packet of 0 waits the rest of the silence and its
+    margin (all of it when the last packet's time is unknown), never measured from the
+    old reference (issue 25: the resume's first packet a 36,400-count jump)."""
+    sent = None if silent_s is None else NOW - silent_s
+    c = plan_contact(SILENCE, last(sent_at=sent), "fresh", "x:1", NOW)
+    assert c.kind == "fresh" and not c.held.any()
+    assert c.wait_s == pytest.approx(wait_s, abs=1e-3) and "2 s of silence" in c.why
+
+
+@pytest.mark.parametrize("behaviour", [None, KEEP, SILENCE, CLIENT])
+def test_a_lost_state_file_of_an_earlier_session_asks(behaviour):
+    """A resume whose sidecar records an earlier session but whose state file is missing
+    (another $PLANECAL_STATE_DIR, another user) asks in one line naming --rt-fresh and
+    --rt-keep; --rt-keep cannot repeat a delta no file holds, so it asks too. --rt-fresh
+    is the operator's statement (on a cell fresh after silence: the whole silence waited)."""
+    lost = "RUN.tsv.json (an earlier session)"
+    for override in (None, "keep"):
+        with pytest.raises(InputError) as e:
+            plan_contact(behaviour, None, override, "x:1", NOW, lost=lost)
+        msg = str(e.value)
+        assert "\n" not in msg and msg.startswith(lost) and "--rt-fresh" in msg \
+            and "--rt-keep" in msg
+    c = plan_contact(behaviour, None, "fresh", "x:1", NOW, lost=lost)
+    assert c.kind == "fresh" and c.wait_s == (2.5 if behaviour is SILENCE else 0)
+    # no earlier session anywhere: both behaviours agree on 0, nothing to wait for
+    assert plan_contact(behaviour, None, None, "x:1", NOW).kind == "either"

@@ -148,7 +148,8 @@ def test_samples_recorded_in_the_provenance_are_used_and_checked(results, tmp_pa
     doc = json.loads(results["demo"].read_text())
     entry = {"role": "samples", "path": str(results["tsv"]), "sha256": sha256(results["tsv"]),
              "bytes": results["tsv"].stat().st_size}
-    doc["provenance"] = {"planecal_version": "0.1.0", "scene": "thesis_final", "inputs": [entry]}
+    doc["provenance"] = {"planecal_version": "0.1.0", "created_utc": "2026-01-01T00:00:00+00:00",
+                         "scene": "thesis_final", "inputs": [entry]}
     index = write_report(doc, tmp_path / "ok")
     assert "error_after.png" in figures(index)
     doc["provenance"]["inputs"] = [{**entry, "sha256": "0" * 64}]

@@ -262,3 +262,57 @@ def test_a_cell_stated_wrongly_stops_after_its_first_packet(tmp_path, capsys):
     assert c.datagrams - stopped.datagrams == 1  # the one first packet
     assert fd11.tripped and c.max_step == int(np.abs(held).max())
     print(f"wrong statement: one packet, step {c.max_step} counts, then stopped")
+
+
+def test_rt_fresh_right_after_a_stop_waits_out_the_silence_and_a_complete_run_ends_at_once(
+        tmp_path, capsys):
+    """A cell stated fresh_after_silence (2 s); SIGINT mid-move, then at once `--resume
+    --rt-fresh` (the operator's statement): the first packet of 0 still waits until the
+    controller has been silent 2 s and the margin -- sent earlier, it would be measured
+    from the old reference (the issue's 36,400 counts). The run completes, no request asks
+    for more than 51 counts. A resume of the complete run ends before any contact
+    ("nothing to do"): not one packet more, with --rt-fresh or without."""
+    scene = stated_scene(tmp_path, "fresh_after_silence", SILENCE_S)
+    out = tmp_path / "RUN.tsv"
+    with controller("fresh_after_silence") as (fd11, laser):
+        stopped = start_and_stop(fd11, laser, out, signal.SIGINT, "--scene", str(scene))
+        check_stopped(stopped, signal.SIGINT, out)
+        code, s, err = resume(fd11, laser, out, capsys, "--rt-fresh")
+        assert fd11.idle(5)
+        got = steps(fd11.received, "fresh_after_silence")
+        sent = fd11.snapshot().datagrams
+        for flags in ((), ("--rt-fresh",)):
+            again = resume(fd11, laser, out, capsys, *flags)
+            assert again[0] == 0 and again[1] is None and "nothing to do" in again[2]
+        assert fd11.idle(2) and fd11.snapshot().datagrams == sent  # not one packet
+    assert code == 0, err
+    assert s["status"] == "complete" and s["samples"] == 2
+    first = s["first_contact"]
+    assert first["kind"] == "fresh" and "--rt-fresh" in first["why"] and first["waited_s"] > 0
+    assert "note: waiting" in err
+    assert not fd11.tripped and got.max() <= STEP_LIMIT and got[stopped.datagrams] == 0
+    gap = max(b[0] - a[0] for a, b in zip(fd11.received, fd11.received[1:]))
+    assert gap >= SILENCE_S + 0.5 - 0.05
+
+
+def test_a_resume_whose_state_file_is_missing_asks_and_sends_nothing(tmp_path, capsys,
+                                                                     monkeypatch):
+    """A run stopped mid-move, resumed with another $PLANECAL_STATE_DIR (another user, a
+    moved home): the controller's state file is not there, but the run's sidecar records
+    an earlier session. Sending delta 0 would be a guess (a jump of the last delta on a
+    controller that kept its reference): the resume asks in one line (exit 2) naming
+    --rt-fresh and --rt-keep, and sends nothing."""
+    scene = stated_scene(tmp_path, "keep")
+    out = tmp_path / "RUN.tsv"
+    with controller("keep") as (fd11, laser):
+        stopped = start_and_stop(fd11, laser, out, signal.SIGTERM, "--scene", str(scene))
+        check_stopped(stopped, signal.SIGTERM, out)
+        monkeypatch.setenv("PLANECAL_STATE_DIR", str(tmp_path / "elsewhere"))
+        for flags in ((), ("--rt-keep",)):
+            code, s, err = resume(fd11, laser, out, capsys, *flags)
+            lines = [ln for ln in err.strip().splitlines() if not ln.startswith("note: ")]
+            assert code == 2 and s is None and len(lines) == 1, err
+            assert "records an earlier session" in lines[0] and "--rt-fresh" in lines[0] \
+                and "--rt-keep" in lines[0]
+        assert fd11.idle(1) and fd11.snapshot().datagrams == stopped.datagrams
+    assert not (tmp_path / "elsewhere").exists()

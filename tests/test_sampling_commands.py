@@ -86,7 +86,7 @@ def test_resume_continues_a_file_begun_without_the_direction_group(tmp_path, cap
 
 
 @pytest.mark.parametrize("argv, msg", [
-    (["--samples", "0"], "--samples must be at least 1"),
+    (["--samples", "0"], "--samples: 0 is not a count (1 .. 100_000)"),
     (["--cone-deg", "95"], "cone half-angle"),
     (["--fixed-distance-mm", "120"], "laser range"),
     (["--distance-mm", "90", "70"], "LO 90.0 is above HI 70.0"),

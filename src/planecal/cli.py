@@ -11,7 +11,6 @@ import importlib
 import logging
 import os
 import sys
-from pathlib import Path
 
 from planecal import __version__
 from planecal.base.errors import InputError, RunFailed
@@ -67,6 +66,7 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         kwargs["allow_abbrev"] = False
         self.long_options: set[str] = set()  # before argparse adds --help
+        self.option_actions: dict[str, argparse.Action] = {}  # long option -> its action
         self.commands: dict[str, Parser] = {}  # the top-level parser's commands
         super().__init__(*args, **kwargs)
 
@@ -76,7 +76,9 @@ class Parser(argparse.ArgumentParser):
     def _recording(self, add):
         def add_argument(*args, **kwargs):
             action = add(*args, **kwargs)
-            self.long_options.update(s[2:] for s in action.option_strings if s.startswith("--"))
+            names = [s[2:] for s in action.option_strings if s.startswith("--")]
+            self.long_options.update(names)
+            self.option_actions.update((n, action) for n in names)
             return action
         return add_argument
 
@@ -140,21 +142,18 @@ def build_parser(argv: list[str], full: bool = False) -> Parser:
     return parser
 
 
-def _config_argv(path: str, command: str, options: set[str]) -> list[str]:
+def _config_argv(path: str, command: str, options: dict) -> list:
     """The options of the ``[command]`` table of a TOML file, as command-line tokens (so
-    argparse checks them as if typed): ``key = value`` is ``--key value``, a list gives
-    several values, ``key = true`` a flag. ``options``: the command's long options. A
-    table that names no command, a key outside a table and a key that is not one of the
-    command's long options (misspelt, abbreviated) are refused. One-line errors name the
-    file."""
-    import tomllib
-
-    from planecal.formats.base import read_bounded
-    data = read_bounded(Path(path), "TOML file", MAX_CONFIG_BYTES)  # /dev/zero, a directory
-    try:
-        doc = tomllib.loads(data.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise InputError(f"{path}: invalid TOML: {str(e).splitlines()[0]}") from None
+    argparse checks them as if typed), each typed by its option: a flag takes true or
+    false (``--flag`` or nothing), an option of one value a string or a number
+    (``--key=value``: the value can never be read as another option or a file), one of
+    several values (``nargs``, repeatable) a list or one value. ``options``: the
+    command's long options and their actions. A table that names no command, a key
+    outside a table, a key that is not one of the command's long options (misspelt,
+    abbreviated) and a value of the wrong type are refused. One-line errors name the file
+    and the key."""
+    from planecal.formats.base import read_toml
+    doc = read_toml(path, "TOML file", MAX_CONFIG_BYTES)  # /dev/zero, a directory, binary
     for name, value in doc.items():
         if name in COMMANDS and not isinstance(value, dict):
             raise InputError(f"{path}: [{name}] must be a table of options")
@@ -174,13 +173,45 @@ def _config_argv(path: str, command: str, options: set[str]) -> list[str]:
             raise InputError(f"{path}: [{command}].{key}: planecal {command} has no option "
                              f"{flag} (the keys are its long option names, in full; see "
                              f"planecal {command} --help)")
-        if isinstance(value, dict):
-            raise InputError(f"{path}: [{command}].{key}: a table is not an option value")
-        if value is True:
-            out.append(flag)
-        elif value is not False:
-            out += [flag, *(str(v) for v in (value if isinstance(value, list) else [value]))]
+        out += _config_tokens(f"{path}: [{command}].{key}", flag, options[flag[2:]], value)
     return out
+
+
+def _config_tokens(where: str, flag: str, action: argparse.Action, value) -> list:
+    """The tokens of one config key (``_config_argv``), its value typed by ``action``; an
+    option of any number of values (``nargs`` + or \\*) as (action, values): its default."""
+    if action.nargs == 0:  # a flag
+        if not isinstance(value, bool):
+            raise InputError(f"{where}: {flag} is a flag: true or false, not {value!r}"[:300])
+        return [flag] if value else []
+    many = action.nargs not in (None, "?") or isinstance(action, argparse._AppendAction)
+    values = value if isinstance(value, list) and many else [value]
+    for v in values:
+        if isinstance(v, bool) or not isinstance(v, (str, int, float)):
+            what = ("a list" if isinstance(v, list) else "a table" if isinstance(v, dict)
+                    else "true/false" if isinstance(v, bool) else type(v).__name__)
+            raise InputError(f"{where}: {flag} takes "
+                             + ("a value or a list of values" if many else "one value")
+                             + f" (a string or a number), not {what}")
+    if isinstance(action.nargs, int) and len(values) != action.nargs:
+        raise InputError(f"{where}: {flag} takes {action.nargs} values, got {len(values)}")
+    if not many:
+        return [f"{flag}={values[0]}"]
+    if isinstance(action, argparse._AppendAction):
+        return [f"{flag}={v}" for v in values]
+    if any(str(v).startswith("-") and not _number(v) for v in values):
+        raise InputError(f"{where}: {flag}: a value may not start with '-'")
+    if not isinstance(action.nargs, int):  # + or *: its values would take the next tokens
+        return [(action, [str(v) for v in values])]
+    return [flag, *(str(v) for v in values)]
+
+
+def _number(v) -> bool:
+    try:
+        float(v)
+        return True
+    except ValueError:
+        return False
 
 
 def _usage(command: str | None, e: UsageError, where: str = "") -> UsageError:
@@ -191,23 +222,45 @@ def _usage(command: str | None, e: UsageError, where: str = "") -> UsageError:
     return UsageError(f"planecal {command}: error: {where}{why} (see planecal {command} --help)")
 
 
+def _config_path(argv: list[str]) -> str | None:
+    """The --config FILE of a command line (its last), before it is parsed: its options
+    can be what the command requires (``[plan] out = ...``)."""
+    path = None
+    for i, a in enumerate(argv):
+        if a == "--config" and i + 1 < len(argv):
+            path = argv[i + 1]
+        elif a.startswith("--config="):
+            path = a.split("=", 1)[1]
+    return path
+
+
 def parse(argv: list[str]) -> argparse.Namespace:
     parser = build_parser(argv)
     command = next((a for a in argv if not a.startswith("-")), None)
-    try:
-        args = parser.parse_args(argv)
-    except UsageError as e:
-        raise _usage(command, e) from None
-    cfg = args.config
-    if cfg:
-        # the file's options first, the command line's after: the last value wins
-        pos = argv.index(args.command)
-        extra = _config_argv(cfg, args.command, parser.commands[args.command].long_options)
+    cfg = _config_path(argv) if command in COMMANDS else None
+    if not cfg:
         try:
-            args = parser.parse_args(argv[:pos + 1] + extra + argv[pos + 1:])
+            return parser.parse_args(argv)
         except UsageError as e:
-            raise _usage(args.command, e, f"{cfg} [{args.command}]: ") from None
-    return args
+            raise _usage(command, e) from None
+    # the file's options first, the command line's after: the last value wins
+    pos = argv.index(command)
+    sub = parser.commands[command]
+    extra = _config_argv(cfg, command, sub.option_actions)
+    try:
+        for action, values in [t for t in extra if isinstance(t, tuple)]:
+            sub.set_defaults(**{action.dest: sub._get_values(action, values)})
+        tokens = [t for t in extra if not isinstance(t, tuple)]
+        return parser.parse_args(argv[:pos + 1] + tokens + argv[pos + 1:])
+    except argparse.ArgumentError as e:
+        raise _usage(command, UsageError(f"x: error: {e}"), f"{cfg} [{command}]: ") from None
+    except UsageError as e:
+        try:  # the command line's own mistake is said as the command line's
+            parser.parse_args(argv)
+        except UsageError as own:
+            if "are required" not in str(own):
+                raise _usage(command, own) from None
+        raise _usage(command, e, f"{cfg} [{command}]: ") from None
 
 
 def _logging(args) -> None:
@@ -217,6 +270,19 @@ def _logging(args) -> None:
              {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG))
     logging.basicConfig(level=level, format="planecal: %(message)s", stream=sys.stderr)
     set_quiet(quiet)
+
+
+def _check_files(module, args) -> None:
+    """The command's outputs against its inputs (``--config`` included), before it runs:
+    its ``files(args)`` declaration (``planecal.commands.io_options``) through the output
+    guard (``planecal.io.outputs.check_files``)."""
+    declare = getattr(module, "files", None)
+    if declare is None:
+        return
+    from planecal.io.outputs import check_files
+    files = declare(args)
+    files.read(args.config, role="--config")
+    check_files(files, bool(getattr(args, "force", False)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -236,6 +302,7 @@ def main(argv: list[str] | None = None) -> int:
     module = _module(args.command)
     from planecal.base.interrupts import exit_code, interrupt_on_signals, signal_name
     try:
+        _check_files(module, args)
         with interrupt_on_signals():  # SIGTERM, SIGHUP end a command as Ctrl-C does
             return int(module.run(args) or 0)
     except InputError as e:

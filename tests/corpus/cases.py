@@ -3,10 +3,12 @@
 A case is ``Case(name, argv, files, code, fragment)``:
 * ``argv``: the command line after ``planecal``; ``{d}`` is the case's own directory
   (a fresh temporary copy), ``{base}`` tests/corpus/base (valid files, never written);
-* ``files``: name -> content, built into ``{d}`` before the run (see ``build`` in
-  tests/test_corpus.py): ``Text(...)``, ``Json(value)``, ``Mut(base, set=..., drop=...,
-  raw=...)`` (a valid base file with fields replaced, deleted or given a raw JSON
-  literal such as ``NaN``), ``Nest(depth)``, ``Bytes(n)``, ``Dir()``, ``Rows(...)``;
+* ``files``: name -> content, built into ``{d}`` in order before the run (see ``build``
+  in tests/test_corpus.py): ``Text(...)``, ``Tmpl(...)`` (with ``{d}`` filled in),
+  ``Raw(bytes)``, ``Json(value)``, ``Mut(base, set=..., drop=..., raw=...)`` (a valid
+  base file with fields replaced, deleted or given a raw JSON literal such as ``NaN``),
+  ``Nest(depth)``, ``Bytes(n)``, ``Dir()``, ``Rows(...)``, ``Link(target, hard=False)``
+  (a symbolic or a hard link);
 * ``code``: the expected exit status (2 bad input or usage, 1 a fit that failed, 0 valid);
 * ``fragment``: text the one stderr line must hold (it names the file or field, and the
   problem); ``None`` for a valid case (exit 0).
@@ -17,7 +19,8 @@ Base files (tests/corpus/base): ``robot.json`` (models/mc70), ``scene.json``
 (thesis_final), ``params.json`` (the seed's Table 10 values), ``poses.json``, ``run.tsv``
 + ``run.tsv.json`` (a 120-sample twin rehearsal on thesis_final, seed 3, realistic errors,
 and its sidecar), ``run3.tsv`` (30 samples on three_plates), ``errors.json`` (the
-realistic error profile).
+realistic error profile), ``result.json`` (``calibrate run.tsv`` in this folder: its
+provenance records ``run.tsv`` beside it).
 """
 from __future__ import annotations
 
@@ -72,6 +75,27 @@ class Rows:
     comma: bool = False
     drop_plate: tuple = ()  # rows (0-based) whose plate column is removed
     head: int = 0  # keep the first n rows only
+
+
+@dataclass(frozen=True)
+class Tmpl:
+    """Text with ``{d}`` (the case's directory) and ``{base}`` filled in (a config naming
+    a path)."""
+    text: str
+
+
+@dataclass(frozen=True)
+class Link:
+    """A symbolic link to ``target`` (``{d}``, ``{base}`` filled in), or with ``hard`` a
+    hard link (its target built before it)."""
+    target: str
+    hard: bool = False
+
+
+@dataclass(frozen=True)
+class Raw:
+    """These bytes (a UTF-16 file)."""
+    data: bytes
 
 
 @dataclass(frozen=True)
@@ -467,3 +491,233 @@ case("emulate-truth-ntilde-zero", "emulate --truth {d}/p.json",
      "planes[0].n_tilde")
 case("emulate-truth-directory", "emulate --truth {d}/p.json", {"p.json": Dir()}, 2, "directory")
 case("emulate-scene-binary", "emulate --scene {d}/s.json", {"s.json": Bytes(300, 5)}, 2, "s.json")
+
+# ----- issue 25: no output replaces an input, whatever the path to it ---------------------------
+SC, ER, RT = Mut("scene.json"), Mut("errors.json"), Rows()
+RES = Mut("result.json")
+SPEC = '[grid]\nsamples = [20]\ndesign = ["random"]\n[sweep]\nruns = 2\n'
+INPUT_AS_OUTPUT = [  # (name, argv, files): an output that is an input, refused
+    ("out-urdf-equals-scene", "urdf --scene {d}/scene.json --out {d}/scene.json",
+     {"scene.json": SC}),
+    ("out-export-equals-scene", "export {base}/result.json --scene {d}/scene.json "
+     "--out {d}/scene.json", {"scene.json": SC}),
+    ("out-plan-equals-scene-force", "plan --scene {d}/scene.json --out {d}/scene.json --force",
+     {"scene.json": SC}),
+    ("out-layouts-equals-scene-force", "layouts --scene {d}/scene.json --out {d}/scene.json "
+     "--force", {"scene.json": SC}),
+    ("out-montecarlo-equals-nan-errors-force", "montecarlo --errors {d}/e.json --out {d}/e.json "
+     "--force", {"e.json": Mut("errors.json", raw=((("cell", "joint_offsets_rad", 0), "NaN"),))}),
+    ("out-validate-equals-errors-force", "validate --errors {d}/e.json --out {d}/e.json --force",
+     {"e.json": ER}),
+    ("out-validate-equals-poses-force", "validate --poses {d}/p.json --out {d}/p.json --force",
+     {"p.json": Mut("poses.json")}),
+    ("results-bootstrap-equals-pool-force", "bootstrap {d}/s.tsv --results {d}/s.tsv --force",
+     {"s.tsv": RT}),
+    ("results-bootstrap-equals-scene-force", "bootstrap {base}/run.tsv --scene {d}/scene.json "
+     "--results {d}/scene.json --force", {"scene.json": SC}),
+    ("out-bootstrap-equals-scene-force", "bootstrap {base}/run.tsv --scene {d}/scene.json "
+     "--out {d}/scene.json --force", {"scene.json": SC}),
+    ("out-calibrate-equals-scene-force", "calibrate {base}/run.tsv --scene {d}/scene.json "
+     "--out {d}/scene.json --force", {"scene.json": SC}),
+    ("out-calibrate-equals-input-sidecar-force", "calibrate {d}/s.tsv --out {d}/s.tsv.json --force",
+     {"s.tsv": RT, "s.tsv.json": Mut("run.tsv.json")}),
+    ("out-calibrate-hard-link-to-input-force", "calibrate {d}/s.tsv --out {d}/h.json --force",
+     {"s.tsv": RT, "h.json": Link("{d}/s.tsv", hard=True)}),
+    ("out-layouts-link-to-scene-force", "layouts --scene {d}/scene.json --out {d}/l.json --force",
+     {"scene.json": SC, "l.json": Link("{d}/scene.json")}),
+    ("results-montecarlo-link-to-scene-force", "montecarlo --scene {d}/scene.json --results "
+     "{d}/r.jsonl --force", {"scene.json": SC, "r.jsonl": Link("{d}/scene.json")}),
+    ("report-index-is-the-result-link", "report {d}/r.json --out {d}/rep",
+     {"r.json": RES, "run.tsv": RT, "rep": Dir(), "rep/index.html": Link("{d}/r.json")}),
+    ("report-png-is-the-recorded-samples-link", "report {d}/r.json --out {d}/rep",
+     {"r.json": RES, "run.tsv": RT, "rep": Dir(), "rep/offsets.png": Link("{d}/run.tsv")}),
+    ("report-bootstrap-index-is-a-sample-file", "bootstrap {d}/rep/index.html --report {d}/rep",
+     {"rep": Dir(), "rep/index.html": RT}),
+    ("report-plan-index-is-the-scene", "plan --scene {d}/rep/index.html --report {d}/rep "
+     "--out {d}/p.json", {"rep": Dir(), "rep/index.html": SC}),
+    ("sweep-txt-is-the-spec-link", "sweep {d}/spec.toml --out {d}/sw",
+     {"spec.toml": Text(SPEC), "sw": Dir(), "sw/sweep.txt": Link("{d}/spec.toml")}),
+    ("sweep-spec-is-sweep-txt", "sweep {d}/sw/sweep.txt --out {d}/sw",
+     {"sw": Dir(), "sw/sweep.txt": Text(SPEC)}),
+    ("sweep-errors-profile-is-sweep-json", "sweep {d}/spec.toml --out {d}/sw",
+     {"spec.toml": Text(SPEC.replace("[sweep]", 'errors = ["sw/sweep.json"]\n[sweep]')),
+      "sw": Dir(), "sw/sweep.json": ER}),
+    ("rrd-calibrate-equals-samples", "calibrate {d}/s.tsv --rrd {d}/s.tsv", {"s.tsv": RT}),
+    ("rrd-rehearse-equals-errors", "rehearse --errors {d}/e.json --rrd {d}/e.json "
+     "--out {d}/o.tsv", {"e.json": ER}),
+    ("rrd-validate-equals-errors", "validate --errors {d}/e.json --rrd {d}/e.json",
+     {"e.json": ER}),
+    ("rrd-demo-equals-scene", "demo --scene {d}/scene.json --rrd {d}/scene.json --dir {d}/dd",
+     {"scene.json": SC}),
+    ("out-rehearse-equals-errors-force", "rehearse --errors {d}/e.json --out {d}/e.json --force",
+     {"e.json": ER}),
+    ("out-rehearse-equals-scene-force", "rehearse --scene {d}/s.json --out {d}/s.json --force",
+     {"s.json": SC}),
+    ("truth-out-rehearse-equals-errors-force", "rehearse --errors {d}/e.json --truth-out "
+     "{d}/e.json --out {d}/o.tsv --force", {"e.json": ER}),
+    ("out-rehearse-sidecar-equals-scene-force", "rehearse --scene {d}/s.tsv.json --out {d}/s.tsv "
+     "--force", {"s.tsv.json": SC}),
+    ("out-montecarlo-equals-scene-force", "montecarlo --scene {d}/scene.json --out "
+     "{d}/scene.json --force", {"scene.json": SC}),
+    ("results-montecarlo-equals-scene-force", "montecarlo --scene {d}/scene.json --results "
+     "{d}/scene.json --force", {"scene.json": SC}),
+    ("dir-demo-holds-the-scene-force", "demo --dir {d}/dd --scene {d}/dd/result.json --force",
+     {"dd": Dir(), "dd/result.json": SC}),
+]
+for name, argv, files in INPUT_AS_OUTPUT:
+    case(name, argv, files, 2, "input")
+CFG_CMDS = {"calibrate": "calibrate {base}/run.tsv", "plan": "plan",
+            "compensate": "compensate {d}/t.csv --params {base}/result.json",
+            "rehearse": "rehearse"}
+for cmd, line in CFG_CMDS.items():
+    case(f"out-{cmd}-equals-config-force", f"{line} --config {{d}}/c.toml --out {{d}}/c.toml "
+         "--force", {"c.toml": Text(f"[{cmd}]\n")}, 2, "input")
+    case(f"config-{cmd}-out-is-the-config", f"{line} --config {{d}}/c.toml",
+         {"c.toml": Tmpl(f'[{cmd}]\nout = "{{d}}/c.toml"\nforce = true\n')}, 2, "input")
+for name, row, col, text, frag in (("corrupt-last-line", 119, 0, "x#", "run.tsv:121"),
+                                   ("corrupt-middle-line", 50, 0, "x#", "run.tsv:52"),
+                                   ("nan-dm-line", 119, None, "nan", "run.tsv:121"),
+                                   ("inf-dm-line", 60, None, "inf", "run.tsv:62")):
+    case(f"resume-{name}", RESUME, {"run.tsv": Rows(edit=((row, col, text),)),
+                                    "run.tsv.json": Mut("run.tsv.json")}, 2, frag)
+case("results-montecarlo-equals-out", "montecarlo --results {d}/m.json --out {d}/m.json", {}, 2,
+     "writes that file too")
+
+# ----- issue 25: files planecal did not write are replaced only with --force ------------------
+NOTES = Text("my notes\n")
+case("out-export-foreign-file", "export {base}/result.json --out {d}/notes.txt",
+     {"notes.txt": NOTES}, 2, "--force")
+case("out-export-sample-file", "export {base}/result.json --out {d}/s.tsv", {"s.tsv": RT}, 2,
+     "--force")
+case("out-export-directory", "export {base}/result.json --out {d}/sub", {"sub": Dir()}, 2,
+     "directory")
+case("report-foreign-index", "report {base}/result.json --out {d}/rep",
+     {"rep": Dir(), "rep/index.html": Text("<p>mine</p>\n")}, 2, "did not write")
+case("report-calibrate-foreign-png", "calibrate {base}/run.tsv --report {d}/rep",
+     {"rep": Dir(), "rep/offsets.png": Bytes(300)}, 2, "did not write")
+case("report-out-is-a-folder-of-other-files", "report {d}/r.json --out {d}",
+     {"r.json": RES}, 2, "did not write")
+case("rrd-calibrate-foreign-file", "calibrate {base}/run.tsv --rrd {d}/notes.txt",
+     {"notes.txt": NOTES}, 2, "--force")
+case("rrd-rehearse-foreign-file", "rehearse --out {d}/o.tsv --rrd {d}/notes.txt",
+     {"notes.txt": NOTES}, 2, "--force")
+case("out-urdf-foreign-file", "urdf --out {d}/notes.txt", {"notes.txt": NOTES}, 2, "--force")
+case("urdf-meshes-foreign-stl", "urdf --out {d}/x.urdf",
+     {"x_meshes": Dir(), "x_meshes/base_link_visual.stl": Bytes(300)}, 2, "--force")
+case("sweep-foreign-txt", "sweep {d}/spec.toml --out {d}/sw",
+     {"spec.toml": Text(SPEC), "sw": Dir(), "sw/sweep.txt": NOTES}, 2, "did not write")
+
+# ----- issue 25: a refusal writes nothing ------------------------------------------------------
+NEW = "calibrate {base}/run.tsv --out {d}/new.json"
+case("calibrate-report-is-a-file", f"{NEW} --report {{d}}/notes.txt", {"notes.txt": NOTES}, 2,
+     "not a directory")
+case("calibrate-report-in-proc", f"{NEW} --report /proc/x", {}, 2, "/proc")
+case("calibrate-report-missing-parent", f"{NEW} --report {{d}}/no/such/dir", {}, 2,
+     "does not exist")
+case("calibrate-rrd-missing-dir", f"{NEW} --rrd {{d}}/no/x.rrd", {}, 2, "does not exist")
+case("calibrate-rrd-in-proc", f"{NEW} --rrd /proc/x", {}, 2, "/proc")
+case("plan-report-is-a-file", "plan --out {d}/pp.json --report {d}/notes.txt",
+     {"notes.txt": NOTES}, 2, "not a directory")
+REPORT_BAD = [
+    ("residual-nan", dict(raw=((("residual_rms_mm",), "NaN"),)), "residual_rms_mm"),
+    ("model-error-number", dict(set=((("model_error",), 3),)), "model_error"),
+    ("covariance-list", dict(set=((("covariance",), [1, 2]),)), "covariance"),
+    ("identifiability-list", dict(set=((("identifiability",), [1]),)), "identifiability"),
+    ("samples-used-string", dict(set=((("samples_used",), "120"),)), "samples_used"),
+    ("encoder-offsets-string", dict(set=((("encoder_offsets",), "none"),)), "encoder_offsets"),
+    ("provenance-list", dict(set=((("provenance",), []),)), "provenance"),
+]
+for name, mut, frag in REPORT_BAD:
+    case(f"report-{name}", "report {d}/r.json --out {d}/rep",
+         {"r.json": Mut("result.json", **mut), "run.tsv": RT}, 2, frag)
+case("report-samples-missing", "report {base}/result.json --out {d}/rep --samples {d}/none.tsv",
+     {}, 2, "none.tsv")
+for v in ("nan", "inf"):
+    case(f"sweep-clearance-{v}", "sweep {d}/spec.toml --out {d}/sw",
+         {"spec.toml": Text(SPEC + f"clearance_m = {v}\n")}, 2, "clearance_m")
+case("demo-samples-0", "demo --samples 0 --dir {d}/dd", {}, 2, "--samples")
+case("demo-free-unknown", "demo --free delta9 --dir {d}/dd", {}, 2, "delta9")
+
+# ----- issue 25: unreadable inputs and numbers too large are one line ------------------------
+case("sweep-spec-binary", "sweep {d}/spec.toml --out {d}/sw", {"spec.toml": Bytes(500, 6)}, 2,
+     "spec.toml")
+case("sweep-spec-utf16", "sweep {d}/spec.toml --out {d}/sw",
+     {"spec.toml": Raw(SPEC.encode("utf-16"))}, 2, "spec.toml")
+case("sweep-spec-dev-zero", "sweep /dev/zero --out {d}/sw", {}, 2, "/dev/zero", rss=True)
+COUNTS_HEAD = "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n"
+COMP = "compensate {d}/t.csv --params {base}/result.json --samples {base}/run.tsv --out {d}/o.tsv"
+case("compensate-field-2-mib", COMP, {"t.csv": Text(COUNTS_HEAD + "1" * 2**21 + ",0,0,0,0,0\n")},
+     2, "t.csv:2")
+for name, head in (("q1-twice", "q1,q1,q3,q4,q5,q6\n"),
+                   ("q6-deg-twice", "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,q6_deg\n"),
+                   ("name-twice", "name,name," + COUNTS_HEAD)):
+    case(f"compensate-column-{name}", COMP, {"t.csv": Text(head)}, 2, "twice")
+case("export-current-qe0-overflow", "export {base}/result.json --current-qe0 "
+     "99999999999999999999,1,2,3,4,5", {}, 2, "--current-qe0")
+case("sample-baud-negative", "sample --rt 127.0.0.1 --laser /dev/null --out {d}/o.tsv --baud -1",
+     {}, 2, "--baud")
+BIG = "100000000000000000000"
+for name, line in (("sweep-samples-2-63", "samples = [9223372036854775808]"),
+                   ("sweep-samples-1e9", "samples = [1000000000]")):
+    case(name, "sweep {d}/spec.toml --out {d}/sw", {"spec.toml": Text(f"[grid]\n{line}\n")}, 2,
+         "grid.samples")
+for key, value in (("runs", "1000000000000"), ("plan_candidates", "1000000000000"),
+                   ("seed", "1e20"), ("seed", BIG)):
+    case(f"sweep-{key}-{value[:5]}", "sweep {d}/spec.toml --out {d}/sw",
+         {"spec.toml": Text(f"[sweep]\n{key} = {value}\n")}, 2, f"sweep.{key}")
+for line, opt in ((f"rehearse --out {{d}}/o.tsv --samples {BIG}", "--samples"),
+                  (f"montecarlo --runs {BIG}", "--runs"), (f"montecarlo --samples {BIG}", "--samples"),
+                  (f"bootstrap {RUN} --repeats {BIG}", "--repeats"),
+                  (f"plan --out {{d}}/p.json --candidates {BIG}", "--candidates"),
+                  (f"bootstrap {RUN} --jobs 100000", "--jobs")):
+    case(f"count-{line.split()[0]}-{opt[2:]}-{line.split()[-1][:6]}", line, {}, 2, opt)
+
+# ----- issue 25: numbers that are not defined are refused or written as null -----------------
+for opt, v in (("--target-ap-mm", "inf"), ("--target-std-urad", "inf"), ("--target-ap-mm", "nan"),
+               ("--target-ap-mm", "0"), ("--target-std-urad", "-1")):
+    case(f"plan-target-{opt[9:]}-{v}", f"plan --out {{d}}/p.json {opt} {v}", {}, 2, opt)
+case("plan-target-unreachable", "plan --out {d}/p.json --samples 13 --candidates 40 "
+     "--target-std-urad 0.001", {}, 2, "not reached")
+case("valid-bootstrap-writes-null-not-nan", f"bootstrap {RUN} --sizes 60 --repeats 2 --jobs 1 "
+     "--out {d}/b.json", {}, 0)
+case("valid-montecarlo-errors-file-writes-null-not-nan", "montecarlo --errors "
+     "{base}/errors.json --runs 2 --samples 40 --jobs 1 --out {d}/m.json -q", {}, 0)
+case("valid-validate-writes-null-not-nan", "validate --truth-seeds 0 --samples 20 --breakdown "
+     "none --jobs 1 --cycles 2 --gauge-repeats 1 --out {d}/v.json -q", {}, 0)
+
+# ----- issue 25: exit codes -------------------------------------------------------------------
+LONG = "{d}/" + "x" * 300
+LONG_OUT = {
+    "urdf": f"urdf --out {LONG}", "export": f"export {{base}}/result.json --out {LONG}",
+    "calibrate": f"calibrate {RUN} --out {LONG}", "rehearse": f"rehearse --out {LONG}",
+    "mjcf": f"mjcf --out {LONG}", "layouts": f"layouts --out {LONG}",
+    "replay": f"replay {RUN} --params {PARAMS} --out {LONG}",
+    "compensate": f"compensate {{d}}/t.csv --params {{base}}/result.json --out {LONG}",
+    "bootstrap": f"bootstrap {RUN} --out {LONG}", "montecarlo": f"montecarlo --out {LONG}",
+    "plan": f"plan --out {LONG}", "validate": f"validate --out {LONG}",
+    "scene-new": f"scene new --robot mc70 --out {LONG}",
+    "robot-import": f"robot import {{d}}/r.urdf --out {LONG}",
+    "report": f"report {{base}}/result.json --out {LONG}",
+    "sweep": f"sweep {{d}}/spec.toml --out {LONG}"}
+for cmd, line in LONG_OUT.items():
+    case(f"out-{cmd}-name-too-long", line, {"spec.toml": Text(SPEC)}, 2, "too long")
+for cmd, line in (("urdf", "urdf"), ("export", "export {base}/result.json"),
+                  ("scene-new", "scene new --robot mc70"), ("sweep", "sweep {d}/spec.toml")):
+    case(f"out-{cmd}-in-proc", f"{line} --out /proc/o.json", {"spec.toml": Text(SPEC)}, 2,
+         "/proc")
+case("predict-distances-in-metres", "predict {d}/s.tsv --params {base}/params.json",
+     {"s.tsv": Rows(edit=((3, None, "0.08"),))}, 2, "laser window")
+case("replay-distances-in-metres", "replay {d}/s.tsv --params {base}/params.json",
+     {"s.tsv": Rows(edit=((3, None, "0.08"),))}, 2, "laser window")
+case("config-flag-given-a-file", f"calibrate {RUN} --config {{d}}/c.toml",
+     {"c.toml": Text('[calibrate]\nweighted = "fresh.tsv"\n')}, 2, "--weighted is a flag")
+case("config-value-given-a-list", f"calibrate {RUN} --config {{d}}/c.toml",
+     {"c.toml": Text('[calibrate]\nmax-iter = [20, "fresh.tsv"]\n')}, 2, "--max-iter")
+case("config-robot-show-out", "robot show mc70 --config {d}/c.toml",
+     {"c.toml": Text('[robot]\nout = "x"\n')}, 2, "--out")
+case("robot-show-out", "robot show mc70 --out {d}/x", {}, 2, "robot import")
+case("robot-import-bad-file-one-line", "robot import {d}/r.urdf --out {d}/rb",
+     {"r.urdf": Text("<robot><link\n")}, 2, "r.urdf")
+case("emulate-host-empty", ("emulate", "--host", ""), {}, 2, "0.0.0.0")
+case("validate-two-poses-quiet", "validate --poses {base}/poses.json -q --jobs 1", {}, 2,
+     "poses.json")

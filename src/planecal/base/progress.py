@@ -29,22 +29,37 @@ class Progress:
     stderr; ``tty``: override the stream's own answer (tests)."""
 
     def __init__(self, label: str, total: int, stream=None, tty: bool | None = None,
-                 unit: str = "", quiet: bool = False):
-        self.label, self.total = label, max(int(total), 0)
+                 unit: str = "", quiet: bool = False, hold: bool = False):
+        self.label, self.total, self.unit = label, max(int(total), 0), unit
         self.stream = stream or sys.stderr
         self.tty = self.stream.isatty() if tty is None else tty
         self.off = quiet or _QUIET[0]
+        # ``hold``: nothing shown until ``release()`` (work that may still be refused in
+        # one line, e.g. a plan whose target cannot be reached)
+        self._held = hold and not self.off
+        self.off = self.off or self._held
         self.done = 0
         self.note = ""
         self._printed = -1
         self._bar = None
         self._closed = False
         if self.tty and not self.off:
-            from tqdm import tqdm
-            self._bar = tqdm(total=self.total, desc=label, unit=unit or " " + label,
-                             file=self.stream, leave=True, dynamic_ncols=True,
-                             mininterval=0.1, bar_format="{desc} {n_fmt}/{total_fmt} "
-                             "{bar:24} {elapsed}<{remaining} {postfix}")
+            self._open_bar()
+
+    def _open_bar(self) -> None:
+        from tqdm import tqdm
+        self._bar = tqdm(total=self.total, initial=self.done, desc=self.label,
+                         unit=self.unit or " " + self.label, file=self.stream, leave=True,
+                         dynamic_ncols=True, mininterval=0.1,
+                         bar_format="{desc} {n_fmt}/{total_fmt} "
+                         "{bar:24} {elapsed}<{remaining} {postfix}")
+
+    def release(self) -> None:
+        """Show the progress from now on (one made with ``hold``)."""
+        if self._held and not self._closed:
+            self._held = self.off = False
+            if self.tty:
+                self._open_bar()
 
     def line(self) -> str:
         return f"{self.label} {self.done}/{self.total}" + (f"  {self.note}" if self.note else "")

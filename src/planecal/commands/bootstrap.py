@@ -16,7 +16,7 @@ B.runs.jsonl next to it); --resume fits only the subsets not in it yet.
 """
 from __future__ import annotations
 
-from planecal.commands.value_options import seed
+from planecal.commands.value_options import MAX_RUNS, MAX_SAMPLES, count, seed
 
 FORMAT = "planecal-bootstrap/1"
 
@@ -27,7 +27,7 @@ def add_arguments(p):
     p.add_argument("--sizes", default=None,
                    help="comma-separated subset sizes, each below the pool (default: those of "
                         "30,50,100,150 below the pool)")
-    p.add_argument("--repeats", type=int, default=10, help="subsets per size (default 10)")
+    p.add_argument("--repeats", type=count(MAX_RUNS), default=10, help="subsets per size (default 10)")
     p.add_argument("--seed", type=seed, default=0, help="random seed of the subsets")
     p.add_argument("--initial", help="initial parameter file (default: the scene's nominal values)")
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values (default %(default)s)")
@@ -47,6 +47,19 @@ def add_arguments(p):
     add_report_argument(p)
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.engine_options import results_path
+    from planecal.commands.io_options import (Files, report_output, results_output,
+                                              rrd_output, scene_inputs, with_sidecars)
+    f = Files().read(*with_sidecars(args.samples), args.initial, *scene_inputs(args.scene))
+    f.write(args.out, "--out", FORMAT)
+    results_output(f, results_path(args), args.resume)
+    report_output(f, args.report, "--report")
+    rrd_output(f, args.rrd)
+    return f
+
+
 def run(args) -> int:
     from planecal.commands.calibration_options import (calibration_settings, fit_options,
                                                        load_inputs)
@@ -59,11 +72,8 @@ def run(args) -> int:
                                                   results_path)
 
     from planecal.commands.report_options import write_command_report
-    from planecal.io.outputs import check_output
 
-    if args.out:
-        check_output(args.out, args.samples + [args.initial], FORMAT, args.force)
-    sizes = None if args.sizes is None else tuple(parse_int_list(args.sizes, "--sizes"))
+    sizes = None if args.sizes is None else tuple(parse_int_list(args.sizes, "--sizes", 1, MAX_SAMPLES))
     samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
     cal = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
     pool = Pool(scene.robot, samples.qe, samples.d_mm * 1e-3, samples.plate, initial, cal,

@@ -31,7 +31,6 @@ from planecal.commands.calibration_options import (add_calibration_arguments,
                                                    fit_options, load_inputs)
 from planecal.commands.report_options import add_report_argument, write_command_report
 from planecal.formats.params import RESULT_FORMAT, provenance, result_document
-from planecal.io.outputs import check_output
 from planecal.io.params import save_json
 from planecal.model.scene import DEFAULT_SCENE
 
@@ -53,6 +52,17 @@ def add_arguments(p):
                         "'auto' for recordings/calibrate-<scene>-<time>.rrd)")
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import (Files, report_output, rrd_output, scene_inputs,
+                                              with_sidecars)
+    f = Files().read(*with_sidecars(args.samples), args.initial, *scene_inputs(args.scene))
+    f.write(args.out, "--out", RESULT_FORMAT)
+    report_output(f, args.report, "--report")
+    rrd_output(f, args.rrd)
+    return f
+
+
 def run(args) -> int:
     from planecal.estimation.accuracy import of_samples
     from planecal.estimation.calibrate import calibrate_samples
@@ -60,8 +70,7 @@ def run(args) -> int:
 
     inputs = [("samples", p) for p in args.samples] + (
         [("initial", args.initial)] if args.initial else [])
-    out = None if not args.out else check_output(args.out, [p for _, p in inputs],
-                                                 RESULT_FORMAT, args.force)
+    out = args.out  # checked before the run (``files``)
     samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
     settings = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
     cal = calibrate_samples(scene.robot, samples, initial, settings, scene.references)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import MAX_ITERATIONS, count
 
 
 def add_calibration_arguments(p, weighted_help: str | None = None) -> None:
@@ -50,7 +51,7 @@ def add_calibration_arguments(p, weighted_help: str | None = None) -> None:
 def add_fit_arguments(p) -> None:
     """The solver's options and the weighted fit's noise model."""
     g = p.add_argument_group("the fit")
-    g.add_argument("--max-iter", type=int, default=30,
+    g.add_argument("--max-iter", type=count(MAX_ITERATIONS), default=30,
                    help="at most this many corrections (default %(default)s)")
     g.add_argument("--improvement-limit", type=float, default=1e-12,
                    help="stop when the mean absolute correction falls below this "
@@ -99,8 +100,6 @@ def fit_options(args, robot):
     repeatability noise model of ``robot`` (or of --repeatability-mm)."""
     from planecal.estimation.fit import FitOptions
 
-    if args.max_iter < 1:
-        raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
     if not (np.isfinite(args.improvement_limit) and args.improvement_limit >= 0):
         raise InputError(f"--improvement-limit must be a number >= 0, got "
                          f"{args.improvement_limit}")
@@ -140,11 +139,12 @@ def weighting(weighted: bool, robot, repeatability_mm: float | None = None,
     return {"joint_sigma_rad": repeatability_sigma(robot, r_m), "distance_sigma_m": sd_um * 1e-6}
 
 
-def calibration_settings(args, robot=None, options=None):
+def calibration_settings(args, robot=None, options=None, scene=None):
     """The ``CalibrationSettings`` of the flags, checked (InputError naming the option).
     ``options``: the fit's (``fit_options`` on a command that has them); otherwise the
     defaults, with --weighted the repeatability noise model of ``robot`` (None: a study
-    sets its world's noise per run)."""
+    sets its world's noise per run). With ``scene``, --free's names are checked against
+    the level's parameters on its plates before any work."""
     from planecal.estimation.calibrate import CalibrationSettings
     from planecal.estimation.fit import FitOptions
 
@@ -154,6 +154,9 @@ def calibration_settings(args, robot=None, options=None):
                              free=_free(args.free), geometry_prior=_prior(args.geometry_prior),
                              free_scale=args.free_scale, options=options)
     st.check()
+    if scene is not None and st.free is not None:
+        from planecal.model.levels import layout_for
+        layout_for(scene.robot, len(scene.plates), st.level, st.compliance).free_mask(st.free)
     return st
 
 

@@ -58,20 +58,32 @@ def _region(args, doc, robot):
     return Region.from_counts(robot, qe, ", ".join(str(p) for p in paths)), paths
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the targets,
+    the result, the sample files given or recorded in it, the robot; the corrected
+    targets (a record or a counts table)."""
+    from planecal.commands.io_options import Files, recorded_inputs, with_sidecars
+    from planecal.estimation.compensate import COMPENSATED_FORMAT
+    from planecal.io.outputs import COUNTS_TABLE_MARK
+    from planecal.model.robot import robot_path
+    f = Files().read(args.targets, args.params, robot_path(args.robot),
+                     *with_sidecars(args.samples or recorded_inputs(args.params)))
+    return f.write(args.out, "--out", (COMPENSATED_FORMAT, COUNTS_TABLE_MARK))
+
+
 def run(args) -> int:
-    from planecal.estimation.compensate import COMPENSATED_FORMAT, compensate, load_calibrated
+    from pathlib import Path
+
+    from planecal.estimation.compensate import compensate, load_calibrated
     from planecal.io.targets import read_targets, write_counts_table
     from planecal.present.compensation import compensated_document
-    from planecal.io.outputs import check_output
     from planecal.io.params import save_json
     from planecal.model.robot import load_robot
 
-    inputs = [args.targets, args.params] + list(args.samples or [])
-    out = check_output(args.out, inputs, COMPENSATED_FORMAT, args.force)
+    out = Path(args.out)  # checked before the run (``files``)
     robot = load_robot(args.robot)
     model, doc = load_calibrated(robot, args.params)
     region, sample_paths = _region(args, doc, robot)
-    check_output(out, inputs + sample_paths, COMPENSATED_FORMAT, args.force)  # recorded ones
     targets = read_targets(args.targets, robot)
     comp = compensate(model, targets, region, frame=args.frame)
     s = comp.summary()

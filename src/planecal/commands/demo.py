@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.base.errors import InputError, RunFailed
-from planecal.commands.value_options import seed
+from planecal.base.errors import RunFailed
+from planecal.commands.value_options import MAX_SAMPLES, count, seed
 from planecal.model.scene import DEFAULT_SCENE
 
 DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
@@ -32,7 +32,7 @@ DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
 
 def add_arguments(p):
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
-    p.add_argument("--samples", type=int, default=150, help="samples to take (default %(default)s)")
+    p.add_argument("--samples", type=count(MAX_SAMPLES), default=150, help="samples to take (default %(default)s)")
     p.add_argument("--seed", type=seed, default=1, help="seed of poses and twin truth (default %(default)s)")
     p.add_argument("--dir", default="runs/demo", help="output directory (default %(default)s)")
     p.add_argument("--errors", default="realistic", metavar="ideal|realistic|FILE.json",
@@ -46,22 +46,24 @@ def add_arguments(p):
     add_calibration_arguments(p)
 
 
-def _check_outputs(out: Path, force: bool) -> tuple[Path, Path, Path]:
-    """The demo's files, each checked (``outputs.check_output``): an existing one must be
-    the demo's own kind (its format field; the sample file: its run sidecar's)."""
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the scene
+    and the error profile; the folder (made with its parents) and the demo's files in it,
+    each replaced only when the demo wrote it (its format; the sample file: its sidecar's)."""
+    from planecal.commands.io_options import (SIDECAR_FORMAT, Files, profile_inputs,
+                                              rrd_output, sample_file_is_ours, scene_inputs)
     from planecal.formats.params import PARAMS_FORMAT, RESULT_FORMAT
-    from planecal.formats.run import SIDECAR_FORMAT
-    from planecal.io.outputs import check_output, file_format
-    from planecal.sampling.runfiles import sidecar_path
+    f = Files().read(*scene_inputs(args.scene), *profile_inputs(args.errors, args.scene))
+    members = (("demo.tsv", (sample_file_is_ours,)), ("demo.tsv.json", (SIDECAR_FORMAT,)),
+               ("demo.tsv.lock", ()), ("truth.json", (PARAMS_FORMAT,)),
+               ("result.json", (RESULT_FORMAT,)))
+    f.write(args.dir, "--dir", folder=True, parents=True, members=members)
+    rrd_output(f, args.rrd)
+    return f
 
-    run_file, truth_file, result_file = out / "demo.tsv", out / "truth.json", out / "result.json"
-    side = sidecar_path(run_file)
-    ours = file_format(side) == SIDECAR_FORMAT
-    check_output(run_file, (), None, force or ours, what="--dir")
-    check_output(side, (), SIDECAR_FORMAT, force, what="--dir")
-    check_output(truth_file, (), PARAMS_FORMAT, force, what="--dir")
-    check_output(result_file, (), RESULT_FORMAT, force, what="--dir")
-    return run_file, truth_file, result_file
+
+def _files(out: Path) -> tuple[Path, Path, Path]:
+    return out / "demo.tsv", out / "truth.json", out / "result.json"
 
 
 WHY_OFF = (
@@ -79,15 +81,13 @@ def run(args) -> int:
     from planecal.model.scene import load_scene
     from planecal.twin.profile import load_profile
 
+    from planecal.io.outputs import make_folder
+
     scene = load_scene(args.scene)  # a bad scene, --errors or --level before any folder
     profile = load_profile(args.errors, scene.robot)
-    settings = calibration_settings(args, scene.robot)
-    out = Path(args.dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"--dir {out}: cannot create ({e.strerror})") from None
-    files = _check_outputs(out, args.force)
+    settings = calibration_settings(args, scene.robot, scene=scene)
+    out = make_folder(args.dir, "--dir", parents=True)  # checked before the run (``files``)
+    files = _files(out)
     print(f"== rehearsal on the twin ({args.scene}, {args.samples} samples, seed {args.seed}, "
           f"{profile.name} world)", flush=True)
     code = _rehearse(args, *files[:2])

@@ -31,7 +31,7 @@ from __future__ import annotations
 import argparse
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import port_or_zero, seed
+from planecal.commands.value_options import MAX_TRIES, count, host, port_or_zero, seed
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -45,7 +45,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
                    help="the twin's error profile: realistic (default: a robot of the MC70's "
                         "class), ideal (the nominal robot), or a profile file")
-    p.add_argument("--host", default="127.0.0.1", help="address the FD11 emulator binds")
+    p.add_argument("--host", type=host, default="127.0.0.1",
+                   help="address the FD11 emulator binds (0.0.0.0: every interface)")
     p.add_argument("--rt-port", type=port_or_zero, default=5555,
                    help="UDP port receiving delta packets (FD11 remote port, default 5555)")
     p.add_argument("--reply-port", type=port_or_zero, default=5556,
@@ -67,11 +68,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="seed of the random faults (default 0)")
     p.add_argument("--boot-silence-s", type=float, default=0.0,
                    help="fault: the RT system answers nothing for this long after start")
-    p.add_argument("--laser-silent-every", type=int, default=0, metavar="K",
+    p.add_argument("--laser-silent-every", type=count(MAX_TRIES, 0), default=0, metavar="K",
                    help="fault: every K-th laser request goes unanswered")
-    p.add_argument("--release-after-ticks", type=int, default=0, metavar="N",
+    p.add_argument("--release-after-ticks", type=count(2**40, 0), default=0, metavar="N",
                    help="fault: the dead-man switch is released after N ticks")
-    p.add_argument("--release-after-moves", type=int, default=0, metavar="N",
+    p.add_argument("--release-after-moves", type=count(2**40, 0), default=0, metavar="N",
                    help="fault: the dead-man switch is released after N ticks that command "
                         "motion (hold ticks not counted: reproducible on any machine)")
 
@@ -88,9 +89,6 @@ def _faults(args):
         raise InputError(f"--silence-s must be a positive number, got {args.session_gap_s}")
     if not (math.isfinite(args.boot_silence_s) and args.boot_silence_s >= 0):
         raise InputError(f"--boot-silence-s must be a number >= 0, got {args.boot_silence_s}")
-    for flag in ("laser_silent_every", "release_after_ticks", "release_after_moves"):
-        if getattr(args, flag) < 0:
-            raise InputError(f"--{flag.replace('_', '-')} must be >= 0")
     return (FD11Faults(drop_probability=args.drop_replies, seed=args.fault_seed,
                        boot_s=args.boot_silence_s,
                        release_after_ticks=args.release_after_ticks,

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import jobs
 from planecal.studies.cluster import TLSFiles, tls_files
 from planecal.studies.distributed import Engine
 
@@ -40,9 +41,9 @@ def add_engine_arguments(p) -> None:
     """``--jobs N``, ``--scheduler tls://HOST:PORT`` with its certificates and
     ``--insecure`` on parser ``p``."""
     g = p.add_argument_group("where the runs go (planecal.studies.distributed)")
-    g.add_argument("--jobs", type=int, default=None, metavar="N",
+    g.add_argument("--jobs", type=jobs, default=None, metavar="N",
                    help="1: run in this process; N: a local Dask cluster of N worker "
-                        "processes (default: one per core)")
+                        "processes, at most 4 per core (default: one per core)")
     g.add_argument("--scheduler", default=None, metavar="tls://HOST:PORT",
                    help="run on a Dask cluster you already run, with TLS (README: a "
                         "cluster of your machines); tcp:// only to one on this machine")

@@ -68,13 +68,26 @@ def add_arguments(p):
                    help="scene: robot and calibration position (default %(default)s)")
 
 
-def _counts(text: str) -> np.ndarray:
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import Files, scene_inputs
+    from planecal.io.outputs import YAML_MARK
+    f = Files().read(args.result, *scene_inputs(args.scene))
+    return f.write(args.out, "--out", (FORMAT, OFFSETS_FORMAT, YAML_MARK))
+
+
+def _counts(text: str, robot) -> np.ndarray:
+    from planecal.model.encoder import counts_in_range
     try:
         v = [int(x) for x in text.split(",")]
     except ValueError:
-        raise InputError(f"--current-qe0: expected six integers separated by commas, got {text!r}") from None
+        raise InputError(f"--current-qe0: expected six integers separated by commas, got "
+                         f"{text[:60]!r}") from None
     if len(v) != 6:
         raise InputError(f"--current-qe0: expected six integers, got {len(v)}")
+    if any(abs(c) >= 2**62 for c in v) or not counts_in_range(robot, np.array(v, np.int64)):
+        raise InputError(f"--current-qe0: {text[:60]}: not encoder counts of {robot.name} "
+                         f"(0 .. 2**{robot.encoder_bits} - 1)")
     return np.array(v, np.int64)
 
 
@@ -124,8 +137,6 @@ def run(args) -> int:
 
     scene = load_scene(args.scene)
     robot = scene.robot
-    if args.out and Path(args.out).resolve() == Path(args.result).resolve():
-        raise InputError(f"--out {args.out}: that is the result file (an input)")
     doc = read_json(args.result, "calibration result")
     params = load_params(args.result, robot)
     fmt = args.format or ("ur" if robot.controller_kind == "ur" else "fd11")
@@ -146,7 +157,7 @@ def _fd11(args, robot, scene, delta, fitted, kept, label) -> int:
     from planecal.io.params import save_json
     from planecal.model.encoder import counts_in_range, encoder_zero_counts
 
-    qe0 = robot.qe0.astype(np.int64) if args.current_qe0 is None else _counts(args.current_qe0)
+    qe0 = robot.qe0.astype(np.int64) if args.current_qe0 is None else _counts(args.current_qe0, robot)
     q_ref = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     new, residual, tcp = encoder_zero_counts(robot, delta, qe0, q_ref)
     if not counts_in_range(robot, new):

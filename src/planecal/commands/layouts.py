@@ -11,13 +11,13 @@ table, n1 is the first plate of that layout, n2 the second.
 from __future__ import annotations
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import seed
+from planecal.commands.value_options import MAX_SAMPLES, count, seed
 
 
 def add_arguments(p):
     from planecal.commands.calibration_options import add_calibration_arguments
     p.add_argument("--scene", default="three_plates", help="scene (default %(default)s)")
-    p.add_argument("--samples", type=int, default=150,
+    p.add_argument("--samples", type=count(MAX_SAMPLES), default=150,
                    help="poses per layout (default %(default)s)")
     p.add_argument("--seed", type=seed, default=0, help="pose draw seed (default %(default)s)")
     add_calibration_arguments(p)
@@ -29,23 +29,30 @@ def add_arguments(p):
                    help="replace --out even if it is not an earlier layouts study")
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import Files, scene_inputs
+    from planecal.studies.layouts import FORMAT
+    return Files().read(*scene_inputs(args.scene)).write(args.out, "--out", FORMAT)
+
+
 def run(args) -> int:
     from dataclasses import replace
 
     from planecal.commands.calibration_options import calibration_settings
-    from planecal.io.outputs import check_output
     from planecal.io.params import save_json
     from planecal.model.scene import load_scene
     from planecal.safety.collision import CollisionWorld
-    from planecal.studies.layouts import FORMAT, layout_study
+    from planecal.studies.layouts import layout_study
     from planecal.present.layouts import format_layouts
     from planecal.model.layout import display_of
 
-    out = check_output(args.out, [], FORMAT, args.force) if args.out else None
+    out = args.out  # checked before the run (``files``)
     if not 0 < args.tol < 1:
         raise InputError(f"--tol must be in (0, 1), got {args.tol:g}")
     scene = load_scene(args.scene)
-    settings = replace(calibration_settings(args, scene.robot), base_tolerance=args.tol)
+    settings = replace(calibration_settings(args, scene.robot, scene=scene),
+                       base_tolerance=args.tol)
     res = layout_study(scene, settings, args.samples, args.seed, CollisionWorld(scene))
     res["level"] = settings.label
     print(format_layouts(res, display_of))

@@ -24,26 +24,19 @@ def add_arguments(p):
                    help="replace an existing OUT.xml planecal did not write")
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import Files, scene_inputs
+    from planecal.io.outputs import MJCF_MARK
+    return Files().read(args.truth, *scene_inputs(args.scene)).write(args.out, "--out", MJCF_MARK)
+
+
 def run(args) -> int:
-    from planecal.io.outputs import check_output
     from planecal.model.scene import load_scene
     from planecal.twin.export import export_scene
 
     scene = load_scene(args.scene)
-    ours = _written_by_us(args.out)  # a model this command wrote may be replaced
-    out = check_output(args.out, inputs=(args.truth, scene.path), force=args.force or ours)
+    out = args.out  # checked before the run (``files``)
     export_scene(scene, out, args.truth, args.truth_seed)
     print(f"MJCF written to {out}; view it with: python -m mujoco.viewer --mjcf {out}")
     return 0
-
-
-def _written_by_us(path) -> bool:
-    from pathlib import Path
-
-    from planecal.twin.export import MARKER
-    p = Path(path)
-    try:
-        with open(p, "rb") as f:
-            return MARKER.encode() in f.read(512)
-    except OSError:
-        return False

@@ -30,7 +30,7 @@ Cramer-Rao bound of the noise. The output says by how much; it is what a real ro
 from __future__ import annotations
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import seed
+from planecal.commands.value_options import MAX_RUNS, MAX_SAMPLES, count, seed
 
 
 def add_arguments(p):
@@ -39,8 +39,8 @@ def add_arguments(p):
     from planecal.sampling.poses import IK_CHOICES
     from planecal.studies.rehearsal import MODES
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
-    p.add_argument("--runs", type=int, default=50, help="Monte Carlo runs (default 50)")
-    p.add_argument("--samples", type=int, default=150, help="samples per run (default 150)")
+    p.add_argument("--runs", type=count(MAX_RUNS), default=50, help="Monte Carlo runs (default 50)")
+    p.add_argument("--samples", type=count(MAX_SAMPLES), default=150, help="samples per run (default 150)")
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="also write the plots as a Rerun recording (planecal view FILE)")
     p.add_argument("--out", help="write the summary (JSON) here")
@@ -73,10 +73,27 @@ def add_arguments(p):
                    help="twin/rehearse modes: the pose draw's IK branch choice (default: the "
                         "sampling run's, wrist)")
     p.add_argument("--slope", help="also measure the spread at these sample counts (e.g. 50,100,200)")
-    p.add_argument("--slope-runs", type=int, default=None, help="runs per slope point (default --runs)")
+    p.add_argument("--slope-runs", type=count(MAX_RUNS), default=None, help="runs per slope point (default --runs)")
     from planecal.commands.engine_options import add_engine_arguments, add_results_arguments
     add_engine_arguments(p)
     add_results_arguments(p)
+
+
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the summary,
+    the results files (the slope points' too) and the recording."""
+    from planecal.commands.engine_options import results_path
+    from planecal.commands.io_options import (Files, profile_inputs, results_output,
+                                              rrd_output, scene_inputs)
+    from planecal.studies.common import parse_int_list
+    from planecal.studies.montecarlo import FORMAT
+    f = Files().read(*scene_inputs(args.scene), *profile_inputs(args.errors, args.scene))
+    f.write(args.out, "--out", FORMAT)
+    results_output(f, results_path(args), args.resume)
+    for n in parse_int_list(args.slope, "--slope", 20, MAX_SAMPLES) if args.slope else []:
+        results_output(f, results_path(args, f"slope-{n}"), args.resume)
+    rrd_output(f, args.rrd)
+    return f
 
 
 def run(args) -> int:
@@ -88,20 +105,17 @@ def run(args) -> int:
     from planecal.commands.calibration_options import calibration_settings
     from planecal.commands.engine_options import (check_results_path, engine_from_args,
                                                   results_path)
-    from planecal.io.outputs import check_output
     from planecal.io.params import save_json
     from planecal.model.scene import load_scene
     from planecal.studies.common import parse_int_list
     from planecal.studies.distributed import warm_twin
-    from planecal.studies.montecarlo import FORMAT, MCSettings, analyze, run_many, slope_study
+    from planecal.studies.montecarlo import MCSettings, analyze, run_many, slope_study
     from planecal.present.montecarlo import format_montecarlo, format_slope
     from planecal.twin.profile import DEFAULT_PROFILE
 
-    if args.out:
-        check_output(args.out, [], FORMAT, args.force)
     scene = load_scene(args.scene)  # InputError for a bad scene before any work
     errors = args.errors or ("ideal" if args.mode == "synthetic" else DEFAULT_PROFILE)
-    cal = calibration_settings(args)
+    cal = calibration_settings(args, scene=scene)
     st = MCSettings(scene=str(scene.path), samples=args.samples, runs=args.runs, seed=args.seed,
                     mode=args.mode, truth_seed=args.truth_seed, vary_truth=args.vary_truth,
                     offsets_all=args.offsets_all, errors=errors,
@@ -111,7 +125,7 @@ def run(args) -> int:
                     ik_choice=args.ik_choice, level=cal.level, compliance=cal.compliance,
                     geometry_prior=cal.geometry_prior, free_scale=cal.free_scale)
     st.check()
-    slope_counts = parse_int_list(args.slope, "--slope", 20) if args.slope else None
+    slope_counts = parse_int_list(args.slope, "--slope", 20, MAX_SAMPLES) if args.slope else None
     if slope_counts is not None and len(slope_counts) < 2:
         raise InputError("--slope needs at least two sample counts")
     # the twin's numba tick: compiled (or loaded from its cache) once before the runs
@@ -127,9 +141,10 @@ def run(args) -> int:
         t0 = time.perf_counter()
         runs = run_many(st, engine, results=results, resume=args.resume)
         dt = time.perf_counter() - t0
-        print(f"runs: {st.runs} in {dt:.2f} s ({st.runs / dt:.4f} runs/s), "
-              f"{engine.describe()}" + (f"; each written to {results}" if results else ""),
-              file=sys.stderr, flush=True)
+        if not args.quiet:
+            print(f"runs: {st.runs} in {dt:.2f} s ({st.runs / dt:.4f} runs/s), "
+                  f"{engine.describe()}" + (f"; each written to {results}" if results else ""),
+                  file=sys.stderr, flush=True)
         res = analyze(runs, st)
         res["settings"]["scene"] = scene.name
         print(format_montecarlo(res))

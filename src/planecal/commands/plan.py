@@ -21,13 +21,13 @@ in this process; default: a local Dask cluster; --scheduler: a cluster you run).
 from __future__ import annotations
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import seed
+from planecal.commands.value_options import MAX_CANDIDATES, MAX_RUNS, MAX_SAMPLES, count, seed
 
 
 def add_arguments(p):
     from planecal.model.scene import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
-    p.add_argument("--samples", type=int, default=150,
+    p.add_argument("--samples", type=count(MAX_SAMPLES), default=150,
                    help="poses to choose (default 150; with a target: the most it may choose)")
     t = p.add_mutually_exclusive_group()
     t.add_argument("--target-std-urad", type=float, default=None, metavar="X",
@@ -39,12 +39,12 @@ def add_arguments(p):
                         "offsets' covariance) is <= X mm")
     p.add_argument("--no-order", action="store_true",
                    help="keep the design's order (do not order the poses for robot time)")
-    p.add_argument("--candidates", type=int, default=1500, help="candidate poses (default 1500)")
+    p.add_argument("--candidates", type=count(MAX_CANDIDATES), default=1500, help="candidate poses (default 1500)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the candidates")
     p.add_argument("--out", required=True, help="pose list to write (JSON)")
     from planecal.commands.calibration_options import add_calibration_arguments
     add_calibration_arguments(p)
-    p.add_argument("--measure", type=int, default=0, metavar="R",
+    p.add_argument("--measure", type=count(MAX_RUNS, 0), default=0, metavar="R",
                    help="measure planned vs random spread on the twin over R runs each")
     p.add_argument("--force", action="store_true",
                    help="replace --out even if it is not an earlier pose list")
@@ -54,47 +54,54 @@ def add_arguments(p):
     add_report_argument(p)
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import Files, report_output, scene_inputs
+    from planecal.formats.poses import POSES_FORMAT
+    f = Files().read(*scene_inputs(args.scene)).write(args.out, "--out", POSES_FORMAT)
+    report_output(f, args.report, "--report")
+    return f
+
+
 def run(args) -> int:
+    import contextlib
+
     from planecal.safety.collision import CollisionWorld
     from planecal.io.params import save_json
     from planecal.model.scene import load_scene
     from planecal.commands.calibration_options import calibration_settings
     from planecal.model.layout import display_of
     from planecal.present.tables import table
-    from planecal.studies.planning import plan
+    from planecal.studies.planning import plan, plan_target
 
     from planecal.commands.report_options import write_command_report
-    from planecal.formats.poses import POSES_FORMAT
-    from planecal.io.outputs import check_output
 
-    check_output(args.out, [], POSES_FORMAT, args.force)
-    scene = load_scene(args.scene)
+    target = plan_target(args.samples, args.candidates, args.target_std_urad, args.target_ap_mm)
     if args.measure and args.measure < 2:
         raise InputError(f"--measure needs at least 2 runs, got {args.measure}")
-    if args.samples < 13:
-        raise InputError(f"--samples must be at least 13, got {args.samples}")
-    if args.candidates < args.samples:
-        raise InputError(f"--candidates ({args.candidates}) must be at least --samples ({args.samples})")
-    settings = calibration_settings(args, scene.robot)
-    engine = None
-    if args.measure:  # the engine's options checked before the planning
-        import functools
+    scene = load_scene(args.scene)
+    settings = calibration_settings(args, scene.robot, scene=scene)
+    with contextlib.ExitStack() as stack:
+        engine = None
+        if args.measure:  # the engine's options checked and its scheduler reached first
+            import functools
 
-        from planecal.commands.engine_options import engine_from_args
-        from planecal.studies.distributed import warm_twin
-        engine = engine_from_args(args, warmup=functools.partial(warm_twin, str(scene.path)))
-    from planecal.base.progress import Progress
-    from planecal.studies.planning import PLAN_STAGES
-    bar = Progress("plan", PLAN_STAGES, unit=" stages")
-    bar.update(done=0, note="collision model")
-    try:
-        res = plan(scene, args.samples, args.candidates, args.seed, settings,
-                   CollisionWorld(scene, clearance_m=0.01), target_std_urad=args.target_std_urad,
-                   target_ap_mm=args.target_ap_mm, ordered=not args.no_order, progress=bar)
-    finally:
-        bar.close()
-    if engine is not None:
-        with engine:
+            from planecal.commands.engine_options import engine_from_args
+            from planecal.studies.distributed import warm_twin
+            engine = stack.enter_context(engine_from_args(
+                args, warmup=functools.partial(warm_twin, str(scene.path))))
+        from planecal.base.progress import Progress
+        from planecal.studies.planning import PLAN_STAGES
+        bar = Progress("plan", PLAN_STAGES, unit=" stages", hold=target is not None)
+        bar.update(done=0, note="collision model")
+        try:
+            res = plan(scene, args.samples, args.candidates, args.seed, settings,
+                       CollisionWorld(scene, clearance_m=0.01),
+                       target_std_urad=args.target_std_urad, target_ap_mm=args.target_ap_mm,
+                       ordered=not args.no_order, progress=bar)
+        finally:
+            bar.close()
+        if engine is not None:
             res["measured"] = measure(scene, res, args.measure, engine, settings)
     rows = []
     for n in res["free"]:

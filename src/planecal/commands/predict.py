@@ -20,10 +20,16 @@ def add_arguments(p):
     p.add_argument("samples", help="sample file, seed format (7.1.4)")
     p.add_argument("--params", required=True, help="parameter file (JSON)")
     p.add_argument("--robot", default="mc70", help="robot description (default %(default)s)")
+    p.add_argument("--scene", default=None,
+                   help="scene whose laser window and plates the samples are checked against, "
+                        "as calibrate checks them (default: thesis_final, or with --robot "
+                        "none: any reading up to the format's bound)")
 
 
 def run(args) -> int:
-    s = read_samples(args.samples)
+    from planecal.model.scene import DEFAULT_SCENE, load_scene
+    name = args.scene or (DEFAULT_SCENE if args.robot == "mc70" else None)
+    s = read_samples(args.samples, load_scene(name) if name else None)
     robot = load_robot(args.robot)
     params = load_params(args.params, robot)
     if s.plate.max() >= params.n_planes:

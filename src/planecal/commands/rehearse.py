@@ -53,6 +53,16 @@ def add_errors_argument(p: argparse.ArgumentParser) -> None:
                         "models/mc70/errors/realistic.json and edit it)")
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the run's
+    files (``sampling_options.run_files``), the truth read and the truth written."""
+    from planecal.commands.io_options import profile_inputs
+    from planecal.commands.sampling_options import run_files
+    from planecal.io.params import PARAMS_FORMAT
+    f = run_files(args).read(args.truth_in, *profile_inputs(args.errors, args.scene))
+    return f.write(args.truth_out, "--truth-out", PARAMS_FORMAT)
+
+
 def world_ref(args, side, seed: int):
     """The world the run is made in (``twin.world.WorldRef``): a resumed run's (its sidecar
     names it; a flag that contradicts it is refused), or the truth file's (--truth), or the
@@ -91,8 +101,7 @@ def run(args) -> int:
     from planecal.twin.profile import save_truth
     from planecal.twin.world import make_twin
 
-    scene, settings, side = prepare(args, also_out={"--truth-out": args.truth_out},
-                                    also_in=[args.truth_in])
+    scene, settings, side = prepare(args)
     ref, twin_seed = world_ref(args, side, settings.seed)
     twin = make_twin(scene, ref, twin_seed)
     checker = CollisionWorld(scene, clearance_m=settings.clearance_m)

@@ -36,8 +36,15 @@ def add_arguments(p):
     p.add_argument("--out", help="write the per-sample table and summary (JSON) here")
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import Files, profile_inputs, scene_inputs, with_sidecars
+    f = Files().read(*with_sidecars([args.samples]), args.params, *scene_inputs(args.scene),
+                     *profile_inputs(args.errors, args.scene))
+    return f.write(args.out, "--out", REPLAY_FORMAT)
+
+
 def run(args) -> int:
-    from planecal.io.outputs import check_output
     from planecal.io.params import load_json, load_params, save_json
     from planecal.twin.world import recorded_world
     from planecal.io.samples import read_samples
@@ -47,10 +54,8 @@ def run(args) -> int:
     from planecal.studies.replay import replay, replay_world
     from planecal.twin.profile import load_profile
 
-    if args.out:  # checked before any work (issue 16): never an input, never a directory
-        check_output(args.out, [args.samples, args.params], REPLAY_FORMAT)
-    s = read_samples(args.samples)
     scene = load_scene(args.scene)
+    s = read_samples(args.samples, scene)  # calibrate's check: the laser window, the plates
     params = load_params(args.params, scene.robot)
     doc = load_json(args.params, "parameter file")
     truth_file = args.params if isinstance(doc, dict) and doc.get("world") else None

@@ -20,6 +20,20 @@ def add_arguments(p):
     p.add_argument("--scene", default=None,
                    help="scene for the robot, plate names and nominal values (default: the "
                         "result's, else thesis_final)")
+    p.add_argument("--force", action="store_true",
+                   help="write into DIR even if it holds files planecal did not write (never "
+                        "over an input)")
+
+
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the result,
+    the sample files given or recorded in its provenance, the scene; the report folder."""
+    from planecal.commands.io_options import (Files, recorded_inputs, report_output,
+                                              scene_inputs)
+    f = Files().read(args.result, *(args.samples or recorded_inputs(args.result)))
+    f.read(*scene_inputs(args.scene) if args.scene else [])
+    report_output(f, args.out, "--out")
+    return f
 
 
 def run(args) -> int:

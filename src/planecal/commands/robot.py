@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import count
 
 ACTIONS = ("import", "show")
 
@@ -40,21 +41,21 @@ def add_arguments(p):
     p.add_argument("--visual", choices=("urdf", "collision"), default="urdf",
                    help="import: draw the URDF's visual elements, or its collision ones "
                         "(visual meshes missing or too heavy) (default %(default)s)")
-    p.add_argument("--counts-per-rev", type=int, default=1 << 20, metavar="N",
+    p.add_argument("--counts-per-rev", type=count(2**31), default=1 << 20, metavar="N",
                    help="import: encoder counts per joint revolution (default %(default)s)")
     p.add_argument("--coupling", metavar="ROW,COL,VALUE", action="append", default=[],
                    help="import: a coupling entry C[row, col] = value of q = C x (1-based; "
                         "repeatable; default: none, C = I)")
-    p.add_argument("--encoder-bits", type=int, default=24, metavar="B",
+    p.add_argument("--encoder-bits", type=count(62), default=24, metavar="B",
                    help="import: encoder width (default %(default)s)")
     p.add_argument("--tick-s", type=float, default=0.008, metavar="S",
                    help="import: the controller's tick (default %(default)s s)")
     p.add_argument("--speed-fraction", type=float, default=0.1, metavar="F",
                    help="import: the step limit as this fraction of the slowest joint's URDF "
                         "velocity (default %(default)s)")
-    p.add_argument("--max-step-counts", type=int, metavar="N",
+    p.add_argument("--max-step-counts", type=count(2**31), metavar="N",
                    help="import: the step limit per tick (default: from --speed-fraction)")
-    p.add_argument("--trip-step-counts", type=int, metavar="N",
+    p.add_argument("--trip-step-counts", type=count(2**31), metavar="N",
                    help="import: the controller's trip limit per tick (default: the slowest "
                         "joint's URDF velocity)")
     p.add_argument("--repeatability-mm", type=float, default=0.0, metavar="MM",
@@ -91,8 +92,31 @@ def _coupling(items: list[str]) -> list:
     return out
 
 
+def files(args):
+    """What the output guard checks before an import (``commands.io_options``): the URDF
+    and the package folders; the new robot folder (never an existing one)."""
+    from planecal.commands.io_options import Files
+    f = Files()
+    if args.action == "import":
+        f.read(args.source, *(folder for _, folder in _packages(args.package).items()))
+        f.write(args.out, "--out", folder=True, new=True)
+    return f
+
+
+IMPORT_ONLY = ("out", "name", "tip", "package", "coupling", "max_step_counts",
+               "trip_step_counts", "payload_kg", "controller")
+
+
 def run(args) -> int:
-    return _import(args) if args.action == "import" else _show(args)
+    if args.action == "show":
+        given = [o for o in IMPORT_ONLY if getattr(args, o) not in (None, [])]
+        if given:
+            raise InputError(f"--{given[0].replace('_', '-')}: an option of robot import; "
+                             "robot show reads and writes nothing else")
+        return _show(args)
+    if args.json:
+        raise InputError("--json: an option of robot show")
+    return _import(args)
 
 
 def _import(args) -> int:
@@ -102,14 +126,7 @@ def _import(args) -> int:
 
     if not args.out:
         raise InputError("robot import: give --out DIR, the new folder to write")
-    out = Path(args.out)
-    if out.exists():
-        raise InputError(f"--out {out}: exists; give a new folder (nothing is overwritten)")
-    if not out.parent.is_dir():
-        raise InputError(f"--out {out}: folder {out.parent} does not exist")
-    for v, what in ((args.counts_per_rev, "--counts-per-rev"), (args.encoder_bits, "--encoder-bits")):
-        if v < 1:
-            raise InputError(f"{what} {v}: must be positive")
+    out = Path(args.out)  # a new folder in one that exists (checked before the run: ``files``)
     if not 0 < args.speed_fraction <= 1:
         raise InputError(f"--speed-fraction {args.speed_fraction}: must be in (0, 1]")
     coupling = _coupling(args.coupling)

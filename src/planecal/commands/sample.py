@@ -58,13 +58,14 @@ import sys
 from pathlib import Path
 
 from planecal.base.errors import InputError, RunFailed
-from planecal.commands.value_options import port, port_or_zero
+from planecal.commands.value_options import MAX_TRIES, count, host, port, port_or_zero
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from planecal.commands.sampling_options import add_sampling_arguments
 
-    p.add_argument("--rt", required=True, metavar="HOST", help="FD11 RT system address")
+    p.add_argument("--rt", type=host, required=True, metavar="HOST",
+                   help="FD11 RT system address")
     p.add_argument("--rt-port", type=port, default=5555, help="FD11 UDP port (default 5555)")
     p.add_argument("--local-port", type=port_or_zero, default=5556,
                    help="local UDP port for the replies (default 5556; 0 = any)")
@@ -91,14 +92,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                           "first packet repeats the last delta it received")
     p.add_argument("--laser", default="/dev/ttyUSB0", metavar="PORT",
                    help="ZS-LD80 serial port (default /dev/ttyUSB0)")
-    p.add_argument("--baud", type=int, default=38400, help="laser baud rate (default 38400)")
+    p.add_argument("--baud", type=count(10_000_000, 50), default=38400, help="laser baud rate (default 38400)")
     p.add_argument("--laser-timeout-s", type=float, default=0.1,
                    help="a laser request unanswered this long is an error (default 0.1)")
     p.add_argument("--laser-wait-s", type=float, default=0.005,
                    help="the longest a tick waits for the laser's reply (default 0.005)")
-    p.add_argument("--laser-error-limit", type=int, default=50,
+    p.add_argument("--laser-error-limit", type=count(MAX_TRIES), default=50,
                    help="stop after this many laser read errors in a row (default 50)")
-    p.add_argument("--follow-limit-counts", type=int, default=None,
+    p.add_argument("--follow-limit-counts", type=count(MAX_TRIES), default=None,
                    help="the most the command may run ahead of the robot (default: derived "
                         "from --servo-tau-s, 211 counts)")
     p.add_argument("--servo-tau-s", type=float, default=None,
@@ -156,8 +157,6 @@ def _check_link_flags(args, robot) -> int:
         raise InputError("--rt-silence-s and --rt-boot-timeout-s must be at least --rt-resend-s")
     if not 0 <= args.laser_wait_s <= args.laser_timeout_s:
         raise InputError("--laser-wait-s must be in 0..--laser-timeout-s")
-    if args.laser_error_limit < 1:
-        raise InputError("--laser-error-limit must be at least 1")
     tau = SERVO_TAU_S if args.servo_tau_s is None else args.servo_tau_s
     if not (tau > 0 and tau < float("inf")):
         raise InputError("--servo-tau-s must be a positive number of seconds")
@@ -171,13 +170,15 @@ def _check_link_flags(args, robot) -> int:
 
 class Controller:
     """The FD11 link with its state file, the controller's lock and the first contact
-    (`planecal.links.sessions`): opened before any packet, closed in any case."""
+    (`planecal.links.sessions`): opened before any packet, closed in any case. Made in two
+    steps: the link and the first contact (nothing written), then ``take()``: the state
+    file's folder and the controller's lock."""
 
-    def __init__(self, args, robot):
+    def __init__(self, args, robot, side: dict | None = None):
         from planecal.links.fd11 import FD11Link, LinkError
         from planecal.links.sessions import (StateFile, default_state_path, plan_contact,
                                              stated_behaviour)
-        from planecal.sampling.runfiles import RunLock, sidecar_path
+        from planecal.sampling.runfiles import sidecar_path
 
         self.link = self.lock = self.state = None
         try:
@@ -195,20 +196,29 @@ class Controller:
             self.path = path
             self.state = StateFile(path)
             override = "fresh" if args.rt_fresh else "keep" if args.rt_keep else None
+            earlier = ((side or {}).get("real_cell") or {}).get("rt_state")
+            lost = (f"{sidecar_path(out)} (an earlier session, state file {earlier})"
+                    if earlier else None)
             self.contact = plan_contact(stated_behaviour(robot.source), self.state.last,
-                                        override, self.link.client, where=str(robot.source))
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-            except OSError as e:
-                raise InputError(f"--rt-state {path}: cannot create {path.parent} "
-                                 f"({e.strerror})") from None
-            # one client per controller: a second run on it would command it too
-            self.lock = RunLock(path, what="the FD11 at "
-                                f"{self.link.remote[0]}:{self.link.remote[1]} (state {path})")
-            self.link.expect(self.contact, self.state)
+                                        override, self.link.client, where=str(robot.source),
+                                        lost=lost)
         except BaseException:
             self.close()
             raise
+
+    def take(self) -> None:
+        """The state file's folder and the controller's lock (one client per controller: a
+        second run on it would command it too); the link told what the controller holds."""
+        from planecal.sampling.runfiles import RunLock
+        path = self.path
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise InputError(f"--rt-state {path}: cannot create {path.parent} "
+                             f"({e.strerror})") from None
+        self.lock = RunLock(path, what="the FD11 at "
+                            f"{self.link.remote[0]}:{self.link.remote[1]} (state {path})")
+        self.link.expect(self.contact, self.state)
 
     @property
     def recorded_reference(self):
@@ -271,6 +281,20 @@ def _record_link(out: Path, real_cell: dict) -> None:
         pass
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the run's
+    files (``sampling_options.run_files``) and a state file given by --rt-state."""
+    from planecal.commands.io_options import lock_output
+    from planecal.commands.sampling_options import run_files
+    from planecal.links.sessions import is_state_file
+    f = run_files(args)
+    if args.rt_state:
+        f.write(args.rt_state, "--rt-state", (is_state_file,),
+                hint="give the controller's state file")
+        lock_output(f, args.rt_state, "--rt-state")
+    return f
+
+
 def run(args) -> int:
     from dataclasses import asdict
 
@@ -278,21 +302,28 @@ def run(args) -> int:
     from planecal.commands.sampling_options import command_model, prepare, rerun_observer
     from planecal.links.zs_ld80 import NO_READING, ZSLD80, LaserError
     from planecal.sampling.enable import FollowingMonitor
+    from planecal.sampling.runfiles import count_samples
     from planecal.sampling.session import print_summary
 
     scene, settings, side = prepare(args)
     robot = scene.robot
     limit = _check_link_flags(args, robot)
+    if side is not None and count_samples(Path(args.out)) >= settings.samples:
+        print(f"note: {args.out} holds {count_samples(Path(args.out))} of the run's "
+              f"{settings.samples} samples: nothing to do, the controller not contacted "
+              "(--samples N asks for more)", file=sys.stderr)
+        return 0
     model = command_model(args, scene, side)
     checker = CollisionWorld(scene, clearance_m=settings.clearance_m)
-    cell = Controller(args, robot)  # nothing sent yet; a run that cannot tell asks here
+    cell = Controller(args, robot, side)  # nothing sent or written; one that cannot tell asks
     observer = raw_laser = None
     try:
-        try:
-            raw_laser = ZSLD80(args.laser, baudrate=args.baud, timeout_s=args.laser_timeout_s,
-                               wait_s=args.laser_wait_s)
+        try:  # the laser's port before the controller's state folder and lock
+            raw_laser = ZSLD80(args.laser, baudrate=args.baud,
+                               timeout_s=args.laser_timeout_s, wait_s=args.laser_wait_s)
         except LaserError as e:
             raise InputError(f"--laser {args.laser}: {e}") from None
+        cell.take()
         laser = TolerantLaser(raw_laser, args.laser_error_limit, (LaserError,), NO_READING)
         waited = cell.wait_for_silence()
         observer = rerun_observer(args.rrd, scene) if args.rrd else None

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import seed
+from planecal.commands.value_options import MAX_SAMPLES, MAX_TRIES, count, seed
 from planecal.sampling.laserread import LaserSettings
 from planecal.sampling.observer import RecordingObserver
 from planecal.sampling.poses import IK_CHOICES, PLATE_CHOICES
@@ -33,7 +33,7 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
     p.add_argument("--out", required=True, metavar="RUN.tsv",
                    help="sample file to write (its sidecar is RUN.tsv.json)")
     p.add_argument("--scene", default=None, help="scene name or JSON path (default thesis_final)")
-    p.add_argument("--samples", type=int, default=None,
+    p.add_argument("--samples", type=count(MAX_SAMPLES), default=None,
                    help=f"number of samples (default {default_samples}; with --resume: a new target)")
     p.add_argument("--seed", type=seed, default=None, help="random seed of the poses (default 0)")
     p.add_argument("--cone-deg", type=finite_float, default=None,
@@ -54,10 +54,10 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
                         "nearest to the current configuration (default wrist)")
     p.add_argument("--clearance-mm", type=finite_float, default=None,
                    help="collision clearance (default 10)")
-    p.add_argument("--laser-max-reads", type=int, default=None,
+    p.add_argument("--laser-max-reads", type=count(MAX_TRIES), default=None,
                    help="give a pose up after this many laser reads without a stable buffer "
                         "(default 1000)")
-    p.add_argument("--max-attempts", type=int, default=None,
+    p.add_argument("--max-attempts", type=count(MAX_TRIES), default=None,
                    help="stop after this many poses rejected in a row (default 500)")
     p.add_argument("--start", choices=("here", "calibration", "home"), default="here",
                    help="move there before sampling (default: sample from where the robot is)")
@@ -128,43 +128,64 @@ def settings_from_args(args, scene) -> RunSettings:
         if args.clearance_mm < 0:
             raise InputError(f"--clearance-mm must be >= 0, got {args.clearance_mm}")
         st.clearance_m = args.clearance_mm * 1e-3
-    if args.max_attempts is not None:
-        if args.max_attempts < 1:
-            raise InputError(f"--max-attempts must be at least 1, got {args.max_attempts}")
+    if args.max_attempts is not None:  # 1 .. MAX_TRIES (its argparse type)
         st.max_attempts = args.max_attempts
     st.decimal_comma = bool(args.decimal_comma)
     return st
 
 
-def _inputs(args) -> list:
-    return [args.poses, args.params, args.encoder_offsets]
+def recorded_files(side: dict | None) -> list:
+    """The files a run's sidecar records (scene, pose list, aiming model, truth file, error
+    profile file): what a resumed run reads."""
+    if not isinstance(side, dict):
+        return []
+    twin = side.get("twin") if isinstance(side.get("twin"), dict) else {}
+    cmd = side.get("command") if isinstance(side.get("command"), dict) else {}
+    out = [side.get("scene_path"), side.get("poses"), cmd.get("params"),
+           cmd.get("encoder_offsets"), twin.get("truth_file"), twin.get("errors")]
+    return [p for p in out if isinstance(p, str) and p and ("/" in p or p.endswith(".json"))]
 
 
-def prepare(args, default_samples: int = 150, also_out: dict | None = None,
-            also_in: list | None = None):
+def run_files(args):
+    """What a sampling run reads and writes (``commands.io_options``), for the output guard:
+    the sample file, its sidecar and lock, the recording; the pose list, the aiming model
+    and the scene, or on --resume those its sidecar records."""
+    from planecal.commands.io_options import (SIDECAR_FORMAT, Files, lock_output, rrd_output,
+                                              sample_file_is_ours, scene_inputs)
+    from planecal.formats.base import read_json
+
+    out = Path(args.out)
+    side = None
+    if args.resume:
+        try:
+            side = read_json(sidecar_path(out), "run sidecar")
+        except InputError:
+            side = None  # its reader says why, later
+        side = side if isinstance(side, dict) else None
+    f = Files().read(args.poses, args.params, args.encoder_offsets, *recorded_files(side),
+                     *scene_inputs(args.scene if side is None else side.get("scene_path")))
+    hint = "use --resume to continue that run or --force to overwrite it"
+    f.write(out, "--out", (sample_file_is_ours,), keep=args.resume, hint=hint)
+    f.write(sidecar_path(out), "--out's sidecar", SIDECAR_FORMAT, keep=args.resume, hint=hint)
+    lock_output(f, out, "--out")
+    rrd_output(f, args.rrd)
+    return f
+
+
+def prepare(args, default_samples: int = 150):
     """(scene, settings, sidecar or None) for a new run or a resumed one; refuses to
-    overwrite an existing sample file without --resume or --force. The outputs (``--out``,
-    its sidecar, and ``also_out``: flag -> path, e.g. rehearse's ``--truth-out``) are
-    checked before anything runs: none is an input (``also_in`` too: rehearse's
-    ``--truth``), a directory, or in a place that cannot be written
-    (``planecal.io.outputs.check_output``)."""
-    from planecal.io.outputs import check_output
-    from planecal.io.params import PARAMS_FORMAT
+    overwrite an existing sample file without --resume or --force, and to continue a
+    sample file with a line that is not a sample (nothing is appended after it). The
+    outputs were checked before the run (``run_files``, the output guard)."""
+    from planecal.io.samples import check_continuable
     from planecal.model.scene import DEFAULT_SCENE, load_scene
 
     out = Path(args.out)
-    inputs = _inputs(args) + [p for p in also_in or [] if p is not None]
-    check_output(out, inputs, force=True)  # existing: the --resume/--force rule below
-    check_output(sidecar_path(out), inputs, fmt="planecal-run/1", force=True,
-                 what="--out's sidecar")
-    for flag, path in (also_out or {}).items():
-        if path is not None:
-            check_output(path, [out, sidecar_path(out), *inputs], fmt=PARAMS_FORMAT,
-                         force=args.force, what=flag)
     if args.resume:
         side = load_sidecar(out)
         if not out.exists():
             raise InputError(f"{out}: the sample file of the run to resume is missing")
+        check_continuable(out)
         given = [f"--{f.replace('_', '-')}" for f in SETTING_FLAGS if getattr(args, f) is not None]
         if given:
             print(f"note: --resume takes the scene and settings from {sidecar_path(out)}; "
@@ -172,17 +193,13 @@ def prepare(args, default_samples: int = 150, also_out: dict | None = None,
         st = RunSettings.from_sidecar(side, str(sidecar_path(out)))
         if side.get("poses") and getattr(args, "poses", None) is None:
             args.poses = side["poses"]
-        if args.samples is not None:
-            if args.samples < 1:
-                raise InputError(f"--samples must be at least 1, got {args.samples}")
+        if args.samples is not None:  # 1 .. MAX_SAMPLES (its argparse type)
             st.samples = args.samples
         scene = load_scene(st.scene)
         st.pose.check(scene)
         return scene, st, side
     if out.exists() and out.stat().st_size > 0 and not args.force:
         raise InputError(f"{out}: exists; use --resume to continue that run or --force to overwrite it")
-    if out.parent and not out.parent.exists():
-        raise InputError(f"{out}: directory {out.parent} does not exist")
     scene = load_scene(args.scene or DEFAULT_SCENE)
     st = settings_from_args(args, scene)
     if args.samples is None:

@@ -41,18 +41,23 @@ def robot_reference(given: str, out: Path) -> str:
     return rel if os.sep in rel or rel.startswith(".") else f".{os.sep}{rel}"
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the robot;
+    the new scene file (never an existing one)."""
+    from planecal.commands.io_options import Files
+    from planecal.model.robot import robot_path
+    f = Files().read(robot_path(args.robot))
+    return f.write(args.out, "--out", new=True)
+
+
 def run(args) -> int:
     from planecal.formats.base import dumps
     from planecal.model.robot import load_robot
     from planecal.sampling.default_cell import default_cell
 
-    out = Path(args.out)
-    if out.exists():
-        raise InputError(f"--out {out}: exists (nothing is overwritten); give a new file")
+    out = Path(args.out)  # a new file in a folder that exists (``files``)
     if out.suffix != ".json":
         raise InputError(f"--out {out}: a scene file ends in .json")
-    if not out.parent.is_dir():
-        raise InputError(f"--out {out}: folder {out.parent} does not exist")
     robot = load_robot(args.robot)
     ref = robot_reference(args.robot, out)
     quiet = args.quiet

@@ -29,7 +29,31 @@ def add_arguments(p):
     add_engine_arguments(p)
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the spec,
+    its scenes and error-profile files; the folder and every file the sweep writes in it
+    (the folder is planecal's when it holds a sweep's results file, or nothing)."""
+    from planecal.commands.io_options import (RESULTS_FORMAT, Files, profile_inputs,
+                                              scene_inputs)
+    from planecal.io.outputs import PNG_MARK
+    from planecal.studies.sweep import FORMAT, load_spec
+
+    spec = load_spec(args.spec)
+    f = Files().read(args.spec)
+    for s in spec.scene:
+        f.read(*scene_inputs(s), *[p for e in spec.errors for p in profile_inputs(e, s)])
+    from planecal.commands.io_options import results_output
+    members = ((RESULTS, (RESULTS_FORMAT,)), (RESULTS + ".lock", ()), ("sweep.json", (FORMAT,)),
+               ("sweep.txt", ()), ("*.png", (PNG_MARK,)))
+    if args.resume:  # the results file continued is a results file (one line, before all)
+        results_output(Files(), Path(args.out) / RESULTS, True)
+    return f.write(args.out, "--out", folder=True, members=members, anchor=RESULTS,
+                   keep=args.resume, hint="give another folder")
+
+
 def run(args) -> int:
+    from planecal.base.errors import RunFailed
+    from planecal.io.outputs import make_folder
     from planecal.io.params import save_json
     from planecal.base.progress import Progress
     from planecal.present.report.sweep import fig_accuracy_vs_time
@@ -40,17 +64,15 @@ def run(args) -> int:
 
     spec = load_spec(args.spec)
     engine = engine_from_args(args, warmup=lambda: warm_twin(spec.scene[0]))  # checked here
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
+    out = Path(args.out)  # checked before the run (``files``)
     results = out / RESULTS
     if results.exists() and results.stat().st_size > 0 and not args.resume:
         raise InputError(f"--out {out}: holds a sweep's {RESULTS}; continue it with --resume "
                          "or give another folder")
-    out.mkdir(parents=True, exist_ok=True)
     n_runs = len(spec.cells()) * spec.runs
-    bar = Progress("planning", len(plans_needed(spec)), unit=" plans")
-    with engine as eng:
+    with engine as eng:  # the scheduler reached before anything is made
+        make_folder(out, "--out")
+        bar = Progress("planning", len(plans_needed(spec)), unit=" plans")
         res = run_sweep(spec, results, eng, resume=args.resume,
                         progress=Progress(f"sweep: {n_runs} runs, {eng.describe()}", n_runs),
                         plan_progress=bar)
@@ -61,4 +83,6 @@ def run(args) -> int:
     plot = fig_accuracy_vs_time(out, res)
     print(f"results: {results}; table: {out / 'sweep.txt'}, {out / 'sweep.json'}; "
           f"plot: {out / plot.file}")
+    if not any(c["runs"] for c in res["cells"]):
+        raise RunFailed(f"every run of the sweep failed (the table says why: {out / 'sweep.txt'})")
     return 0

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from planecal.base.errors import InputError
 
 
 def add_arguments(p):
@@ -31,17 +30,40 @@ def add_arguments(p):
                         "path FILE_meshes/name)")
 
 
+def _mesh_dir(out) -> Path:
+    out = Path(out)
+    return out.with_name(out.stem + "_meshes")
+
+
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): the URDF and
+    its mesh folder."""
+    from planecal.commands.io_options import Files, scene_inputs
+    from planecal.io.outputs import STL_MARK, URDF_MARK
+    f = Files().read(args.params, role="--params").read(*scene_inputs(args.scene))
+    f.write(args.out, "--out", URDF_MARK)
+    if not args.no_meshes:
+        f.write(_mesh_dir(args.out), "--out's mesh folder", folder=True,
+                members=(("*.stl", (STL_MARK,)),))
+    return f
+
+
 def write_meshes(scene, params, mesh_dir: Path, prefix: str):
-    """STL files of the link and tool shapes (planecal.model.geometry) and their MeshRefs."""
+    """STL files of the link and tool shapes (planecal.model.geometry) and their MeshRefs;
+    each STL's header says planecal wrote it (``outputs.STL_MARK``)."""
+    from trimesh.exchange.stl import export_stl
+
+    from planecal.io.outputs import STL_MARK, make_folder
     from planecal.model.geometry import robot_link_meshes, tool_meshes
     from planecal.io.urdf import MeshRef
-    mesh_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(mesh_dir, "--out's mesh folder")
     refs = []
     for kind in ("visual", "collision"):
         for lm in robot_link_meshes(scene.robot, kind) + tool_meshes(scene, kind, sensor=params):
             mesh = lm.mesh.transformed(lm.T_body_mesh).to_trimesh()
             fname = f"{lm.name}_{kind}.stl"
-            mesh.export(mesh_dir / fname)
+            data = export_stl(mesh)
+            (mesh_dir / fname).write_bytes(STL_MARK.ljust(80, b" ") + data[80:])
             refs.append(MeshRef(lm.body, kind, prefix + fname, name=f"{lm.name}_{kind}"))
     return refs
 
@@ -52,25 +74,21 @@ def run(args) -> int:
     from planecal.io.urdf import urdf_text
 
     scene = load_scene(args.scene)
-    out = Path(args.out)
+    out = Path(args.out)  # checked before the run (``files``)
     if args.params:
-        if out.exists() and out.resolve() == Path(args.params).resolve():
-            raise InputError(f"--out {out}: is the --params file; choose another name")
         params = load_params(args.params)
         source = f"calibrated: {args.params}"
     else:
         params = nominal_params(scene)
         source = f"nominal: scene {scene.name}"
-    if out.is_dir():
-        raise InputError(f"--out {out}: is a directory; give a file name")
-    if not out.parent.exists():
-        raise InputError(f"--out {out}: directory {out.parent} does not exist")
+    text = urdf_text(scene.robot, params, meshes=[], source=source)  # a bad model: nothing written
     refs = []
     if not args.no_meshes:
-        mesh_dir = out.with_name(out.stem + "_meshes")
+        mesh_dir = _mesh_dir(out)
         prefix = args.mesh_prefix if args.mesh_prefix is not None else mesh_dir.name + "/"
         refs = write_meshes(scene, params, mesh_dir, prefix)
-    out.write_text(urdf_text(scene.robot, params, meshes=refs, source=source), encoding="utf-8")
+        text = urdf_text(scene.robot, params, meshes=refs, source=source)
+    out.write_text(text, encoding="utf-8")
     print(f"URDF written to {out} ({source}"
           + (f"; {len(refs)} meshes in {out.stem}_meshes/" if refs else "") + ")")
     return 0

@@ -44,7 +44,8 @@ import sys
 import numpy as np
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import seed, seed_list
+from planecal.commands.value_options import (MAX_ITERATIONS, MAX_SAMPLES, count, seed,
+                                             seed_list)
 
 
 def add_arguments(p):
@@ -62,25 +63,25 @@ def add_arguments(p):
                    help="seeds of the truths (worlds) to validate on (default 0,1,2,3,4)")
     p.add_argument("--truth-seed", type=seed, default=None,
                    help="one truth seed (the same as --truth-seeds T)")
-    p.add_argument("--samples", type=int, default=150, help="rehearsal samples (default 150)")
+    p.add_argument("--samples", type=count(MAX_SAMPLES), default=150, help="rehearsal samples (default 150)")
     p.add_argument("--seed", type=seed, default=0, help="rehearsal seed (poses, noise)")
     p.add_argument("--offsets-all", action="store_true",
                    help="the ideal world with delta1 and delta6 != 0 as well (the realistic "
                         "one has them)")
-    p.add_argument("--cycles", type=int, default=30, help="ISO cycles (default 30)")
+    p.add_argument("--cycles", type=count(MAX_ITERATIONS), default=30, help="ISO cycles (default 30)")
     p.add_argument("--cube-mm", type=float, default=None, help="ISO cube edge (default: from the samples)")
     p.add_argument("--tcp-mm", default=None, metavar="X,Y,Z",
                    help="a TCP in the flange frame [mm] to measure AP at too (named 'tcp'), "
                         "besides the tool point, the flange and the scene's named TCPs")
     p.add_argument("--block-mm", type=float, default=100.0, help="gauge block length (default 100)")
-    p.add_argument("--gauge-repeats", type=int, default=10)
+    p.add_argument("--gauge-repeats", type=count(MAX_ITERATIONS), default=10)
     p.add_argument("--poses", help="rehearse through this planned pose list (planecal plan) "
                                    "instead of random poses")
     p.add_argument("--breakdown", default="alone", choices=("alone", "off", "none"),
                    help="repeat one truth with each error source of the profile on alone "
                         "(alone), or switched off in turn (off), or not (none) "
                         "(default alone)")
-    p.add_argument("--breakdown-truth", type=int, default=None,
+    p.add_argument("--breakdown-truth", type=seed, default=None,
                    help="the truth seed of the breakdown (default: the first truth seed)")
     from planecal.commands.calibration_options import add_calibration_arguments
     add_calibration_arguments(p)
@@ -116,11 +117,22 @@ CELL_FRAME_NOTE = (
     "plates.")
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import (Files, profile_inputs, rrd_output, scene_inputs,
+                                              with_sidecars)
+    from planecal.studies.validation import FORMAT, OLD_FORMATS
+    f = Files().read(*scene_inputs(args.scene), *profile_inputs(args.errors, args.scene),
+                     args.poses, args.calibrated, args.truth, *with_sidecars([args.run]))
+    f.write(args.out, "--out", (FORMAT, *OLD_FORMATS))  # a /1 file is validate's own too
+    rrd_output(f, args.rrd)
+    return f
+
+
 def run(args) -> int:
-    from planecal.io.outputs import check_output
     from planecal.io.params import save_json
     from planecal.model.scene import load_scene
-    from planecal.studies.validation import FORMAT, OLD_FORMATS, TruthJob, ValidationSettings
+    from planecal.studies.validation import TruthJob, ValidationSettings
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile
 
     from planecal.commands.calibration_options import calibration_settings
@@ -128,8 +140,6 @@ def run(args) -> int:
     given = [a for a in (args.calibrated, args.truth, args.run) if a]
     if given and len(given) != 3:
         raise InputError("--calibrated, --truth and --run go together")
-    if args.out:
-        check_output(args.out, given, (FORMAT, *OLD_FORMATS), args.force)
     scene = load_scene(args.scene)
     cal = calibration_settings(args, scene.robot)
     st = ValidationSettings(cycles=args.cycles,
@@ -152,6 +162,9 @@ def run(args) -> int:
         if args.poses:
             from planecal.studies.planning import load_poses
             pq, pp, _ = load_poses(args.poses)
+            if len(pq) < 20:
+                raise InputError(f"{args.poses}: {len(pq)} poses; a calibration set needs at "
+                                 "least 20")
             poses = tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
         base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
                         samples=args.samples, seed=args.seed, offsets_all=args.offsets_all,
@@ -160,10 +173,11 @@ def run(args) -> int:
         from planecal.studies.distributed import warm_twin
         engine = engine_from_args(args, warmup=warm_twin)  # its options checked here
         what = f"the poses of {args.poses}" if args.poses else f"{args.samples} samples"
-        print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): rehearse "
-              f"{what} (seed {args.seed}), calibrate (level {cal.label}), validate...",
-              file=sys.stderr, flush=True)
-        with engine:
+        with engine:  # the scheduler reached before anything is said
+            if not args.quiet:
+                print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): "
+                      f"rehearse {what} (seed {args.seed}), calibrate (level {cal.label}), "
+                      "validate...", file=sys.stderr, flush=True)
             doc = _truths(args, seeds, base, profile, scene, engine)
     if args.out:
         save_json(args.out, doc)

@@ -7,6 +7,13 @@ socket or random stream is made), so a bad one is argparse's one line, exit 2::
     p.add_argument("--reply-port", type=port_or_zero, ...)   # where 0 has a meaning
     p.add_argument("--truth-seeds", type=seed_list, ...)     # "0,1,2"
 
+Counts (samples, runs, repeats, candidates, iterations, ...) take ``count(hi, lo)``: a
+whole number in a stated range, so no option can ask for a run that never ends (the
+bounds are in the README)::
+
+    p.add_argument("--samples", type=count(MAX_SAMPLES), ...)
+    p.add_argument("--jobs", type=jobs, ...)                  # 1 .. 4 x this machine's cores
+
 A seed is a whole number 0 .. 2**63 - 1 (numpy's generators take any non-negative integer;
 the bound keeps it a 64-bit integer in every file that records it). A port is 1 .. 65535
 (0 only where the option gives 0 a meaning: any free port, the sender's own port).
@@ -15,8 +22,13 @@ from __future__ import annotations
 
 import argparse
 
-SEED_MAX = 2**63 - 1
+from planecal.base.limits import (JOBS_PER_CORE, MAX_CANDIDATES, MAX_ITERATIONS,
+                                  MAX_RUNS, MAX_SAMPLES, MAX_TRIES, SEED_MAX)
+
 PORT_MAX = 65535
+__all__ = ["JOBS_PER_CORE", "MAX_CANDIDATES", "MAX_ITERATIONS", "MAX_RUNS", "MAX_SAMPLES",
+           "MAX_TRIES", "SEED_MAX", "count", "host", "jobs", "max_jobs", "port", "port_or_zero",
+           "seed", "seed_list"]
 
 
 def _shown(text: str) -> str:
@@ -50,6 +62,37 @@ def seed_list(text: str) -> list[int]:
         twice = next(s for s in seeds if seeds.count(s) > 1)
         raise argparse.ArgumentTypeError(f"the seed {twice} is given twice")
     return seeds
+
+
+def host(text: str) -> str:
+    """argparse type: a host name or address; never empty (which a socket takes as every
+    interface: give 0.0.0.0 for that)."""
+    t = str(text).strip()
+    if not t or any(c.isspace() or ord(c) < 32 for c in t) or len(t) > 253:
+        raise argparse.ArgumentTypeError(f"{_shown(text)!r} is not a host name or address "
+                                         "(0.0.0.0 binds every interface)")
+    return t
+
+
+def count(hi: int, lo: int = 1):
+    """argparse type: a whole number ``lo`` .. ``hi`` (a count with a stated bound)."""
+    def whole_count(text: str) -> int:
+        what = f"a count ({lo} .. {hi:,})".replace(",", "_")
+        v = _whole(text, what)
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"{_shown(text)} is not {what}")
+        return v
+    return whole_count
+
+
+def max_jobs() -> int:
+    import os
+    return JOBS_PER_CORE * (os.cpu_count() or 1)
+
+
+def jobs(text: str) -> int:
+    """argparse type: worker processes, 1 .. 4 x this machine's cores."""
+    return count(max_jobs())(text)
 
 
 def _port(text: str, low: int) -> int:

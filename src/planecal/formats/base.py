@@ -68,6 +68,20 @@ def read_bounded(path: Path, what: str, limit: int) -> bytes:
     return b"".join(chunks)
 
 
+def read_toml(path: str | Path, what: str, limit: int) -> dict:
+    """A TOML file within ``limit`` bytes, UTF-8 (``read_bounded``); one-line InputError
+    naming the file otherwise."""
+    import tomllib
+    path = Path(path)
+    data = read_bounded(path, what, limit)
+    try:
+        return tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise InputError(f"{path}: not UTF-8 text (byte {e.start}), not a {what}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{path}: invalid TOML: {str(e).splitlines()[0]}") from None
+
+
 def _reason(e: Exception) -> str:
     return getattr(e, "strerror", None) or (str(e).splitlines() or [type(e).__name__])[0]
 
@@ -324,10 +338,27 @@ def FormatTag(*accepted: str, what: str):
                      Field(json_schema_extra={"enum": [*accepted, None]})]
 
 
+def json_values(v: Any) -> Any:
+    """``v`` as the JSON values planecal writes: numpy arrays and scalars as lists and
+    numbers, tuples as lists, and a number that is not defined (NaN, an infinity) as null:
+    no file planecal writes holds NaN or Infinity (``json.dumps(..., allow_nan=False)``
+    after this)."""
+    if isinstance(v, dict):
+        return {k: json_values(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [json_values(x) for x in v]
+    if hasattr(v, "tolist") and hasattr(v, "dtype"):  # numpy arrays and scalars
+        return json_values(v.tolist())
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
 def dumps(doc: Any) -> str:
     """JSON as planecal writes the files people read: indented, a list of scalars on one
-    line, an object of scalars on one line where it fits in 120 characters."""
-    return _dump(doc, 0) + "\n"
+    line, an object of scalars on one line where it fits in 120 characters. Numbers that
+    are not defined are null (``json_values``)."""
+    return _dump(json_values(doc), 0) + "\n"
 
 
 def _dump(v: Any, level: int) -> str:
@@ -335,7 +366,7 @@ def _dump(v: Any, level: int) -> str:
     scalar = (lambda x: not isinstance(x, (dict, list)))
     if isinstance(v, list):
         if all(scalar(x) for x in v):
-            return "[" + ", ".join(json.dumps(x) for x in v) + "]"
+            return "[" + ", ".join(json.dumps(x, allow_nan=False) for x in v) + "]"
         return "[\n" + ",\n".join(inner + _dump(x, level + 1) for x in v) + "\n" + pad + "]"
     if isinstance(v, dict):
         if not v:
@@ -347,4 +378,4 @@ def _dump(v: Any, level: int) -> str:
             return one
         return ("{\n" + ",\n".join(f"{inner}{json.dumps(k)}: {_dump(x, level + 1)}"
                                     for k, x in v.items()) + "\n" + pad + "}")
-    return json.dumps(v)
+    return json.dumps(v, allow_nan=False)

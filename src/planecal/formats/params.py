@@ -19,7 +19,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Annotated, Any
 
-from pydantic import AfterValidator, Field, ValidationError
+from pydantic import AfterValidator, Field, Strict, ValidationError
 
 from planecal.formats.base import (
     DEG_AS_RAD, Angle, Bool, FormatTag, Int, Model, Point, Ranged, Record, Str, Vector,
@@ -192,6 +192,20 @@ class Provenance(Model):
     robot: Str | None = None
 
 
+class CovarianceBlock(Model):
+    """The free parameters' covariance, by name (SI units; null where not identifiable)."""
+    names: list[Str]
+    matrix: list[list[Annotated[float, Strict(), Field(allow_inf_nan=False)] | None]]
+
+
+class EncoderOffsetsBlock(Model):
+    """What a controller can take: the joint offsets (null, with the reason, where none)."""
+    joint_offsets_rad: Offsets | None
+    calibrated: list[Str] = []
+    kept_initial: list[Str] = []
+    reason: Str | None = None
+
+
 class ResultFile(ParamsFile):
     """What ``planecal calibrate --out`` writes."""
     format: ResultTag = None
@@ -206,6 +220,9 @@ class ResultFile(ParamsFile):
     identifiability: dict[str, Any]
     free: list[Str]
     provenance: Provenance | None = None
+    model_error: Str | None = None
+    covariance: CovarianceBlock | None = None
+    encoder_offsets: EncoderOffsetsBlock | None = None
 
 
 def provenance(inputs: Iterable[tuple[str, str | Path]], scene: str | None = None,

@@ -21,7 +21,7 @@ import numpy as np
 
 from planecal.base.errors import InputError
 from planecal.model.cell_params import CellParams
-from planecal.formats.base import read_json, validate
+from planecal.formats.base import json_values, read_json, validate
 from planecal.formats.params import PARAMS_FORMAT, ParamsFile
 
 
@@ -131,12 +131,15 @@ def check_robot(doc, robot, path) -> None:
 
 def save_json(path: str | Path, data: dict, fsync: bool = False) -> None:
     """Write JSON to a temp file and rename it over ``path``: a reader (or a resumed run)
-    sees the old or the new file, never a torn one."""
+    sees the old or the new file, never a torn one. The one JSON writer of planecal's
+    files: a number that is not defined (NaN, an infinity) is written as null, never as
+    NaN or Infinity (``formats.base.json_values``)."""
     path = Path(path)
+    text = json.dumps(json_values(data), indent=2, default=_jsonable, allow_nan=False) + "\n"
     tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
     try:
         with open(tmp, "w", encoding="utf-8") as f:
-            f.write(json.dumps(data, indent=2, default=_jsonable) + "\n")
+            f.write(text)
             if fsync:
                 f.flush()
                 os.fsync(f.fileno())

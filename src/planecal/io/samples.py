@@ -207,33 +207,51 @@ def _parse_line(path: Path, lineno: int, fields: list[str], direction: bool):
     return counts, dm, k, dirs
 
 
-def read_samples(path: str | Path, scene: "SceneLike | None" = None) -> Samples:
-    """Read a sample file (module docstring). With ``scene``, also ``check_samples``."""
-    path = Path(path)
+def _scan(path: Path, f):
+    """Every line of an open sample file checked (module docstring): the arrays of its
+    samples, the laser zeros and its columns."""
     qe, d, plate, lines, dirs = array("q"), array("d"), array("q"), array("q"), array("b")
     n_zero = 0
     columns = _Columns()
+    for lineno, line in _lines(path, f):
+        if not line.strip():
+            continue
+        fields = line.strip().split("\t") if "\t" in line else line.split()
+        if _is_header(fields):
+            if len(lines) or n_zero:
+                raise InputError(f"{path}:{lineno}: header line in the middle of the data")
+            columns = _header_columns(path, lineno, fields)
+            continue
+        columns.check(path, lineno, len(fields))
+        counts, dm, k, dj = _parse_line(path, lineno, fields, columns.direction)
+        if dm == 0.0:
+            n_zero += 1
+            continue
+        qe.extend(counts)
+        d.append(dm)
+        plate.append(k)
+        lines.append(lineno)
+        if dj is not None:
+            dirs.extend(dj)
+    return qe, d, plate, lines, dirs, n_zero, columns
+
+
+def check_continuable(path: str | Path) -> None:
+    """A sample file a run is about to continue: every whole line is a sample line (a
+    partial last line, which a killed run may leave, is cut off when the run continues);
+    InputError naming the first line that is not, so nothing is appended after it."""
+    path = Path(path)
     with _open(path) as f:
-        for lineno, line in _lines(path, f):
-            if not line.strip():
-                continue
-            fields = line.strip().split("\t") if "\t" in line else line.split()
-            if _is_header(fields):
-                if len(lines) or n_zero:
-                    raise InputError(f"{path}:{lineno}: header line in the middle of the data")
-                columns = _header_columns(path, lineno, fields)
-                continue
-            columns.check(path, lineno, len(fields))
-            counts, dm, k, dj = _parse_line(path, lineno, fields, columns.direction)
-            if dm == 0.0:
-                n_zero += 1
-                continue
-            qe.extend(counts)
-            d.append(dm)
-            plate.append(k)
-            lines.append(lineno)
-            if dj is not None:
-                dirs.extend(dj)
+        text = f.read(MAX_FILE_BYTES + 1)
+    whole = text[:text.rfind("\n") + 1]
+    _scan(path, io.StringIO(whole))
+
+
+def read_samples(path: str | Path, scene: "SceneLike | None" = None) -> Samples:
+    """Read a sample file (module docstring). With ``scene``, also ``check_samples``."""
+    path = Path(path)
+    with _open(path) as f:
+        qe, d, plate, lines, dirs, n_zero, columns = _scan(path, f)
     if not len(lines):
         what = f" ({n_zero} laser zeros)" if n_zero else ""
         raise InputError(f"{path}: no samples in the file{what}")
@@ -267,9 +285,10 @@ def check_samples(samples: Samples, scene: SceneLike) -> None:
     out = (samples.d_mm < lo) | (samples.d_mm > hi)
     if out.any():
         i = int(np.argmax(out))
+        metres = ": a distance in m written as mm?" if lo <= samples.d_mm[i] * 1e3 <= hi else ""
         raise InputError(f"{where}:{samples.lines[i]}: Dm = {samples.d_mm[i]:g} mm is outside "
                          f"the laser window {lo:g}-{hi:g} mm of scene {scene.name}: not a "
-                         f"reading this sensor gives ({int(out.sum())} such samples)")
+                         f"reading this sensor gives ({int(out.sum())} such samples){metres}")
     n = len(scene.plates)
     if samples.plate.max() >= n:
         i = int(np.argmax(samples.plate >= n))

@@ -129,6 +129,13 @@ def _read_csv_targets(p: Path, robot: Robot) -> Targets:
     head = lines[first]
     delim = "\t" if "\t" in head else (";" if ";" in head else ",")
     rows = csv.reader(io.StringIO("\n".join(lines)), delimiter=delim)
+    try:
+        return _csv_rows(p, robot, rows)
+    except csv.Error as e:  # a field over the csv module's limit, a stray quote
+        raise InputError(f"{p}:{rows.line_num}: not a row of the targets table ({e})") from None
+
+
+def _csv_rows(p: Path, robot: Robot, rows) -> Targets:
     cols = None
     b = _Builder(robot, str(p))
     for lineno, row in enumerate(rows, 1):
@@ -137,6 +144,10 @@ def _read_csv_targets(p: Path, robot: Robot) -> Targets:
         row = [c.strip() for c in row]
         if cols is None:
             cols = [c.lower() for c in row]
+            twice = sorted({c for c in cols if cols.count(c) > 1})
+            if twice:
+                raise InputError(f"{p}:{lineno}: column {twice[0]!r} appears twice in the "
+                                 "header")
             kinds = [k for k in (CARTESIAN, JOINTS_DEG, COUNTS) if set(k) <= set(cols)]
             if len(kinds) != 1:
                 raise InputError(f"{p}:{lineno}: the header names the columns: "

@@ -73,14 +73,27 @@ class Imported:
     notes: list[str] = field(default_factory=list)
 
 
+def _yourdfpy(path: Path, **kw):
+    """yourdfpy's ``URDF.load``, its own log lines silenced (what is wrong is said in one
+    line by the caller)."""
+    import logging
+
+    import yourdfpy
+    log = logging.getLogger("yourdfpy")
+    level, log.level = log.level, logging.CRITICAL + 1
+    try:
+        return yourdfpy.URDF.load(str(path), load_meshes=False, load_collision_meshes=False,
+                                  **kw)
+    finally:
+        log.setLevel(level)
+
+
 def load_urdf(path: Path):
     """yourdfpy's model of the file, without meshes (one-line InputError if unreadable)."""
-    import yourdfpy
     if not path.is_file():
         raise InputError(f"{path}: file not found (URDF)")
     try:
-        return yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False,
-                                  load_collision_meshes=False)
+        return _yourdfpy(path, build_scene_graph=False)
     except Exception as e:  # lxml, yourdfpy's own: any reason it cannot be read
         text = (str(e).splitlines() or [type(e).__name__])[0]
         raise InputError(f"{path}: not a URDF yourdfpy can read ({text})") from None
@@ -221,9 +234,7 @@ def check_flange(path: Path, imp: Imported, kin: Kinematics | None = None, n: in
     import's chain) from the URDF's (yourdfpy's forward kinematics) over n random poses
     within the limits; RunFailed above MATCH_M."""
     kin = imp.kin if kin is None else kin
-    import yourdfpy
-    u = yourdfpy.URDF.load(str(path), build_scene_graph=True, load_meshes=False,
-                           load_collision_meshes=False)
+    u = _yourdfpy(path, build_scene_graph=True)
     names = [j.name for j in imp.joints]
     rng = np.random.default_rng(seed)
     worst = 0.0

@@ -165,18 +165,45 @@ class Contact:
                 "either": "first delta 0 (both behaviours agree)"}[self.kind] + f": {self.why}"
 
 
+def _silence_wait(behaviour: SessionBehaviour, last: LastSession | None, now: float) -> float:
+    """What is left of a ``fresh_after_silence`` controller's silence and its margin since
+    the last packet recorded (all of it when the time is unknown or the clock went back)."""
+    need = behaviour.silence_s + SILENCE_MARGIN_S
+    sent_at = None if last is None else last.sent_at
+    silent = now - sent_at if sent_at is not None else 0.0
+    wait = need - silent if 0.0 <= silent < need else (need if silent < 0 else 0.0)
+    return round(wait, 3)
+
+
 def plan_contact(behaviour: SessionBehaviour | None, last: LastSession | None,
                  override: str | None, client: str, now: float | None = None,
-                 where: str = "robot.json") -> Contact:
+                 where: str = "robot.json", lost: str | None = None) -> Contact:
     """The first contact of a new session (module doc). ``override``: "fresh" or "keep",
     the operator's statement for this run (``--rt-fresh``, ``--rt-keep``), which wins over
-    the cell's. ``client``: this link's address ("ip:port"). Raises `InputError` (exit 2)
-    when the behaviour is unstated (in ``where``, the robot file) and the controller was
-    last left at a delta other than 0: planecal cannot tell which first packet is safe, so
-    it asks."""
+    the cell's; a fresh reference on a cell that takes one only after a silence still
+    waits that silence out (from the time of the last packet recorded: all of it when
+    unknown), so the first packet of 0 is never measured from the old reference.
+    ``client``: this link's address ("ip:port"). ``lost``: where an earlier session with
+    this controller is recorded although ``last`` is None (a resumed run's sidecar whose
+    state file is missing: another $PLANECAL_STATE_DIR, another user). Raises
+    `InputError` (exit 2) when the behaviour is unstated (in ``where``, the robot file)
+    and the controller was last left at a delta other than 0, or when the record of the
+    last session is lost: planecal cannot tell which first packet is safe, so it asks."""
     now = time.time() if now is None else now
     if override == "fresh":
-        return Contact.fresh("--rt-fresh: the controller took a fresh reference")
+        why = "--rt-fresh: the controller took a fresh reference"
+        if behaviour is not None and behaviour.reference == "fresh_after_silence" and (
+                last is not None or lost):
+            return Contact.fresh(f"{why}; {behaviour.source}: it {behaviour.describe()}",
+                                 wait_s=_silence_wait(behaviour, last, now))
+        return Contact.fresh(why)
+    if last is None and lost:
+        raise InputError(
+            f"{lost} records an earlier session with this controller, but its state file "
+            f"(the last delta it holds) is not here: planecal will not guess what the "
+            f"controller holds; state for this run that it took a fresh reference "
+            f"(--rt-fresh, e.g. the RT system was restarted), or give its state file "
+            f"(--rt-state) so that --rt-keep can repeat the delta it kept")
     if override == "keep":
         if last is None:
             return Contact.either("--rt-keep, but no earlier session recorded")
@@ -196,12 +223,9 @@ def plan_contact(behaviour: SessionBehaviour | None, last: LastSession | None,
     if behaviour.reference == "keep":
         return Contact.kept(last, f"{behaviour.source}: the controller {behaviour.describe()}")
     if behaviour.reference == "fresh_after_silence":
-        need = behaviour.silence_s + SILENCE_MARGIN_S
         # unknown time, or a clock that went back: wait the whole silence
-        silent = now - last.sent_at if last.sent_at is not None else 0.0
-        wait = need - silent if 0.0 <= silent < need else (need if silent < 0 else 0.0)
         return Contact.fresh(f"{behaviour.source}: the controller {behaviour.describe()}",
-                             wait_s=round(wait, 3))
+                             wait_s=_silence_wait(behaviour, last, now))
     if last.client is None:
         raise InputError(f"{last.path}: records no client address (an older state line): "
                          f"state for this run that the controller took a fresh reference "
@@ -243,6 +267,17 @@ def state_dir() -> Path:
 def default_state_path(remote: tuple[str, int]) -> Path:
     """The state file of the controller at ``remote`` (ip, port)."""
     return state_dir() / f"fd11-{remote[0]}-{remote[1]}.state"
+
+
+def is_state_file(path: str | Path) -> bool:
+    """Whether ``path`` holds an FD11 state line (what the output guard lets a run
+    rewrite)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(STATE_TAG))
+    except OSError:
+        return False
+    return head in (STATE_TAG, OLD_TAG[:len(STATE_TAG)])
 
 
 def _line(delta, reference, sent_ms: int, client: str) -> bytes:

@@ -6,6 +6,12 @@ from pathlib import Path
 from planecal.present.tables import table
 
 
+def urad_text(v) -> str:
+    """A value in rad as urad for the table; "-" where it is not defined (one run: no std)."""
+    import math
+    return f"{v * 1e6:.3g}" if v is not None and math.isfinite(v) else "-"
+
+
 def format_sweep(res: dict) -> str:
     """The sweep's table: one row per cell."""
     cells = res["cells"]
@@ -21,8 +27,8 @@ def format_sweep(res: dict) -> str:
         if c["runs"]:
             row += [f"{c['robot_time_min']:.2f}", f"{c['robot_time_per_sample_s']:.2f}",
                     f"{c['travel_per_sample_s']:.2f}"]
-            row += [f"{c['std_rad'].get(n, float('nan')) * 1e6:.3g}" for n in names]
-            row += [f"{c['offset_std_rad'] * 1e6:.3g}", f"{c['offset_rms_rad'] * 1e6:.3g}"]
+            row += [urad_text(c["std_rad"].get(n)) for n in names]
+            row += [urad_text(c["offset_std_rad"]), urad_text(c["offset_rms_rad"])]
         else:
             row += ["-"] * (3 + len(names) + 2)
         rows.append(row)

@@ -28,8 +28,10 @@ from planecal.studies.distributed import Engine
 
 
 
-def parse_int_list(text: str, what: str, minimum: int = 1) -> list[int]:
-    """"30,50,100" -> [30, 50, 100]; InputError on anything else."""
+def parse_int_list(text: str, what: str, minimum: int = 1,
+                   maximum: int | None = None) -> list[int]:
+    """"30,50,100" -> [30, 50, 100], each in [minimum, maximum]; InputError on anything
+    else."""
     try:
         vals = [int(v) for v in str(text).split(",") if v.strip()]
     except ValueError:
@@ -39,6 +41,9 @@ def parse_int_list(text: str, what: str, minimum: int = 1) -> list[int]:
     bad = [v for v in vals if v < minimum]
     if bad:
         raise InputError(f"{what}: values must be at least {minimum}, got {bad[0]}")
+    big = [v for v in vals if maximum is not None and v > maximum]
+    if big:
+        raise InputError(f"{what}: values must be at most {maximum}, got {str(big[0])[:40]}")
     return vals
 
 

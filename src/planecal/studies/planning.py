@@ -5,10 +5,10 @@ Candidates (``candidate_pool``): the sampling run's own pose distribution
 (``PoseGenerator``: spot on the plate, beam in the cone, distance, roll; round robin over
 plates), half with IK nearest to the scene's calibration position within the limits, counts
 in range, target configuration collision-free (``CollisionWorld.check_config``), half the
-poses the run's own planner visits. Rows: the distance Jacobian at the
-scene's *nominal* parameters (all we know before calibrating) over the free parameters,
-columns scaled to unit RMS over the candidates (so units do not matter; D-optimality is
-invariant to column scaling anyway, the scaling only conditions the arithmetic).
+poses the run's own planner visits. Rows: the distance Jacobian at the scene's *nominal*
+parameters (all we know before calibrating) over the free parameters, columns scaled to
+unit RMS over the candidates (so units do not matter; D-optimality is invariant to column
+scaling anyway, the scaling only conditions the arithmetic).
 
 Algorithm: greedy forward selection (each step adds the candidate with the largest
 prediction variance a^T M^-1 a, Sherman-Morrison updates, M0 = 1e-6 I), then Fedorov
@@ -34,10 +34,10 @@ Bisection over n (the prediction falls with n; the result is checked, never assu
 Robot time (``sampling.tour``): the planned poses are ordered into the tour from the
 calibration position that minimises the robot's ticks under the step limit (``tour.order``:
 each move costs the ticks of the joint that needs the most, collision-checked moves, a
-blocked one by its detour), and the plan reports the robot time of the run that visits
-them (``tour.visit`` with the run's own ``ListPlanner``, then ``tour.robot_time_s``; laser
-reads at ``tour.READ_TICKS``, the twin's median) before ordering (the design's order), after
-it, and for the random run of equal size.
+blocked one by its detour), and the plan reports the robot time of the run that visits them
+(``tour.visit`` with the run's own ``ListPlanner``, then ``tour.robot_time_s``; laser reads
+at ``tour.READ_TICKS``, the twin's median) before ordering (the design's order), after it,
+and for the random run of equal size.
 
 The sampling run takes the list through ``SamplingRun(..., planner=ListPlanner(...))``
 (foreground planning only: the list planner keeps state); ``rehearse_planned`` does that
@@ -241,9 +241,8 @@ class Predictor:
 
 def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
                  n_min: int, n_max: int, progress=None):
-    """The smallest n in [n_min, n_max] whose D-optimal design (``d_optimal``) has the
-    ``predictor.figure(target)`` <= value (module docstring): (n, d_optimal's result).
-    InputError when even n_max misses it."""
+    """The smallest n in [n_min, n_max] whose D-optimal design has ``predictor.figure(target)``
+    <= value: (n, ``d_optimal``'s result); InputError when even n_max misses it."""
     cache: dict = {}
 
     def fig(n):
@@ -259,6 +258,8 @@ def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
         raise InputError(f"--target-{target}-{unit} {value:g}: not reached with {n_max} "
                          f"samples (predicted {fig(n_max):.4g} {unit}); allow more samples "
                          f"(--samples is the most a target may choose) or candidates")
+    if progress:  # reachable: the progress held until now is shown
+        progress.release()
     lo, hi = n_min, n_max  # fig(hi) <= value
     if fig(lo) <= value:
         return lo, cache[lo][1]
@@ -324,9 +325,8 @@ def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
     the most samples it may choose. ``settings``: how the poses will be calibrated
     (``estimation.calibrate.CalibrationSettings``; default level offsets): the design is
     D-optimal for the base set the candidates can identify (``calibrate.base_set``).
-    ``progress``: a ``planecal.base.progress.Progress`` of ``PLAN_STAGES`` steps, updated
-    at each stage."""
-    target = _target(n, m, target_std_urad, target_ap_mm)
+    ``progress``: a ``Progress`` of ``PLAN_STAGES`` steps (released once a target is met)."""
+    target = plan_target(n, m, target_std_urad, target_ap_mm)
     design = _design(scene, n, m, seed, settings, checker, repeatability_mm, laser_noise_mm,
                      target, progress)
     q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
@@ -342,7 +342,7 @@ def _say(progress, note: str) -> None:
         progress.update(note=note)
 
 
-def _target(n: int, m: int, target_std_urad, target_ap_mm) -> tuple[str, float] | None:
+def plan_target(n: int, m: int, target_std_urad, target_ap_mm) -> tuple[str, float] | None:
     """The plan's sizes checked, and its target: ("std" | "ap", value), or None."""
     if n < 13:
         raise InputError(f"--samples must be at least 13, got {n}")
@@ -351,8 +351,8 @@ def _target(n: int, m: int, target_std_urad, target_ap_mm) -> tuple[str, float] 
     if target_std_urad is not None and target_ap_mm is not None:
         raise InputError("--target-std-urad and --target-ap-mm exclude each other")
     for name, t in (("--target-std-urad", target_std_urad), ("--target-ap-mm", target_ap_mm)):
-        if t is not None and not t > 0:
-            raise InputError(f"{name} must be > 0, got {t}")
+        if t is not None and not (np.isfinite(t) and t > 0):
+            raise InputError(f"{name} must be a finite number > 0, got {t}")
     if target_std_urad is not None:
         return "std", target_std_urad
     return None if target_ap_mm is None else ("ap", target_ap_mm)

@@ -7,8 +7,10 @@ map -- Ctrl-C, SIGKILL -- leaves whole lines), read back to resume::
 
 Numpy arrays are written as (nested) lists; ``arrays`` names them by JSON pointer (RFC 6901)
 with dtype and shape, so a result read back is the same arrays, bit for bit (floats are
-written with Python's shortest round-trip repr; NaN and infinities as ``NaN``,
-``Infinity``). Every result the engine returns with a file -- read back or just computed --
+written with Python's shortest round-trip repr). A number that is not defined (NaN, an
+infinity) is written as null, its pointer and value in ``nonfinite`` (``{"/err/0":
+"nan"}``, "+inf", "-inf"): the file is standard JSON, and it reads back as written. A line holding a bare
+``NaN`` or ``Infinity`` (not planecal's) is refused, naming the line. Every result the engine returns with a file -- read back or just computed --
 is the decoded line (``ResultsFile.append``), so a resumed map returns exactly what an
 uninterrupted one does. Tuples come back as lists; dict keys must be strings. Resuming
 refuses a file written with another ``header`` (one line naming the first field that
@@ -31,33 +33,69 @@ def _ptr(parent: str, k) -> str:
     return parent + "/" + str(k).replace("~", "~0").replace("/", "~1")
 
 
-def encode(obj, arrays: dict | None = None, at: str = ""):
-    """``obj`` as JSON values (arrays as nested lists, numpy scalars as Python numbers);
-    ``arrays`` collects ``{pointer: [dtype, shape]}`` of every array."""
+_NONFINITE = {"nan": float("nan"), "+inf": float("inf"), "-inf": float("-inf")}
+
+
+def _nonfinite_name(v: float) -> str:
+    return "nan" if v != v else ("+inf" if v > 0 else "-inf")
+
+
+def encode(obj, arrays: dict | None = None, at: str = "", nonfinite: dict | None = None):
+    """``obj`` as JSON values (arrays as nested lists, numpy scalars as Python numbers, a
+    NaN or infinity as null); ``arrays`` collects ``{pointer: [dtype, shape]}`` of every
+    array, ``nonfinite`` ``{pointer: "nan" | "+inf" | "-inf"}`` of every number
+    written as null."""
     if isinstance(obj, np.ndarray):
         if obj.dtype.kind not in "biuf":
             raise TypeError(f"result {at or '/'}: cannot write an array of dtype {obj.dtype}")
         if arrays is not None:
             arrays[at] = [obj.dtype.str, list(obj.shape)]
-        return obj.tolist()
+        out = obj.tolist()
+        if obj.dtype.kind == "f":
+            for idx in np.argwhere(~np.isfinite(obj)):
+                ptr = at + "".join(f"/{i}" for i in idx)
+                if nonfinite is not None:
+                    nonfinite[ptr] = _nonfinite_name(float(obj[tuple(idx)]))
+                if len(idx):
+                    parent = _get(out, [str(i) for i in idx[:-1]])
+                    parent[int(idx[-1])] = None
+                else:
+                    out = None
+        return out
     if isinstance(obj, np.generic):
-        return obj.item()
+        return encode(obj.item(), arrays, at, nonfinite)
     if isinstance(obj, dict):
         bad = [k for k in obj if not isinstance(k, str)]
         if bad:
             raise TypeError(f"result {at or '/'}: dict key {bad[0]!r} is not a string")
-        return {k: encode(v, arrays, _ptr(at, k)) for k, v in obj.items()}
+        return {k: encode(v, arrays, _ptr(at, k), nonfinite) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [encode(v, arrays, _ptr(at, i)) for i, v in enumerate(obj)]
+        return [encode(v, arrays, _ptr(at, i), nonfinite) for i, v in enumerate(obj)]
+    if isinstance(obj, float) and not np.isfinite(obj):
+        if nonfinite is not None:
+            nonfinite[at] = _nonfinite_name(obj)
+        return None
     if obj is None or isinstance(obj, (bool, int, float, str)):
         return obj
     raise TypeError(f"result {at or '/'}: cannot write a {type(obj).__name__}")
 
 
-def decode(value, arrays: dict):
-    """The inverse of ``encode``: the arrays named in ``arrays`` made numpy arrays again."""
+def _parts(ptr: str) -> list[str]:
+    return [p.replace("~1", "/").replace("~0", "~") for p in ptr.split("/")[1:]]
+
+
+def decode(value, arrays: dict, nonfinite: dict | None = None):
+    """The inverse of ``encode``: the numbers ``nonfinite`` names restored, the arrays
+    named in ``arrays`` made numpy arrays again."""
+    for ptr, name in (nonfinite or {}).items():
+        parts = _parts(ptr)
+        if not parts:
+            value = _NONFINITE[name]
+            continue
+        parent = _get(value, parts[:-1])
+        parent[int(parts[-1]) if isinstance(parent, list) else parts[-1]] = _NONFINITE[name]
     for ptr, (dtype, shape) in sorted(arrays.items(), key=lambda kv: -kv[0].count("/")):
-        parts = [p.replace("~1", "/").replace("~0", "~") for p in ptr.split("/")[1:]]
+        parts = _parts(ptr)
         arr = np.array(_get(value, parts), dtype=np.dtype(dtype)).reshape(shape)
         if not parts:
             value = arr
@@ -79,7 +117,20 @@ def canonical_key(key) -> str:
 
 
 def _line(obj) -> bytes:
-    return (json.dumps(obj, separators=(",", ":")) + "\n").encode()
+    return (json.dumps(obj, separators=(",", ":"), allow_nan=False) + "\n").encode()
+
+
+class _Bare(ValueError):
+    pass
+
+
+def _refuse_constant(name: str):
+    raise _Bare(name)
+
+
+def _loads(text):
+    """A results line: standard JSON only (a bare NaN or Infinity is not planecal's)."""
+    return json.loads(text, parse_constant=_refuse_constant)
 
 
 class ResultsFile:
@@ -122,9 +173,15 @@ class ResultsFile:
                              "file or start afresh")
         for n, ln in enumerate(lines[1:], start=2):
             try:
-                rec = json.loads(ln)
-                key, res = rec["key"], decode(rec["result"], rec.get("arrays", {}))
-            except (ValueError, KeyError, TypeError, IndexError):
+                rec = _loads(ln)
+                key, res = rec["key"], decode(rec["result"], rec.get("arrays", {}),
+                                              rec.get("nonfinite"))
+            except _Bare as e:
+                raise InputError(f"{self.path}, line {n}: {e} is not a value planecal "
+                                 "writes (a number that is not defined is null); the line "
+                                 "was not written by planecal: remove it or start afresh") \
+                    from None
+            except (ValueError, KeyError, TypeError, IndexError, AttributeError):
                 raise InputError(f"{self.path}, line {n}: not a result line") from None
             self.done.setdefault(canonical_key(key), (key, res))
         if end < len(data):
@@ -138,9 +195,13 @@ class ResultsFile:
     def append(self, key, result):
         """Write one result; returns it as read back (``decode(encode(result))``)."""
         arrays: dict = {}
-        rec = {"key": encode(key), "result": encode(result, arrays), "arrays": arrays}
+        nonfinite: dict = {}
+        rec = {"key": encode(key), "result": encode(result, arrays, nonfinite=nonfinite),
+               "arrays": arrays}
+        if nonfinite:
+            rec["nonfinite"] = nonfinite
         self._write(rec)
-        return decode(json.loads(json.dumps(rec["result"])), arrays)
+        return decode(json.loads(json.dumps(rec["result"])), arrays, nonfinite)
 
     def close(self) -> None:
         if getattr(self, "_fd", None) is not None:
@@ -162,13 +223,14 @@ def read_results(path) -> tuple[dict, list[tuple]]:
     p = Path(path)
     lines = p.read_bytes().split(b"\n")
     try:
-        head = json.loads(lines[0])
+        head = _loads(lines[0])
         out = []
         for ln in lines[1:]:
             if ln.strip():
-                rec = json.loads(ln)
-                out.append((rec["key"], decode(rec["result"], rec.get("arrays", {}))))
-    except (ValueError, KeyError, IndexError):
+                rec = _loads(ln)
+                out.append((rec["key"], decode(rec["result"], rec.get("arrays", {}),
+                                               rec.get("nonfinite"))))
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError):
         raise InputError(f"{p}: not a planecal results file") from None
     if not isinstance(head, dict) or head.get("format") != RESULTS_FORMAT:
         raise InputError(f"{p}: not a planecal results file")

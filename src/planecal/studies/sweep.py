@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import tomllib
 import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -45,11 +44,13 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.limits import MAX_CANDIDATES, MAX_RUNS, MAX_SAMPLES, SEED_MAX
 from planecal.studies.common import cached_profile, cached_scene, cached_world
 
 FORMAT = "planecal-sweep/1"
 DESIGNS = ("random", "planned", "planned+ordered")
 AXES = ("scene", "errors", "design", "samples", "level")
+MAX_SPEC_BYTES = 2**20  # a spec is a few lines
 
 
 
@@ -96,14 +97,9 @@ def _list(v, where: str, kind, allow_scalar: bool = True) -> tuple:
 
 def load_spec(path) -> SweepSpec:
     """SPEC.toml read and checked: a one-line InputError naming the file and the field."""
+    from planecal.formats.base import read_toml
     p = Path(path)
-    try:
-        doc = tomllib.loads(p.read_text())
-    except OSError as e:
-        raise InputError(f"{p}: cannot read ({e.strerror})") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{p}: not TOML ({e})") from None
-    return spec_from_dict(doc, p)
+    return spec_from_dict(read_toml(p, "sweep spec", MAX_SPEC_BYTES), p)
 
 
 def spec_from_dict(doc: dict, path: Path | None = None) -> SweepSpec:
@@ -141,21 +137,26 @@ def spec_from_dict(doc: dict, path: Path | None = None) -> SweepSpec:
         if n < 20:
             raise InputError(f"{where}: grid.samples: {n} is below 20 (a calibration needs "
                              "at least 20 samples)")
+        if n > MAX_SAMPLES:
+            raise InputError(f"{where}: grid.samples: {str(n)[:40]} is above {MAX_SAMPLES} "
+                             "(the most samples a run takes)")
     kw["level"] = _list(grid.get("level", list(d.level)), f"{where}: grid.level", str)
     for x in kw["level"]:
         try:
             calibration_of(x)
         except InputError as e:
             raise InputError(f"{where}: grid.level: {x!r}: {e}") from None
-    for k, kind, lo in (("runs", int, 2), ("seed", int, 0), ("plan_candidates", int, 20),
-                        ("plan_seed", int, 0), ("clearance_m", float, 0.0)):
+    for k, kind, lo, hi in (("runs", int, 2, MAX_RUNS), ("seed", int, 0, SEED_MAX),
+                            ("plan_candidates", int, 20, MAX_CANDIDATES),
+                            ("plan_seed", int, 0, SEED_MAX), ("clearance_m", float, 0.0, 1.0)):
         if k in sw:
             v = sw[k]
             if kind is float and isinstance(v, int) and not isinstance(v, bool):
                 v = float(v)
-            if not isinstance(v, kind) or isinstance(v, bool) or v < lo:
-                raise InputError(f"{where}: sweep.{k}: expected {_KIND[kind]} >= {lo}, "
-                                 f"got {sw[k]!r}")
+            if (not isinstance(v, kind) or isinstance(v, bool) or not lo <= v <= hi
+                    or (kind is float and not np.isfinite(v))):
+                raise InputError(f"{where}: sweep.{k}: expected {_KIND[kind]} in "
+                                 f"[{lo}, {hi}], got {str(sw[k])[:40]}")
             kw[k] = v
     spec = SweepSpec(**kw)
     planned = [n for n in spec.samples if any(x != "random" for x in spec.design)]

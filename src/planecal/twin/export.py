@@ -8,11 +8,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from planecal.io.outputs import MJCF_MARK
 from planecal.model.scene import Scene, load_scene
 from planecal.twin.mjcf import scene_spec, to_xml_exact
 from planecal.twin.truth import resolve_truth
 
-MARKER = "written by planecal mjcf"  # first line of every file export_scene writes
+MARKER = MJCF_MARK.decode()  # first line of every file export_scene writes
 
 
 def export_scene(scene: Scene | str, out, truth=None, seed: int | None = None) -> Path:

@@ -84,10 +84,16 @@ def _kind_from_content(doc: dict) -> str | None:
 
 def write_report(result, out_dir, samples=None, scene: str | None = None) -> Path:
     """Write the report of ``result`` (a path to a result file, or its dict) into
-    ``out_dir`` (created if needed): index.html and its PNG figures. ``samples``: sample
-    file paths (or a ``planecal.io.samples.Samples``) of a calibration result, for the
-    per-sample figures (default: the inputs the result records); ``scene``: a scene name
-    or path (default: the result's, else the default scene). Returns index.html's path."""
+    ``out_dir`` (created if needed; its parent must exist): index.html and its PNG
+    figures. ``samples``: sample file paths (or a ``planecal.io.samples.Samples``) of a
+    calibration result, for the per-sample figures (default: the inputs the result
+    records); ``scene``: a scene name or path (default: the result's, else the default
+    scene). The page and figures are made in a temporary folder beside ``out_dir`` and
+    moved in when all are written: a result that cannot be reported leaves nothing.
+    Returns index.html's path."""
+    import os
+    import shutil
+    import tempfile
     source = None
     if isinstance(result, (str, Path)):
         from planecal.io.params import load_json
@@ -97,22 +103,44 @@ def write_report(result, out_dir, samples=None, scene: str | None = None) -> Pat
         doc = result
     where = str(source) if source else "result"
     kind = detect_kind(doc, where)
+    check_document(doc, kind, where)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a directory")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"{out}: cannot create the report directory ({e.strerror})") from None
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"{out}: directory {parent} does not exist")
     _refuse_overwriting_inputs(out, source, samples)
-    ctx = Context(doc=doc, out_dir=out, source=source, samples=samples, scene=scene)
     module = importlib.import_module(f"planecal.present.report.{KINDS[kind]}")
     try:
-        page = module.build(ctx)
-    except (KeyError, TypeError, ValueError, IndexError) as e:
-        raise InputError(f"{where}: not a complete {kind} result ({type(e).__name__}: {e})") from None
-    provenance_section(page, ctx, kind)
-    return page.write(out)
+        stage = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name[:64]}.", suffix=".tmp"))
+    except OSError as e:
+        raise InputError(f"{out}: cannot create the report directory ({e.strerror})") from None
+    try:
+        ctx = Context(doc=doc, out_dir=stage, source=source, samples=samples, scene=scene)
+        try:
+            page = module.build(ctx)
+        except (KeyError, TypeError, ValueError, IndexError) as e:
+            raise InputError(f"{where}: not a complete {kind} result ({type(e).__name__}: "
+                             f"{e})") from None
+        provenance_section(page, ctx, kind)
+        page.write(stage)
+        out.mkdir(exist_ok=True)
+        for f in sorted(stage.iterdir()):
+            os.replace(f, out / f.name)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return out / "index.html"
+
+
+def check_document(doc: dict, kind: str, where: str) -> None:
+    """A result file that names its format is validated against it before anything is
+    drawn (``formats.params.ResultFile``: a field of the wrong type, NaN where a number
+    belongs): one line naming the field."""
+    if kind == "calibration" and doc.get("format") is not None:
+        from planecal.formats.base import validate
+        from planecal.formats.params import ResultFile
+        validate(ResultFile, doc, where, "result file")
 
 
 def _refuse_overwriting_inputs(out: Path, source: Path | None, samples) -> None:

@@ -65,7 +65,7 @@ def new_figure(width_in: float, height_in: float, rows: int = 1, cols: int = 1, 
 
 def save(fig, out_dir: Path, name: str, title: str, caption: str) -> Plot:
     path = Path(out_dir) / f"{name}.png"
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, metadata={"Software": "planecal"})  # outputs.PNG_MARK
     return Plot(path.name, title, caption)
 
 

@@ -80,6 +80,7 @@ class Page:
     def render(self) -> str:
         e = html.escape
         out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+               '<meta name="generator" content="planecal">',  # outputs.HTML_MARK
                f"<title>{e(self.title)}</title>", f"<style>{STYLE}</style>", "</head>", "<body>",
                f"<h1>{e(self.title)}</h1>"]
         if self.subtitle:

@@ -78,8 +78,9 @@ def build(ctx) -> Page:
         if c.get("runs"):
             row += [f"{c['samples_taken']:.1f}", f"{c['robot_time_min']:.2f}",
                     f"{c['travel_per_sample_s']:.2f}"]
-            row += [f"{c['std_rad'][n] * 1e6:.3g}" for n in names]
-            row += [f"{c['offset_std_rad'] * 1e6:.3g}"]
+            from planecal.present.sweep import urad_text  # null (one run: no std): "-"
+            row += [urad_text(c["std_rad"].get(n)) for n in names]
+            row += [urad_text(c["offset_std_rad"])]
         else:
             row += ["-"] * (4 + len(names))
         rows.append(row)

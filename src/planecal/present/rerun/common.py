@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.io.outputs import RRD_MAGIC
 
 APP_ID = "planecal"
 DEFAULT_DIR = "recordings"  # relative to the working directory (see recordings/README.md)
 AUTO_NAMES = ("", "auto", "-")  # --rrd values that mean "a generated name in recordings/"
-RRD_MAGIC = b"RRF"  # "RRF2" in rerun 0.41; older files start "RRF0"/"RRF1"
 
 # recording kinds: each has a blueprint of its own (docs/RERUN.md)
 KINDS = ("rehearsal", "real", "calibration", "montecarlo", "bootstrap", "validate")
