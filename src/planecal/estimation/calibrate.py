@@ -224,9 +224,11 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
         # the samples checked (shapes, plates) before the Jacobian; the free set after
         probe = Problem(robot, qe, d_m, pidx, initial, layout, np.zeros(len(layout), bool),
                         options, direction=direction, references=tuple(references))
-        n_cand = int(candidates(robot, layout, st, references)[0].sum())
+        mask = candidates(robot, layout, st, references)[0]
+        n_cand = int((mask & ~layout.mask(n for n, _ in options.prior)).sum())
         if n <= n_cand:
-            raise ValueError(f"{n} samples cannot determine {n_cand} free parameters")
+            raise ValueError(f"{n} samples cannot determine {n_cand} free parameters"
+                             + (" without a prior" if options.prior else ""))
         # the distances and Jacobian at the initial values: the base set's, and the fit's
         # first evaluation
         at_initial = predict_joints_with_jacobian(robot, probe.joints, initial, pidx, layout)

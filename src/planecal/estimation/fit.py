@@ -106,9 +106,11 @@ class Problem:
                              f"{self.initial.n_planes} plane(s)")
         if free.shape != (len(self.layout),):
             raise ValueError(f"free mask of {free.shape} over {len(self.layout)} parameters")
-        p = int(free.sum())
+        # a parameter with a prior is determined by it where the samples do not
+        p = int((free & ~self.layout.mask(n for n, _ in self.options.prior)).sum())
         if N <= p:
-            raise ValueError(f"{N} samples cannot determine {p} free parameters")
+            raise ValueError(f"{N} samples cannot determine {p} free parameters"
+                             + (" without a prior" if self.options.prior else ""))
         opt = self.options
         if opt.joint_sigma_rad is not None and not (
                 np.isfinite(opt.joint_sigma_rad) and opt.joint_sigma_rad >= 0
