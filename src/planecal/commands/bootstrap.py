@@ -1,5 +1,5 @@
 """planecal bootstrap SAMPLES... [--sizes 30,50,100] [--repeats 10] [--seed K]
-[--initial P.json] [--scene S] [--level offsets|full] [--compliance] [--free NAMES] [--out B.json]
+[--initial P.json] [--scene S] [--level offsets|full|nonkinematic] [--compliance] [--free NAMES] [--out B.json]
 [--jobs J | --scheduler tcp://HOST:PORT] [--results FILE.jsonl] [--resume]
 
 Seed 9.3's result analysis: random subsets of each size drawn from the pool of samples,

@@ -1,6 +1,6 @@
 """planecal calibrate SAMPLES... [--initial P.json] [--out R.json] [--max-iter N]
 [--improvement-limit X] [--outlier-sigma K] [--method gn|lm] [--free NAMES]
-[--level offsets|full] [--compliance] [--geometry-prior MM,MRAD]
+[--level offsets|full|nonkinematic] [--compliance] [--geometry-prior MM,MRAD]
 [--weighted [--repeatability-mm R] [--distance-sigma-um S]] [--rrd FILE]
 
 The one calibration (planecal.estimation.calibrate), with the options every command that

@@ -1,5 +1,5 @@
 """planecal demo [--scene S] [--samples N] [--seed K] [--dir D] [--errors ideal|realistic|FILE]
-[--level offsets|full] [--compliance] [--rrd FILE] [--force]
+[--level offsets|full|nonkinematic] [--compliance] [--rrd FILE] [--force]
 
 The main job on the built-in twin: rehearse a sampling run on the default scene (the
 thesis's final cell) in the world of an error profile (default realistic: a robot of the

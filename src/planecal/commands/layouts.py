@@ -1,4 +1,4 @@
-"""planecal layouts [--scene S] [--samples N] [--seed K] [--level offsets|full] [--compliance]
+"""planecal layouts [--scene S] [--samples N] [--seed K] [--level offsets|full|nonkinematic] [--compliance]
 [--free NAMES] [--out L.json]
 
 For 1, 2 and 3 of the scene's plates (every subset), the parameters random collision-free

@@ -2,7 +2,7 @@
 [--jobs J | --scheduler tcp://HOST:PORT] [--results FILE.jsonl] [--resume]
 [--mode twin|rehearse|synthetic] [--seed K] [--truth-seed T] [--vary-truth]
 [--offsets-all] [--laser-noise-mm X] [--repeatability-mm X] [--quantization]
-[--level offsets|full] [--compliance] [--free NAMES] [--weighted] [--slope 50,100,200]
+[--level offsets|full|nonkinematic] [--compliance] [--free NAMES] [--weighted] [--slope 50,100,200]
 [--slope-runs R]
 [--roll-deg X] [--ik-choice wrist|nearest] [--errors ideal|realistic|FILE.json] [--force]
 

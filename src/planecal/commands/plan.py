@@ -1,6 +1,6 @@
 """planecal plan [--scene S] [--samples N] [--candidates M] [--seed K] --out POSES.json
 [--target-std-urad X | --target-ap-mm X] [--no-order]
-[--measure R [--jobs J | --scheduler tcp://HOST:PORT]] [--level offsets|full] [--compliance]
+[--measure R [--jobs J | --scheduler tcp://HOST:PORT]] [--level offsets|full|nonkinematic] [--compliance]
 [--free NAMES]
 
 D-optimal sample poses: N of M collision-free candidates (the sampling run's pose
