@@ -174,3 +174,78 @@ def test_scenes_lists_each_scenes_robot(capsys):
     assert main(["scenes", "--json"]) == 0
     rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
     assert rows["ur5_table"]["robot"] == "ur5" and rows["thesis_final"]["robot"] == "mc70"
+
+
+@pytest.fixture(scope="module")
+def ur5_cell():
+    from planecal.safety.collision import CollisionWorld
+    scene = load_scene("ur5_table")
+    return scene, CollisionWorld(scene, clearance_m=0.01)
+
+
+def test_plans_robot_time_is_the_rehearsals_at_the_ur5s_step(ur5_cell, tmp_path):
+    """plan's robot time of its list (the UR5's 129 counts a tick and 8 ms) is the time a
+    rehearsal of that list takes, but for the laser reads: the plan counts the twin's
+    median of 102 ticks a read, the exact twin (no noise) takes its buffer's 100. So within
+    2 ticks a sample, and the travel exactly (at the MC70's 50 counts the plan said 2.6x)."""
+    from planecal.studies.planning import plan
+    from planecal.studies.rehearsal import rehearse_planned
+    from planecal.twin import Twin, TwinOptions
+    scene, world = ur5_cell
+    res = plan(scene, 16, 120, 2, None, world)
+    n, tick_s = res["samples"], scene.robot.tick_s
+    stats = rehearse_planned(scene, np.array(res["counts"]), np.array(res["plates"]),
+                             tmp_path / "run.tsv",
+                             Twin(scene, truth="nominal", seed=0, options=TwinOptions.exact()),
+                             world)
+    assert stats.status == "complete" and stats.samples == n
+    assert stats.read_ticks == 100 * n
+    assert stats.travel_ticks == res["tour"]["travel_ticks"]  # the tour's own count
+    predicted = res["robot_time_s"]["planned"] / tick_s
+    assert predicted == pytest.approx(stats.ticks - 1 + 2 * n, abs=1e-6)  # 1: first exchange
+    assert res["robot_time_per_sample_s"]["planned"] == pytest.approx(
+        stats.robot_time_s / n, rel=0.02)
+
+
+class _Unreachable:
+    """A collision checker that blocks every path to and from one configuration."""
+
+    def __init__(self, world, q_bad):
+        self.world, self.q_bad = world, np.asarray(q_bad)
+
+    def check_config(self, q):
+        return self.world.check_config(q)
+
+    def check_path(self, q0, q1):
+        from types import SimpleNamespace
+        if any(np.allclose(q, self.q_bad, atol=1e-9) for q in (q0, q1)):
+            return SimpleNamespace(ok=False, pair=("wall", "q_bad"))
+        return self.world.check_path(q0, q1)
+
+
+def test_a_plan_lists_only_poses_its_run_can_visit(ur5_cell, tmp_path):
+    """A planned pose no path reaches (straight or by a detour) is dropped from the list,
+    and the plan says so; the rehearsal of the list then completes (before: the pose stayed
+    in the list, the run gave up on it at the end)."""
+    from planecal.model.encoder import counts_to_joints
+    from planecal.studies.planning import candidates, plan
+    from planecal.studies.rehearsal import rehearse_planned
+    from planecal.twin import Twin
+    scene, world = ur5_cell
+    n, m, seed = 16, 120, 2
+    clear = plan(scene, n, m, seed, None, world)
+    assert clear["dropped"] is None and clear["samples"] == n
+    # a chosen pose of the candidates' first half (theirs is the checker-free draw)
+    first = {tuple(c) for c in candidates(scene, m - m // 2, seed, world)[0].tolist()}
+    bad = next(c for c in clear["counts"] if tuple(c) in first)
+    checker = _Unreachable(world, counts_to_joints(scene.robot, np.array(bad)))
+    res = plan(scene, n, m, seed, None, checker)
+    assert res["dropped"].startswith(f"1 of the {n} planned poses dropped (")
+    assert res["samples"] == len(res["counts"]) == n - 1 and bad not in res["counts"]
+    assert sorted(map(tuple, res["counts"] + [bad])) == sorted(map(tuple, clear["counts"]))
+    # the prediction is of the poses listed: one row fewer, det(J^T J) smaller
+    # (det(G - a a^T) = det(G) (1 - a^T G^-1 a))
+    assert res["logdet_planned"] < clear["logdet_planned"]
+    stats = rehearse_planned(scene, np.array(res["counts"]), np.array(res["plates"]),
+                             tmp_path / "run.tsv", Twin(scene, seed=1), checker)
+    assert stats.status == "complete", stats.reason

@@ -71,6 +71,13 @@ class Robot:
         return self.kinematics.n_joints
 
     @property
+    def step_counts(self) -> int:
+        """The step generator's step a tick [counts]: one count below the controller's
+        limit ``max_step_counts`` (the MC70's FD11: 50 of 51). Every move, and every
+        estimate of robot time, is cut at this step (``sampling.steps``)."""
+        return max(1, self.max_step_counts - 1)
+
+    @property
     def folder(self) -> Path | None:
         """The description's folder (models/<robot>/, or an imported robot's directory)."""
         return None if self.source is None else self.source.parent
