@@ -403,7 +403,8 @@ def _steps(path: Path, imp: Imported, gain: float, enc: EncoderSettings) -> tupl
     if not imp.velocities[slow] > 0:
         raise InputError(f"{path}: joint {imp.joints[slow].name!r} has no velocity limit: "
                          "give --max-step-counts and --trip-step-counts")
-    full = imp.velocities[slow] * gain * enc.tick_s
+    # a hair of rounding forgiven: planecal urdf writes trip / (gain tick) as the velocity
+    full = imp.velocities[slow] * gain * enc.tick_s * (1 + 1e-12)
     trip = enc.trip_step_counts or max(2, int(full))
     step = enc.max_step_counts or max(1, min(trip - 1, int(enc.speed_fraction * full)))
     return step, trip
