@@ -146,7 +146,8 @@ def test_joint_offsets_export_for_any_robot_and_ur_only_for_a_ur(tmp_path, capsy
 
 
 def test_generic_profile_for_a_robot_without_one(tmp_path, caplog):
-    from planecal.twin.generic_profile import REFERENCE_REACH_M, generic_document
+    from planecal.model.robot import REFERENCE_REACH_M
+    from planecal.twin.generic_profile import generic_document
     from planecal.twin.profile import load_profile
     kr = tmp_path / "arm"
     kr.mkdir()
@@ -168,6 +169,42 @@ def test_generic_profile_for_a_robot_without_one(tmp_path, caplog):
     assert prof.doc.geometry.alpha_rad == mc.geometry.alpha_rad  # angles as they are
     ideal, how = generic_document("ideal", robot)
     assert "used as it is" in how
+
+
+def test_a_robot_without_a_repeatability_gets_one_default_everywhere(tmp_path, capsys):
+    """robot.json without repeatability_mm (robot import without --repeatability-mm): the
+    MC70's 0.07 mm scaled by reach, the same figure for the twin's noise, the generic
+    profile, plan and layouts, and robot show says it is a default (before: 0 in plan and
+    layouts, the generic profile silently by reach)."""
+    from planecal.estimation.noise import repeatability_sigma
+    from planecal.model.kinematics import reach_m
+    from planecal.model.robot import REFERENCE_REACH_M
+    from planecal.studies.layouts import layout_study
+    from planecal.twin.profile import load_profile
+    arm = tmp_path / "arm"
+    arm.mkdir()
+    doc = json.loads(load_robot("ur5").source.read_text())
+    doc.pop("repeatability_mm")
+    doc["name"] = "UR5 copy without a repeatability"
+    (arm / "robot.json").write_text(json.dumps(doc))
+    robot = load_robot(arm)
+    want = 0.07 * reach_m(robot.kinematics) / REFERENCE_REACH_M
+    assert not robot.repeatability_given
+    assert robot.repeatability_m * 1e3 == pytest.approx(want) and 0.015 < want < 0.03
+    assert main(["robot", "show", str(arm)]) == 0
+    out = capsys.readouterr().out
+    assert f"repeatability: +-{want:.3g} mm, a default" in out
+    # the generic profile: the robot's share of the MC70's (0.081 of 0.07 mm)
+    mc = load_profile("realistic", load_robot("mc70")).doc.joints.repeatability_mm
+    assert load_profile("realistic", robot).doc.joints.repeatability_mm == \
+        pytest.approx(mc * want / 0.07)
+    # the predictions' noise model: the same repeatability, not zero
+    cell = json.loads((load_scene("ur5_table").path).read_text())
+    cell["robot"] = "arm"
+    (tmp_path / "cell.json").write_text(json.dumps(cell))
+    res = layout_study(load_scene(tmp_path / "cell.json"), samples=20, seed=0)
+    assert res["noise"]["joint_sigma_rad"] == pytest.approx(
+        repeatability_sigma(robot, want * 1e-3)) and res["noise"]["joint_sigma_rad"] > 0
 
 
 def test_scenes_lists_each_scenes_robot(capsys):
