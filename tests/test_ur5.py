@@ -286,3 +286,20 @@ def test_a_plan_lists_only_poses_its_run_can_visit(ur5_cell, tmp_path):
     stats = rehearse_planned(scene, np.array(res["counts"]), np.array(res["plates"]),
                              tmp_path / "run.tsv", Twin(scene, seed=1), checker)
     assert stats.status == "complete", stats.reason
+
+
+def test_validate_names_the_profiles_compliant_joints():
+    """validate's breakdown names the joints the world's profile makes compliant: the
+    UR5's J2, J3 and J4 (before: 'J2, J3' for every robot), the MC70's J2 and J3."""
+    from planecal.studies.validation.truths import cannot_remove
+    from planecal.twin.profile import load_profile
+    from planecal.twin.world import source_labels, study_world
+    for scene, joints in (("ur5_table", "J2, J3, J4"), ("thesis_final", "J2, J3")):
+        sc = load_scene(scene)
+        _, opts = study_world(sc, load_profile("realistic", sc.robot), 0)
+        assert source_labels(opts)["compliance"] == f"gravity compliance ({joints})"
+    bd = {"mode": "alone", "sources": ["compliance"],
+          "what": {"compliance": "gravity compliance (J2, J3, J4)"},
+          "variants": [{"variant": "compliance alone", "ap_after_mm": 0.9},
+                       {"variant": "none (cell only)", "ap_after_mm": 0.1}]}
+    assert cannot_remove(bd)[0]["what"] == "gravity compliance (J2, J3, J4)"
