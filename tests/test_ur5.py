@@ -303,3 +303,23 @@ def test_validate_names_the_profiles_compliant_joints():
           "variants": [{"variant": "compliance alone", "ap_after_mm": 0.9},
                        {"variant": "none (cell only)", "ap_after_mm": 0.1}]}
     assert cannot_remove(bd)[0]["what"] == "gravity compliance (J2, J3, J4)"
+
+
+def test_the_ur5_demo_works_at_any_seed(tmp_path):
+    """The realistic UR5's link geometry leaves an offsets-only fit 3-15x the noise; its
+    sensor angles are determined at the noise (0.1-0.4 of their 0.01 rad limit) but their
+    reported std is then above the limit. Judged at the noise model's level they are a
+    warning, not a refusal (before: seeds 0, 2, 3, 4 exited 1, 'the samples cannot
+    identify phi_y, phi_z'); the joint offsets still must meet their limits. 40 samples,
+    seeds 0-4."""
+    for seed in range(5):
+        d = tmp_path / f"s{seed}"
+        code, out = _run(["demo", "--scene", "ur5_table", "--samples", "40", "--seed",
+                          str(seed), "--dir", str(d), "-q"])
+        assert code == 0, (seed, out[-400:])
+        doc = json.loads((d / "result.json").read_text())
+        ident = doc["identifiability"]
+        assert not ident["not_identifiable"] and ident["residual_over_noise"] > 2
+        for pd in ident["mismatch_inflated"]:  # the sensor's frame only, within at the noise
+            assert pd["parameter"] in ("o_x", "o_y", "o_z", "phi_y", "phi_z")
+            assert pd["noise_std"] < pd["limit"] < pd["std"]

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from planecal.estimation.identifiability import Covariance, Identifiability, uncertainty
-from planecal.estimation.noise import row_weights
+from planecal.estimation.noise import noise_variance, row_weights
 from planecal.estimation.solver import Iteration, Prior, SolverOptions, Status, least_squares
 from planecal.model.cell_params import CellParams
 from planecal.model.layout import ParamLayout, level1_layout
@@ -48,6 +48,10 @@ class FitOptions(SolverOptions):
     # from the sensor itself [m]
     joint_sigma_rad: float | None = None
     distance_sigma_m: float = 1e-6
+    # the noise model "not identifiable in practice" is judged at (identifiability's
+    # ``_practical``), with distance_sigma_m: the repeatability's joint-angle std [rad]
+    # (the weighted fit's joint_sigma_rad where set; None: at the residuals' level)
+    noise_joint_sigma_rad: float | None = None
     # a prior (maximum a posteriori; level 2): ((name, std), ...) pulls those free
     # parameters towards their initial values, weighed as if the distances had the std
     # prior_sigma_m: rows (x - x0) * prior_sigma_m / std join the distance rows (gn only)
@@ -293,6 +297,20 @@ def reference_rows(layout: ParamLayout, ref, sigma_m: float) -> tuple:
     return cols[ref.plates[0]], cols[ref.plates[1]], float(ref.separation_m), w
 
 
+def _noise_var(pb: Problem, params: CellParams, used: np.ndarray) -> np.ndarray | None:
+    """Each used sample's variance under the noise model of ``FitOptions`` (the
+    repeatability on the beam and the sensor's own, ``noise.noise_variance``) at the
+    solution, or None when the options hold no noise model."""
+    opt = pb.options
+    s = opt.joint_sigma_rad if opt.joint_sigma_rad is not None else opt.noise_joint_sigma_rad
+    if s is None:
+        return None
+    offsets = pb.layout.mask(pb.layout.group("joint_offsets").names)
+    _, J = predict_joints_with_jacobian(pb.robot, pb.joints.rows(used), params,
+                                        pb.plate[used], pb.layout, offsets)
+    return noise_variance(J, s, opt.distance_sigma_m)
+
+
 def solve(problem: Problem) -> Result:
     """Fit the cell parameters to the problem's samples (module docstring)."""
     pb = problem
@@ -307,13 +325,16 @@ def solve(problem: Problem) -> Result:
     # residuals over all samples (outliers included), for reporting
     final_r = r if sol.used.all() else predict(pb.robot, pb.qe, params, pb.plate,
                                                pb.direction) - pb.d_m
+    v = _noise_var(pb, params, sol.used)
     if prior is not None:  # the posterior covariance: the prior rows join the data's
         P, rp = prior.rows(sol.x, J.shape[1])
         Jw, rw = (J, r) if w is None else (J * w[:, None], r * w)
+        vp = None if v is None else np.concatenate([v if w is None else v * w ** 2,
+                                                    np.full(len(P), opt.prior_sigma_m ** 2)])
         ident, cov, sigma = uncertainty(np.vstack([Jw, P]), np.concatenate([rw, rp]), layout,
-                                        free, opt)
+                                        free, opt, noise_var=vp)
     else:
-        ident, cov, sigma = uncertainty(J, r, layout, free, opt, weights=w)
+        ident, cov, sigma = uncertainty(J, r, layout, free, opt, weights=w, noise_var=v)
     return Result(pb, params, sol.converged, sol.iterations, sol.initial_cost,
                   sol.final_cost, sol.history, final_r, sol.initial_r, sol.used,
                   sol.outliers, sigma, cov, ident, sol.notes, sol.status)
