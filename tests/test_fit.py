@@ -390,7 +390,8 @@ def test_covariance_and_identifiability_are_typed_and_agree(two_plane_problem):
                        "unidentifiable_directions", "weak_directions", "correlated_pairs",
                        "singular_values", "scaled_singular_values", "condition_number_scaled",
                        "observability", "sigma_mm", "samples", "rank",
-                       "identifiable_min_scaled_ratio", "weighted", "variance_factor"]
+                       "identifiable_min_scaled_ratio", "weighted", "variance_factor",
+                       "mismatch_inflated", "residual_over_noise"]
     assert list(d["observability"]) == ["O1", "O2", "O3", "O4"]
     assert d["free"] == list(cov.names) and d["samples"] == len(two_plane_problem)
     assert d["rank"] == len(cov.names) and d["sigma_mm"] == pytest.approx(res.sigma_m * 1e3)

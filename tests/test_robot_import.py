@@ -92,6 +92,38 @@ def test_urdf_writes_the_imported_robot_back(kr16, tmp_path):
         assert np.abs(T - _urdf_flange(orig, q)).max() < 1e-9
 
 
+def _wrapped(a, b):
+    """Angles a - b wrapped to (-pi, pi] (alpha = -pi and +pi are one twist)."""
+    return np.angle(np.exp(1j * (np.asarray(a) - np.asarray(b))))
+
+
+def test_import_urdf_import_round_trip(kr16, tmp_path):
+    """planecal urdf's file imports back (--tip flange: its laser frame hangs below) as the
+    same chain, joint limits, controller steps (from the joint velocities it writes) and
+    masses (before: velocity 0 was refused, and no <inertial> was written)."""
+    back, again = tmp_path / "back.urdf", tmp_path / "again"
+    assert main(["urdf", "--scene", str(kr16[1]), "--out", str(back), "-q"]) == 0
+    assert main(["robot", "import", str(back), "--out", str(again), "--tip", "flange",
+                 "--visual", "collision", "-q"]) == 0
+    a = json.loads((kr16[0] / "robot.json").read_text())
+    b = json.loads((again / "robot.json").read_text())
+    for ja, jb in zip(a["chain"]["joints"], b["chain"]["joints"]):
+        for k in ("a_m", "d_m"):
+            assert jb[k] == pytest.approx(ja[k], abs=1e-12)
+        for k in ("alpha_rad", "beta_rad", "theta0_rad"):
+            assert abs(_wrapped(jb[k], ja[k])) < 1e-11
+    for f in ("base", "flange"):
+        assert np.allclose(b["chain"][f]["xyz_m"], a["chain"][f]["xyz_m"], atol=1e-12)
+        assert np.all(np.abs(_wrapped(b["chain"][f]["rpy_rad"], a["chain"][f]["rpy_rad"])) < 1e-11)
+    assert b["joint_limits_deg"] == a["joint_limits_deg"] and b["joint_names"] == a["joint_names"]
+    assert b["controller"] == a["controller"]  # max and trip steps, tick, home
+    assert len(b["masses"]) == len(a["masses"]) == 6
+    for ma, mb in zip(a["masses"], b["masses"]):
+        assert mb["frame"] == ma["frame"] and mb["mass_kg"] == ma["mass_kg"]
+        assert np.allclose(mb["com_m"], ma["com_m"], atol=1e-12)
+        assert np.allclose(mb["inertia_kg_m2"], ma["inertia_kg_m2"], atol=1e-12)
+
+
 def test_scene_new_rehearse_calibrate_recovers_the_offsets(kr16, tmp_path, capsys):
     _, cell = kr16
     scene = json.loads(cell.read_text())

@@ -1,4 +1,5 @@
-"""Step generator (seed 7.1.2): integer, synchronized, <= 51 counts a tick, exact landing."""
+"""Step generator (seed 7.1.2): integer, synchronized, <= 51 counts a tick at the MC70's
+step (50), exact landing."""
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -6,6 +7,7 @@ from hypothesis import strategies as st
 from planecal.sampling.steps import MAX_STEP, max_step, n_steps, step_path
 
 LIMIT = (1 << 24) - 1
+STEP = 50  # the MC70's (Robot.step_counts: one below robot.json's max_step_counts 51)
 counts = st.lists(st.integers(0, LIMIT), min_size=6, max_size=6).map(
     lambda v: np.array(v, np.int64))
 near = st.lists(st.integers(-400, 400), min_size=6, max_size=6).map(
@@ -13,8 +15,8 @@ near = st.lists(st.integers(-400, 400), min_size=6, max_size=6).map(
 
 
 def check_path(start, goal, dwell=0):
-    rows = step_path(start, goal, dwell=dwell)
-    n = n_steps(start, goal)
+    rows = step_path(start, goal, STEP, dwell=dwell)
+    n = n_steps(start, goal, STEP)
     dq = goal - start
     assert rows.dtype == np.int64
     assert rows.shape == (n + dwell, 6)
@@ -63,22 +65,22 @@ def test_seed_example():
     """Seed 7.1.2: +300 on q1-q3, -300 on q4-q5 from home gives six rows of 50."""
     home = np.full(6, 8388608, np.int64)
     goal = home + np.array([300, 300, 300, -300, -300, 0])
-    rows = step_path(np.zeros(6, np.int64), goal - home)
+    rows = step_path(np.zeros(6, np.int64), goal - home, STEP)
     expect = np.array([[50, 50, 50, -50, -50, 0]]) * np.arange(1, 7)[:, None]
     assert np.array_equal(rows, expect)
 
 
 def test_no_motion_only_dwell():
     s = np.array([5, 6, 7, 8, 9, 10], np.int64)
-    rows = step_path(s, s, dwell=5)
+    rows = step_path(s, s, STEP, dwell=5)
     assert rows.shape == (5, 6) and np.all(rows == s)
-    assert step_path(s, s).shape == (0, 6)
+    assert step_path(s, s, STEP).shape == (0, 6)
 
 
 def test_full_range_move():
     start = np.zeros(6, np.int64)
     goal = np.full(6, LIMIT, np.int64) * np.array([1, -1, 1, 0, 1, -1])
-    rows = step_path(start, goal)
+    rows = step_path(start, goal, STEP)
     assert len(rows) == -(-LIMIT // 50)
     assert max_step(start, rows) == 50
     assert np.array_equal(rows[-1], goal)

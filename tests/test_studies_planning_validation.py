@@ -45,7 +45,7 @@ def test_plan_command_predicts_a_smaller_spread_than_random(tmp_path, capsys, sc
     # every planned pose is collision-free and the run consumes the list
     from planecal.model.encoder import counts_to_joints
     from planecal.io.samples import read_samples
-    from planecal.studies.planning import rehearse_planned
+    from planecal.studies.rehearsal import rehearse_planned
     from planecal.twin import Twin
     counts = np.array(res["counts"][:3])
     for c in counts:

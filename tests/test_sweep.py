@@ -42,6 +42,10 @@ def _spec(tmp_path, text):
     ('colour = ["red"]', "grid.colour: unknown axis"),
     ('samples = [20, 20]', "grid.samples: a value appears twice"),
     ('samples = ["20"]', "grid.samples: '20' is not an integer"),
+    # every run of such a cell would be refused (before: the sweep ran them all, failed)
+    ('level = ["offsets", "full"]',
+     "grid.samples: 20 samples cannot determine the 35 free parameters of level 'full' on "
+     "thesis_final: give more than 35"),
 ])
 def test_spec_checks_name_the_field(tmp_path, change, message):
     key = change.split(" =")[0]

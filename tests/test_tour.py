@@ -26,8 +26,8 @@ def test_move_ticks_is_the_step_generators_row_count():
         assert T.move_ticks(a, b, nominal, dwell) == len(step_path(a, b, nominal, dwell))
         assert T.move_ticks(a, b, nominal, dwell) == T.move_ticks(b, a, nominal, dwell)
     a = np.full(6, 8_000_000)
-    assert T.move_ticks(a, a) == 5  # no move: the dwell only
-    assert T.move_ticks(a, a + [0, 0, 0, 0, 0, 101]) == 3 + 5  # the joint with most counts
+    assert T.move_ticks(a, a, 50) == 5  # no move: the dwell only
+    assert T.move_ticks(a, a + [0, 0, 0, 0, 0, 101], 50) == 3 + 5  # the joint with most counts
 
 
 def test_robot_ticks_sums_the_legs():
@@ -35,25 +35,44 @@ def test_robot_ticks_sums_the_legs():
     a = start + [5000, 0, 0, 0, 0, 0]  # 100 ticks
     b = a + [0, -2550, 10, 0, 0, 0]  # 51 ticks
     via = a + [0, 0, 0, 0, 0, 500]  # 10 ticks there, then 51 to b
-    assert T.robot_ticks([a, b], start, read_ticks=100) == 100 + 5 + 100 + 51 + 5 + 100
-    assert T.robot_ticks([a, b], start, read_ticks=100, vias=[[], [via]]) == \
+    assert T.robot_ticks([a, b], start, read_ticks=100, nominal=50) == \
+        100 + 5 + 100 + 51 + 5 + 100
+    assert T.robot_ticks([a, b], start, read_ticks=100, vias=[[], [via]], nominal=50) == \
         100 + 5 + 100 + 10 + 51 + 5 + 100
-    assert T.robot_time_s([a, b], start, tick_s=0.01, read_ticks=0) == pytest.approx(1.61)
+    # on a robot: its step and its tick (the MC70's 50 counts and 10 ms, the UR5's 129
+    # counts and 8 ms: 39 + 20 ticks of travel)
+    from planecal.model.robot import load_robot
+    mc70, ur5 = load_robot("mc70"), load_robot("ur5")
+    assert (mc70.step_counts, ur5.step_counts) == (50, 129)
+    assert T.robot_time_s([a, b], start, mc70, read_ticks=0) == pytest.approx(1.61)
+    assert T.robot_time_s([a, b], start, ur5, read_ticks=0) == pytest.approx((59 + 10) * 0.008)
+
+
+_CELLS: dict = {}
+
+
+def _cell(name: str):
+    from planecal.safety.collision import CollisionWorld
+    from planecal.model.scene import load_scene
+    if name not in _CELLS:
+        scene = load_scene(name)
+        _CELLS[name] = scene, CollisionWorld(scene, clearance_m=0.01)
+    return _CELLS[name]
 
 
 @pytest.fixture(scope="module")
 def cell():
-    from planecal.safety.collision import CollisionWorld
-    from planecal.model.scene import load_scene
-    scene = load_scene("thesis_final")
-    return scene, CollisionWorld(scene, clearance_m=0.01)
+    return _cell("thesis_final")
 
 
-@pytest.mark.parametrize("planned", [False, True])
-def test_robot_ticks_match_the_twins_own_clock(cell, tmp_path, planned):
+@pytest.mark.parametrize("scene_name, planned", [("thesis_final", False),
+                                                 ("thesis_final", True), ("ur5_table", False)])
+def test_robot_ticks_match_the_twins_own_clock(tmp_path, scene_name, planned):
     """A rehearsal on the exact twin (no noise: each laser read takes exactly the 100
-    readings of its buffer) ticks exactly as ``visit`` + ``robot_ticks`` predict: the
-    random planner with its detours, and a pose list in the order ListPlanner takes it."""
+    readings of its buffer) ticks exactly as ``visit`` + ``robot_ticks`` predict at the
+    robot's own step (the MC70's 50 counts a tick, the UR5's 129) and tick: the random
+    planner with its detours, and a pose list in the order ListPlanner takes it. On the
+    UR5, at the MC70's 50 counts the run's travel (its Clock) was 2.6x the ticks driven."""
     from planecal.links.base import AlwaysEnabled
     from planecal.sampling.driver import Driver
     from planecal.sampling.planner import ListPlanner, Planner
@@ -61,7 +80,8 @@ def test_robot_ticks_match_the_twins_own_clock(cell, tmp_path, planned):
     from planecal.studies.planning import plan
     from planecal.twin import Twin, TwinOptions
 
-    scene, world = cell
+    scene, world = _cell(scene_name)
+    step, tick_s = scene.robot.step_counts, scene.robot.tick_s
     twin = Twin(scene, truth="nominal", seed=0, options=TwinOptions.exact())
     start = twin.current_counts.copy()
     q0 = counts_to_joints(scene.robot, start)
@@ -70,7 +90,7 @@ def test_robot_ticks_match_the_twins_own_clock(cell, tmp_path, planned):
         counts, plates = np.array(res["counts"]), np.array(res["plates"])
         # in the tour's order ListPlanner visits all 14, one of the moves by a detour
         # (unavoidable)
-        tr = T.order(counts, start, world, scene)
+        tr = T.order(counts, start, world, scene, nominal=step)
         assert tr.detours == 1 and tr.excluded == 0
         counts, plates = counts[tr.order], plates[tr.order]
         rs = RunSettings(scene=str(scene.path), samples=len(counts), seed=0)
@@ -85,14 +105,15 @@ def test_robot_ticks_match_the_twins_own_clock(cell, tmp_path, planned):
     assert stats.status == "complete"
     assert stats.rejected["laser"] == 0
     # +1: the driver's first exchange (a zero delta) is the run's
-    assert stats.ticks == 1 + T.robot_ticks(visits, start, read_ticks=100)
+    assert stats.ticks == 1 + T.robot_ticks(visits, start, read_ticks=100, nominal=step)
     # the run's own account (tour.Clock in SamplingRun): travel + dwell + reads
     assert stats.read_ticks == 100 * rs.samples
     assert stats.ticks == 1 + stats.travel_ticks + rs.dwell_ticks * rs.samples + stats.read_ticks
     per = stats.per_sample()
-    assert per["travel_per_sample_s"] == round(stats.travel_ticks * 0.01 / rs.samples, 3)
-    assert per["robot_time_per_sample_s"] == round(stats.ticks * 0.01 / rs.samples, 3)
-    assert any(v.via for v in visits)  # the check covered detour legs
+    assert per["travel_per_sample_s"] == round(stats.travel_ticks * tick_s / rs.samples, 3)
+    assert per["robot_time_per_sample_s"] == round(stats.ticks * tick_s / rs.samples, 3)
+    if scene_name == "thesis_final":  # the check covered detour legs (the UR5 took none)
+        assert any(v.via for v in visits)
 
 
 def _brute(C):
@@ -105,8 +126,8 @@ def test_order_is_optimal_on_small_instances():
     for n in range(1, 8):
         for _ in range(6):
             nodes = rng.integers(8_000_000, 8_400_000, (n + 1, 6))
-            tr = T.order(nodes[1:], nodes[0])
-            C = T.tick_matrix(nodes).astype(float)
+            tr = T.order(nodes[1:], nodes[0], nominal=50)
+            C = T.tick_matrix(nodes, 50).astype(float)
             assert sorted(tr.order) == list(range(n))
             assert tr.travel_ticks == T.path_cost(C, [0, *(i + 1 for i in tr.order)])
             assert tr.travel_ticks == _brute(C)
@@ -120,9 +141,9 @@ def test_heuristic_close_to_optimal_and_never_worse_than_the_input():
     gaps = []
     for _ in range(30):
         nodes = rng.integers(8_000_000, 8_400_000, (10, 6))
-        C = T.tick_matrix(nodes).astype(float)
+        C = T.tick_matrix(nodes, 50).astype(float)
         best = T.path_cost(C, [0, *T.held_karp(C)])
-        h = T.order(nodes[1:], nodes[0], exact_max=0)
+        h = T.order(nodes[1:], nodes[0], exact_max=0, nominal=50)
         assert h.travel_ticks <= T.path_cost(C, range(10))
         gaps.append(h.travel_ticks / best - 1)
     assert max(gaps) < 0.03
@@ -132,8 +153,8 @@ def test_heuristic_close_to_optimal_and_never_worse_than_the_input():
 def test_order_keeps_a_good_input_order():
     rng = np.random.default_rng(2)
     nodes = rng.integers(8_000_000, 8_400_000, (40, 6))
-    first = T.order(nodes[1:], nodes[0])
-    again = T.order(nodes[1:][first.order], nodes[0])
+    first = T.order(nodes[1:], nodes[0], nominal=50)
+    again = T.order(nodes[1:][first.order], nodes[0], nominal=50)
     assert again.travel_ticks <= first.travel_ticks
 
 
@@ -154,9 +175,9 @@ def test_checked_order_is_driven_as_planned_and_saves_robot_time(cell):
     def ticks(idx):
         v = T.visit(ListPlanner(scene, counts[idx], plates[idx], world), q0, len(idx))
         seq = [int(np.flatnonzero(np.all(counts[idx] == x.goal, axis=1))[0]) for x in v]
-        return T.robot_ticks(v, start), seq, v
+        return T.robot_ticks(v, start, nominal=50), seq, v
 
-    tr = T.order(counts, start, world, scene)
+    tr = T.order(counts, start, world, scene, nominal=50)
     assert tr.detours == 0 and tr.excluded == 0 and tr.paths_checked > 0
     t_tour, seq, v = ticks(np.array(tr.order))
     assert seq == list(range(len(counts)))  # visited exactly in the tour's order
@@ -177,9 +198,9 @@ def test_checked_order_is_driven_as_planned_and_saves_robot_time(cell):
 
 def test_order_errors():
     with pytest.raises(ValueError, match="blocked must be"):
-        T.order(np.zeros((2, 6)), np.zeros(6), blocked="nope")
+        T.order(np.zeros((2, 6)), np.zeros(6), blocked="nope", nominal=50)
     with pytest.raises(ValueError, match="needs the scene"):
-        T.order(np.zeros((2, 6)), np.zeros(6), checker=object())
+        T.order(np.zeros((2, 6)), np.zeros(6), checker=object(), nominal=50)
 
 
 def test_clock_counts_the_driven_ticks_and_estimates_them_at_rest(cell, tmp_path):
@@ -204,7 +225,7 @@ def test_clock_counts_the_driven_ticks_and_estimates_them_at_rest(cell, tmp_path
     def run(make_acquirer):
         twin = Twin(scene, truth=truth, seed=rs.seed)
         start = twin.current_counts.copy()
-        clock = T.Clock(make_acquirer(twin), start)
+        clock = T.Clock(make_acquirer(twin), start, rs.nominal_step_counts)
         tally = Tally()
         collect(Planner(scene, rs.pose, world), clock, MemoryRecorder(), rs.samples,
                 Cursor(counts_to_joints(scene.robot, start),

@@ -146,7 +146,8 @@ def test_joint_offsets_export_for_any_robot_and_ur_only_for_a_ur(tmp_path, capsy
 
 
 def test_generic_profile_for_a_robot_without_one(tmp_path, caplog):
-    from planecal.twin.generic_profile import REFERENCE_REACH_M, generic_document
+    from planecal.model.robot import REFERENCE_REACH_M
+    from planecal.twin.generic_profile import generic_document
     from planecal.twin.profile import load_profile
     kr = tmp_path / "arm"
     kr.mkdir()
@@ -170,7 +171,155 @@ def test_generic_profile_for_a_robot_without_one(tmp_path, caplog):
     assert "used as it is" in how
 
 
+def test_a_robot_without_a_repeatability_gets_one_default_everywhere(tmp_path, capsys):
+    """robot.json without repeatability_mm (robot import without --repeatability-mm): the
+    MC70's 0.07 mm scaled by reach, the same figure for the twin's noise, the generic
+    profile, plan and layouts, and robot show says it is a default (before: 0 in plan and
+    layouts, the generic profile silently by reach)."""
+    from planecal.estimation.noise import repeatability_sigma
+    from planecal.model.kinematics import reach_m
+    from planecal.model.robot import REFERENCE_REACH_M
+    from planecal.studies.layouts import layout_study
+    from planecal.twin.profile import load_profile
+    arm = tmp_path / "arm"
+    arm.mkdir()
+    doc = json.loads(load_robot("ur5").source.read_text())
+    doc.pop("repeatability_mm")
+    doc["name"] = "UR5 copy without a repeatability"
+    (arm / "robot.json").write_text(json.dumps(doc))
+    robot = load_robot(arm)
+    want = 0.07 * reach_m(robot.kinematics) / REFERENCE_REACH_M
+    assert not robot.repeatability_given
+    assert robot.repeatability_m * 1e3 == pytest.approx(want) and 0.015 < want < 0.03
+    assert main(["robot", "show", str(arm)]) == 0
+    out = capsys.readouterr().out
+    assert f"repeatability: +-{want:.3g} mm, a default" in out
+    # the generic profile: the robot's share of the MC70's (0.081 of 0.07 mm)
+    mc = load_profile("realistic", load_robot("mc70")).doc.joints.repeatability_mm
+    assert load_profile("realistic", robot).doc.joints.repeatability_mm == \
+        pytest.approx(mc * want / 0.07)
+    # the predictions' noise model: the same repeatability, not zero
+    cell = json.loads((load_scene("ur5_table").path).read_text())
+    cell["robot"] = "arm"
+    (tmp_path / "cell.json").write_text(json.dumps(cell))
+    res = layout_study(load_scene(tmp_path / "cell.json"), samples=20, seed=0)
+    assert res["noise"]["joint_sigma_rad"] == pytest.approx(
+        repeatability_sigma(robot, want * 1e-3)) and res["noise"]["joint_sigma_rad"] > 0
+
+
 def test_scenes_lists_each_scenes_robot(capsys):
     assert main(["scenes", "--json"]) == 0
     rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
     assert rows["ur5_table"]["robot"] == "ur5" and rows["thesis_final"]["robot"] == "mc70"
+
+
+@pytest.fixture(scope="module")
+def ur5_cell():
+    from planecal.safety.collision import CollisionWorld
+    scene = load_scene("ur5_table")
+    return scene, CollisionWorld(scene, clearance_m=0.01)
+
+
+def test_plans_robot_time_is_the_rehearsals_at_the_ur5s_step(ur5_cell, tmp_path):
+    """plan's robot time of its list (the UR5's 129 counts a tick and 8 ms) is the time a
+    rehearsal of that list takes, but for the laser reads: the plan counts the twin's
+    median of 102 ticks a read, the exact twin (no noise) takes its buffer's 100. So within
+    2 ticks a sample, and the travel exactly (at the MC70's 50 counts the plan said 2.6x)."""
+    from planecal.studies.planning import plan
+    from planecal.studies.rehearsal import rehearse_planned
+    from planecal.twin import Twin, TwinOptions
+    scene, world = ur5_cell
+    res = plan(scene, 16, 120, 2, None, world)
+    n, tick_s = res["samples"], scene.robot.tick_s
+    stats = rehearse_planned(scene, np.array(res["counts"]), np.array(res["plates"]),
+                             tmp_path / "run.tsv",
+                             Twin(scene, truth="nominal", seed=0, options=TwinOptions.exact()),
+                             world)
+    assert stats.status == "complete" and stats.samples == n
+    assert stats.read_ticks == 100 * n
+    assert stats.travel_ticks == res["tour"]["travel_ticks"]  # the tour's own count
+    predicted = res["robot_time_s"]["planned"] / tick_s
+    assert predicted == pytest.approx(stats.ticks - 1 + 2 * n, abs=1e-6)  # 1: first exchange
+    assert res["robot_time_per_sample_s"]["planned"] == pytest.approx(
+        stats.robot_time_s / n, rel=0.02)
+
+
+class _Unreachable:
+    """A collision checker that blocks every path to and from one configuration."""
+
+    def __init__(self, world, q_bad):
+        self.world, self.q_bad = world, np.asarray(q_bad)
+
+    def check_config(self, q):
+        return self.world.check_config(q)
+
+    def check_path(self, q0, q1):
+        from types import SimpleNamespace
+        if any(np.allclose(q, self.q_bad, atol=1e-9) for q in (q0, q1)):
+            return SimpleNamespace(ok=False, pair=("wall", "q_bad"))
+        return self.world.check_path(q0, q1)
+
+
+def test_a_plan_lists_only_poses_its_run_can_visit(ur5_cell, tmp_path):
+    """A planned pose no path reaches (straight or by a detour) is dropped from the list,
+    and the plan says so; the rehearsal of the list then completes (before: the pose stayed
+    in the list, the run gave up on it at the end)."""
+    from planecal.model.encoder import counts_to_joints
+    from planecal.studies.planning import candidates, plan
+    from planecal.studies.rehearsal import rehearse_planned
+    from planecal.twin import Twin
+    scene, world = ur5_cell
+    n, m, seed = 16, 120, 2
+    clear = plan(scene, n, m, seed, None, world)
+    assert clear["dropped"] is None and clear["samples"] == n
+    # a chosen pose of the candidates' first half (theirs is the checker-free draw)
+    first = {tuple(c) for c in candidates(scene, m - m // 2, seed, world)[0].tolist()}
+    bad = next(c for c in clear["counts"] if tuple(c) in first)
+    checker = _Unreachable(world, counts_to_joints(scene.robot, np.array(bad)))
+    res = plan(scene, n, m, seed, None, checker)
+    assert res["dropped"].startswith(f"1 of the {n} planned poses dropped (")
+    assert res["samples"] == len(res["counts"]) == n - 1 and bad not in res["counts"]
+    assert sorted(map(tuple, res["counts"] + [bad])) == sorted(map(tuple, clear["counts"]))
+    # the prediction is of the poses listed: one row fewer, det(J^T J) smaller
+    # (det(G - a a^T) = det(G) (1 - a^T G^-1 a))
+    assert res["logdet_planned"] < clear["logdet_planned"]
+    stats = rehearse_planned(scene, np.array(res["counts"]), np.array(res["plates"]),
+                             tmp_path / "run.tsv", Twin(scene, seed=1), checker)
+    assert stats.status == "complete", stats.reason
+
+
+def test_validate_names_the_profiles_compliant_joints():
+    """validate's breakdown names the joints the world's profile makes compliant: the
+    UR5's J2, J3 and J4 (before: 'J2, J3' for every robot), the MC70's J2 and J3."""
+    from planecal.studies.validation.truths import cannot_remove
+    from planecal.twin.profile import load_profile
+    from planecal.twin.world import source_labels, study_world
+    for scene, joints in (("ur5_table", "J2, J3, J4"), ("thesis_final", "J2, J3")):
+        sc = load_scene(scene)
+        _, opts = study_world(sc, load_profile("realistic", sc.robot), 0)
+        assert source_labels(opts)["compliance"] == f"gravity compliance ({joints})"
+    bd = {"mode": "alone", "sources": ["compliance"],
+          "what": {"compliance": "gravity compliance (J2, J3, J4)"},
+          "variants": [{"variant": "compliance alone", "ap_after_mm": 0.9},
+                       {"variant": "none (cell only)", "ap_after_mm": 0.1}]}
+    assert cannot_remove(bd)[0]["what"] == "gravity compliance (J2, J3, J4)"
+
+
+def test_the_ur5_demo_works_at_any_seed(tmp_path):
+    """The realistic UR5's link geometry leaves an offsets-only fit 3-15x the noise; its
+    sensor angles are determined at the noise (0.1-0.4 of their 0.01 rad limit) but their
+    reported std is then above the limit. Judged at the noise model's level they are a
+    warning, not a refusal (before: seeds 0, 2, 3, 4 exited 1, 'the samples cannot
+    identify phi_y, phi_z'); the joint offsets still must meet their limits. 40 samples,
+    seeds 0-4."""
+    for seed in range(5):
+        d = tmp_path / f"s{seed}"
+        code, out = _run(["demo", "--scene", "ur5_table", "--samples", "40", "--seed",
+                          str(seed), "--dir", str(d), "-q"])
+        assert code == 0, (seed, out[-400:])
+        doc = json.loads((d / "result.json").read_text())
+        ident = doc["identifiability"]
+        assert not ident["not_identifiable"] and ident["residual_over_noise"] > 2
+        for pd in ident["mismatch_inflated"]:  # the sensor's frame only, within at the noise
+            assert pd["parameter"] in ("o_x", "o_y", "o_z", "phi_y", "phi_z")
+            assert pd["noise_std"] < pd["limit"] < pd["std"]

@@ -239,9 +239,11 @@ def _ur(args, robot, params) -> int:
     if robot.controller_kind != "ur":
         raise InputError(f"--format ur: {robot.name}'s controller is not a UR (robot.json "
                          "controller.kind); --format offsets is for any robot")
-    if params.compliance.any():
-        print(f"note: {args.result} also fits joint compliance: it depends on the pose and "
-              "is not in a kinematics file (planecal compensate corrects targets with it)",
+    from planecal.io.urdf import not_in_urdf
+    left = not_in_urdf(params)  # what a fixed chain cannot hold
+    if left:
+        print(f"note: {args.result} also fits {', '.join(left)}: not in a kinematics file, "
+              "a fixed chain (planecal compensate corrects targets with the joints' errors)",
               file=sys.stderr)
     segs = ur_kinematics(robot, params)
     tag = hashlib.sha256(Path(args.result).read_bytes()).hexdigest()[:16]

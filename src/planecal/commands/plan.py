@@ -14,7 +14,7 @@ the random run), its travel per sample,  the predicted std (twin noise model) fo
 planned set and for the poses the sampling run itself would visit with the same seed
 ("random"); with --measure R also the measured spread on the twin over R runs each
 (planned poses replayed with fresh noise vs fresh random rehearsals, same truth). POSES.json holds the counts and plates
-(format planecal-poses/1); planecal.studies.planning.rehearse_planned runs them through
+(format planecal-poses/1); planecal.studies.rehearsal.rehearse_planned runs them through
 the sampling loop. The --measure runs go through planecal.studies.distributed (--jobs 1:
 in this process; default: a local Dask cluster; --scheduler: a cluster you run).
 """
@@ -137,6 +137,8 @@ def format_robot_time(res: dict) -> str:
     n = res["samples"]
     tp, tr = res["travel_per_sample_s"], res["robot_time_per_sample_s"]
     out = []
+    if res.get("dropped"):  # poses the run could not reach from the others: not listed
+        out.append(f"{res['dropped']}; the list holds the {n} the run visits")
     if res.get("target"):
         g = res["target"]
         what = "largest free offset std" if g["kind"] == "std" else "flange position error"

@@ -58,8 +58,10 @@ def add_arguments(p):
     p.add_argument("--trip-step-counts", type=count(2**31), metavar="N",
                    help="import: the controller's trip limit per tick (default: the slowest "
                         "joint's URDF velocity)")
-    p.add_argument("--repeatability-mm", type=float, default=0.0, metavar="MM",
-                   help="import: the datasheet's pose repeatability (default %(default)s)")
+    p.add_argument("--repeatability-mm", type=float, default=None, metavar="MM",
+                   help="import: the datasheet's pose repeatability, +- mm at the flange "
+                        "(default: none written; the robot then gets the MC70's 0.07 mm "
+                        "scaled by its reach, and robot show says so)")
     p.add_argument("--payload-kg", type=float, metavar="KG",
                    help="import: the rated payload (the generic error profile scales by it)")
     p.add_argument("--controller", choices=("fd11", "ur"),
@@ -129,6 +131,8 @@ def _import(args) -> int:
     out = Path(args.out)  # a new folder in one that exists (checked before the run: ``files``)
     if not 0 < args.speed_fraction <= 1:
         raise InputError(f"--speed-fraction {args.speed_fraction}: must be in (0, 1]")
+    if args.repeatability_mm is not None and not 0 <= args.repeatability_mm <= 5:
+        raise InputError(f"--repeatability-mm {args.repeatability_mm:g}: must be in [0, 5] mm")
     coupling = _coupling(args.coupling)
     path = Path(args.source)
     imp, u = ui.import_chain(path, args.tip)
@@ -164,8 +168,21 @@ def _summary(robot, imp, worst: float, parts: dict) -> None:
     print(f"inverse kinematics: {solver_name(robot)} ({kinematic_family(robot)})")
     print(f"shapes: {parts['visual']} visual, {parts['collision']} collision pieces; "
           f"masses: {len(robot.masses)}")
+    print(repeatability_line(robot))
     for note in imp.notes:
         print(f"note: {note}")
+
+
+def repeatability_line(robot) -> str:
+    """Where the robot's repeatability comes from, in one line."""
+    from planecal.model.robot import REFERENCE_REPEATABILITY_MM
+    mm = robot.repeatability_m * 1e3
+    if robot.repeatability_given:
+        return f"repeatability: +-{mm:.3g} mm (robot.json)"
+    return (f"repeatability: +-{mm:.3g} mm, a default: robot.json states none, so the MC70's "
+            f"{REFERENCE_REPEATABILITY_MM:g} mm scaled by the reach (the twin's noise, the "
+            "generic error profile, plan and layouts use it; put the datasheet's in "
+            "robot.json's repeatability_mm)")
 
 
 def _chain_table(robot) -> None:
@@ -200,7 +217,9 @@ def _show(args) -> int:
     info = {"name": robot.name, "file": str(robot.source), "sha256": robot.digest,
             "ik": solver_name(robot), "family": kinematic_family(robot),
             "reach_m": reach_m(robot.kinematics), "masses": len(robot.masses),
-            "shapes": parts, "errors": {p: profile_source(p, robot) for p in ("ideal", "realistic")}}
+            "shapes": parts, "errors": {p: profile_source(p, robot) for p in ("ideal", "realistic")},
+            "repeatability_mm": robot.repeatability_m * 1e3,
+            "repeatability_source": "robot.json" if robot.repeatability_given else "default"}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -210,6 +229,7 @@ def _show(args) -> int:
     print("shapes: " + ("none (no shapes.json: the twin and the checker need them)" if parts is None
                         else f"{parts['visual']} visual, {parts['collision']} collision pieces")
           + f"; masses: {len(robot.masses)}")
+    print(repeatability_line(robot))
     for p, src in info["errors"].items():
         print(f"error profile {p}: {src}")
     return 0

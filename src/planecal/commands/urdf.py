@@ -2,16 +2,20 @@
 [--mesh-prefix PREFIX]
 
 The robot as URDF: base link ``base``, six revolute joints whose values are planecal's
-joint angles q, ``flange`` and the sensor frame ``laser`` (fixed children). Without
---params: the nominal model (zero joint offsets, the scene's nominal sensor pose); with
---params (a calibration result or parameter file): its joint offsets, folded into the
-joint origins, and its sensor pose. Visual and collision meshes (planecal.model.geometry's, as
+joint angles q, ``flange`` and the sensor frame ``laser`` (fixed children), robot.json's
+masses as the links' inertials. Without --params: the nominal model (zero joint offsets,
+the scene's nominal sensor pose); with --params (a calibration result or parameter file
+made for the scene's robot, else refused): the calibrated model, its joint offsets,
+joint geometry and base frame in the joint origins, and its sensor pose. What a URDF
+cannot hold (joint compliance; level 3's gear harmonics, backlash and laser linearity)
+is left out, said in one line on stderr. Visual and collision meshes (planecal.model.geometry's, as
 the twin and the collision checker use them) go as STL files into FILE_meshes/ beside
 the URDF, referenced by a relative path, or by PREFIX + file name (e.g.
 package://mc70_description/meshes/). See planecal.io.urdf.
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 
@@ -71,12 +75,12 @@ def write_meshes(scene, params, mesh_dir: Path, prefix: str):
 def run(args) -> int:
     from planecal.io.params import load_params
     from planecal.model.scene import load_scene, nominal_params
-    from planecal.io.urdf import urdf_text
+    from planecal.io.urdf import not_in_urdf, urdf_text
 
     scene = load_scene(args.scene)
     out = Path(args.out)  # checked before the run (``files``)
     if args.params:
-        params = load_params(args.params)
+        params = load_params(args.params, scene.robot)
         source = f"calibrated: {args.params}"
     else:
         params = nominal_params(scene)
@@ -89,6 +93,12 @@ def run(args) -> int:
         refs = write_meshes(scene, params, mesh_dir, prefix)
         text = urdf_text(scene.robot, params, meshes=refs, source=source)
     out.write_text(text, encoding="utf-8")
+    left = not_in_urdf(params)
+    if left:
+        print(f"note: {args.params} also corrects {', '.join(left)}: a URDF is a fixed chain "
+              f"and cannot hold {'it' if len(left) == 1 else 'them'}, so {out} does not "
+              "(planecal compensate corrects a program's targets with the joints' errors)",
+              file=sys.stderr)
     print(f"URDF written to {out} ({source}"
           + (f"; {len(refs)} meshes in {out.stem}_meshes/" if refs else "") + ")")
     return 0

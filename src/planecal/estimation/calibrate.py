@@ -30,7 +30,7 @@ from planecal.base.errors import InputError
 from planecal.estimation.fit import (SIGMA_START_M, FitOptions, FitPrior, Problem, Result,
                                      reference_rows, solve)
 from planecal.estimation.identifiability import DEFAULT_TOL, BaseSet, Excluded, select_base
-from planecal.estimation.noise import row_weights
+from planecal.estimation.noise import repeatability_sigma, row_weights
 from planecal.model.cell_params import CellParams
 from planecal.model.layout import ParamLayout
 from planecal.model.layout import layout_prior
@@ -213,6 +213,9 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
     st = settings
     st.check()
     options = st.options
+    if options.joint_sigma_rad is None and options.noise_joint_sigma_rad is None:
+        # "not identifiable in practice" judged at the robot's noise, not at the mismatch
+        options = replace(options, noise_joint_sigma_rad=repeatability_sigma(robot))
     layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
     prior = layout_prior(layout) + (() if st.geometry_prior is None
                                     else geometry_prior(layout, *st.geometry_prior))

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from planecal.estimation.identifiability import Covariance, Identifiability, uncertainty
-from planecal.estimation.noise import row_weights
+from planecal.estimation.noise import noise_variance, row_weights
 from planecal.estimation.solver import Iteration, Prior, SolverOptions, Status, least_squares
 from planecal.model.cell_params import CellParams
 from planecal.model.layout import ParamLayout, level1_layout
@@ -48,6 +48,10 @@ class FitOptions(SolverOptions):
     # from the sensor itself [m]
     joint_sigma_rad: float | None = None
     distance_sigma_m: float = 1e-6
+    # the noise model "not identifiable in practice" is judged at (identifiability's
+    # ``_practical``), with distance_sigma_m: the repeatability's joint-angle std [rad]
+    # (the weighted fit's joint_sigma_rad where set; None: at the residuals' level)
+    noise_joint_sigma_rad: float | None = None
     # a prior (maximum a posteriori; levels 2 and 3): ((name, std), ...) pulls those free
     # parameters towards their initial values: rows (x - x0) * sigma / std join the
     # distance rows (gn only), sigma the distances' std: ``prior_sigma_m``, or None, the
@@ -315,6 +319,18 @@ TEMPER = 2.0  # the prior rows are weighed against twice the residuals' std (a t
 # posterior: the residuals hold the robot's mismatch with the model, which is not white noise;
 # on three_plates' realistic truths 0-4, 2 of the level-3 fits' tool error 1x, 2x and 3x the
 # residuals gave median 0.22, 0.13, 0.14 mm over two seeds)
+def _noise_var(pb: Problem, params: CellParams, used: np.ndarray) -> np.ndarray | None:
+    """Each used sample's variance under the noise model of ``FitOptions`` (the
+    repeatability on the beam and the sensor's own, ``noise.noise_variance``) at the
+    solution, or None when the options hold no noise model."""
+    opt = pb.options
+    s = opt.joint_sigma_rad if opt.joint_sigma_rad is not None else opt.noise_joint_sigma_rad
+    if s is None:
+        return None
+    offsets = pb.layout.mask(pb.layout.group("joint_offsets").names)
+    _, J = predict_joints_with_jacobian(pb.robot, pb.joints.rows(used), params,
+                                        pb.plate[used], pb.layout, offsets)
+    return noise_variance(J, s, opt.distance_sigma_m)
 
 
 def solve(problem: Problem) -> Result:
@@ -358,13 +374,16 @@ def _solve(pb: Problem, x0: np.ndarray | None = None) -> Result:
     # residuals over all samples (outliers included), for reporting
     final_r = r if sol.used.all() else predict(pb.robot, pb.qe, params, pb.plate,
                                                pb.direction) - pb.d_m
+    v = _noise_var(pb, params, sol.used)
     if prior is not None:  # the posterior covariance: the prior rows join the data's
         P, rp = prior.rows(sol.x, J.shape[1])
         Jw, rw = (J, r) if w is None else (J * w[:, None], r * w)
+        vp = None if v is None else np.concatenate([v if w is None else v * w ** 2,
+                                                    np.full(len(P), opt.prior_sigma_m ** 2)])
         ident, cov, sigma = uncertainty(np.vstack([Jw, P]), np.concatenate([rw, rp]), layout,
-                                        free, opt)
+                                        free, opt, noise_var=vp)
     else:
-        ident, cov, sigma = uncertainty(J, r, layout, free, opt, weights=w)
+        ident, cov, sigma = uncertainty(J, r, layout, free, opt, weights=w, noise_var=v)
     return Result(pb, params, sol.converged, sol.iterations, sol.initial_cost,
                   sol.final_cost, sol.history, final_r, sol.initial_r, sol.used,
                   sol.outliers, sigma, cov, ident, sol.notes, sol.status)

@@ -79,6 +79,8 @@ class PoorlyDetermined:
     parameter: str
     std: float
     limit: float
+    # its std at the noise model's level (``uncertainty``'s ``noise_var``; None: not known)
+    noise_std: float | None = None
 
 
 @dataclass(frozen=True)
@@ -102,7 +104,7 @@ class Identifiability:
     free: list[str]
     not_identifiable: list[str]
     no_effect: list[str]
-    poorly_determined: list[PoorlyDetermined]
+    poorly_determined: list[PoorlyDetermined]  # not identifiable in practice
     unidentifiable_directions: list[dict]  # each: parameter name -> component
     weak_directions: list[WeakDirection]
     correlated_pairs: list[CorrelatedPair]
@@ -116,6 +118,10 @@ class Identifiability:
     identifiable_min_scaled_ratio: float
     weighted: bool = False
     variance_factor: float | None = None  # weighted fit only
+    # std above its practical limit only through the residuals' model mismatch: at the
+    # noise model's level within it (identifiable; their std is reported)
+    mismatch_inflated: list[PoorlyDetermined] = field(default_factory=list)
+    residual_over_noise: float | None = None  # the residuals' rms over the noise model's
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -163,6 +169,35 @@ class Covariance:
                            for row in self.matrix]}
 
 
+CELL_KINDS = ("sensor_origin", "sensor_angles", "plane")  # the setup's frames, not the robot's
+
+
+def _practical(layout: ParamLayout, names: list[str], bad: np.ndarray, cov: np.ndarray,
+               A: np.ndarray, G: np.ndarray, S: np.ndarray, v: np.ndarray | None):
+    """(not identifiable in practice, inflated by mismatch): the identifiable parameters
+    whose std exceeds their ``practical_std``. With the rows' noise-model variances ``v``
+    a cell frame's parameter (``CELL_KINDS``: the sensor pose, the planes; they carry the
+    fit, the robot's parameters are its result) is judged at that noise (the sandwich
+    G A^T diag(v) A G of the column-scaled rows A, G = (A^T A)^+): within its limit there,
+    it is identifiable and its reported std large only because the residuals exceed the
+    noise (errors the model lacks: the realistic UR5's link geometry leaves an offsets fit
+    10-15x the noise, its sensor angles 0.09-0.4 of their limit at the noise and above it
+    at the residuals'), a warning. A robot parameter must meet its limit with the mismatch
+    (what it is exported for)."""
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    noise = None if v is None else np.sqrt(np.maximum(np.diag(G @ (A.T * v) @ A @ G), 0)) * S
+    limits = layout.practical_std(names)
+    poorly, inflated = [], []
+    for j, name in enumerate(names):
+        if bad[j] or not std[j] > limits[j]:
+            continue
+        pd = PoorlyDetermined(name, float(std[j]), float(limits[j]),
+                              None if noise is None else float(noise[j]))
+        cell = layout.group(layout.param(name).group).kind in CELL_KINDS
+        (inflated if cell and noise is not None and noise[j] <= limits[j] else poorly).append(pd)
+    return poorly, inflated
+
+
 def analyze(robot: Robot, qe: np.ndarray, params: CellParams, plane_index=None,
             free=None, sigma_m: float = 2e-6, options=None,
             layout: ParamLayout | None = None) -> tuple[Identifiability, Covariance]:
@@ -181,14 +216,15 @@ def analyze(robot: Robot, qe: np.ndarray, params: CellParams, plane_index=None,
 
 def uncertainty(Jf: np.ndarray, r: np.ndarray, layout: ParamLayout, free: np.ndarray,
                 opt=None, weights: np.ndarray | None = None,
-                known_sigma_m: float | None = None):
+                known_sigma_m: float | None = None, noise_var: np.ndarray | None = None):
     """Covariance and the identifiability report at a solution, for the free columns Jf of
     the Jacobian and the residuals r; ``weights`` (row weights 1/sqrt(v_i)): of the weighted
     fit (module docstring); ``known_sigma_m``: a known white noise std instead of the
-    residuals' estimate (``analyze``). Returns (Identifiability, Covariance, sigma_m =
+    residuals' estimate (``analyze``); ``noise_var``: each row's variance under the noise
+    model (``estimation.noise``; unweighted units), against which "not identifiable in
+    practice" is judged (``_practical``). Returns (Identifiability, Covariance, sigma_m =
     sqrt(|r|^2 / (m - rank)) of the unweighted residuals, or the known sigma)."""
-    opt = opt or Thresholds()
-    m, p = Jf.shape
+    opt, m = opt or Thresholds(), len(Jf)
     rr = float(r @ r)  # the unweighted residuals' (sigma_m)
     if weights is not None:
         Jf, r = Jf * weights[:, None], r * weights
@@ -224,11 +260,8 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, layout: ParamLayout, free: np.nda
     weak_dirs = [WeakDirection(float(ratio[i]), direction(Vt[i])) for i in np.flatnonzero(weak)]
     not_ident = sorted({k for d in unidentifiable for k in d}, key=free_names.index)
     bad = np.array([n in not_ident for n in free_names])
-    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    # identifiable in theory but not in practice: the data barely depends on it
-    limits = layout.practical_std(free_names)
-    poorly = [PoorlyDetermined(name, float(std[j]), float(limits[j]))
-              for j, name in enumerate(free_names) if not bad[j] and std[j] > limits[j]]
+    v = None if noise_var is None else noise_var * (1.0 if weights is None else weights ** 2)
+    poorly, inflated = _practical(layout, free_names, bad, cov, A, cov_scaled, S, v)
     not_ident = sorted(set(not_ident) | {pd.parameter for pd in poorly}, key=free_names.index)
     bad = np.array([n in not_ident for n in free_names])
     cov[bad, :] = np.nan
@@ -257,6 +290,8 @@ def uncertainty(Jf: np.ndarray, r: np.ndarray, layout: ParamLayout, free: np.nda
         identifiable_min_scaled_ratio=float(sk[-1] / s[0]) if len(sk) else 0.0,
         weighted=weights is not None,
         variance_factor=sigma2 if weights is not None else None,
+        mismatch_inflated=inflated,
+        residual_over_noise=None if v is None else float(np.sqrt(sigma2 / np.mean(v))),
     )
     return ident, covariance, sigma_m
 

@@ -246,7 +246,7 @@ class RobotFile(Model):
     joint_limits_deg: Limits
     encoder: Encoder
     inverse_kinematics: Solver = None
-    repeatability_mm: Repeatability = 0.0
+    repeatability_mm: Repeatability | None = None  # None: not given (model.robot's default)
     payload_kg: Payload | None = None
     controller: Controller
     masses: list[PointMass] = []

@@ -356,7 +356,7 @@ class EncoderSettings:
     speed_fraction: float = 0.1  # of the slowest joint's URDF velocity, per tick
     max_step_counts: int | None = None
     trip_step_counts: int | None = None
-    repeatability_mm: float = 0.0
+    repeatability_mm: float | None = None  # None: not written (model.robot's default)
     payload_kg: float | None = None
     controller: str | None = None
 
@@ -392,7 +392,6 @@ def description(path: Path, imp: Imported, name: str, enc: EncoderSettings) -> d
                                      "as given (planecal robot import's settings; "
                                      "C = I but for the entries listed)"},
         "inverse_kinematics": None,
-        "repeatability_mm": enc.repeatability_mm,
         "controller": {"kind": enc.controller, "tick_s": enc.tick_s,
                        "max_step_counts": steps[0], "trip_step_counts": steps[1],
                        "home_counts": [int(round(zero + gain * q)) for q in home_q]},
@@ -403,6 +402,8 @@ def description(path: Path, imp: Imported, name: str, enc: EncoderSettings) -> d
     }
     if enc.payload_kg is not None:
         doc["payload_kg"] = enc.payload_kg
+    if enc.repeatability_mm is not None:
+        doc["repeatability_mm"] = enc.repeatability_mm
     return doc
 
 
@@ -414,7 +415,8 @@ def _steps(path: Path, imp: Imported, gain: float, enc: EncoderSettings) -> tupl
     if not imp.velocities[slow] > 0:
         raise InputError(f"{path}: joint {imp.joints[slow].name!r} has no velocity limit: "
                          "give --max-step-counts and --trip-step-counts")
-    full = imp.velocities[slow] * gain * enc.tick_s
+    # a hair of rounding forgiven: planecal urdf writes trip / (gain tick) as the velocity
+    full = imp.velocities[slow] * gain * enc.tick_s * (1 + 1e-12)
     trip = enc.trip_step_counts or max(2, int(full))
     step = enc.max_step_counts or max(1, min(trip - 1, int(enc.speed_fraction * full)))
     return step, trip

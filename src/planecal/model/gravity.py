@@ -49,6 +49,30 @@ def gravity_world(robot: Robot, payload=None) -> tuple:
             np.array(com, float).reshape(-1, 3), np.array(kg, float), GRAVITY.copy())
 
 
+def inertia_matrix(six) -> np.ndarray | None:
+    """robot.json's inertia (ixx iyy izz ixy ixz iyz) as a symmetric 3x3 (None: none)."""
+    if six is None:
+        return None
+    xx, yy, zz, xy, xz, yz = (float(v) for v in six)
+    return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+
+def lumped(masses) -> tuple[float, np.ndarray, np.ndarray]:
+    """One body's masses ``(position (3,), mass[, inertia about its centre (3, 3) or
+    None])`` (all in the body's frame) as one: (total mass, its centre of mass, the
+    inertia about that centre: each mass's own, point masses none, plus m (|r|^2 I - r r^T)
+    for its offset r). (0, 0, 0) for none. The twin's bodies and the URDF's inertials."""
+    pts = [(np.asarray(p[0], float), float(p[1]), p[2] if len(p) > 2 else None)
+           for p in masses if p[1] > 0]
+    M = sum(m for _, m, _ in pts)
+    if not M:
+        return 0.0, np.zeros(3), np.zeros((3, 3))
+    c = sum(m * p for p, m, _ in pts) / M
+    I = sum(m * (np.dot(p - c, p - c) * np.eye(3) - np.outer(p - c, p - c))
+            + (np.zeros((3, 3)) if J is None else J) for p, m, J in pts)
+    return float(M), c, I
+
+
 @lru_cache(maxsize=1)
 def _compiled():
     """The twin's gravity_torque over many rows, compiled with numba (cached)."""

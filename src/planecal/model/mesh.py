@@ -163,12 +163,29 @@ def convex_hull(points) -> Mesh:
     if hit is None:
         import trimesh
         tm = trimesh.convex.convex_hull(P)
-        if not tm.is_watertight:  # pragma: no cover - qhull hulls are closed
-            raise RuntimeError("convex_hull: the hull is not watertight")
-        hit = (np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64))
+        if tm.is_watertight:
+            hit = (np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64))
+        else:  # trimesh merged points closer than its tolerance and broke faces
+            hit = _qhull(P)
         _CACHE.put(key, *hit)
     V, F = hit
     return Mesh(V.copy(), F.copy())
+
+
+def _qhull(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The hull's vertices and triangles from qhull as it gives them (closed: every edge
+    of its triangulated facets joins two), each turned outward by its facet's plane. For
+    points trimesh's hull cannot close: clusters within its merging tolerance (the
+    margin grown round an STL's float32 corners)."""
+    from scipy.spatial import ConvexHull
+    h = ConvexHull(P)
+    index = np.full(len(P), -1, np.int64)
+    index[h.vertices] = np.arange(len(h.vertices))
+    V, F = P[h.vertices], index[h.simplices]
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    inward = np.einsum("ij,ij->i", n, h.equations[:, :3]) < 0
+    F[inward] = F[inward][:, ::-1]
+    return V, F
 
 
 def box(extents, pose=None) -> Mesh:

@@ -25,6 +25,17 @@ from planecal.base.paths import data_folder
 from planecal.model.kinematics import Kinematics, from_standard_dh
 
 DEFAULT_ROBOT = "mc70"
+# the MC70's (seed H.1): the reference a robot without a stated repeatability is scaled from
+REFERENCE_REACH_M = 2.8334658438426485  # kinematics.reach_m of models/mc70/robot.json
+REFERENCE_REPEATABILITY_MM = 0.07  # its datasheet's, JIS B 8432
+
+
+def default_repeatability_m(kin: Kinematics) -> float:
+    """The repeatability [m] of a robot whose description states none: the MC70's 0.07 mm
+    scaled by the arm's reach (``kinematics.reach_m``; a UR5-sized arm 0.021 mm, a KR 16
+    0.052 mm). A stand-in for the datasheet's figure, which robot.json should hold."""
+    from planecal.model.kinematics import reach_m
+    return REFERENCE_REPEATABILITY_MM * 1e-3 * reach_m(kin) / REFERENCE_REACH_M
 
 
 @dataclass(frozen=True)
@@ -60,6 +71,9 @@ class Robot:
     gear_orders: tuple[tuple[int, ...], ...] = ((1, 2),) * 6
     backlash_preload_nm: tuple[float, ...] = (float("inf"),) * 6
     transmission_given: bool = False  # False: the defaults above (the robot gives none)
+    # False: robot.json states no repeatability_mm; repeatability_m is then
+    # ``default_repeatability_m`` (the MC70's scaled by reach), as every consumer reads it
+    repeatability_given: bool = True
 
     def __post_init__(self):
         if self.kinematics is None:
@@ -69,6 +83,13 @@ class Robot:
     @property
     def n_joints(self) -> int:
         return self.kinematics.n_joints
+
+    @property
+    def step_counts(self) -> int:
+        """The step generator's step a tick [counts]: one count below the controller's
+        limit ``max_step_counts`` (the MC70's FD11: 50 of 51). Every move, and every
+        estimate of robot time, is cut at this step (``sampling.steps``)."""
+        return max(1, self.max_step_counts - 1)
 
     @property
     def folder(self) -> Path | None:
@@ -95,12 +116,11 @@ def load_robot(name_or_path: str | Path = DEFAULT_ROBOT, relative_to: Path | Non
     raw = read_json(p, "robot description")
     rf = validate(RobotFile, raw, p, "robot description")
     enc, ctrl = rf.encoder, rf.controller
-    table = {}
-    kin = None
     if rf.dh is not None:
         table = dict(theta0=np.array([j.theta0_rad for j in rf.dh]),
                      d=np.array([j.d_m for j in rf.dh]), a=np.array([j.a_m for j in rf.dh]),
                      alpha=np.array([j.alpha_rad for j in rf.dh]))
+        kin = from_standard_dh(table["theta0"], table["d"], table["a"], table["alpha"])
     else:
         c = rf.chain
         kin = Kinematics(*(np.array([getattr(j, k) for j in c.joints]) for k in
@@ -115,7 +135,9 @@ def load_robot(name_or_path: str | Path = DEFAULT_ROBOT, relative_to: Path | Non
         coupling=enc.coupling_matrix(),
         encoder_bits=enc.bits,
         ik_kind=rf.inverse_kinematics,
-        repeatability_m=rf.repeatability_mm * 1e-3,
+        repeatability_m=(default_repeatability_m(kin) if rf.repeatability_mm is None
+                         else rf.repeatability_mm * 1e-3),
+        repeatability_given=rf.repeatability_mm is not None,
         tick_s=ctrl.tick_s,
         max_step_counts=ctrl.max_step_counts,
         trip_step_counts=ctrl.trip_step_counts,

@@ -234,9 +234,18 @@ def findings(doc: dict) -> list[Finding]:
         out.append(Finding(f"no effect: {name} does not change any distance in this data",
                            True))
     for pd in ident.get("poorly_determined", []):
+        noise = pd.get("noise_std")
+        why = ("the data barely depends on it" if noise is None or noise > pd["limit"] else
+               f"the model's mismatch (residuals {ident['residual_over_noise']:.1f}x the noise; "
+               f"{noise:.3g} at the noise model's level)")
         out.append(Finding(f"not identifiable in practice: {pd['parameter']} (std "
-                           f"{pd['std']:.3g} above {pd['limit']:g}): the data barely depends "
-                           "on it", True))
+                           f"{pd['std']:.3g} above {pd['limit']:g}): {why}", True))
+    for pd in ident.get("mismatch_inflated", []):
+        out.append(Finding(
+            f"poorly determined through model mismatch: {pd['parameter']} (std {pd['std']:.3g} "
+            f"above {pd['limit']:g}; at the noise model's level {pd['noise_std']:.3g}): the "
+            f"residuals are {ident['residual_over_noise']:.1f}x the noise, errors the model "
+            "lacks (a fuller model, --level full, may explain them)", True))
     for d in ident.get("unidentifiable_directions", []):
         mix = " ".join(f"{v:+.3f}*{k}" for k, v in d.items())
         out.append(Finding(f"not identifiable: {', '.join(d)} move together without changing "

@@ -20,11 +20,11 @@ from planecal.sampling.planner import ListPlanner, Plan, Planner
 from planecal.sampling.poses import PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.run import RunSettings, RunStats, SamplingRun
 from planecal.sampling.runfiles import load_sidecar, sidecar_path
-from planecal.sampling.steps import MAX_STEP, NOMINAL_STEP, step_path
+from planecal.sampling.steps import MAX_STEP, step_path
 
 __all__ = ["Cursor", "DriveAcquirer", "Driver", "EnableDropped", "FollowingMonitor",
            "LaserResult", "LaserSettings", "ListPlanner", "MAX_STEP", "MemoryRecorder",
-           "NOMINAL_STEP", "NullObserver", "Observer", "PathBlocked", "Plan", "Planner",
+           "NullObserver", "Observer", "PathBlocked", "Plan", "Planner",
            "PoseGenerator", "PoseSettings", "RestAcquirer", "RunSettings", "RunStats",
            "SamplingRun", "SensorPose", "Tally", "collect", "load_sidecar", "move_home",
            "move_to_calibration", "move_to_counts", "read_stable", "sidecar_path",

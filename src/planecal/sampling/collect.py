@@ -5,7 +5,8 @@ acquired and where it goes (``Recorder``).
 
 Acquire:
 * ``DriveAcquirer`` drives the ticks: the step generator's path to the target
-  (``Driver.follow``: <= 50 counts a tick, 5 dwell ticks), then the laser read while the
+  (``Driver.follow``: at most the robot's step a tick, ``Robot.step_counts``; 5 dwell
+  ticks), then the laser read while the
   hold delta keeps going out (``Driver.read_laser``). The real cell and ``rehearse``.
 * ``RestAcquirer`` sets the twin at rest at the target (``Twin.set_counts``: a new rest,
   as after a move) and reads the laser the same way. For studies: the same plans,
@@ -32,7 +33,7 @@ import numpy as np
 from planecal.sampling.driver import Driver, plan_move
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource
-from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP
+from planecal.sampling.steps import DWELL_TICKS
 
 REJECT_KINDS = ("collision", "laser", "unreachable")
 
@@ -55,7 +56,7 @@ class Acquirer(Protocol):
 class DriveAcquirer:
     """Drive the ticks to the target and read the laser there (``Driver``)."""
 
-    def __init__(self, driver: Driver, laser: LaserSettings, nominal: int = NOMINAL_STEP,
+    def __init__(self, driver: Driver, laser: LaserSettings, nominal: int,
                  dwell: int = DWELL_TICKS, hold_while_planning: bool = False):
         self.driver, self.laser = driver, laser
         self.nominal, self.dwell = nominal, dwell

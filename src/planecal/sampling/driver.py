@@ -21,7 +21,7 @@ from planecal.model.robot import Robot, within_limits
 from planecal.sampling.approach import ApproachTracker
 from planecal.sampling.laserread import NO_READING_MM, LaserResult, LaserSettings, read_stable
 from planecal.sampling.observer import NullObserver, Observer
-from planecal.sampling.steps import COUNT_LIMIT, DWELL_TICKS, NOMINAL_STEP, max_step, step_path
+from planecal.sampling.steps import COUNT_LIMIT, DWELL_TICKS, max_step, step_path
 from planecal.model.scene import Scene
 
 
@@ -137,7 +137,7 @@ class Driver:
 
     def follow(self, rows: np.ndarray) -> None:
         """Send each row, one per tick (stops, by ``EnableDropped``, when enable drops).
-        A path with a step above the robot's limit (51 counts) is refused before anything
+        A path with a step above the robot's limit (``max_step_counts``) is refused before anything
         is sent; the step generator never makes one, this is a second line of defence."""
         rows = np.ascontiguousarray(rows, np.int64)
         before = self.delta
@@ -176,19 +176,20 @@ class Driver:
         return self.ticks * self.robot.tick_s
 
 
-def plan_move(driver: Driver, qe_goal: np.ndarray, nominal: int = NOMINAL_STEP,
+def plan_move(driver: Driver, qe_goal: np.ndarray, nominal: int | None = None,
               dwell: int = DWELL_TICKS) -> np.ndarray | None:
-    """Rows taking the robot from the last delta to absolute counts ``qe_goal``, or None
+    """Rows taking the robot from the last delta to absolute counts ``qe_goal`` at
+    ``nominal`` counts a tick (default the robot's step, ``Robot.step_counts``), or None
     when the goal is outside the 24-bit encoder range."""
     qe_goal = np.asarray(qe_goal, np.int64)
     if np.any(qe_goal < 0) or np.any(qe_goal >= COUNT_LIMIT):
         return None
     goal = qe_goal - driver.reference.astype(np.int64)
-    return step_path(driver.delta, goal, nominal, dwell)
+    return step_path(driver.delta, goal, nominal or driver.robot.step_counts, dwell)
 
 
 def move_to_counts(driver: Driver, qe_goal, checker, kind: str = "move",
-                   nominal: int = NOMINAL_STEP, dwell: int = DWELL_TICKS) -> int:
+                   nominal: int | None = None, dwell: int = DWELL_TICKS) -> int:
     """A checked move to absolute encoder counts (home, calibration position). Raises
     ``PathBlocked`` if the goal is out of range/limits or the motion is not collision-free;
     ``EnableDropped`` if enable drops on the way. Returns the ticks used."""

@@ -216,7 +216,8 @@ class ListPlanner:
     like a random pose (target configuration and straight path from where the robot
     is); a pose whose path is blocked from here is left for later. Stateful: plans in the
     run's own process. When no pose is left, or none of those left can be reached from
-    here, the plan says so (``q`` None, ``reason``)."""
+    here, the plan says so (``q`` None, ``reason``). ``taken``: the indices of the poses
+    served so far, in the order served."""
     pure = False
 
     def __init__(self, scene: Scene, counts: np.ndarray, plates: np.ndarray, checker: Checker,
@@ -230,6 +231,7 @@ class ListPlanner:
         self.counts = np.asarray(counts, np.int64).reshape(-1, 6)
         self.plates = np.asarray(plates, int).reshape(-1)
         self.left = list(range(len(self.counts)))
+        self.taken: list[int] = []
 
     def index_matters(self) -> bool:
         return False
@@ -266,6 +268,7 @@ class ListPlanner:
 
     def _take(self, out: Plan, j: int, q: np.ndarray, via=()) -> None:
         self.left.remove(j)
+        self.taken.append(j)
         out.q, out.qe_goal, out.plate = q, self.counts[j].copy(), int(self.plates[j])
         out.via = list(via)
 

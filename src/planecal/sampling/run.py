@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable
@@ -62,7 +62,7 @@ from planecal.sampling.planner import (BackgroundPlanner, Checker, Plan, PlanSou
 from planecal.sampling.poses import CommandModel, PoseSettings
 from planecal.sampling.runfiles import (RunLock, RunWriteError, count_samples, load_sidecar,
                                         sidecar_path)
-from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP
+from planecal.sampling.steps import DWELL_TICKS
 from planecal.sampling.tour import Clock
 from planecal.model.scene import Scene
 
@@ -77,7 +77,7 @@ class RunSettings:
     pose: PoseSettings = field(default_factory=PoseSettings)
     laser: LaserSettings = field(default_factory=LaserSettings)
     dwell_ticks: int = DWELL_TICKS
-    nominal_step_counts: int = NOMINAL_STEP
+    nominal_step_counts: int | None = None  # None: the robot's (``Robot.step_counts``)
     max_attempts: int = 500  # poses rejected in a row before the run gives up
     clearance_m: float = 0.01
     collision_checking: bool = True
@@ -90,7 +90,7 @@ class RunSettings:
         return cls(scene=str(scene.path), samples=samples, seed=seed,
                    pose=PoseSettings(cone_deg=scene.cone_deg,
                                      distance_mm=tuple(scene.distance_mm)),
-                   nominal_step_counts=max(1, scene.robot.max_step_counts - 1))
+                   nominal_step_counts=scene.robot.step_counts)
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -184,6 +184,8 @@ class SamplingRun:
         self.driver = driver
         self.scene = scene
         self.robot = scene.robot
+        if settings.nominal_step_counts is None:
+            settings = replace(settings, nominal_step_counts=self.robot.step_counts)
         self.settings = settings
         self.out = Path(out)
         self.checker = checker
@@ -285,7 +287,8 @@ class SamplingRun:
         self._wall0, self._ticks0, self._step0 = st.wall_time_s, st.ticks, st.max_step_counts
         self._drv_ticks0 = drv.ticks
         self._travel0, self._read0 = st.travel_ticks, st.read_ticks
-        self._clock = Clock(self.acquirer, np.zeros(6, np.int64))  # counts set at the start
+        self._clock = Clock(self.acquirer, np.zeros(6, np.int64),  # counts set at the start
+                            s.nominal_step_counts, s.dwell_ticks)
         drv.max_step_counts = 0
         own_lock = RunLock(self.out) if self.lock is None else None
         try:

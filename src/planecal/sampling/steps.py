@@ -5,14 +5,16 @@ The FD11 takes, every 10 ms tick, a delta (commanded = reference + delta) and tr
 encoder-jump error when consecutive deltas differ by 60 counts or more on any joint. A path
 from delta ``start`` to delta ``goal`` (int64[6]) is cut into
 
-    n = ceil(max_j |goal_j - start_j| / nominal)        (nominal = 50 counts)
+    n = ceil(max_j |goal_j - start_j| / nominal)
 
-ticks; row k (k = 1..n) is ``start + round(dq * k / n)`` with round-half-up in exact integer
+ticks, ``nominal`` the robot's step (``Robot.step_counts``: one count below robot.json's
+``controller.max_step_counts``; the MC70's FD11: 50 counts, its trip at 60); row k (k = 1..n) is ``start + round(dq * k / n)`` with round-half-up in exact integer
 arithmetic (cumulative rounding, no drift): every joint moves in proportion, all of them
 arrive on tick n, the last row is exactly ``goal``. A step is the difference of two
-roundings of values |dq|/n <= 50 apart, each off by at most 1/2, so it is strictly less than
-51 in magnitude: at most 50 counts, within the seed's 51 (the seed rounds the number of
-via-points down and the step size up, hence its 51).
+roundings of values |dq|/n <= nominal apart, each off by at most 1/2, so it is strictly
+less than nominal + 1 in magnitude: at most ``nominal`` counts (the MC70: 50, within the
+seed's 51; the seed rounds the number of via-points down and the step size up, hence its
+51).
 
 At the goal the last row is repeated ``dwell`` times (the seed's 5 identical deltas, 50 ms at
 100 Hz) before the laser is read.
@@ -21,20 +23,19 @@ from __future__ import annotations
 
 import numpy as np
 
-NOMINAL_STEP = 50
-MAX_STEP = 51
+MAX_STEP = 51  # the seed's step limit of the FD11 (the MC70's robot.json)
 DWELL_TICKS = 5
 COUNT_LIMIT = 1 << 24
 
 
-def n_steps(start, goal, nominal: int = NOMINAL_STEP) -> int:
+def n_steps(start, goal, nominal: int) -> int:
     """Number of ticks to go from ``start`` to ``goal`` (0 when they are equal)."""
     dq = np.asarray(goal, np.int64) - np.asarray(start, np.int64)
     m = int(np.max(np.abs(dq))) if dq.size else 0
     return -(-m // int(nominal))
 
 
-def step_path(start, goal, nominal: int = NOMINAL_STEP, dwell: int = 0) -> np.ndarray:
+def step_path(start, goal, nominal: int, dwell: int = 0) -> np.ndarray:
     """Rows of absolute deltas (n + dwell, 6) int64 to send, one per tick, from ``start``
     (the last delta sent, not included) to ``goal`` (included, then repeated ``dwell``
     times). With start == goal only the dwell rows are returned."""

@@ -1,11 +1,12 @@
 """Robot time of a sampling run, and the visiting order of a pose list that minimises it.
 
-Robot time is what a calibration costs the cell: ticks x ``robot.tick_s`` (10 ms). Per
-sample the robot
+Robot time is what a calibration costs the cell: ticks x ``robot.tick_s`` (the MC70's
+10 ms). Per sample the robot
 
 * moves: the step generator (``steps``) cuts a move from counts a to counts b into
-  ``steps.n_steps(a, b)`` ticks -- the joint that needs the most counts sets it, at
-  ``NOMINAL_STEP`` (50) counts a tick -- then holds the goal for ``DWELL_TICKS`` (5);
+  ``steps.n_steps(a, b, nominal)`` ticks -- the joint that needs the most counts sets it,
+  at the robot's step ``nominal`` (``Robot.step_counts``: the MC70's 50 counts, the UR5's
+  129) -- then holds the goal for ``DWELL_TICKS`` (5);
   a detour's legs to its via-points have no dwell (``collect.DriveAcquirer``);
 * reads the laser: ``read_stable`` takes one reading a tick until its buffer of
   ``buffer_len`` (100) readings is stable, so at least 100 ticks. On the twin with the
@@ -16,8 +17,8 @@ sample the robot
 
 ``order`` finds the visiting order of a set of poses that minimises the travel ticks (the
 dwell and read ticks are the same for every order): an open path from the start
-configuration over the cost matrix of move ticks (symmetric: ``n_steps(a, b) ==
-n_steps(b, a)``). Exact (Held-Karp dynamic programming) up to ``exact_max`` poses;
+configuration over the cost matrix of move ticks (symmetric: ``n_steps(a, b, s) ==
+n_steps(b, a, s)``). Exact (Held-Karp dynamic programming) up to ``exact_max`` poses;
 beyond, nearest neighbour and the input order, each improved by 2-opt (reverse a stretch)
 and Or-opt (move a stretch of 1-3 poses elsewhere, either way round) until neither helps;
 the better of the two. Hand-kept rather than a library: 150 poses take well under a second
@@ -46,7 +47,7 @@ from typing import Sequence
 
 import numpy as np
 
-from planecal.sampling.steps import DWELL_TICKS, NOMINAL_STEP, n_steps
+from planecal.sampling.steps import DWELL_TICKS, n_steps
 
 READ_TICKS = 102  # median ticks of one laser read on the twin (100 at least: the buffer)
 EXACT_MAX = 12  # poses up to which ``order`` solves exactly (Held-Karp: n^2 2^n)
@@ -55,8 +56,9 @@ BLOCKED_MODES = ("avoid", "detour")
 
 # ----- robot time -------------------------------------------------------------------------------
 
-def move_ticks(counts_a, counts_b, nominal: int = NOMINAL_STEP, dwell: int = DWELL_TICKS) -> int:
-    """Ticks of one move from counts a to counts b as the step generator makes it, with
+def move_ticks(counts_a, counts_b, nominal: int, dwell: int = DWELL_TICKS) -> int:
+    """Ticks of one move from counts a to counts b as the step generator makes it at
+    ``nominal`` counts a tick (the robot's step, ``Robot.step_counts``), with
     ``dwell`` ticks holding the goal (``len(steps.step_path(a, b, nominal, dwell))``)."""
     return n_steps(counts_a, counts_b, nominal) + int(dwell)
 
@@ -80,10 +82,11 @@ def _as_visits(sequence, vias) -> list[Visit]:
     return [Visit(c, [np.asarray(v, np.int64) for v in vs]) for c, vs in zip(seq, vias)]
 
 
-def robot_ticks(sequence, start, read_ticks: float = READ_TICKS, vias=None,
-                nominal: int = NOMINAL_STEP, dwell: int = DWELL_TICKS) -> float:
+def robot_ticks(sequence, start, read_ticks: float = READ_TICKS, vias=None, *,
+                nominal: int, dwell: int = DWELL_TICKS) -> float:
     """Ticks of visiting ``sequence`` (encoder-count targets (n, 6), or ``Visit``s) from
-    counts ``start``: every leg's ``n_steps``, the dwell and ``read_ticks`` at each
+    counts ``start`` at the robot's step ``nominal`` (``Robot.step_counts``): every leg's
+    ``n_steps``, the dwell and ``read_ticks`` at each
     target (not at a via-point). ``vias``: per target, the via-point counts before it."""
     cur = np.asarray(start, np.int64)
     total = 0.0
@@ -96,10 +99,12 @@ def robot_ticks(sequence, start, read_ticks: float = READ_TICKS, vias=None,
     return total
 
 
-def robot_time_s(sequence, start, tick_s: float, read_ticks: float = READ_TICKS, vias=None,
-                 nominal: int = NOMINAL_STEP, dwell: int = DWELL_TICKS) -> float:
-    """Robot time [s] of ``robot_ticks`` at ``tick_s`` a tick (``robot.tick_s``)."""
-    return robot_ticks(sequence, start, read_ticks, vias, nominal, dwell) * float(tick_s)
+def robot_time_s(sequence, start, robot, read_ticks: float = READ_TICKS, vias=None,
+                 dwell: int = DWELL_TICKS) -> float:
+    """Robot time [s] of ``robot_ticks`` on ``robot`` (``model.robot.Robot``): its step
+    (``step_counts``) and its tick (``tick_s``)."""
+    return robot_ticks(sequence, start, read_ticks, vias, nominal=robot.step_counts,
+                       dwell=dwell) * float(robot.tick_s)
 
 
 # ----- counting a collection's ticks -----------------------------------------------------------
@@ -110,11 +115,12 @@ class Clock:
     without dwell, the goal with ``dwell``) and the laser read's own ticks
     (``LaserResult.reads``; a read that gives up counts too: the robot went there). With
     ``RestAcquirer`` (studies) this is the robot time ``DriveAcquirer`` spends on the same
-    plans, without simulating the ticks. ``ticks`` is the running total, ``travel_ticks``
-    the part spent moving (the legs without their dwell), ``read_ticks`` the laser's."""
+    plans, without simulating the ticks. ``nominal``: the step the acquirer drives at
+    (the run's ``nominal_step_counts``, the robot's step). ``ticks`` is the running
+    total, ``travel_ticks`` the part spent moving (the legs without their dwell),
+    ``read_ticks`` the laser's."""
 
-    def __init__(self, inner, start_counts, nominal: int = NOMINAL_STEP,
-                 dwell: int = DWELL_TICKS):
+    def __init__(self, inner, start_counts, nominal: int, dwell: int = DWELL_TICKS):
         self.inner, self.nominal, self.dwell = inner, nominal, dwell
         self.idle = inner.idle
         self.counts = np.asarray(start_counts, np.int64).copy()
@@ -159,18 +165,35 @@ class _Moves:
 
 
 def visit(planner, start_q: np.ndarray, samples: int, seed: int = 0,
-          max_attempts: int = 500) -> list[Visit]:
+          max_attempts: int = 500, short: bool = False):
     """The moves the sampling run makes with ``planner`` (a ``Planner`` drawing with
     ``seed``, or a ``ListPlanner``) from joint angles ``start_q`` if every laser read
-    succeeds (``collect`` with ``PlansOnly``). RuntimeError when the planner gives up."""
+    succeeds (``collect`` with ``PlansOnly``). RuntimeError when the planner gives up;
+    with ``short`` the moves up to there and why it gave up (None: it did not)."""
     from planecal.sampling.collect import Cursor, PlansOnly, Tally, collect
     rec, tally = _Moves(), Tally()
     collect(planner, PlansOnly(), rec, samples,
             Cursor(np.asarray(start_q, float), np.random.default_rng(seed).bit_generator.state),
             tally, max_attempts)
-    if tally.status != "complete":
-        raise RuntimeError(f"the planner gave up after {tally.samples} samples: {tally.reason}")
+    why = None if tally.status == "complete" else tally.reason
+    if short:
+        return rec.visits, why
+    if why is not None:
+        raise RuntimeError(f"the planner gave up after {tally.samples} samples: {why}")
     return rec.visits
+
+
+def visit_list(scene, counts, plates, checker, start_q: np.ndarray):
+    """What the sampling run does with a pose list (its ``ListPlanner``) from joint angles
+    ``start_q`` if every laser read succeeds: (the moves, the indices of the poses it
+    takes in the order it takes them, why it stops short of the list or None). The list
+    without the poses it left out, ``counts[np.sort(taken)]``, is then visited whole by
+    the same moves: each pose the run took was the first of those left that it could
+    reach (straight, else by a detour), and still is without the others."""
+    from planecal.sampling.planner import ListPlanner
+    lp = ListPlanner(scene, counts, plates, checker)
+    visits, why = visit(lp, start_q, len(lp.counts), short=True)
+    return visits, np.array(lp.taken, int), why
 
 
 # ----- the order --------------------------------------------------------------------------------
@@ -188,8 +211,9 @@ class Tour:
     paths_checked: int = 0
 
 
-def tick_matrix(nodes: np.ndarray, nominal: int = NOMINAL_STEP) -> np.ndarray:
-    """Straight-move ticks between every pair of count rows (symmetric, int64)."""
+def tick_matrix(nodes: np.ndarray, nominal: int) -> np.ndarray:
+    """Straight-move ticks between every pair of count rows at ``nominal`` counts a tick
+    (symmetric, int64)."""
     m = len(nodes)
     D = np.zeros((m, m), np.int64)
     for i in range(m):
@@ -320,9 +344,10 @@ def solve_path(C: np.ndarray, initial: Sequence[int] | None = None,
 
 
 def order(counts, start, checker=None, scene=None, blocked: str = "avoid",
-          exact_max: int = EXACT_MAX, nominal: int = NOMINAL_STEP) -> Tour:
+          exact_max: int = EXACT_MAX, *, nominal: int) -> Tour:
     """The visiting order of the poses ``counts`` (n, 6) from counts ``start`` that
-    minimises robot time (module docstring). With a ``checker`` (``CollisionWorld``) the
+    minimises robot time at the robot's step ``nominal`` (``Robot.step_counts``; module
+    docstring). With a ``checker`` (``CollisionWorld``) the
     moves are collision-checked; ``scene`` (for counts -> joint angles and the detour) is
     then required. Never worse than the input order (by the same costs)."""
     if blocked not in BLOCKED_MODES:

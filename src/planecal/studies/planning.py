@@ -34,19 +34,22 @@ Bisection over n (the prediction falls with n; the result is checked, never assu
 Robot time (``sampling.tour``): the planned poses are ordered into the tour from the
 calibration position that minimises the robot's ticks under the step limit (``tour.order``:
 each move costs the ticks of the joint that needs the most, collision-checked moves, a
-blocked one by its detour), and the plan reports the robot time of the run that visits them
-(``tour.visit`` with the run's own ``ListPlanner``, then ``tour.robot_time_s``; laser reads
-at ``tour.READ_TICKS``, the twin's median) before ordering (the design's order), after it,
-and for the random run of equal size.
+blocked one by its detour), and the plan reports the robot time of the run that visits
+them (``tour.visit_list``: the run's own ``ListPlanner``, then ``tour.robot_time_s`` at the
+robot's step and tick; laser reads at ``tour.READ_TICKS``, the twin's median) before
+ordering (the design's order), after it, and for the random run of equal size. A pose
+that run cannot reach from the others (straight or by a detour) is dropped from the list
+and the plan says so (``dropped``), its prediction then of the poses listed: the run
+visits a plan's list whole.
 
 The sampling run takes the list through ``SamplingRun(..., planner=ListPlanner(...))``
-(foreground planning only: the list planner keeps state); ``rehearse_planned`` does that
-on the twin; ``planecal rehearse --poses POSES.json`` (and ``sample``) does it from the
-command line.
+(foreground planning only: the list planner keeps state);
+``studies.rehearsal.rehearse_planned`` does that on the twin; ``planecal rehearse --poses
+POSES.json`` (and ``sample``) does it from the command line.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -286,9 +289,9 @@ class _Design:
     predictor: Predictor
     n: int  # the sample count: asked for, or chosen for a target
     chosen: np.ndarray
-    logdet: float
     passes: int
     swaps: int
+    logdet: float
     std: np.ndarray  # sandwich std of the free parameters
     white: np.ndarray  # white-noise std of the free parameters
     ap_mm: float  # predicted flange position error
@@ -308,11 +311,13 @@ class _RandomRun:
 
 @dataclass
 class _Tour:
-    """The planned poses in the order visited; the robot time before and after ordering."""
+    """The planned poses in the order listed; the robot time before and after ordering;
+    ``dropped``: why the run cannot visit the rest of the design (None: it can)."""
     chosen: np.ndarray
     order: object | None  # ``tour.order``'s result, None when not ordered
     time_unordered_s: float
     time_s: float
+    dropped: str | None = None
 
 
 def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
@@ -329,11 +334,14 @@ def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
     target = plan_target(n, m, target_std_urad, target_ap_mm)
     design = _design(scene, n, m, seed, settings, checker, repeatability_mm, laser_noise_mm,
                      target, progress)
-    q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    start = joints_to_counts(scene.robot, q0)
+    start = joints_to_counts(scene.robot, scene.calibration_q if scene.calibration_q is not
+                             None else np.zeros(6))
     _say(progress, f"the random run's {design.n} poses")
     random = _random_run(scene, design, seed, checker, start)
-    tour = _tour(scene, design, checker, q0, start, ordered, progress)
+    tour = _tour(scene, design, checker, counts_to_joints(scene.robot, start), start, ordered,
+                 progress)
+    if tour.dropped is not None:  # the prediction of the poses listed
+        design = _keep(design, tour.chosen)
     return _result(scene, seed, design, random, tour, ordered, target)
 
 
@@ -380,65 +388,73 @@ def _design(scene, n: int, m: int, seed: int, settings, checker, repeatability_m
     predictor = Predictor(scene, J, layout, free, s, sig_l, position_rows(scene, q, layout, free))
     if target is not None:
         _say(progress, f"choosing the sample count for the target ({target[0]} <= {target[1]:g})")
-        n, (chosen, logdet, passes, swaps) = choose_count(A, predictor, *target,
+        n, (chosen, _, passes, swaps) = choose_count(A, predictor, *target,
                                                           max(13, int(free.sum()) + 1), n,
                                                           progress)
     else:
         _say(progress, f"choosing {n} D-optimal poses")
-        chosen, logdet, passes, swaps = d_optimal(A, n)
-    std, white = predicted_std(J[chosen], layout, free, s, sig_l)
-    return _Design(qe, plate, layout, free, J, predictor, n, chosen, logdet, passes, swaps,
-                   std, white, predictor(chosen)[1])
+        chosen, _, passes, swaps = d_optimal(A, n)
+    return _Design(qe, plate, layout, free, J, predictor, n, chosen, passes, swaps,
+                   *_prediction(predictor, J, J[chosen]))
 
 
 def _random_run(scene, d: _Design, seed: int, checker, start: np.ndarray) -> _RandomRun:
     """What the sampling run itself would sample (same seed; without a checker the first
     candidates), scaled as the design's candidates, and its robot time from ``start``."""
     from planecal.sampling import tour
-    n, tick_s = d.n, scene.robot.tick_s
+    n, robot = d.n, scene.robot
     if checker is not None:
         qe_r, plate_r, visits_r = run_design(scene, n, seed, checker, with_visits=True)
-        time_r = tour.robot_time_s(visits_r, start, tick_s)
+        time_r = tour.robot_time_s(visits_r, start, robot)
     else:
-        qe_r, plate_r, time_r = d.qe[:n], d.plate[:n], tour.robot_time_s(d.qe[:n], start, tick_s)
+        qe_r, plate_r, time_r = d.qe[:n], d.plate[:n], tour.robot_time_s(d.qe[:n], start, robot)
     J_r, _ = scaled_rows(scene, qe_r, plate_r, d.layout, d.free)
-    A_r = J_r[:, d.free] / np.sqrt(np.mean(d.J[:, d.free] ** 2, axis=0))
-    _, logdet_r = np.linalg.slogdet(A_r.T @ A_r)
-    p = d.predictor
-    std_r, white_r = predicted_std(J_r, d.layout, d.free, p.s, p.sig_l)
-    return _RandomRun(qe_r, plate_r, time_r, float(logdet_r), std_r, white_r,
-                      p.of_jacobian(J_r)[1])
+    return _RandomRun(qe_r, plate_r, time_r, *_prediction(d.predictor, d.J, J_r))
+
+
+def _prediction(p: Predictor, J_all: np.ndarray, J: np.ndarray):
+    """(log det of the design scaled as the candidates J_all, sandwich and white std of the
+    free parameters, predicted position error [mm]) of the poses whose Jacobian rows are J."""
+    A = J[:, p.free] / np.sqrt(np.mean(J_all[:, p.free] ** 2, axis=0))
+    std, white = predicted_std(J, p.layout, p.free, p.s, p.sig_l)
+    return float(np.linalg.slogdet(A.T @ A)[1]), std, white, p.of_jacobian(J)[1]
 
 
 def _tour(scene, d: _Design, checker, q0: np.ndarray, start: np.ndarray, ordered: bool,
           progress) -> _Tour:
     """The run's robot time through the design's poses in the design's order and, with
-    ``ordered``, ordered into the tour that minimises it (``tour.order``)."""
+    ``ordered``, ordered into the tour that minimises it (``tour.order``), without any
+    pose the run's own ``ListPlanner`` cannot reach from the others, straight or by a
+    detour (``tour.visit_list``; ``_Tour.dropped`` says why)."""
     from planecal.sampling import tour
-    from planecal.sampling.planner import ListPlanner
-    tick_s = scene.robot.tick_s
+    robot = scene.robot
 
-    def run_time(idx):
-        """The run's robot time through the list; if its planner cannot serve the list
-        (a pose it cannot reach from where it is), the straight moves' (unchecked)."""
-        if checker is not None:
-            try:
-                vs = tour.visit(ListPlanner(scene, d.qe[idx], d.plate[idx], checker), q0,
-                                len(idx))
-                return tour.robot_time_s(vs, start, tick_s)
-            except RuntimeError:
-                pass
-        return tour.robot_time_s(d.qe[idx], start, tick_s)
+    def run(idx):
+        """(robot time, the poses of idx the run takes in idx's order, why not the rest)."""
+        if checker is None:
+            return tour.robot_time_s(d.qe[idx], start, robot), idx, None
+        vs, taken, why = tour.visit_list(scene, d.qe[idx], d.plate[idx], checker, q0)
+        return tour.robot_time_s(vs, start, robot), idx[np.sort(taken)], why
 
     _say(progress, "robot time of the design's order")
-    time_before = run_time(d.chosen)
-    chosen, tr = d.chosen, None
+    time_before, chosen, why = run(d.chosen)
+    time_s, tr = time_before, None
     _say(progress, "ordering the poses for robot time" if ordered else "keeping the design's order")
     if ordered:
-        tr = tour.order(d.qe[chosen], start, checker, scene if checker is not None else None)
-        chosen = chosen[np.array(tr.order, int)]
+        tr = tour.order(d.qe[d.chosen], start, checker, scene if checker is not None else None,
+                        nominal=robot.step_counts)
     _say(progress, "robot time of the tour" if ordered else "not ordered")
-    return _Tour(chosen, tr, time_before, run_time(chosen) if ordered else time_before)
+    if ordered:
+        time_s, chosen, why = run(d.chosen[np.array(tr.order, int)])
+    why = None if why is None else (f"{d.n - len(chosen)} of the {d.n} planned poses dropped "
+                                    f"(the sampling run's list planner: {why})")
+    return _Tour(chosen, tr, time_before, time_s, why)
+
+
+def _keep(d: _Design, rows: np.ndarray) -> _Design:
+    """The design reduced to the candidates ``rows`` of its choice, its prediction anew."""
+    logdet, std, white, ap = _prediction(d.predictor, d.J, d.J[rows])
+    return replace(d, n=len(rows), chosen=rows, logdet=logdet, std=std, white=white, ap_mm=ap)
 
 
 def _result(scene, seed: int, d: _Design, r: _RandomRun, t: _Tour, ordered: bool,
@@ -455,7 +471,7 @@ def _result(scene, seed: int, d: _Design, r: _RandomRun, t: _Tour, ordered: bool
         "logdet_planned": d.logdet, "logdet_random": r.logdet,
         "d_efficiency_gain": float(np.exp((d.logdet - r.logdet) / p)),
         "exchange_passes": d.passes, "exchange_swaps": d.swaps,
-        "ordered": bool(ordered),
+        "ordered": bool(ordered), "dropped": t.dropped,
         "tour": None if tr is None else {"travel_ticks": tr.travel_ticks, "detours": tr.detours,
                                          "excluded": tr.excluded,
                                          "paths_checked": tr.paths_checked},
@@ -482,18 +498,3 @@ def load_poses(path) -> tuple[np.ndarray, np.ndarray, dict]:
     d = read_json(path, "pose list")
     pf = validate(PosesFile, d, path, "pose list")
     return np.array(pf.counts, np.int64).reshape(-1, 6), np.array(pf.plates, int), d
-
-
-# ----- consuming a pose list in the sampling run ---------------------------------------------
-
-def rehearse_planned(scene, counts, plates, out, twin, checker, seed: int = 0):
-    """A sampling run on ``twin`` through the planned poses (``ListPlanner``)."""
-    from planecal.links.base import AlwaysEnabled
-    from planecal.sampling.driver import Driver
-    from planecal.sampling.planner import ListPlanner
-    from planecal.sampling.run import RunSettings, SamplingRun
-
-    rs = RunSettings(scene=str(scene.path), samples=len(counts), seed=seed)
-    drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
-    return SamplingRun(drv, scene, rs, out, checker,
-                       planner=ListPlanner(scene, counts, plates, checker)).run()

@@ -250,3 +250,16 @@ def synthetic_noisy_samples(scene, truth, st: RehearsalSettings, seed: int):
     d = d + rng.normal(0.0, sample_sigma_m(st.options().laser_noise_mm), len(d))
     return (qe, d, plate, np.zeros(qe.shape, np.int8),
             {"collision": 0, "laser": 0, "unreachable": 0})
+
+
+def rehearse_planned(scene, counts, plates, out, twin, checker, seed: int = 0):
+    """A sampling run on ``twin`` through the planned poses (``ListPlanner``)."""
+    from planecal.links.base import AlwaysEnabled
+    from planecal.sampling.driver import Driver
+    from planecal.sampling.planner import ListPlanner
+    from planecal.sampling.run import RunSettings, SamplingRun
+
+    rs = RunSettings(scene=str(scene.path), samples=len(counts), seed=seed)
+    drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
+    return SamplingRun(drv, scene, rs, out, checker,
+                       planner=ListPlanner(scene, counts, plates, checker)).run()

@@ -167,7 +167,24 @@ def spec_from_dict(doc: dict, path: Path | None = None) -> SweepSpec:
         cached_scene(s)  # InputError if unknown
     for s, e in itertools.product(spec.scene, spec.errors):
         cached_profile(s, e)
+    _check_sizes(spec, where)
     return spec
+
+
+def _check_sizes(spec: SweepSpec, where: str) -> None:
+    """InputError (one line) for a cell whose sample count cannot determine its level's
+    free parameters (every run would be refused: ``estimation.calibrate``'s rule)."""
+    from planecal.estimation.calibrate import candidates
+    from planecal.model.levels import layout_for
+    for s, level in itertools.product(spec.scene, spec.level):
+        scene, st = cached_scene(s), calibration_of(level)
+        layout = layout_for(scene.robot, len(scene.plates), st.level, st.compliance)
+        p = int(candidates(scene.robot, layout, st, scene.references)[0].sum())
+        low = [n for n in spec.samples if n <= p]
+        if low:
+            raise InputError(f"{where}: grid.samples: {low[0]} samples cannot determine the "
+                             f"{p} free parameters of level {level!r} on {s}: give more than "
+                             f"{p} (or leave that level out)")
 
 
 def calibration_of(level: str):

@@ -8,8 +8,9 @@ profile"):
 * joint stiffness and the torque that holds a loaded joint on one flank (backlash
   preload) by reach times payload over the MC70's (2.83 m, 70 kg): the torque class a
   joint is built for; without ``payload_kg`` in robot.json, by reach alone (it says so);
-* the joints' repeatability by robot.json's datasheet repeatability over the MC70's
-  0.07 mm (the same 0.81 share of it), by reach where robot.json has none;
+* the joints' repeatability by the robot's over the MC70's 0.07 mm (the same 0.81 share
+  of it): robot.json's datasheet figure, or where it states none the MC70's scaled by
+  reach (``model.robot.default_repeatability_m``, the one default every consumer reads);
 * angles (twists, Hayati's beta, gear errors, lost motion) and the cell's tolerances (the
   sensor's mounting, the plates) as they are: they belong to the reducer class and to
   the cell, not to the arm's size.
@@ -27,10 +28,9 @@ from planecal.base.paths import data_folder
 from planecal.formats import read_json, validate
 from planecal.formats.error_profile import ErrorProfileFile
 from planecal.model.kinematics import reach_m
+from planecal.model.robot import REFERENCE_REACH_M, REFERENCE_REPEATABILITY_MM
 
-REFERENCE_REACH_M = 2.8334658438426485  # the MC70: kinematics.reach_m of its robot.json
 REFERENCE_PAYLOAD_KG = 70.0  # MC70 datasheet (seed H.1)
-REFERENCE_REPEATABILITY_MM = 0.07  # MC70 datasheet (seed H.1), JIS B 8432
 _told: set = set()
 log = logging.getLogger(__name__)
 
@@ -44,8 +44,7 @@ def scaling(robot) -> dict:
     length = reach_m(robot.kinematics) / REFERENCE_REACH_M
     payload = None if robot.payload_kg is None else robot.payload_kg / REFERENCE_PAYLOAD_KG
     torque = length * (payload if payload is not None else 1.0)
-    rep = (robot.repeatability_m * 1e3 / REFERENCE_REPEATABILITY_MM if robot.repeatability_m > 0
-           else length)
+    rep = robot.repeatability_m * 1e3 / REFERENCE_REPEATABILITY_MM
     return {"length": length, "payload": payload, "torque": torque, "repeatability": rep}
 
 

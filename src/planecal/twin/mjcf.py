@@ -40,6 +40,7 @@ import numpy as np
 from planecal.model.cell_params import CellParams
 from planecal.model.geometry import robot_link_meshes, scene_meshes, sensor_pose, tool_meshes
 from planecal.model.kinematics import Kinematics, link_site
+from planecal.model.gravity import inertia_matrix, lumped
 from planecal.model.robot import Robot
 
 GROUP_ENV = 0  # plates, stands, floor, obstacles: visible and seen by the laser
@@ -83,16 +84,11 @@ def set_inertial(body, masses) -> None:
     their centre (3, 3) in the body's axes, or None])``: their total mass at their centre
     of mass and their inertia about it (point masses but for the inertias given);
     MIN_MASS_KG when there are none. The body's geoms add nothing."""
-    pts = [(np.asarray(p[0], float), float(p[1]), p[2] if len(p) > 2 else None)
-           for p in masses if p[1] > 0]
-    M = sum(m for _, m, _ in pts)
+    M, c, I = lumped(masses)
     body.explicitinertial = True
     if not M:
         body.mass, body.ipos, body.inertia = MIN_MASS_KG, [0, 0, 0], [MIN_MASS_KG] * 3
         return
-    c = sum(m * p for p, m, _ in pts) / M
-    I = sum(m * (np.dot(p - c, p - c) * np.eye(3) - np.outer(p - c, p - c))
-            + (np.zeros((3, 3)) if J is None else J) for p, m, J in pts)
     body.mass, body.ipos = M, c.tolist()
     body.fullinertia = (np.array([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
                         + np.array([1, 1, 1, 0, 0, 0]) * 1e-6 * M).tolist()
@@ -100,11 +96,8 @@ def set_inertial(body, masses) -> None:
 
 def _inertia_in(R: np.ndarray, six) -> np.ndarray | None:
     """robot.json's inertia (ixx iyy izz ixy ixz iyz, link frame axes) in axes R x."""
-    if six is None:
-        return None
-    xx, yy, zz, xy, xz, yz = six
-    J = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-    return R @ J @ R.T
+    J = inertia_matrix(six)
+    return None if J is None else R @ J @ R.T
 
 
 def _clean(T: np.ndarray) -> np.ndarray:

@@ -170,7 +170,7 @@ def file_sha256(path) -> str:
 SOURCES = {
     "geometry": "geometry other than the joint offsets (link lengths and offsets, twists, "
                 "base and flange frames)",
-    "compliance": "gravity compliance (J2, J3)",
+    "compliance": "gravity compliance",
     "gear": "gear transmission error",
     "backlash": "backlash",
     "noise": "repeatability and encoder quantisation",
@@ -181,6 +181,17 @@ SHORT = {"geometry": "link lengths, twists and frames", "compliance": "joint com
          "gear": "gear error", "backlash": "backlash", "noise": "repeatability, quantisation",
          "laser_linearity": "laser linearity", "thermal": "thermal growth"}
 MISMATCH = ("geometry", "compliance", "gear", "backlash", "laser_linearity", "thermal")
+
+
+def source_labels(options) -> dict[str, str]:
+    """``SOURCES`` with what a world's options (``TwinOptions``) add: the joints its
+    profile makes compliant (the UR5's J2, J3 and J4; the MC70's J2 and J3)."""
+    out = dict(SOURCES)
+    k = options.stiffness_nm_per_rad
+    joints = [f"J{j + 1}" for j, v in enumerate(k or ()) if v is not None]
+    if joints:
+        out["compliance"] = f"gravity compliance ({', '.join(joints)})"
+    return out
 
 
 def sources_on(robot, world, options) -> list[str]:

@@ -208,8 +208,9 @@ def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) 
     from dataclasses import replace
 
     from planecal.studies.common import cached_scene
-    from planecal.twin.world import sources_on
-    on = sources_on(cached_scene(job.scene).robot, *job.rehearsal().world(0))
+    from planecal.twin.world import source_labels, sources_on
+    world = job.rehearsal().world(0)
+    on = sources_on(cached_scene(job.scene).robot, *world)
     variants = breakdown_variants(on, mode)
     st = replace(job.settings, gauge=False)
     res = run_jobs(validate_truth, [replace(job, off=off, settings=st, beside=False)
@@ -223,7 +224,9 @@ def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) 
             row.update({k: v[k] for k in BREAKDOWN_KEYS})
             row["max_model_error_mm"] = v["calibration"]["max_model_error_mm"]
         rows.append(row)
-    return {"truth_seed": job.truth_seed, "mode": mode, "sources": on, "variants": rows}
+    labels = source_labels(world[1])
+    return {"truth_seed": job.truth_seed, "mode": mode, "sources": on, "variants": rows,
+            "what": {f: labels[f] for f in on}}
 
 
 def cannot_remove(bd: dict) -> list[dict]:
@@ -244,6 +247,7 @@ def cannot_remove(bd: dict) -> list[dict]:
             if r is None or none is None:
                 continue
             share = r["ap_after_tool_mm"] - none["ap_after_tool_mm"]
-        out.append({"source": f, "what": SOURCES[f], "ap_after_tool_share_mm": float(share),
+        out.append({"source": f, "what": bd.get("what", SOURCES).get(f, SOURCES[f]),
+                    "ap_after_tool_share_mm": float(share),
                     "ap_after_tool_variant_mm": r["ap_after_tool_mm"]})
     return sorted(out, key=lambda x: -x["ap_after_tool_share_mm"])
