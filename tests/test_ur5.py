@@ -300,8 +300,8 @@ def test_validate_names_the_profiles_compliant_joints():
         assert source_labels(opts)["compliance"] == f"gravity compliance ({joints})"
     bd = {"mode": "alone", "sources": ["compliance"],
           "what": {"compliance": "gravity compliance (J2, J3, J4)"},
-          "variants": [{"variant": "compliance alone", "ap_after_mm": 0.9},
-                       {"variant": "none (cell only)", "ap_after_mm": 0.1}]}
+          "variants": [{"variant": "compliance alone", "ap_after_tool_mm": 0.9},
+                       {"variant": "none (cell only)", "ap_after_tool_mm": 0.1}]}
     assert cannot_remove(bd)[0]["what"] == "gravity compliance (J2, J3, J4)"
 
 

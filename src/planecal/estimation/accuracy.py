@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from planecal.base.errors import InputError
 from planecal.estimation.calibrate import Calibration, calibrate
 from planecal.estimation.noise import repeatability_sigma, sample_variance
 from planecal.model.encoder import counts_to_joints
@@ -51,8 +52,10 @@ class Accuracy:
     noise_only_mm: float  # predicted from the noise model alone
     residual_sigma_mm: float  # the fit's own (unbiased) residual std
     noise_sigma_mm: float  # the noise model's rms sample std
-    cv_residual_rms_mm: float  # held-out residuals of the cross-validation
+    cv_residual_rms_mm: float | None  # held-out residuals of the cross-validation (None:
+    # no fold had enough other samples to calibrate)
     in_sample_rms_mm: float
+    held_out: int  # samples the cross-validation predicted
     folds: int
     standoff_mm: float
     where: str = ("the laser's beam point at its nominal standoff, in the robot's frame, rms "
@@ -95,16 +98,20 @@ def tool_jacobian(robot: Robot, q: np.ndarray, side, cal: Calibration,
 def cross_validate(robot: Robot, qe, d_m, initial, plate, settings, direction=None,
                    references: tuple = (), folds: int = FOLDS, seed: int = 0) -> np.ndarray:
     """(N,) held-out residuals [m] (predicted - measured): each of ``folds`` folds (a
-    random partition, ``seed``) predicted by a calibration of the other samples."""
+    random partition, ``seed``) predicted by a calibration of the other samples; NaN for a
+    fold whose other samples are too few to calibrate."""
     qe, d_m = np.asarray(qe), np.asarray(d_m, float)
     n = len(d_m)
     plate = np.zeros(n, int) if plate is None else np.asarray(plate, int)
-    out = np.empty(n)
+    out = np.full(n, np.nan)
     for f in np.array_split(np.random.default_rng(seed).permutation(n), folds):
         keep = np.setdiff1d(np.arange(n), f)
         dk = None if direction is None else np.asarray(direction)[keep]
-        cal = calibrate(robot, qe[keep], d_m[keep], initial, plate[keep], settings, dk,
-                        references)
+        try:
+            cal = calibrate(robot, qe[keep], d_m[keep], initial, plate[keep], settings, dk,
+                            references)
+        except InputError:  # too few samples left to fit: this fold is not predicted
+            continue
         df = None if direction is None else np.asarray(direction)[f]
         out[f] = predict(robot, qe[f], cal.params, plate[f], df) - d_m[f]
     return out
@@ -145,7 +152,10 @@ def accuracy(robot: Robot, cal: Calibration, qe, d_m, plate=None, direction=None
     scale = noise_sigma / res.sigma_m if res.sigma_m > 0 else 0.0
     cv = cross_validate(robot, qe, d_m, res.initial, plate, cal.settings, direction,
                         references, folds)
+    held = cv[np.isfinite(cv)]
     return Accuracy(tool_point_mm=tool_rms * 1e3, noise_only_mm=tool_rms * scale * 1e3,
                     residual_sigma_mm=res.sigma_m * 1e3, noise_sigma_mm=noise_sigma * 1e3,
-                    cv_residual_rms_mm=float(np.sqrt(np.mean(cv ** 2)) * 1e3),
+                    cv_residual_rms_mm=(float(np.sqrt(np.mean(held ** 2)) * 1e3)
+                                        if len(held) else None),
+                    held_out=len(held),
                     in_sample_rms_mm=res.rms_mm(), folds=folds, standoff_mm=standoff * 1e3)

@@ -307,5 +307,8 @@ def accuracy_lines(doc: dict) -> list[str]:
             f"the fit's residual level {a['residual_sigma_mm']:.4f} mm, the model's mismatch in "
             "it); from the noise model alone "
             f"{a['noise_only_mm']:.3f} mm ({a['noise_sigma_mm']:.4f} mm a sample)",
-            f"held-out residuals ({a['folds']}-fold cross-validation) rms "
-            f"{a['cv_residual_rms_mm']:.4f} mm against {a['in_sample_rms_mm']:.4f} mm in the fit"]
+            (f"held-out residuals ({a['folds']}-fold cross-validation, {a.get('held_out')} "
+             f"samples) rms {a['cv_residual_rms_mm']:.4f} mm against "
+             f"{a['in_sample_rms_mm']:.4f} mm in the fit"
+             if a.get("cv_residual_rms_mm") is not None else
+             "held-out residuals: too few samples to calibrate without a fold of them")]
