@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.paths import file_sha256  # noqa: F401 (the world's files' hash)
 from planecal.model.scene import Scene
 from planecal.twin.options import TwinOptions
 from planecal.twin.profile import ErrorProfile, draw_world, load_profile
@@ -154,15 +155,6 @@ def make_twin(scene: Scene, ref: WorldRef, seed: int):
     from planecal.twin import Twin
     world, opts = ref.build(scene)
     return Twin(scene, truth=world, seed=seed, options=opts)
-
-
-def file_sha256(path) -> str:
-    import hashlib
-    try:
-        with open(path, "rb") as f:
-            return hashlib.file_digest(f, "sha256").hexdigest()
-    except OSError as e:
-        raise InputError(f"{path}: cannot read ({e.strerror})") from None
 
 
 # The error sources of a world, by family (what ``without`` switches off): the ones the
