@@ -37,11 +37,18 @@ no encoder offsets either: ``planecal compensate`` corrects a program's targets 
 (``ur`` takes the geometry and base frame; compliance, which depends on the pose, stays
 out of every format). A result made for another robot than the scene's is refused. The
 calibrated URDF: ``planecal urdf --params RESULT.json``.
+
+The export is recorded in the cell's history (docs/HISTORY.md), linked to the calibration
+entry that wrote the result file (found by its SHA-256). ``planecal history rollback N``
+writes the controller file of an earlier calibration with the same writer
+(``planecal.present.controller``).
 """
 from __future__ import annotations
 
 from planecal.commands.controller_options import (add_controller_arguments, checked_out,
                                                   current_qe0)
+from planecal.commands.history_options import (add_history_arguments, command_provenance,
+                                               new_entry, open_history, record, result_link)
 
 
 def add_arguments(p):
@@ -50,6 +57,7 @@ def add_arguments(p):
     add_controller_arguments(p)
     p.add_argument("--scene", default="thesis_final",
                    help="scene: robot and calibration position (default %(default)s)")
+    add_history_arguments(p)
 
 
 def run(args) -> int:
@@ -57,13 +65,18 @@ def run(args) -> int:
     from planecal.io.params import load_params
     from planecal.model.scene import load_scene
     from planecal.present.controller import ControllerFile, write_controller_file
-    from planecal.base.paths import file_sha256
 
     out = checked_out(args, [args.result])
+    hist = open_history(args, [args.result, out])
     qe0 = current_qe0(args.current_qe0)
     scene = load_scene(args.scene)
     doc = read_json(args.result, "calibration result")
     params = load_params(args.result, scene.robot)
-    req = ControllerFile(args.format, out, qe0, str(args.result), file_sha256(args.result))
-    write_controller_file(doc, params, scene, req)
+    sha, against = result_link(hist, args.result)
+    req = ControllerFile(args.format, out, qe0, str(args.result), sha)
+    written = write_controller_file(doc, params, scene, req)
+    prov = command_provenance(scene, [("result", args.result)])
+    record(hist, new_entry(args, "export", "ok", 0, prov, robot_sha256=scene.robot.digest,
+                           against=against, result_sha256=sha, summary=written,
+                           output=str(out) if out else None))
     return 0

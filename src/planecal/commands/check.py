@@ -1,0 +1,123 @@
+"""planecal check RUN.tsv --against RESULT.json [--calibration-samples FILE...] [--alpha A]
+[--suspects NAMES] [--scene S] [--out VERDICT.json [--force]] [--json] [--history DB]
+[--no-history] [--note TEXT] [--cell NAME]
+
+Has the cell drifted since the calibration RESULT.json? A short run (a few dozen random
+poses, ``rehearse`` or ``sample``) is predicted with the result's parameters and its
+model errors are tested against the result's own model errors on its calibration samples
+(found through the result's provenance, checked by their SHA-256, or given with
+--calibration-samples): the exceedance test (a distribution-free two-sample median test
+with each error studentized by its pose's leverage; ``planecal.estimation.drift``,
+docs/HISTORY.md). The false-alarm rate is at most --alpha (default 0.01); the attained
+rate is printed. Its null hypothesis assumes the run's poses are drawn as the
+calibration's were (random poses on the same plates): a planned pose list of extreme
+poses errs otherwise.
+
+When the run drifted, each suspect (default: the six joint offsets; --suspects names
+others, e.g. o_x,n1_z) is fitted alone to the run with the rest held at the result's
+values: the amount (the run's value minus the result's) in robot terms (J3 (delta3),
+mrad) with its std, the significant ones named, the best explanation first.
+
+Prints the verdict (--json: the JSON verdict instead), writes it to --out (format
+planecal-check/1), and records it in the cell's history, linked to the calibration entry
+that wrote RESULT.json. Exit 0: in control; 1: drifted; 2: bad input.
+"""
+from __future__ import annotations
+
+import json
+
+from planecal.base.errors import InputError
+from planecal.commands.history_options import (add_history_arguments, command_provenance,
+                                               new_entry, open_history, record, result_link,
+                                               result_scene, sample_worlds)
+
+
+def add_arguments(p):
+    p.add_argument("run", metavar="RUN.tsv", help="the short run's sample file")
+    p.add_argument("--against", required=True, metavar="RESULT.json",
+                   help="the calibration result (planecal calibrate --out)")
+    p.add_argument("--calibration-samples", nargs="+", default=None, metavar="FILE",
+                   help="the result's calibration samples (default: the files its provenance "
+                        "records, checked by their SHA-256)")
+    p.add_argument("--alpha", type=float, default=0.01,
+                   help="the false-alarm rate the test may not exceed (default %(default)s)")
+    p.add_argument("--suspects", default=None, metavar="NAMES",
+                   help="parameters to fit one at a time to a drifted run (default: the "
+                        "joint offsets delta1..delta6)")
+    p.add_argument("--scene", default=None,
+                   help="the scene (default: the one the result records)")
+    p.add_argument("--out", metavar="VERDICT.json", help="write the JSON verdict here")
+    p.add_argument("--force", action="store_true",
+                   help="replace --out even if it is not a verdict planecal wrote")
+    p.add_argument("--json", action="store_true", help="print the JSON verdict, not the text")
+    add_history_arguments(p)
+
+
+def suspects_option(text: str | None, layout) -> tuple[str, ...]:
+    """--suspects: names of the result's layout (default the joint offsets)."""
+    from planecal.estimation.drift import JOINT_OFFSETS
+    if text is None:
+        return JOINT_OFFSETS
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise InputError(f"--suspects: no parameter named in {text!r}")
+    for n in names:
+        try:
+            layout.index(n)
+        except InputError:
+            raise InputError(f"--suspects: {n!r} is not a parameter of the result; known: "
+                             f"{', '.join(layout.names)}") from None
+    return names
+
+
+def run(args) -> int:
+    from planecal.estimation.drift import FittedResult, check_run
+    from planecal.formats.base import read_json
+    from planecal.io.outputs import check_output
+    from planecal.io.params import check_robot, recorded_samples
+    from planecal.io.samples import read_many, read_samples
+    from planecal.present.drift import CHECK_FORMAT, check_document, check_text
+
+    if not 0 < args.alpha < 1:
+        raise InputError(f"--alpha must be in (0, 1), got {args.alpha}")
+    given = [args.run, args.against, *(args.calibration_samples or [])]
+    out = check_output(args.out, given, CHECK_FORMAT, args.force) if args.out else None
+    hist = open_history(args, given + [out])
+    doc = read_json(args.against, "calibration result")
+    scene = result_scene(doc, args.scene)
+    check_robot(doc, scene.robot, args.against)
+    cal_paths = args.calibration_samples or recorded_samples(doc, args.against,
+                                                            "--calibration-samples")
+    if not cal_paths:
+        raise InputError(f"{args.against}: records no calibration samples; give them with "
+                         "--calibration-samples")
+    fr = FittedResult.of(doc, scene.robot, args.against)
+    cal, run_s = read_many(cal_paths, scene), read_samples(args.run, scene)
+    if run_s.plate.max(initial=0) >= fr.params.n_planes:
+        raise InputError(f"{args.run}: samples on plate {run_s.plate.max() + 1}, the result "
+                         f"holds {fr.params.n_planes} plane(s)")
+    chk = check_run(fr, (cal.qe, cal.d_mm * 1e-3, cal.plate),
+                    (run_s.qe, run_s.d_mm * 1e-3, run_s.plate), args.alpha,
+                    suspects_option(args.suspects, fr.layout))
+    sha, against = result_link(hist, args.against)
+    verdict = check_document(chk, str(args.run), str(args.against), fr.noise is not None,
+                             against)
+    print(json.dumps(verdict, indent=2) if args.json else check_text(verdict))
+    if out:
+        from planecal.io.params import save_json
+        save_json(out, verdict)
+    prov = command_provenance(scene, [("run", args.run), ("result", args.against),
+                                      *(("calibration samples", p) for p in cal_paths)])
+    record(hist, new_entry(args, "check", verdict["verdict"], verdict["exit_code"], prov,
+                           robot_sha256=scene.robot.digest, against=against,
+                           result_sha256=sha, world=sample_worlds([args.run]),
+                           summary=_summary(verdict), document=verdict,
+                           output=str(out) if out else None), args.json)
+    return verdict["exit_code"]
+
+
+def _summary(v: dict) -> dict:
+    t = v["test"]
+    return {"verdict": v["verdict"], "p_value": t["p_value"], "alpha": t["alpha"],
+            "exceedances": t["exceedances"], "run_samples": t["run_samples"],
+            "run_rms_mm": v["model_error"]["run_rms_mm"], "moved": v["moved"]}
