@@ -245,7 +245,7 @@ class DriftCheck:
         return list(self.explanation.names) if self.drifted and self.explanation else []
 
 
-def _gls(Jc: np.ndarray, rw: np.ndarray, Si: np.ndarray):
+def gls(Jc: np.ndarray, rw: np.ndarray, Si: np.ndarray):
     """Amounts (run minus result), their covariance and the chi-square left, of columns
     ``Jc`` (n, k) fitted to the residuals ``rw`` (r = predicted - measured = -J amount)."""
     A = Jc.T @ Si @ Jc
@@ -255,16 +255,19 @@ def _gls(Jc: np.ndarray, rw: np.ndarray, Si: np.ndarray):
     return x, cov, float(e @ Si @ e)
 
 
-def _explain(rows: Rows, Si, cols: dict, test_after, chi2_limit: float) -> Explanation | None:
-    """Forward selection over the suspects ``cols`` (name -> weighted column): add the one
-    that leaves the least chi-square until the run is in control or none improves it by
-    more than ``chi2_limit``."""
+def forward_selection(rw: np.ndarray, Si: np.ndarray, cols: dict, test_after,
+                      chi2_limit: float) -> Explanation | None:
+    """Forward selection over the suspects ``cols`` (name -> weighted column) fitted to the
+    residuals ``rw`` (r = -J amount) with the inverse covariance ``Si``: add the one that
+    leaves the least chi-square until ``test_after(residuals left, chi-square left,
+    parameters fitted)`` passes (a p above 0) or none lowers the chi-square by more than
+    ``chi2_limit``. ``test_after`` returns (p, rejected)."""
     chosen: list[str] = []
     first: dict = {}
     x = cov = None
-    p_after, left = 0.0, float(rows.rw @ Si @ rows.rw)
+    p_after, passed, left = 0.0, False, float(rw @ Si @ rw)
     while len(chosen) < len(cols):
-        trials = {n: _gls(np.column_stack([cols[c] for c in chosen + [n]]), rows.rw, Si)
+        trials = {n: gls(np.column_stack([cols[c] for c in chosen + [n]]), rw, Si)
                   for n in cols if n not in chosen}
         best = min(trials, key=lambda n: trials[n][2])
         if left - trials[best][2] <= chi2_limit:
@@ -274,16 +277,39 @@ def _explain(rows: Rows, Si, cols: dict, test_after, chi2_limit: float) -> Expla
         chosen.append(best)
         x, cov, left = trials[best]
         J = np.column_stack([cols[c] for c in chosen])
-        p_after = test_after(rows.rw + J @ x)
-        if p_after > 0:
+        p_after, rejected = test_after(rw + J @ x, left, len(chosen))
+        passed = not rejected
+        if passed:
             break
     if not chosen:
         return None
     alt = tuple(n for n, c2 in sorted(first.items(), key=lambda t: t[1])
                 if n != chosen[0] and c2 - first[chosen[0]] <= chi2_limit)
     return Explanation(tuple(chosen), tuple(float(v) for v in x),
-                       tuple(float(v) for v in np.sqrt(np.diag(cov))), max(p_after, 0.0),
-                       p_after > 0, alt)
+                       tuple(float(v) for v in np.sqrt(np.diag(cov))), p_after, passed, alt)
+
+
+def single_fits(rw: np.ndarray, Si: np.ndarray, cols: dict, z_limit: float,
+                test_after) -> list[Suspect]:
+    """Each suspect of ``cols`` fitted alone (``gls``), strongest first."""
+    out = []
+    for n, j in cols.items():
+        x, cov, left = gls(j[:, None], rw, Si)
+        amount, std = float(x[0]), float(np.sqrt(cov[0, 0]))
+        p, rejected = test_after(rw + j * amount, left, 1)
+        out.append(Suspect(n, amount, std, amount / std, abs(amount / std) > z_limit, p,
+                           not rejected))
+    out.sort(key=lambda s: -s.z ** 2)
+    return out
+
+
+def suspect_columns(J: np.ndarray, layout: ParamLayout, names) -> tuple[dict, list[str]]:
+    """(name -> Jacobian column, the names with no effect on these samples)."""
+    names = list(dict.fromkeys(names))
+    norms = {n: float(np.linalg.norm(J[:, layout.index(n)])) for n in names}
+    top = max(norms.values(), default=0.0)
+    cols = {n: J[:, layout.index(n)] for n in names if norms[n] > 1e-12 * top}
+    return cols, [n for n in names if n not in cols]
 
 
 def check_run(fr: FittedResult, calibration, run, alpha: float = DEFAULT_ALPHA,
@@ -305,28 +331,19 @@ def check_run(fr: FittedResult, calibration, run, alpha: float = DEFAULT_ALPHA,
     scale = np.sqrt(1.0 + rows.h)
     test = exceedance_test(a, np.abs(rows.rw) / scale, alpha)
 
-    def p_after(rw):  # the test on what a fit leaves; 0 where it still rejects
+    def test_after(rw, _chi2, _k):  # the test on what a fit leaves
         t = exceedance_test(a, np.abs(rw) / scale, alpha)
-        return 0.0 if t.rejected else t.p
+        return t.p, t.rejected
 
-    names = list(dict.fromkeys(suspects))
-    z_limit = float(norm.isf(alpha / (2 * max(len(names), 1))))
+    cols, no_effect = suspect_columns(rows.J, fr.layout, suspects)
+    z_limit = float(norm.isf(alpha / (2 * max(len(cols), 1))))
     chi2_limit = float(chi2.isf(alpha, 1))
-    norms = {n: float(np.linalg.norm(rows.J[:, fr.layout.index(n)])) for n in names}
-    top = max(norms.values(), default=0.0)
-    cols = {n: rows.J[:, fr.layout.index(n)] for n in names if norms[n] > 1e-12 * top}
-    out = []
-    for n, j in cols.items():
-        x, cov, _ = _gls(j[:, None], rows.rw, Si)
-        amount, std = float(x[0]), float(np.sqrt(cov[0, 0]))
-        after = exceedance_test(a, np.abs(rows.rw + j * amount) / scale, alpha)
-        out.append(Suspect(n, amount, std, amount / std, abs(amount / std) > z_limit,
-                           after.p, not after.rejected))
-    out.sort(key=lambda s: -s.z ** 2)
-    expl = _explain(rows, Si, cols, p_after, chi2_limit) if test.rejected else None
+    out = single_fits(rows.rw, Si, cols, z_limit, test_after)
+    expl = (forward_selection(rows.rw, Si, cols, test_after, chi2_limit) if test.rejected
+            else None)
     return DriftCheck(test, float(np.sqrt(np.mean(rows.r ** 2))), float(np.mean(rows.r)),
-                      float(np.sqrt(np.mean(cal.r[used] ** 2))), out, expl,
-                      [n for n in names if n not in cols], z_limit, chi2_limit)
+                      float(np.sqrt(np.mean(cal.r[used] ** 2))), out, expl, no_effect,
+                      z_limit, chi2_limit)
 
 
 # ----- history diff -----------------------------------------------------------------------

@@ -17,7 +17,7 @@ AUTO_NAMES = ("", "auto", "-")  # --rrd values that mean "a generated name in re
 RRD_MAGIC = b"RRF"  # "RRF2" in rerun 0.41; older files start "RRF0"/"RRF1"
 
 # recording kinds: each has a blueprint of its own (docs/RERUN.md)
-KINDS = ("rehearsal", "real", "calibration", "montecarlo", "bootstrap", "validate")
+KINDS = ("rehearsal", "real", "calibration", "montecarlo", "bootstrap", "validate", "compare")
 
 # colours (RGBA). The beam is green: no sample colour scale and no rejection uses green.
 PLATE_RGBA = (95, 105, 125, 255)  # dark slate: light, blue and red samples all show on it
