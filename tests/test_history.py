@@ -205,6 +205,11 @@ def test_calibrate_check_export_and_the_history_of_a_week(cell, capsys, monkeypa
     p = v["explanation"]["parameters"][0]
     assert abs(p["amount"] - 5e-4) < 4 * p["std"] and p["std"] < 2e-5
     assert v["explanation"]["explains"] and v["against_entry"] == 1
+    # the two runs that passed are the reference now: runs after one calibration are alike
+    assert v["reference"] == {"kind": "runs", "runs": [ok1, ok2], "samples": 60,
+                              "meaning": "earlier in-control runs of this result"}
+    assert main(["check", ok1, "--against", "r.json", "--no-history", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["reference"]["kind"] == "calibration"
     assert "history: entry 4 (check: drifted)" in cap.err  # stdout holds the JSON only
     assert main(["export", "r.json", "--out", "fd11.json", *h]) == 0
     capsys.readouterr()

@@ -8,7 +8,11 @@ model errors are tested against the result's own model errors on its calibration
 (found through the result's provenance, checked by their SHA-256, or given with
 --calibration-samples): the exceedance test (a distribution-free two-sample median test
 with each error studentized by its pose's leverage; ``planecal.estimation.drift``,
-docs/HISTORY.md). The false-alarm rate is at most --alpha (default 0.01); the attained
+docs/HISTORY.md). Once the history holds earlier in-control checks of this result (at
+least two, their run files here and unchanged), their runs are the reference instead
+(--reference auto, the default; --reference calibration keeps the calibration's):
+one calibration's residual scale is a single draw, later runs of the same result are
+alike. The false-alarm rate is at most --alpha (default 0.01); the attained
 rate is printed. Its null hypothesis assumes the run's poses are drawn as the
 calibration's were (random poses on the same plates): a planned pose list of extreme
 poses errs otherwise.
@@ -31,6 +35,8 @@ from planecal.commands.history_options import (add_history_arguments, command_pr
                                                new_entry, open_history, record, result_link,
                                                result_scene, sample_worlds)
 
+MIN_REFERENCE_RUNS = 2
+
 
 def add_arguments(p):
     p.add_argument("run", metavar="RUN.tsv", help="the short run's sample file")
@@ -44,6 +50,11 @@ def add_arguments(p):
     p.add_argument("--suspects", default=None, metavar="NAMES",
                    help="parameters to fit one at a time to a drifted run (default: the "
                         "joint offsets delta1..delta6)")
+    p.add_argument("--reference", choices=("auto", "calibration"), default="auto",
+                   help="the test's reference: auto (the runs of this result's earlier "
+                        "in-control checks in the history, once there are at least "
+                        f"{MIN_REFERENCE_RUNS}, here and unchanged; else the calibration's "
+                        "residuals) or calibration (default %(default)s)")
     p.add_argument("--scene", default=None,
                    help="the scene (default: the one the result records)")
     p.add_argument("--out", metavar="VERDICT.json", help="write the JSON verdict here")
@@ -96,24 +107,50 @@ def run(args) -> int:
     if run_s.plate.max(initial=0) >= fr.params.n_planes:
         raise InputError(f"{args.run}: samples on plate {run_s.plate.max() + 1}, the result "
                          f"holds {fr.params.n_planes} plane(s)")
+    sha, against = result_link(hist, args.against)
+    ref_paths = _reference_runs(args, hist, against)
+    refs = [read_samples(p, scene) for p in ref_paths]
     chk = check_run(fr, (cal.qe, cal.d_mm * 1e-3, cal.plate),
                     (run_s.qe, run_s.d_mm * 1e-3, run_s.plate), args.alpha,
-                    suspects_option(args.suspects, fr.layout))
-    sha, against = result_link(hist, args.against)
+                    suspects_option(args.suspects, fr.layout),
+                    [(r.qe, r.d_mm * 1e-3, r.plate) for r in refs])
     verdict = check_document(chk, str(args.run), str(args.against), fr.noise is not None,
-                             against)
+                             against, ref_paths)
     print(json.dumps(verdict, indent=2) if args.json else check_text(verdict))
     if out:
         from planecal.io.params import save_json
         save_json(out, verdict)
     prov = command_provenance(scene, [("run", args.run), ("result", args.against),
-                                      *(("calibration samples", p) for p in cal_paths)])
+                                      *(("calibration samples", p) for p in cal_paths),
+                                      *(("reference run", p) for p in ref_paths)])
     record(hist, new_entry(args, "check", verdict["verdict"], verdict["exit_code"], prov,
                            robot_sha256=scene.robot.digest, against=against,
                            result_sha256=sha, world=sample_worlds([args.run]),
                            summary=_summary(verdict), document=verdict,
                            output=str(out) if out else None), args.json)
     return verdict["exit_code"]
+
+
+def _reference_runs(args, hist, against) -> list[str]:
+    """The runs of the history's earlier in-control checks against the result's entry
+    (here, with the content recorded), when --reference auto finds at least
+    MIN_REFERENCE_RUNS of them; else none (the calibration's residuals)."""
+    from pathlib import Path
+
+    from planecal.base.paths import file_sha256
+    if args.reference != "auto" or hist is None or against is None:
+        return []
+    here = Path(args.run).resolve()
+    found: list[str] = []
+    for e in hist.entries(kind="check"):
+        if e.against != against or e.outcome != "in_control":
+            continue
+        for i in hist.get(e.id).inputs:
+            p = Path(i.path)
+            if (i.role == "run" and p.is_file() and p.resolve() != here
+                    and str(p) not in found and file_sha256(p) == i.sha256):
+                found.append(str(p))
+    return found if len(found) >= MIN_REFERENCE_RUNS else []
 
 
 def _summary(v: dict) -> dict:

@@ -30,18 +30,22 @@ def in_display(name: str, v: float | None) -> tuple[str, str]:
 
 
 def check_document(chk: DriftCheck, run: str, result: str, weighted: bool,
-                   against: int | None = None) -> dict:
+                   against: int | None = None, reference_runs=()) -> dict:
     """The check's JSON verdict (format ``planecal-check/1``; docs/HISTORY.md)."""
     t, e = chk.test, chk.explanation if chk.drifted else None
     unit = "weighted" if weighted else "m"
     return {
         "format": CHECK_FORMAT, "run": run, "result": result, "against_entry": against,
         "verdict": "drifted" if chk.drifted else "in_control",
+        "reference": {"kind": "runs" if reference_runs else "calibration",
+                      "runs": [str(p) for p in reference_runs], "samples": t.n,
+                      "meaning": "earlier in-control runs of this result" if reference_runs
+                      else "the calibration's residuals"},
         "exit_code": 1 if chk.drifted else 0,
         "test": {"name": "exceedance test (two-sample median test, distribution-free)",
-                 "statistic": "run samples above the calibration's median studentized "
+                 "statistic": "run samples above the reference's median studentized "
                               "|model error|",
-                 "calibration_samples": t.n, "run_samples": t.m, "threshold": t.threshold,
+                 "reference_samples": t.n, "run_samples": t.m, "threshold": t.threshold,
                  "threshold_unit": unit, "exceedances": t.exceed,
                  "expected": t.expected, "expected_std": t.std, "p_value": t.p,
                  "alpha": t.alpha, "attained_false_alarm_rate": t.attained_alpha,
@@ -73,20 +77,23 @@ def check_text(doc: dict) -> str:
            else f"{t['threshold']:.4f} (weighted)")
     lines = [
         f"drift check of {doc['run']} ({t['run_samples']} samples) against {doc['result']}"
-        + (f" (history entry {doc['against_entry']})" if doc.get("against_entry") else "")
-        + f", {t['calibration_samples']} calibration samples",
+        + (f" (history entry {doc['against_entry']})" if doc.get("against_entry") else ""),
+        "reference: " + (f"{len(doc['reference']['runs'])} earlier in-control runs of the "
+                         f"result ({t['reference_samples']} samples)"
+                         if doc["reference"]["kind"] == "runs" else
+                         f"the calibration's {t['reference_samples']} residuals"),
         f"model error (predicted - measured) with the result's parameters: run RMS "
         f"{me['run_rms_mm']:.4f} mm, mean {me['run_mean_mm']:+.4f} mm; calibration RMS "
         f"{me['calibration_rms_mm']:.4f} mm",
         f"exceedance test: {t['exceedances']} of the run's {t['run_samples']} studentized "
-        f"|model errors| above the calibration's median {thr} (expected {t['expected']:.1f} "
+        f"|model errors| above the reference's median {thr} (expected {t['expected']:.1f} "
         f"+- {t['expected_std']:.1f} with no drift); p = {t['p_value']:.3g}",
         f"alpha {t['alpha']:g}: false-alarm rate {t['attained_false_alarm_rate']:.4f} (the "
         f"test's attained size: drifted from {t['critical_exceedances']} exceedances on)"]
     if doc["verdict"] == "in_control":
-        lines.append("IN CONTROL: the run errs as the calibration did (exit 0)")
+        lines.append("IN CONTROL: the run errs as the reference did (exit 0)")
     else:
-        lines.append("DRIFTED: the run errs more than the calibration did (exit 1)")
+        lines.append("DRIFTED: the run errs more than the reference did (exit 1)")
     lines.append(f"suspects, each alone with the rest held at the result's values (the run's "
                  f"value minus the result's; significant where |z| > {doc['z_limit']:.2f}):")
     rows = []

@@ -10,8 +10,8 @@ import numpy as np
 
 from planecal.present.rerun.common import (_rr, close_recording, diverging_colors,
                                            error_legend, hit_columns, lifted, log_info,
-                                           log_pose_set, open_recording, pose_eye,
-                                           recording_path, sample_points)
+                                           log_pose_set, open_recording, recording_path,
+                                           sample_points)
 
 RUN_RGBA = (215, 50, 40, 255)
 REHEARSAL_RGBA = (40, 110, 220, 255)
@@ -80,8 +80,7 @@ def log_compare(path, doc: dict, scene, params) -> str:
     plate = np.array([x["plate"] - 1 for x in s], int)
     diff = np.array([x["difference_mm"] for x in s])
     scale = max(float(np.max(np.abs(diff))), 1e-6)
-    eye = pose_eye(scene, params, qe[0])
-    rec = open_recording(p, compare_blueprint(scene, eye), name=f"compare {scene.name}")
+    rec = open_recording(p, compare_blueprint(scene, None), name=f"compare {scene.name}")
     try:
         log_pose_set(rec, scene, params, qe, run, plate, diverging_colors(diff, scale),
                      extra={"difference_mm": diff})
@@ -109,8 +108,10 @@ def _series(rec, doc: dict) -> None:
     k = np.array([x["sample"] for x in s], np.int64)
     idx = [rr.TimeColumn("sample", sequence=k)]
 
-    def series(path, values, color, name):
-        rec.log(path, rr.SeriesLines(colors=[color], names=[name]), static=True)
+    def series(path, values, color, name, points=True):
+        style = (rr.SeriesPoints(colors=[color], names=[name], marker_sizes=[3.0]) if points
+                 else rr.SeriesLines(colors=[color], names=[name]))
+        rec.log(path, style, static=True)
         rec.send_columns(path, indexes=idx,
                          columns=rr.Scalars.columns(scalars=np.asarray(values, float)))
 
@@ -121,8 +122,8 @@ def _series(rec, doc: dict) -> None:
     band = np.array([x["sigma_mm"] for x in s]) * lim
     series("/series/difference_mm/difference", [x["difference_mm"] for x in s], RUN_RGBA,
            "run - rehearsal")
-    series("/series/difference_mm/band_high", band, BAND_RGBA, f"+{lim:.2f} sigma")
-    series("/series/difference_mm/band_low", -band, BAND_RGBA, f"-{lim:.2f} sigma")
+    series("/series/difference_mm/band_high", band, BAND_RGBA, f"+{lim:.2f} sigma", False)
+    series("/series/difference_mm/band_low", -band, BAND_RGBA, f"-{lim:.2f} sigma", False)
     if doc.get("explanation"):
         series("/series/difference_mm/explained", [x["explained_mm"] for x in s], FIT_RGBA,
-               "explained")
+               "explained", False)
