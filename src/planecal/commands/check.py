@@ -64,25 +64,8 @@ def add_arguments(p):
     add_history_arguments(p)
 
 
-def suspects_option(text: str | None, layout) -> tuple[str, ...]:
-    """--suspects: names of the result's layout (default the joint offsets)."""
-    from planecal.estimation.drift import JOINT_OFFSETS
-    if text is None:
-        return JOINT_OFFSETS
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
-    if not names:
-        raise InputError(f"--suspects: no parameter named in {text!r}")
-    for n in names:
-        try:
-            layout.index(n)
-        except InputError:
-            raise InputError(f"--suspects: {n!r} is not a parameter of the result; known: "
-                             f"{', '.join(layout.names)}") from None
-    return names
-
-
 def run(args) -> int:
-    from planecal.estimation.drift import FittedResult, check_run
+    from planecal.estimation.drift import FittedResult, check_run, parse_suspects
     from planecal.formats.base import read_json
     from planecal.io.outputs import check_output
     from planecal.io.params import check_robot, recorded_samples
@@ -112,7 +95,7 @@ def run(args) -> int:
     refs = [read_samples(p, scene) for p in ref_paths]
     chk = check_run(fr, (cal.qe, cal.d_mm * 1e-3, cal.plate),
                     (run_s.qe, run_s.d_mm * 1e-3, run_s.plate), args.alpha,
-                    suspects_option(args.suspects, fr.layout),
+                    parse_suspects(args.suspects, fr.layout),
                     [(r.qe, r.d_mm * 1e-3, r.plate) for r in refs])
     verdict = check_document(chk, str(args.run), str(args.against), fr.noise is not None,
                              against, ref_paths)

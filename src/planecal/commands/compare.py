@@ -97,6 +97,7 @@ def _noise(args, robot) -> tuple[float, dict]:
 
 def run(args) -> int:
     from planecal.estimation.agreement import compare_runs, pair
+    from planecal.estimation.drift import parse_suspects
     from planecal.io.outputs import check_output
     from planecal.io.samples import read_samples
     from planecal.model.levels import layout_for
@@ -119,7 +120,7 @@ def run(args) -> int:
     js, noise = _noise(args, scene.robot)
     layout = layout_for(scene.robot, params.n_planes, "full", True)
     ag = compare_runs(scene.robot, params, layout, pr, js, 1e-6, args.alpha,
-                      _suspects(args.suspects, layout))
+                      parse_suspects(args.suspects, layout))
     noise["pair_sigma_median_mm"] = float(sorted(ag.sigma_m)[len(ag.sigma_m) // 2] * 1e3)
     doc = compare_document(ag, pr, str(args.run), str(args.rehearsal), noise)
     print(json.dumps(doc, indent=2) if args.json else compare_text(doc))
@@ -135,22 +136,6 @@ def _params(args, scene):
     from planecal.io.params import load_params
     from planecal.model.scene import nominal_params
     return load_params(args.params, scene.robot) if args.params else nominal_params(scene)
-
-
-def _suspects(text, layout):
-    from planecal.estimation.drift import JOINT_OFFSETS
-    if text is None:
-        return JOINT_OFFSETS
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
-    if not names:
-        raise InputError(f"--suspects: no parameter named in {text!r}")
-    for n in names:
-        try:
-            layout.index(n)
-        except InputError:
-            raise InputError(f"--suspects: no model parameter {n!r}; known: "
-                             f"{', '.join(layout.names)}") from None
-    return names
 
 
 def _renderings(args, doc: dict, scene, params) -> None:

@@ -313,6 +313,21 @@ def single_fits(rw: np.ndarray, Si: np.ndarray, cols: dict, z_limit: float,
     return out
 
 
+def parse_suspects(text: str | None, layout: ParamLayout) -> tuple[str, ...]:
+    """--suspects: comma-separated names of ``layout`` (None: the joint offsets);
+    InputError naming an unknown one and the known ones."""
+    if text is None:
+        return JOINT_OFFSETS
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise InputError(f"--suspects: no parameter named in {text!r}")
+    for n in names:
+        if n not in layout.names:
+            raise InputError(f"--suspects: {n!r} is not a parameter here; known: "
+                             f"{', '.join(layout.names)}")
+    return names
+
+
 def suspect_columns(J: np.ndarray, layout: ParamLayout, names) -> tuple[dict, list[str]]:
     """(name -> Jacobian column, the names with no effect on these samples)."""
     names = list(dict.fromkeys(names))

@@ -153,25 +153,11 @@ def is_url(where: str) -> bool:
 
 
 def check_file(where: str, inputs=()) -> Path:
-    """A history file checked before any work: not an input of the command, not a
-    directory, in a folder that exists and can be written, and, if it exists, an SQLite
-    database (one-line InputError otherwise)."""
-    p = Path(where)
-    for i in inputs:
-        try:
-            same = i is not None and Path(i).resolve() == p.resolve()
-        except OSError:
-            same = False
-        if same:
-            raise InputError(f"--history {p}: that is an input of this command ({i})")
-    if p.is_dir():
-        raise InputError(f"--history {p}: is a directory; give a database file")
-    parent = p.parent if str(p.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"--history {p}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise InputError(f"--history {p}: cannot write in {parent} (permission denied; "
-                         "give --history FILE or --no-history)")
+    """A history file checked before any work: the output guard's checks (not an input
+    of the command, not a directory, in a folder that exists and can be written;
+    ``io.outputs``) and, if it exists, an SQLite database (one-line InputError)."""
+    from planecal.io.outputs import check_output
+    p = check_output(where, inputs, force=True, what="--history")
     if p.exists():
         try:
             with open(p, "rb") as f:
@@ -180,8 +166,6 @@ def check_file(where: str, inputs=()) -> Path:
             raise InputError(f"--history {p}: cannot read ({e.strerror})") from None
         if head and head != SQLITE_MAGIC:
             raise InputError(f"--history {p}: not an SQLite database (a history is one)")
-        if not os.access(p, os.W_OK):
-            raise InputError(f"--history {p}: cannot be written (permission denied)")
     return p
 
 

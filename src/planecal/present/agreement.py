@@ -6,7 +6,7 @@ document."""
 from __future__ import annotations
 
 from planecal.estimation.agreement import Agreement, Paired
-from planecal.present.drift import in_display, param_label
+from planecal.present.drift import SUSPECT_HEADERS, in_display, param_label, suspect_rows
 from planecal.present.tables import table
 
 COMPARE_FORMAT = "planecal-compare/1"
@@ -68,15 +68,8 @@ def compare_text(doc: dict) -> str:
         + (", ".join(map(str, doc["flagged_samples"])) or "none")]
     lines.append("AGREE: the runs differ by their noise only (exit 0)" if doc["verdict"] ==
                  "agree" else "DIFFER: the runs differ by more than their noise (exit 1)")
-    rows = []
-    for s in doc["suspects"]:
-        v, unit = in_display(s["name"], s["amount"])
-        sd, _ = in_display(s["name"], s["std"])
-        rows.append([s["label"], f"{v} {unit}", f"{sd.lstrip('+')} {unit}", f"{s['z']:+.1f}",
-                     "yes" if s["significant"] else "", f"{s['p_after']:.3g}"])
     lines.append("suspects, each alone (the run's value minus the rehearsal's):")
-    lines.append(table(["parameter", "amount", "std", "z", "significant", "p after it"],
-                       rows, "lrrrll"))
+    lines.append(table(SUSPECT_HEADERS, suspect_rows(doc["suspects"]), "lrrrll"))
     e = doc.get("explanation")
     if doc["verdict"] == "differ":
         if e:

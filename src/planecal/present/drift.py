@@ -29,6 +29,20 @@ def in_display(name: str, v: float | None) -> tuple[str, str]:
     return f"{v * scale:+.4f}", unit
 
 
+SUSPECT_HEADERS = ["parameter", "amount", "std", "z", "significant", "p after it"]
+
+
+def suspect_rows(suspects: list[dict]) -> list[list[str]]:
+    """The suspects of a check or compare document as table rows (display units)."""
+    rows = []
+    for s in suspects:
+        v, unit = in_display(s["name"], s["amount"])
+        sd, _ = in_display(s["name"], s["std"])
+        rows.append([s["label"], f"{v} {unit}", f"{sd.lstrip('+')} {unit}", f"{s['z']:+.1f}",
+                     "yes" if s["significant"] else "", f"{s['p_after']:.3g}"])
+    return rows
+
+
 def check_document(chk: DriftCheck, run: str, result: str, weighted: bool,
                    against: int | None = None, reference_runs=()) -> dict:
     """The check's JSON verdict (format ``planecal-check/1``; docs/HISTORY.md)."""
@@ -96,14 +110,7 @@ def check_text(doc: dict) -> str:
         lines.append("DRIFTED: the run errs more than the reference did (exit 1)")
     lines.append(f"suspects, each alone with the rest held at the result's values (the run's "
                  f"value minus the result's; significant where |z| > {doc['z_limit']:.2f}):")
-    rows = []
-    for s in doc["suspects"]:
-        v, unit = in_display(s["name"], s["amount"])
-        sd, _ = in_display(s["name"], s["std"])
-        rows.append([s["label"], f"{v} {unit}", f"{sd.lstrip('+')} {unit}", f"{s['z']:+.1f}",
-                     "yes" if s["significant"] else "", f"{s['p_after']:.3g}"])
-    lines.append(table(["parameter", "amount", "std", "z", "significant", "p after it"],
-                       rows, "lrrrll"))
+    lines.append(table(SUSPECT_HEADERS, suspect_rows(doc["suspects"]), "lrrrll"))
     if doc["no_effect"]:
         lines.append(f"no effect on these samples: {', '.join(doc['no_effect'])}")
     lines += _explanation_lines(doc)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planecal.present.drift import in_display
+from planecal.present.drift import SUSPECT_HEADERS, suspect_rows
 from planecal.present.report.figures import AFTER, BEFORE, new_figure, save
 from planecal.present.report.inputs import Context
 from planecal.present.report.page import Page
@@ -112,15 +112,9 @@ def build(ctx: Context) -> Page:
     for fig in (fig_distances(out, doc), fig_differences(out, doc), fig_z(out, doc)):
         sec.figure(fig)
     sec = page.section("What explains the difference")
-    rows = []
-    for s in doc["suspects"]:
-        v, unit = in_display(s["name"], s["amount"])
-        sd, _ = in_display(s["name"], s["std"])
-        rows.append([s["label"], f"{v} {unit}", f"{sd.lstrip('+')} {unit}", f"{s['z']:+.1f}",
-                     "yes" if s["significant"] else "", f"{s['p_after']:.3g}"])
     sec.text("Each suspect fitted alone to the differences (the run's value minus the "
              "rehearsal's, the rest held), weighted by the noise model:")
-    sec.table(["parameter", "amount", "std", "z", "significant", "p after it"], rows, left=1)
+    sec.table(SUSPECT_HEADERS, suspect_rows(doc["suspects"]), left=1)
     e = doc.get("explanation")
     if e:
         sec.finding("Explained by " + "; ".join(p["label"] for p in e["parameters"])
