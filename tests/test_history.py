@@ -217,7 +217,7 @@ def test_calibrate_check_export_and_the_history_of_a_week(cell, capsys, monkeypa
     out = capsys.readouterr().out
     lines = [ln for ln in out.splitlines() if ln[:1].isdigit()]
     assert [ln.split()[2] for ln in lines] == ["calibrate", "check", "check", "check", "export"]
-    assert "drifted" in lines[3] and "moved: delta3" in lines[3] and "monday" in lines[0]
+    assert "drifted" in lines[3] and "moved: J3 (delta3)" in lines[3] and "monday" in lines[0]
     assert main(["history", "show", "5", "--history", db, "--json"]) == 0
     e = json.loads(capsys.readouterr().out)
     assert e["against"] == 1 and e["output"] == "fd11.json"

@@ -15,13 +15,14 @@ def what(e) -> str:
         return (f"level {s.get('level')}{' + compliance' if s.get('compliance') else ''}, "
                 f"{s.get('samples_used')} samples, RMS {_mm(s.get('residual_rms_mm'))}"
                 + (f"; {s['failure']}" if s.get("failure") else ""))
+    from planecal.present.drift import param_label
     if e.kind == "check":
-        moved = ", ".join(s.get("moved") or [])
+        moved = ", ".join(param_label(n) for n in s.get("moved") or [])
         return (f"{s.get('exceedances')}/{s.get('run_samples')} above the median, p "
                 f"{_g(s.get('p_value'))}, RMS {_mm(s.get('run_rms_mm'))}"
                 + (f"; moved: {moved}" if moved else ""))
     if e.kind == "compare":
-        moved = ", ".join(s.get("explained_by") or [])
+        moved = ", ".join(param_label(n) for n in s.get("explained_by") or [])
         return (f"{s.get('samples')} samples, chi2 p {_g(s.get('p_value'))}, mean diff "
                 f"{_mm(s.get('mean_difference_mm'))}" + (f"; explained by {moved}" if moved
                                                           else ""))
