@@ -136,6 +136,7 @@ class SamplingObserver(NullObserver):
         self.rejections = {k: 0 for k in REJECT_KINDS}
         self.ticks_seen = 0
         self.ticks_logged = 0
+        self.live = None  # where a live view is served (``sampling_observer`` sets it)
         self.drop_when_behind = bool(drop_when_behind and background)
         self.dropped_ticks = self.dropped_events = 0
         self._resync: np.ndarray | None = None  # the last delta of a dropped chunk
