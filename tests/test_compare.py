@@ -56,6 +56,7 @@ def test_compare_same_world_agrees_moved_world_differs_and_names_j3(worlds, caps
                  "--report", "rep", "--rrd", "cmp.rrd"]) == 1
     out = capsys.readouterr().out
     v = json.loads((d / "v.json").read_text())
+    assert v["format"] == "planecal-compare/1"
     assert v["verdict"] == "differ" and v["explained_by"] == ["delta3"]
     p = v["explanation"]["parameters"][0]
     assert abs(p["amount"] - 5e-4) < max(4 * p["std"], 2e-5)

@@ -201,6 +201,7 @@ def test_calibrate_check_export_and_the_history_of_a_week(cell, capsys, monkeypa
     cap = capsys.readouterr()
     v = json.loads(cap.out)
     assert v == json.loads((d / "verdict.json").read_text())
+    assert v["format"] == "planecal-check/1"
     assert v["verdict"] == "drifted" and v["moved"] == ["delta3"]
     p = v["explanation"]["parameters"][0]
     assert abs(p["amount"] - 5e-4) < 4 * p["std"] and p["std"] < 2e-5
