@@ -28,12 +28,11 @@ that wrote RESULT.json. Exit 0: in control; 1: drifted; 2: bad input.
 """
 from __future__ import annotations
 
-import json
-
 from planecal.base.errors import InputError
 from planecal.commands.history_options import (add_history_arguments, command_provenance,
                                                new_entry, open_history, record, result_link,
                                                result_scene, sample_worlds)
+from planecal.commands.verdict_options import add_verdict_arguments, emit_verdict, verdict_out
 
 MIN_REFERENCE_RUNS = 2
 
@@ -45,11 +44,9 @@ def add_arguments(p):
     p.add_argument("--calibration-samples", nargs="+", default=None, metavar="FILE",
                    help="the result's calibration samples (default: the files its provenance "
                         "records, checked by their SHA-256)")
-    p.add_argument("--alpha", type=float, default=0.01,
-                   help="the false-alarm rate the test may not exceed (default %(default)s)")
-    p.add_argument("--suspects", default=None, metavar="NAMES",
-                   help="parameters to fit one at a time to a drifted run (default: the "
-                        "joint offsets delta1..delta6)")
+    add_verdict_arguments(p, "the false-alarm rate the test may not exceed",
+                          "parameters to fit one at a time to a drifted run (default: the "
+                          "joint offsets delta1..delta6)")
     p.add_argument("--reference", choices=("auto", "calibration"), default="auto",
                    help="the test's reference: auto (the runs of this result's earlier "
                         "in-control checks in the history, once there are at least "
@@ -57,25 +54,18 @@ def add_arguments(p):
                         "residuals) or calibration (default %(default)s)")
     p.add_argument("--scene", default=None,
                    help="the scene (default: the one the result records)")
-    p.add_argument("--out", metavar="VERDICT.json", help="write the JSON verdict here")
-    p.add_argument("--force", action="store_true",
-                   help="replace --out even if it is not a verdict planecal wrote")
-    p.add_argument("--json", action="store_true", help="print the JSON verdict, not the text")
     add_history_arguments(p)
 
 
 def run(args) -> int:
     from planecal.estimation.drift import FittedResult, check_run, parse_suspects
     from planecal.formats.base import read_json
-    from planecal.io.outputs import check_output
     from planecal.io.params import check_robot, recorded_samples
     from planecal.io.samples import read_many, read_samples
     from planecal.present.drift import CHECK_FORMAT, check_document, check_text
 
-    if not 0 < args.alpha < 1:
-        raise InputError(f"--alpha must be in (0, 1), got {args.alpha}")
     given = [args.run, args.against, *(args.calibration_samples or [])]
-    out = check_output(args.out, given, CHECK_FORMAT, args.force) if args.out else None
+    out = verdict_out(args, given, CHECK_FORMAT)
     hist = open_history(args, given + [out])
     doc = read_json(args.against, "calibration result")
     scene = result_scene(doc, args.scene)
@@ -99,10 +89,7 @@ def run(args) -> int:
                     [(r.qe, r.d_mm * 1e-3, r.plate) for r in refs])
     verdict = check_document(chk, str(args.run), str(args.against), fr.noise is not None,
                              against, ref_paths)
-    print(json.dumps(verdict, indent=2) if args.json else check_text(verdict))
-    if out:
-        from planecal.io.params import save_json
-        save_json(out, verdict)
+    emit_verdict(args, verdict, check_text, out)
     prov = command_provenance(scene, [("run", args.run), ("result", args.against),
                                       *(("calibration samples", p) for p in cal_paths),
                                       *(("reference run", p) for p in ref_paths)])

@@ -23,12 +23,12 @@ two runs with --rrd, and records it in the cell's history. Exit 0: agree; 1: dif
 """
 from __future__ import annotations
 
-import json
 import sys
 
 from planecal.base.errors import InputError
 from planecal.commands.history_options import (add_history_arguments, command_provenance,
                                                new_entry, open_history, record)
+from planecal.commands.verdict_options import add_verdict_arguments, emit_verdict, verdict_out
 
 
 def add_arguments(p):
@@ -38,11 +38,9 @@ def add_arguments(p):
     p.add_argument("--params", default=None, metavar="RESULT.json",
                    help="the parameters whose Jacobian explains a difference (default: the "
                         "scene's nominal values)")
-    p.add_argument("--alpha", type=float, default=0.01,
-                   help="the false-alarm rate of the verdict (default %(default)s)")
-    p.add_argument("--suspects", default=None, metavar="NAMES",
-                   help="parameters that may explain a difference (default: the joint "
-                        "offsets delta1..delta6; any of the whole model's)")
+    add_verdict_arguments(p, "the false-alarm rate of the verdict",
+                          "parameters that may explain a difference (default: the joint "
+                          "offsets delta1..delta6; any of the whole model's)")
     p.add_argument("--repeatability-mm", type=float, default=None,
                    help="the robot's repeatability of the noise model, +- mm at the flange "
                         "(default: robot.json's)")
@@ -51,10 +49,6 @@ def add_arguments(p):
                         "(default %(default)s)")
     p.add_argument("--scene", default=None,
                    help="the scene (default: the rehearsal's sidecar's, else thesis_final)")
-    p.add_argument("--out", metavar="VERDICT.json", help="write the JSON verdict here")
-    p.add_argument("--force", action="store_true",
-                   help="replace --out even if it is not a verdict planecal wrote")
-    p.add_argument("--json", action="store_true", help="print the JSON verdict, not the text")
     p.add_argument("--report", metavar="DIR", default=None,
                    help="also write a report page (index.html, PNG figures) into DIR")
     p.add_argument("--rrd", default=None, metavar="FILE",
@@ -98,17 +92,14 @@ def _noise(args, robot) -> tuple[float, dict]:
 def run(args) -> int:
     from planecal.estimation.agreement import compare_runs, pair
     from planecal.estimation.drift import parse_suspects
-    from planecal.io.outputs import check_output
     from planecal.io.samples import read_samples
     from planecal.model.levels import layout_for
     from planecal.present.agreement import COMPARE_FORMAT, compare_document, compare_text
 
-    if not 0 < args.alpha < 1:
-        raise InputError(f"--alpha must be in (0, 1), got {args.alpha}")
     if args.count_tolerance < 0:
         raise InputError(f"--count-tolerance must be >= 0, got {args.count_tolerance}")
     given = [args.run, args.rehearsal, args.params]
-    out = check_output(args.out, given, COMPARE_FORMAT, args.force) if args.out else None
+    out = verdict_out(args, given, COMPARE_FORMAT)
     hist = open_history(args, given + [out])
     scene = _scene(args)
     params = _params(args, scene)
@@ -123,10 +114,7 @@ def run(args) -> int:
                       parse_suspects(args.suspects, layout))
     noise["pair_sigma_median_mm"] = float(sorted(ag.sigma_m)[len(ag.sigma_m) // 2] * 1e3)
     doc = compare_document(ag, pr, str(args.run), str(args.rehearsal), noise)
-    print(json.dumps(doc, indent=2) if args.json else compare_text(doc))
-    if out:
-        from planecal.io.params import save_json
-        save_json(out, doc)
+    emit_verdict(args, doc, compare_text, out)
     _renderings(args, doc, scene, params)
     _record(args, hist, scene, doc, out)
     return doc["exit_code"]
