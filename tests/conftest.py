@@ -33,6 +33,18 @@ INITIAL = CellParams(np.zeros(6), [0.0257, -0.0725, 0.1769], 1.2427, -1.0472,
                      [[0.0, -1.02511, 3.62708]])
 
 
+@pytest.fixture(scope="session", autouse=True)
+def session_history(tmp_path_factory):
+    """The commands that record in the cell's history (calibrate, validate, export, check,
+    compare) write to one history of the test session, never to planecal.db in the
+    working folder (the checkout): set for the whole session, before any module's
+    fixtures run commands."""
+    path = tmp_path_factory.mktemp("history") / "planecal.db"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PLANECAL_HISTORY", str(path))
+        yield path
+
+
 @pytest.fixture(scope="module")
 def rerun_home(tmp_path_factory):
     """HOME and the XDG directories in a fresh folder for one module, restored after: keeps

@@ -70,8 +70,11 @@ def _seed_cases(out):
 
 def _port_cases(out):
     sample = ["sample", "--rt", "127.0.0.1", "--laser", "/dev/null", "--out", out]
+    rehearse = ["rehearse", "--out", out]
     return [(sample, "--rt-port", BAD_PORTS + ["0"]), (sample, "--local-port", BAD_PORTS),
-            (["emulate"], "--rt-port", BAD_PORTS), (["emulate"], "--reply-port", BAD_PORTS)]
+            (["emulate"], "--rt-port", BAD_PORTS), (["emulate"], "--reply-port", BAD_PORTS),
+            *((argv, "--live-port", BAD_PORTS + ["0"]) for argv in (sample, rehearse)),
+            *((argv, "--live-web-port", BAD_PORTS) for argv in (sample, rehearse))]
 
 
 def _refused(argv, option, what, tmp_path, capsys):

@@ -52,6 +52,15 @@ def test_the_api_and_the_cli_give_the_same_numbers(cli_run):
     assert v["ap_after_tool_mm"] < v["ap_before_tool_mm"]
     assert v["truths"][0]["ap_after_tool_mm"] == v["ap_after_tool_median_mm"]
     assert v["world"]["truth_file"] == str(d / "t.json")
+    # recorded in the history (the session's, conftest), linked to the calibration
+    from planecal.base.paths import file_sha256
+    from planecal.history import History, location
+    h = History.open(location(None), create=False)
+    cal = h.find_result(file_sha256(d / "c.json"))
+    e = h.entries(kind="validate")[-1]
+    assert cal is not None and e.against == cal and e.output == str(out)
+    assert e.summary["ap_after_median_mm"] == pytest.approx(v["ap_after_mm"])
+    assert e.world["truth_file"] == str(d / "t.json")
 
 
 def test_a_whole_model_result_exports_only_encoder_offsets(cli_run, capsys):

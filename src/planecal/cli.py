@@ -40,6 +40,9 @@ COMMANDS = {
     "worker-env": "the environment of a Dask worker for the studies: export $(planecal worker-env)",
     "robot": "import a robot from a URDF (robot import), or show a robot description",
     "scene": "write a default cell for any robot (scene new)",
+    "check": "has the cell drifted since a calibration? a short run tested against it",
+    "compare": "twin against real: two runs of the same poses, agree or differ",
+    "history": "the cell's history: list, show, diff and roll back calibrations",
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,

@@ -78,3 +78,13 @@ def numba_cache() -> None:
     from numba import config
     if not config.CACHE_DIR:
         config.CACHE_DIR = str(cache_dir() / "numba")
+
+
+def file_sha256(path) -> str:
+    """The SHA-256 of a file's bytes (hex); one-line InputError when it cannot be read."""
+    import hashlib
+    try:
+        with open(path, "rb") as f:
+            return hashlib.file_digest(f, "sha256").hexdigest()
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None

@@ -2,6 +2,7 @@
 [--improvement-limit X] [--outlier-sigma K] [--method gn|lm] [--free NAMES]
 [--level offsets|full|nonkinematic] [--compliance] [--geometry-prior MM,MRAD]
 [--weighted [--repeatability-mm R] [--distance-sigma-um S]] [--rrd FILE]
+[--history DB] [--no-history] [--note TEXT] [--cell NAME]
 
 The one calibration (planecal.estimation.calibrate), with the options every command that
 calibrates takes (commands.calibration_options). --level offsets (default) is the seed's
@@ -19,6 +20,9 @@ window are refused. --out is checked before the fit (not an input, a writable pl
 a file other than an earlier result unless --force) and records the inputs with their
 SHA-256 (provenance).
 
+The calibration is recorded in the cell's history (``--history``, default planecal.db in
+the working folder; docs/HISTORY.md) with its result and provenance, whatever its outcome.
+
 Exit 0 when the fit converged and identified every free parameter; 1 when it did not (the
 report and --out are still written, with the reason in one line); 2 on bad input.
 """
@@ -29,6 +33,8 @@ from planecal.base.errors import RunFailed
 from planecal.commands.calibration_options import (add_calibration_arguments,
                                                    add_fit_arguments, calibration_settings,
                                                    fit_options, load_inputs)
+from planecal.commands.history_options import (add_history_arguments, new_entry, open_history,
+                                               parameter_rows, record, sample_worlds)
 from planecal.commands.report_options import add_report_argument, write_command_report
 from planecal.formats.params import RESULT_FORMAT, provenance, result_document
 from planecal.io.params import save_json
@@ -50,6 +56,7 @@ def add_arguments(p):
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="write a Rerun recording of the fit (a file name, a directory, or "
                         "'auto' for recordings/calibrate-<scene>-<time>.rrd)")
+    add_history_arguments(p)
 
 
 def files(args):
@@ -71,6 +78,7 @@ def run(args) -> int:
     inputs = [("samples", p) for p in args.samples] + (
         [("initial", args.initial)] if args.initial else [])
     out = args.out  # checked before the run (``files``)
+    hist = open_history(args, [p for _, p in inputs] + [out])
     samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
     settings = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
     cal = calibrate_samples(scene.robot, samples, initial, settings, scene.references)
@@ -87,6 +95,21 @@ def run(args) -> int:
         path = log_fit_to_file(args.rrd, cal, samples, scene)
         print(f"recording written to {path}")
     why = cal.failure()
+    record(hist, _entry(args, doc, out, why))
     if why:
         raise RunFailed(why)
     return 0
+
+
+def _entry(args, doc: dict, out, why: str | None):
+    """The history's record of this calibration: the result document, its parameters by
+    name, the result file written (and its SHA-256), the world of its samples."""
+    from planecal.base.paths import file_sha256
+    summary = {"level": doc["level"], "compliance": doc["compliance"],
+               "samples_used": doc["samples_used"], "residual_rms_mm": doc["residual_rms_mm"],
+               "converged": doc["converged"], "failure": why}
+    return new_entry(args, "calibrate", "failed" if why else "ok", 1 if why else 0,
+                     doc["provenance"], robot_sha256=(doc.get("robot") or {}).get("sha256"),
+                     world=sample_worlds(args.samples), summary=summary, document=doc,
+                     parameters=parameter_rows(doc), output=str(out) if out else None,
+                     result_sha256=file_sha256(out) if out else None)

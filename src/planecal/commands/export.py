@@ -1,268 +1,65 @@
-"""planecal export RESULT.json [--format fd11|offsets|ur] [--out FILE] [--current-qe0 C1,..,C6]
-[--scene S]
+"""planecal export RESULT.json [--format fd11|offsets|ur] [--out FILE] [--force]
+[--current-qe0 C1,..,C6] [--scene S] [--history DB] [--note TEXT]
 
-What a controller takes after a calibration, in one of three forms:
+What a controller takes after a calibration, in one of three forms, written by
+``planecal.present.controller`` (its docstring says what each holds): ``fd11`` (the
+default, but for a UR) the new encoder offsets as the integer counts the FD11 takes, with
+the rounding residual and the change from the current values (robot.json's, or
+``--current-qe0``); ``offsets`` (any robot) the joint offsets in radians with their sign;
+``ur`` the UR ROS driver's kinematics file. Only encoder offsets reach ``fd11`` and
+``offsets``; a result that fitted delta1 or delta6 freely is refused (exit 2), and one made
+for another robot than the scene's. A whole-model result's geometry, base frame and
+compliance: ``planecal compensate`` corrects a program's targets with them; the calibrated
+URDF: ``planecal urdf --params RESULT.json``. ``--out`` goes through the output guard
+(``--force`` to replace a file planecal did not write).
 
-``fd11`` (the default, but for a UR): the values an operator enters into the FD11: the new
-encoder offset of each joint, as the integer counts the controller takes
-(``encoder.encoder_zero_counts``: qe0' = qe0 - g (C^-1 delta), the wrist coupling applied,
-so a delta4 or delta5 moves the zero of q6 even while delta6 is fixed). Printed as a
-table: joint, current qe0, new qe0', the change in counts, the rounding residual per joint
-in urad, and its effect at the flange in um (at the scene's calibration position).
-``--out`` writes them as JSON (``qe0_counts``: six integers). The current values are the
-encoder offsets the samples were converted with: robot.json's (``offset_counts``), or
-``--current-qe0`` when the controller already holds others.
-
-``offsets`` (any robot): the joint offsets in radians, JSON (``planecal-joint-offsets/1``),
-with their sign convention: the model's joint angle is theta_j = theta0_j + q_j +
-delta_j, q_j the controller's reading, so a controller whose reading grows by delta_j
-(its zero moved by -delta_j) matches the nominal model.
-
-``ur`` (a robot whose controller is a UR, robot.json ``controller.kind``): the UR ROS
-driver's kinematics file (ur_description's ``kinematics:`` YAML, as ur_calibration writes
-it): per joint the origin x y z roll pitch yaw of its segment, ``kinematics.Kinematics``'
-joint transform Rx(alpha) Tx(a) Ry(beta) Rz(theta) Tz(d) of the calibrated model (joint
-offsets, and at level full the geometry and base frame; the first segment carries the
-base frame), the URDF joint turning about z after it, and the flange (tool0) on
-wrist_3_link. A ``hash`` names planecal's calibration: the driver warns that it is not the
-robot's own factory calibration, as it is not.
-
-Only encoder offsets reach ``fd11`` and ``offsets`` (``estimation.calibrate.
-encoder_offsets``): the joint offsets the calibration fitted; a joint it kept fixed
-(delta1 and delta6: no plane calibration can tell J1's zero from the plates' turn, nor
-J6's from the sensor's roll) keeps its current value, and the table says so. A result
-that fitted delta1 or delta6 freely is refused (exit 2): its value is a combination of
-frames, not a joint zero. A whole-model result's geometry, base frame and compliance are
-no encoder offsets either: ``planecal compensate`` corrects a program's targets with them
-(``ur`` takes the geometry and base frame; compliance, which depends on the pose, stays
-out of every format). A result made for another robot than the scene's is refused. The
-calibrated URDF: ``planecal urdf --params RESULT.json``.
+The export is recorded in the cell's history (docs/HISTORY.md), linked to the calibration
+entry that wrote the result file (found by its SHA-256). ``planecal history rollback N``
+writes the controller file of an earlier calibration with the same writer
+(``planecal.present.controller``).
 """
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
-import numpy as np
-
-from planecal.base.errors import InputError
-
-FORMAT = "planecal-fd11-offsets/1"
-OFFSETS_FORMAT = "planecal-joint-offsets/1"
-FORMATS = ("fd11", "offsets", "ur")
-SIGN = ("theta_j = theta0_j + q_j + delta_j, q_j the controller's joint angle: a controller "
-        "whose reading grows by delta_j (its zero moved by -delta_j) matches the nominal model")
+from planecal.commands.controller_options import add_controller_arguments, current_qe0
+from planecal.commands.history_options import (add_history_arguments, command_provenance,
+                                               new_entry, open_history, record, result_link)
 
 
 def add_arguments(p):
     p.add_argument("result", metavar="RESULT.json",
                    help="a calibration result (planecal calibrate --out) or parameter file")
-    p.add_argument("--format", choices=FORMATS, default=None,
-                   help="fd11: encoder offset counts (default); offsets: joint offsets in rad "
-                        "(any robot); ur: the UR ROS driver's kinematics YAML (default for "
-                        "a UR)")
-    p.add_argument("--out", metavar="FILE", help="write the values here (JSON; YAML for ur)")
-    p.add_argument("--current-qe0", metavar="C1,...,C6", default=None,
-                   help="the encoder offsets the samples were taken with, if not robot.json's")
+    add_controller_arguments(p)
     p.add_argument("--scene", default="thesis_final",
                    help="scene: robot and calibration position (default %(default)s)")
+    add_history_arguments(p)
 
 
 def files(args):
     """What the output guard checks before the run (``commands.io_options``)."""
     from planecal.commands.io_options import Files, scene_inputs
     from planecal.io.outputs import YAML_MARK
+    from planecal.present.controller import FORMAT, OFFSETS_FORMAT
     f = Files().read(args.result, *scene_inputs(args.scene))
     return f.write(args.out, "--out", (FORMAT, OFFSETS_FORMAT, YAML_MARK))
-
-
-def _counts(text: str, robot) -> np.ndarray:
-    from planecal.model.encoder import counts_in_range
-    try:
-        v = [int(x) for x in text.split(",")]
-    except ValueError:
-        raise InputError(f"--current-qe0: expected six integers separated by commas, got "
-                         f"{text[:60]!r}") from None
-    if len(v) != 6:
-        raise InputError(f"--current-qe0: expected six integers, got {len(v)}")
-    if any(abs(c) >= 2**62 for c in v) or not counts_in_range(robot, np.array(v, np.int64)):
-        raise InputError(f"--current-qe0: {text[:60]}: not encoder counts of {robot.name} "
-                         f"(0 .. 2**{robot.encoder_bits} - 1)")
-    return np.array(v, np.int64)
-
-
-def _controller_offsets(doc, params, where):
-    """(offsets (6,), calibrated names, kept names, level label) the controller may take
-    from a result (its ``encoder_offsets``, else its ``free``: a result of an older
-    planecal); a parameter file without either: its six offsets as given."""
-    from planecal.estimation.calibrate import encoder_offsets
-    from planecal.model.layout import level1_layout
-
-    label = (doc.get("level") or "offsets") + (" + compliance" if doc.get("compliance") else "")
-    eo = doc.get("encoder_offsets")
-    if isinstance(eo, dict):
-        if eo.get("reason"):
-            raise InputError(f"{where}: no encoder offsets for the controller: {eo['reason']}")
-        return (np.array(eo["joint_offsets_rad"], float), list(eo["calibrated"]),
-                list(eo["kept_initial"]), label)
-    names = [f"delta{j}" for j in range(1, 7)]
-    if not isinstance(doc.get("free"), list):
-        return params.joint_offsets.copy(), names, [], "parameter file"
-    from planecal.io.params import params_from_dict
-    layout = level1_layout(params.n_planes)
-    free = layout.mask([n for n in doc["free"] if n in names])
-    initial = params_from_dict(doc["initial"], where) if isinstance(doc.get("initial"), dict) \
-        else params.copy()
-    if not isinstance(doc.get("initial"), dict):
-        initial.joint_offsets = np.zeros(6)
-    try:
-        delta, fitted, kept = encoder_offsets(layout, free, params, initial)
-    except InputError as e:
-        raise InputError(f"{where}: no encoder offsets for the controller: {e}") from None
-    return delta, fitted, kept, label
-
-
-def _model_corrections(params) -> str:
-    """What else than joint offsets a result corrects, in words ('' for nothing)."""
-    parts = [what for what, on in (("the joint geometry", params.geometry.any()),
-                                   ("the base frame", params.base.any()),
-                                   ("the joint compliance", params.compliance.any())) if on]
-    return ", ".join(parts)
 
 
 def run(args) -> int:
     from planecal.formats.base import read_json
     from planecal.io.params import load_params
     from planecal.model.scene import load_scene
+    from planecal.present.controller import ControllerFile, write_controller_file
 
+    out = args.out  # checked before the run (``files``)
+    hist = open_history(args, [args.result, out])
+    qe0 = current_qe0(args.current_qe0)
     scene = load_scene(args.scene)
-    robot = scene.robot
     doc = read_json(args.result, "calibration result")
-    params = load_params(args.result, robot)
-    fmt = args.format or ("ur" if robot.controller_kind == "ur" else "fd11")
-    if fmt == "ur":
-        return _ur(args, robot, params)
-    delta, fitted, kept, label = _controller_offsets(doc, params, args.result)
-    extra = _model_corrections(params)
-    if extra:
-        print(f"note: {args.result} also corrects {extra} (level {label}); the controller "
-              "takes joint offsets only, so they are not in these values: correct the "
-              "program's targets with planecal compensate", file=sys.stderr)
-    if fmt == "offsets":
-        return _offsets(args, robot, delta, fitted, kept, label)
-    return _fd11(args, robot, scene, delta, fitted, kept, label)
-
-
-def _fd11(args, robot, scene, delta, fitted, kept, label) -> int:
-    from planecal.io.params import save_json
-    from planecal.model.encoder import counts_in_range, encoder_zero_counts
-
-    qe0 = robot.qe0.astype(np.int64) if args.current_qe0 is None else _counts(args.current_qe0, robot)
-    q_ref = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
-    new, residual, tcp = encoder_zero_counts(robot, delta, qe0, q_ref)
-    if not counts_in_range(robot, new):
-        raise InputError(f"{args.result}: the offsets move an encoder zero outside the "
-                         f"{robot.encoder_bits}-bit range: {new.tolist()}")
-    change = new - qe0
-    print(f"FD11 encoder offsets for {robot.name} from {args.result} (calibration level {label})")
-    print(f"{'joint':<6} {'delta_urad':>11} {'current':>9} {'new':>9} {'change':>8} "
-          f"{'rounding_urad':>13}  offset")
-    for j in range(6):
-        name = f"delta{j + 1}"
-        how = "calibrated" if name in fitted else "kept: not fitted (current value)"
-        print(f"J{j + 1:<5} {delta[j] * 1e6:>11.1f} {qe0[j]:>9d} {new[j]:>9d} "
-              f"{change[j]:>+8d} {residual[j] * 1e6:>13.3f}  {how}")
-    print(f"rounding to whole counts moves the flange by {tcp * 1e6:.2f} um at the "
-          f"calibration position of {scene.name}")
-    if args.out:
-        save_json(args.out, {
-            "format": FORMAT, "robot": robot.name, "result": str(args.result),
-            "qe0_counts": [int(v) for v in new],
-            "current_qe0_counts": [int(v) for v in qe0],
-            "change_counts": [int(v) for v in change],
-            "joint_offsets_rad": [float(v) for v in delta],
-            "calibrated": fitted, "kept_current": kept, "level": label,
-            "rounding_residual_urad": [float(v * 1e6) for v in residual],
-            "rounding_flange_um": tcp * 1e6,
-        })
-        print(f"written to {args.out}")
+    params = load_params(args.result, scene.robot)
+    sha, against = result_link(hist, args.result)
+    req = ControllerFile(args.format, out, qe0, str(args.result), sha)
+    written = write_controller_file(doc, params, scene, req)
+    prov = command_provenance(scene, [("result", args.result)])
+    record(hist, new_entry(args, "export", "ok", 0, prov, robot_sha256=scene.robot.digest,
+                           against=against, result_sha256=sha, summary=written,
+                           output=str(out) if out else None))
     return 0
-
-
-def _offsets(args, robot, delta, fitted, kept, label) -> int:
-    from planecal.io.params import save_json
-    from planecal.io.urdf import joint_names
-
-    names = joint_names(robot)
-    print(f"joint offsets for {robot.name} from {args.result} (calibration level {label}); "
-          f"sign: {SIGN}")
-    print(f"{'joint':<22} {'delta_rad':>14} {'delta_mdeg':>11}  offset")
-    for j in range(6):
-        how = "calibrated" if f"delta{j + 1}" in fitted else "kept: not fitted (0)"
-        print(f"{names[j]:<22} {delta[j]:>14.9f} {np.rad2deg(delta[j]) * 1e3:>11.3f}  {how}")
-    if args.out:
-        save_json(args.out, {
-            "format": OFFSETS_FORMAT, "robot": robot.name, "sha256": robot.digest,
-            "result": str(args.result), "joint_names": names,
-            "joint_offsets_rad": [float(v) for v in delta], "sign": SIGN,
-            "calibrated": fitted, "kept": kept, "level": label})
-        print(f"written to {args.out}")
-    return 0
-
-
-def ur_kinematics(robot, params) -> dict:
-    """The UR ROS driver's kinematics (module docstring) of the calibrated model."""
-    from planecal.model.kinematics import rpy_angles
-    from planecal.model.measurement import kinematics_of
-
-    kin = kinematics_of(robot, params)
-    if not np.allclose(kin.flange, np.eye(4), atol=1e-12):
-        raise InputError(f"{robot.name}: the flange frame is not wrist 3's frame (F != I): "
-                         "not a UR kinematics file's chain")
-    out = {}
-    for i, name in enumerate(UR_SEGMENTS):
-        T = kin.joint_transform(i)
-        if i == 0:
-            T = kin.base @ T
-        x, y, z = (float(v) for v in T[:3, 3])
-        roll, pitch, yaw = rpy_angles(T[:3, :3])
-        out[name] = {"x": x, "y": y, "z": z, "roll": roll, "pitch": pitch, "yaw": yaw}
-    return out
-
-
-UR_SEGMENTS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
-
-
-def _ur(args, robot, params) -> int:
-    import hashlib
-
-    if robot.controller_kind != "ur":
-        raise InputError(f"--format ur: {robot.name}'s controller is not a UR (robot.json "
-                         "controller.kind); --format offsets is for any robot")
-    from planecal.io.urdf import not_in_urdf
-    left = not_in_urdf(params)  # what a fixed chain cannot hold
-    if left:
-        print(f"note: {args.result} also fits {', '.join(left)}: not in a kinematics file, "
-              "a fixed chain (planecal compensate corrects targets with the joints' errors)",
-              file=sys.stderr)
-    segs = ur_kinematics(robot, params)
-    tag = hashlib.sha256(Path(args.result).read_bytes()).hexdigest()[:16]
-    lines = [f"# UR ROS driver kinematics (ur_description's kinematics file) of {robot.name},",
-             f"# calibrated by planecal from {args.result}; not the robot's factory "
-             "calibration: the driver warns that its hash differs, as it does",
-             "kinematics:"]
-    for name, v in segs.items():
-        lines.append(f"  {name}:")
-        lines += [f"    {k}: {_yaml_num(x)}" for k, x in v.items()]
-    lines.append(f"  hash: calib_planecal_{tag}")
-    text = "\n".join(lines) + "\n"
-    if args.out:
-        Path(args.out).write_text(text, encoding="utf-8")
-        print(f"UR kinematics written to {args.out}")
-    else:
-        print(text, end="")
-    return 0
-
-
-def _yaml_num(v: float) -> str:
-    return "0" if abs(v) < 1e-15 else repr(float(v))  # below that: the floating point's dust

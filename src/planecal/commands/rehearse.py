@@ -93,7 +93,8 @@ def world_ref(args, side, seed: int):
 
 def run(args) -> int:
     from planecal.commands.sampling_options import (command_model, fixed_distance_summary,
-                                                    pose_list_planner, prepare, rerun_observer,
+                                                    observer_summary, pose_list_planner,
+                                                    prepare, rerun_observer,
                                                     session_from_args)
     from planecal.links.base import AlwaysEnabled
     from planecal.safety.collision import CollisionWorld
@@ -111,7 +112,7 @@ def run(args) -> int:
             save_truth(args.truth_out, twin, errors, ref.truth_seed)
         except OSError as e:
             raise InputError(f"--truth-out {args.truth_out}: cannot write ({e.strerror})") from None
-    observer = rerun_observer(args.rrd, scene, twin) if args.rrd else None
+    observer = rerun_observer(args, scene, twin)
     model = command_model(args, scene, side)
     session = session_from_args(args, pose_list_planner(args, scene, settings, checker, model[0]),
                                 observer, extra={"twin": {"seed": twin_seed, "exact": ref.exact,
@@ -140,7 +141,6 @@ def run(args) -> int:
         summary["world"] = ref.describe()
     if settings.pose.fixed_distance_mm is not None:
         summary["fixed_distance"] = fixed_distance_summary(args.out, settings, model[1])
-    if args.rrd:
-        summary["rrd"] = str(observer.path)
+    summary.update(observer_summary(observer))
     print_summary(summary)
     return code

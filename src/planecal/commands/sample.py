@@ -250,7 +250,7 @@ class Controller:
                 part.close()
 
 
-_PEAKS = ("max_lost_in_a_row", "longest_outage_s", "boot_wait_s")  # maxima, not sums
+_PEAKS = ("max_lost_in_a_row", "longest_outage_s", "boot_wait_s", "max_late_s")  # maxima
 
 
 def link_totals(before: dict | None, session: dict) -> dict:
@@ -299,7 +299,8 @@ def run(args) -> int:
     from dataclasses import asdict
 
     from planecal.safety.collision import CollisionWorld
-    from planecal.commands.sampling_options import command_model, prepare, rerun_observer
+    from planecal.commands.sampling_options import (command_model, observer_summary, prepare,
+                                                    rerun_observer)
     from planecal.links.zs_ld80 import NO_READING, ZSLD80, LaserError
     from planecal.sampling.enable import FollowingMonitor
     from planecal.sampling.runfiles import count_samples
@@ -326,7 +327,7 @@ def run(args) -> int:
         cell.take()
         laser = TolerantLaser(raw_laser, args.laser_error_limit, (LaserError,), NO_READING)
         waited = cell.wait_for_silence()
-        observer = rerun_observer(args.rrd, scene) if args.rrd else None
+        observer = rerun_observer(args, scene)
         monitor = FollowingMonitor(cell.link, limit, max_step_counts=robot.max_step_counts,
                                    trip_counts=robot.trip_step_counts, tick_s=robot.tick_s)
         before = ((side or {}).get("real_cell") or {}).get("link_total")
@@ -342,8 +343,7 @@ def run(args) -> int:
             observer.close()
     summary["laser_read_errors"] = laser.total
     summary["laser"] = {**asdict(raw_laser.counters), "no_reply_ticks": laser.no_reply_ticks}
-    if args.rrd:
-        summary["rrd"] = str(observer.path)
+    summary.update(observer_summary(observer))
     summary["link"] = real_cell["link"]
     summary["link_total"] = real_cell["link_total"]
     summary["first_contact"] = real_cell["first_contact"]  # with what the controller did

@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import MAX_SAMPLES, MAX_TRIES, count, seed
+from planecal.commands.value_options import (MAX_SAMPLES, MAX_TRIES, count, port,
+                                             port_or_zero, seed)
 from planecal.sampling.laserread import LaserSettings
 from planecal.sampling.observer import RecordingObserver
 from planecal.sampling.poses import IK_CHOICES, PLATE_CHOICES
@@ -71,6 +72,15 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
                         "LabVIEW tools do; readers accept both; a resumed run keeps its file's")
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="record the run for Rerun (planecal view FILE opens it)")
+    p.add_argument("--live", action="store_true",
+                   help="stream the run to a Rerun viewer as it happens (the recording's "
+                        "blueprint): a web viewer on --live-web-port, the stream on "
+                        "127.0.0.1:--live-port; the real-time loop never waits for it")
+    p.add_argument("--live-port", type=port, default=9876,
+                   help="--live: the stream's gRPC port on 127.0.0.1 (default %(default)s)")
+    p.add_argument("--live-web-port", type=port_or_zero, default=9090,
+                   help="--live: the web viewer's port (0: none, connect a native viewer: "
+                        "rerun rerun+http://127.0.0.1:PORT/proxy) (default %(default)s)")
     p.add_argument("--params", default=None, metavar="RESULT.json",
                    help="aim with this calibration result (its sensor pose, planes and joint "
                         "offsets) instead of the scene's nominal values: live validation "
@@ -207,10 +217,36 @@ def prepare(args, default_samples: int = 150):
     return scene, st, None
 
 
-def rerun_observer(path, scene, twin=None) -> RecordingObserver:
-    """The Rerun observer of a run (``planecal.present.rerun.sampling_observer``)."""
+def rerun_observer(args, scene, twin=None) -> RecordingObserver | None:
+    """The Rerun observer of a run (``planecal.present.rerun.sampling_observer``): a
+    recording (--rrd), a live view (--live), both, or None."""
+    if not (args.rrd or args.live):
+        return None
     from planecal.present.rerun import sampling_observer
-    return sampling_observer(path, scene=scene, twin=twin)
+    live = None
+    if args.live:
+        from planecal.present.rerun.live import LiveOptions
+        if args.live_port == args.live_web_port:
+            raise InputError(f"--live-port and --live-web-port: both {args.live_port}")
+        live = LiveOptions(args.live_port, args.live_web_port)
+    obs = sampling_observer(args.rrd, scene=scene, twin=twin, live=live)
+    if obs.live is not None:
+        print(obs.live.describe(), file=sys.stderr, flush=True)
+    return obs
+
+
+def observer_summary(obs) -> dict:
+    """The summary's record of the observer: the recording's path, the live view's
+    addresses and the motion it dropped."""
+    out = {}
+    if obs is None:
+        return out
+    if obs.path is not None:
+        out["rrd"] = str(obs.path)
+    if obs.live is not None:
+        out["live"] = {"grpc_url": obs.live.grpc_url, "web_url": obs.live.web_url,
+                       "dropped_ticks": obs.dropped_ticks}
+    return out
 
 
 def pose_list_planner(args, scene, settings: RunSettings, checker, model=None):

@@ -91,6 +91,8 @@ def add_arguments(p):
     p.add_argument("--truth", help="the truth file of the world the calibration's run was "
                    "made in (rehearse --truth-out, or the file rehearse --truth ran in)")
     p.add_argument("--run", help="the calibration's sample file (places the ISO cube)")
+    from planecal.commands.history_options import add_history_arguments
+    add_history_arguments(p)
 
 
 def _tcp(text):
@@ -140,6 +142,8 @@ def run(args) -> int:
     given = [a for a in (args.calibrated, args.truth, args.run) if a]
     if given and len(given) != 3:
         raise InputError("--calibrated, --truth and --run go together")
+    from planecal.commands.history_options import open_history
+    hist = open_history(args, given + [args.out])
     scene = load_scene(args.scene)
     cal = calibration_settings(args, scene.robot)
     st = ValidationSettings(cycles=args.cycles,
@@ -184,7 +188,27 @@ def run(args) -> int:
         print(f"result written to {args.out}")
     if args.rrd:
         print(f"recording written to {_record(args, scene, st, doc, cal)}")
+    _history(args, hist, scene, doc)
     return 0
+
+
+def _history(args, hist, scene, doc: dict) -> None:
+    """The validation's entry in the cell's history (linked to the calibration it
+    validated, where it read one)."""
+    from planecal.commands.history_options import (command_provenance, new_entry, record,
+                                                   result_link)
+    if hist is None:
+        return
+    sha, against = result_link(hist, args.calibrated) if args.calibrated else (None, None)
+    prov = command_provenance(scene, [("calibrated", args.calibrated), ("truth", args.truth),
+                                      ("run", args.run)])
+    world = doc.get("world") or {"errors": doc.get("errors"), "truth_seeds": doc.get("truth_seeds")}
+    summary = {"ap_before_median_mm": doc.get("ap_before_median_mm"),
+               "ap_after_median_mm": doc.get("ap_after_median_mm"),
+               "truths": len(doc.get("truths") or []), "level": doc.get("level")}
+    record(hist, new_entry(args, "validate", "ok", 0, prov, robot_sha256=scene.robot.digest,
+                           against=against, result_sha256=sha, world=world, summary=summary,
+                           document=doc, output=args.out))
 
 
 def _truths(args, seeds, base, profile, scene, engine) -> dict:

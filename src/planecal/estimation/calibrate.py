@@ -89,7 +89,11 @@ class CalibrationSettings:
                 "geometry_prior_m_rad": None if self.geometry_prior is None
                 else list(self.geometry_prior),
                 "free_scale": self.free_scale, "base_set_tolerance": self.base_tolerance,
-                "weighted": self.options.joint_sigma_rad is not None}
+                "weighted": self.options.joint_sigma_rad is not None,
+                # the weighted fit's noise model (what a drift check weighs a run with)
+                "joint_sigma_rad": self.options.joint_sigma_rad,
+                "distance_sigma_m": (self.options.distance_sigma_m
+                                     if self.options.joint_sigma_rad is not None else None)}
 
 
 def geometry_prior(layout: ParamLayout, length_m: float, angle_rad: float) -> tuple:

@@ -161,10 +161,11 @@ def _jsonable(v):
     raise TypeError(f"not JSON serializable: {type(v).__name__}")
 
 
-def recorded_samples(doc: dict, result_path) -> list[Path]:
+def recorded_samples(doc: dict, result_path, flag: str = "--samples") -> list[Path]:
     """The sample files a result's provenance records (role ``samples``), found here with
     the recorded content (relative paths: from the working directory, then beside the
-    result). InputError for a recorded file that is missing or changed."""
+    result). InputError for a recorded file that is missing or changed (naming ``flag``,
+    the option that gives them instead)."""
     prov = doc.get("provenance") if isinstance(doc, dict) else None
     entries = prov.get("inputs") if isinstance(prov, dict) else None
     found = []
@@ -176,11 +177,11 @@ def recorded_samples(doc: dict, result_path) -> list[Path]:
         hit = next((c for c in cands if c.is_file()), None)
         if hit is None:
             raise InputError(f"{result_path}: its samples file {p} is not here; give the "
-                             "calibration's samples with --samples")
+                             f"calibration's samples with {flag}")
         with open(hit, "rb") as f:
             digest = hashlib.file_digest(f, "sha256").hexdigest()
         if e.get("sha256") and digest != e["sha256"]:
             raise InputError(f"{hit}: not the samples file {result_path} was made from (its "
-                             "SHA-256 differs); give the calibration's samples with --samples")
+                             f"SHA-256 differs); give the calibration's samples with {flag}")
         found.append(hit)
     return found

@@ -165,8 +165,7 @@ def _as_delta(delta) -> np.ndarray:
 
 @dataclasses.dataclass
 class LinkCounters:
-    """What the link saw in its life. ``sent = ticks + resends + boot_resends`` (+ the
-    packets of a failed last tick)."""
+    """What the link saw. ``sent = ticks + resends + boot_resends`` (+ a failed last tick's)."""
     sent: int = 0          # request datagrams sent (resends included)
     ticks: int = 0         # ticks answered (a valid reply taken as the answer)
     lost_replies: int = 0  # resend intervals after first contact that ended without a reply
@@ -179,6 +178,8 @@ class LinkCounters:
     dropped: int = 0       # datagrams ignored: wrong size or wrong sender
     stale: int = 0         # valid replies not taken as an answer (late or duplicate)
     refused: int = 0       # deltas refused by the step limit (nothing sent)
+    late_ticks: int = 0    # ticks sent more than ``late_s`` after they were due (RT gaps)
+    max_late_s: float = 0.0  # the latest tick, seconds after it was due
 
 
 class FD11Link:
@@ -189,7 +190,8 @@ class FD11Link:
     ``bind_host``: local address to bind (default: loopback if ``host`` is loopback,
     else all interfaces). ``timeout_s``: the resend interval; ``silence_s``: the longest
     outage after first contact; ``boot_timeout_s``: the longest wait for first contact.
-    ``tick_s``: minimum interval between ticks (0 for emulators on a virtual clock).
+    ``tick_s``: minimum interval between ticks (0 for emulators on a virtual clock); a tick
+    sent over ``late_s`` (default half a tick) after it was due is late (the loop's gaps).
     ``max_step_counts``: refusal threshold, 1..60, for every packet (the first measured
     from what the controller holds, `expect`). ``contact_tolerance_counts``: the first
     reply's largest |commanded - current|. ``enable``: an `EnableSignal` that ends an
@@ -202,7 +204,7 @@ class FD11Link:
                  boot_timeout_s: float = BOOT_TIMEOUT_S, tick_s: float = 0.01,
                  max_step_counts: int = TRIP_STEP_COUNTS, bind_host: str | None = None,
                  contact_tolerance_counts: int = TRIP_STEP_COUNTS,
-                 enable: EnableSignal | None = None):
+                 enable: EnableSignal | None = None, late_s: float | None = None):
         if not 1 <= int(max_step_counts) <= TRIP_STEP_COUNTS:
             raise ValueError(f"max_step_counts must be in 1..{TRIP_STEP_COUNTS} "
                              f"(the FD11 trips above {TRIP_STEP_COUNTS}), got {max_step_counts}")
@@ -215,6 +217,7 @@ class FD11Link:
         self.silence_s = float(silence_s)
         self.boot_timeout_s = float(boot_timeout_s)
         self.tick_s = float(tick_s)
+        self.late_s = 0.5 * self.tick_s if late_s is None else float(late_s)
         self.contact_tolerance_counts = int(contact_tolerance_counts)
         self.contact = Contact.either()
         self.state: StateFile | None = None
@@ -298,6 +301,7 @@ class FD11Link:
         self._pace()
         self._drain()
         t0 = time.monotonic()
+        self._note_lateness(t0)
         bound = self.boot_timeout_s if first else self.silence_s
         self._send(packet, wire)
         self.last_sent = d
@@ -372,6 +376,13 @@ class FD11Link:
                     f"pendant and the cell's statement, robot.json controller.sessions)")
         return (f"{self.where}: no reply for {bound:g} s ({lost} packets of delta "
                 f"{wire.tolist()} unanswered); the robot holds its last command")
+
+    def _note_lateness(self, t0: float) -> None:  # due: the last tick's first packet + tick_s
+        if self.tick_s > 0 and self._last_tick_t is not None:
+            late = t0 - (self._last_tick_t + self.tick_s)
+            if late > self.late_s:
+                self.counters.late_ticks += 1
+            self.counters.max_late_s = max(self.counters.max_late_s, round(late, 6))
 
     def _note_tick(self, first: bool, lost: int, dt: float) -> None:
         c = self.counters

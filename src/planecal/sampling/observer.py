@@ -26,9 +26,13 @@ class Observer(Protocol):
 
 
 class RecordingObserver(Observer, Protocol):
-    """An observer that writes a recording: ``path`` is the file it writes, ``close()``
-    finishes it (the commands call it when the session ends, whatever happened)."""
+    """An observer that writes a recording: ``path`` is the file it writes (None: a live
+    view only), ``live`` where a live view is served (None: none), ``dropped_ticks`` the
+    ticks of motion a live view dropped rather than hold the loop; ``close()`` finishes it
+    (the commands call it when the session ends, whatever happened)."""
     path: object
+    live: object
+    dropped_ticks: int
 
     def close(self) -> None: ...
 

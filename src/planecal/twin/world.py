@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.paths import file_sha256  # noqa: F401 (the world's files' hash)
 from planecal.model.scene import Scene
 from planecal.twin.options import TwinOptions
 from planecal.twin.profile import ErrorProfile, draw_world, load_profile
@@ -134,8 +135,16 @@ def recorded_world(scene: Scene, sample_file=None, truth_file=None, errors: str 
         if t_err is not None and rec.get("errors") not in (None, t_err):
             raise InputError(f"{truth_file}: drawn in the {t_err} world, but {rec['where']} "
                              f"says the run was made in the {rec['errors']} world")
+        digest = file_sha256(truth_file)
+        if rec.get("truth_sha256") not in (None, digest):
+            # a truth file edited in place (say, a drift injected) is another world: the
+            # run was made in the one its sidecar hashed, not in this file's
+            raise InputError(f"{truth_file}: not the truth file the run {sample_file} was "
+                             f"made in (its SHA-256 differs from the recorded "
+                             f"{rec['truth_sha256'][:12]}...): edited since? Edit a copy "
+                             "to make a new world (rehearse --truth COPY.json)")
         rec.update(errors=t_err or rec.get("errors"), truth_file=str(truth_file),
-                   truth_sha256=file_sha256(truth_file), where=str(truth_file))
+                   truth_sha256=digest, where=str(truth_file))
     for flag, key, given in (("--errors", "errors", errors), ("--truth-seed", "truth_seed",
                                                               truth_seed)):
         if given is None:
@@ -154,15 +163,6 @@ def make_twin(scene: Scene, ref: WorldRef, seed: int):
     from planecal.twin import Twin
     world, opts = ref.build(scene)
     return Twin(scene, truth=world, seed=seed, options=opts)
-
-
-def file_sha256(path) -> str:
-    import hashlib
-    try:
-        with open(path, "rb") as f:
-            return hashlib.file_digest(f, "sha256").hexdigest()
-    except OSError as e:
-        raise InputError(f"{path}: cannot read ({e.strerror})") from None
 
 
 # The error sources of a world, by family (what ``without`` switches off): the ones the

@@ -10,6 +10,7 @@ bootstrap      ``bootstrap --out``                           ``report.bootstrap`
 validation     ``validate --out``                            ``report.validation``
 plan           ``plan --out`` (a pose list)                  ``report.planning``
 sweep          ``sweep --out DIR`` (DIR/sweep.json)          ``report.sweep``
+compare        ``compare --out`` (twin against real)         ``report.compare``
 =============  ============================================  ==========================
 
 The kind comes from the file's ``format`` field (``"<name>/<version>"``) when it has one,
@@ -30,13 +31,13 @@ from planecal.present.report.page import Page
 
 KINDS = {"calibration": "calibration", "montecarlo": "montecarlo", "bootstrap": "bootstrap",
          "validation": "validation", "plan": "planning",
-         "sweep": "sweep"}  # kind -> module in this package
+         "sweep": "sweep", "compare": "compare"}  # kind -> module in this package
 
 # format names (the part before "/") and the kind they hold
 FORMATS = {"planecal-result": "calibration", "planecal-montecarlo": "montecarlo",
            "planecal-bootstrap": "bootstrap", "planecal-validation": "validation",
            "planecal-validate": "validation", "planecal-poses": "plan", "planecal-plan": "plan",
-           "planecal-sweep": "sweep"}
+           "planecal-sweep": "sweep", "planecal-compare": "compare"}
 READ_VERSIONS = {"planecal-validate": {2}}  # the versions reported (default: 1 only)
 # why a version is no longer read, in one line
 _FLANGE_AP = ("written before AP was measured at the tool point (its ap_after_mm is the "
@@ -66,7 +67,7 @@ def detect_kind(doc, where: str = "result") -> str:
     if kind is None:
         what = f"format {fmt}" if fmt is not None else "its content"
         raise InputError(f"{where}: not a result planecal can report on (by {what}; known: "
-                         f"calibration, montecarlo, bootstrap, validate and plan results)")
+                         f"calibration, montecarlo, bootstrap, validate, plan and compare results)")
     return kind
 
 

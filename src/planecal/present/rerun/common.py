@@ -17,7 +17,7 @@ DEFAULT_DIR = "recordings"  # relative to the working directory (see recordings/
 AUTO_NAMES = ("", "auto", "-")  # --rrd values that mean "a generated name in recordings/"
 
 # recording kinds: each has a blueprint of its own (docs/RERUN.md)
-KINDS = ("rehearsal", "real", "calibration", "montecarlo", "bootstrap", "validate")
+KINDS = ("rehearsal", "real", "calibration", "montecarlo", "bootstrap", "validate", "compare")
 
 # colours (RGBA). The beam is green: no sample colour scale and no rejection uses green.
 PLATE_RGBA = (95, 105, 125, 255)  # dark slate: light, blue and red samples all show on it
@@ -106,6 +106,30 @@ def close_recording(rec) -> None:
     """Flush everything to the file and finish it (the footer is written)."""
     rec.flush()
     rec.disconnect()
+
+
+def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) of rotation matrices (..., 3, 3), vectorised
+    (Shepperd: from the largest of |w|, |x|, |y|, |z|, so 180-degree turns are exact)."""
+    m = R.reshape(-1, 3, 3)
+    m00, m11, m22 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
+    d21, d02, d10 = m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]
+    s01, s02, s12 = m[:, 0, 1] + m[:, 1, 0], m[:, 0, 2] + m[:, 2, 0], m[:, 1, 2] + m[:, 2, 1]
+    cand = np.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22,
+                     1 - m00 + m11 - m22, 1 - m00 - m11 + m22], -1)
+    k = np.argmax(cand, -1)
+    big = 0.5 * np.sqrt(np.maximum(cand[np.arange(len(m)), k], 1e-300))
+    f = 0.25 / big
+    q = np.empty((len(m), 4))
+    for case, (x, y, z, w) in enumerate((
+            (d21 * f, d02 * f, d10 * f, big),   # w largest
+            (big, s01 * f, s02 * f, d21 * f),   # x largest
+            (s01 * f, big, s12 * f, d02 * f),   # y largest
+            (s02 * f, s12 * f, big, d10 * f))):  # z largest
+        sel = k == case
+        q[sel] = np.stack([x, y, z, w], -1)[sel]
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return q.reshape(R.shape[:-2] + (4,))
 
 
 def is_recording(path) -> bool:

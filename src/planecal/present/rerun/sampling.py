@@ -34,10 +34,10 @@ from planecal.base.errors import InputError
 from planecal.model.kinematics import link_frames
 from planecal.present.rerun.common import (BEAM_NONE_RGBA, BEAM_RADIUS_M, BEAM_RGBA, HIT_RADIUS_M,
                                        HIT_RGBA, REJECT_RGBA, _rr, close_recording,
-                                       eye_controls, hidden, hit_columns, lifted, log_cell,
-                                       log_robot_meshes, open_recording, plate_face_normal,
-                                       recording_path, sequential_colors, whole_axis,
-                                       whole_range)
+                                       hit_columns, lifted, log_cell, log_robot_meshes,
+                                       matrix_to_quaternion, open_recording,
+                                       plate_face_normal, recording_path, sequential_colors)
+from planecal.present.rerun.sampling_blueprint import sampling_blueprint
 from planecal.sampling.collect import REJECT_KINDS
 from planecal.sampling.observer import NullObserver
 
@@ -57,30 +57,6 @@ SERIES_ENTITIES = ([f"/series/steps/q{j}" for j in range(1, N_JOINTS + 1)]
 EVENT_ENTITIES = ["/samples/points"] + [f"/rejected/{k}" for k in REJECT_KINDS] + ["/events"]
 
 
-def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions (x, y, z, w) of rotation matrices (..., 3, 3), vectorised
-    (Shepperd: from the largest of |w|, |x|, |y|, |z|, so 180-degree turns are exact)."""
-    m = R.reshape(-1, 3, 3)
-    m00, m11, m22 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
-    d21, d02, d10 = m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]
-    s01, s02, s12 = m[:, 0, 1] + m[:, 1, 0], m[:, 0, 2] + m[:, 2, 0], m[:, 1, 2] + m[:, 2, 1]
-    cand = np.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22,
-                     1 - m00 + m11 - m22, 1 - m00 - m11 + m22], -1)
-    k = np.argmax(cand, -1)
-    big = 0.5 * np.sqrt(np.maximum(cand[np.arange(len(m)), k], 1e-300))
-    f = 0.25 / big
-    q = np.empty((len(m), 4))
-    for case, (x, y, z, w) in enumerate((
-            (d21 * f, d02 * f, d10 * f, big),   # w largest
-            (big, s01 * f, s02 * f, d21 * f),   # x largest
-            (s01 * f, big, s12 * f, d02 * f),   # y largest
-            (s02 * f, s12 * f, big, d10 * f))):  # z largest
-        sel = k == case
-        q[sel] = np.stack([x, y, z, w], -1)[sel]
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    return q.reshape(R.shape[:-2] + (4,))
-
-
 def reject_kind(reason: str) -> str:
     """'collision', 'laser' or 'unreachable' from a run's rejection reason text."""
     head = reason.split(":", 1)[0].strip().split(" ", 1)[0].lower()
@@ -97,50 +73,6 @@ def _env_int(name: str, default: int) -> int:
         raise InputError(f"{name}: must be an integer, got {v!r}") from None
 
 
-def sampling_blueprint(scene=None, kind: str = "rehearsal"):
-    """The blueprint of a sampling run (``kind`` "rehearsal" on the twin or "real"): the 3D
-    view framing the first plate and the tool (rejections in /rejected start hidden)
-    over an overview of the whole run (laser readings and each sample's model error,
-    whole tick range); the run's info panel (legend) over tabs of the detail series and
-    the event log."""
-    import rerun.blueprint as rrb
-
-    title = "rehearsal on the twin" if kind == "rehearsal" else "real run"
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Spatial3DView(name=f"cell: {title}", origin="/",
-                                  eye_controls=eye_controls(scene),
-                                  contents=["/cell/**", "/robot/**", "/laser/**",
-                                            "/samples/**", "/rejected/**"],
-                                  overrides=hidden("/rejected")),
-                rrb.TimeSeriesView(name="whole run: laser [mm] and sample model error [mm]",
-                                   origin="/series",
-                                   contents=["/series/laser_mm", "/series/model_error_mm"],
-                                   time_ranges=whole_range("tick"), axis_x=whole_axis(),
-                                   plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop)),
-                row_shares=[3, 1]),
-            rrb.Vertical(
-                rrb.TextDocumentView(name="run info and legend", origin="/run/info"),
-                rrb.Tabs(
-                    rrb.TimeSeriesView(name="joint angles [deg]", origin="/series/joint_deg",
-                                       time_ranges=whole_range("tick")),
-                    rrb.TimeSeriesView(name="step counts per tick", origin="/series/steps",
-                                       time_ranges=whole_range("tick")),
-                    rrb.TimeSeriesView(name="laser [mm]", origin="/series/laser_mm",
-                                       time_ranges=whole_range("tick")),
-                    rrb.TimeSeriesView(name="model error per sample [mm]",
-                                       origin="/series/model_error_mm",
-                                       time_ranges=whole_range("tick")),
-                    rrb.TextLogView(name="events", origin="/events"),
-                    active_tab=0),
-                row_shares=[1, 1]),
-            column_shares=[3, 2]),
-        # "following": a finished recording opens at its end (every sample on the plate)
-        rrb.TimePanel(timeline="tick", play_state="following"),
-        collapse_panels=False)
-
-
 class SamplingObserver(NullObserver):
     """An ``Observer`` (``planecal.sampling.observer``) writing a Rerun recording.
 
@@ -155,7 +87,7 @@ class SamplingObserver(NullObserver):
                  kinematics: str = "auto", every: int = DEFAULT_EVERY,
                  series_every: int = DEFAULT_EVERY,
                  chunk_ticks: int | None = None, background: bool = True, path=None,
-                 source: str | None = None):
+                 source: str | None = None, drop_when_behind: bool = False):
         from planecal.model.scene import nominal_params
 
         if chunk_ticks is None:
@@ -204,15 +136,31 @@ class SamplingObserver(NullObserver):
         self.rejections = {k: 0 for k in REJECT_KINDS}
         self.ticks_seen = 0
         self.ticks_logged = 0
+        self.live = None  # where a live view is served (``sampling_observer`` sets it)
+        self.drop_when_behind = bool(drop_when_behind and background)
+        self.dropped_ticks = self.dropped_events = 0
+        self._resync: np.ndarray | None = None  # the last delta of a dropped chunk
         self._closed = False
         self.error: Exception | None = None
         self._static(twin)
         self._queue = self._worker = None
-        if background:
-            self._queue = queue.Queue(maxsize=4)
+        if background:  # a live view queues events too, and flushes the static cell now
+            self._queue = queue.Queue(maxsize=64 if self.drop_when_behind else 4)
             self._worker = threading.Thread(target=self._work, name="planecal-rerun",
                                             daemon=True)
             self._worker.start()
+        if self.drop_when_behind:
+            self._warm()
+            rec.flush()  # the static cell through rerun's batcher before the first tick
+
+    def _warm(self) -> None:
+        """Run the sender's kinematics once before the first tick: a first call loads
+        numba's compiled kernels, holding the interpreter for tens of milliseconds."""
+        qe = np.asarray(self.robot.qe0, np.int64)[None]
+        q = counts_to_joints(self.robot, qe)
+        sensor_in_base(self.robot, q, self.kin)
+        predict(self.robot, qe, self.model, np.zeros(1, int))
+        matrix_to_quaternion(link_frames(self.robot.kinematics, q)[:, 1:, :3, :3])
 
     # ----- set-up -----
     def _static(self, twin) -> None:
@@ -274,7 +222,22 @@ class SamplingObserver(NullObserver):
         self._buffered += n
         self._last_tick = first_tick + n - 1
 
+    def _event(self, fn, *args) -> None:
+        """Log an event here, or (a live view of the real cell) hand it to the sender: the
+        real-time loop only queues it, dropped (and counted) if the queue is full."""
+        if not self.drop_when_behind:
+            fn(*args)
+            return
+        try:
+            self._queue.put_nowait(("event", fn, args))
+        except queue.Full:
+            self.dropped_events += 1
+
     def on_sample(self, index, qe, d_mm, plate):
+        self._force.add(self._last_tick)
+        self._event(self._sample, index, np.array(qe, np.int64), d_mm, plate, self._last_tick)
+
+    def _sample(self, index, qe, d_mm, plate, tick):
         rr, rec = self.rr, self.rec
         qe = np.asarray(qe, np.int64).reshape(1, N_JOINTS)
         plate = int(plate or 0)
@@ -291,8 +254,7 @@ class SamplingObserver(NullObserver):
         self._samples_e.append(err_mm)
         self._samples_plate.append(plate)
         self._samples_index.append(int(index))
-        self._force.add(self._last_tick)
-        self._time(self._last_tick)
+        self._time(tick)
         self._log_samples()
         rec.log("/series/model_error_mm", rr.Scalars(err_mm))
         rec.log("/events", rr.TextLog(f"sample {index}: {d_mm:.4f} mm on plate {plate + 1}, "
@@ -313,10 +275,14 @@ class SamplingObserver(NullObserver):
                                   **hit_columns(np.array(self._samples_p))))
 
     def on_reject(self, q_target, reason):
+        self._event(self._reject, None if q_target is None else np.array(q_target, float),
+                    reason, self._last_tick)
+
+    def _reject(self, q_target, reason, tick):
         rr, rec = self.rr, self.rec
         kind = reject_kind(reason)
         self.rejections[kind] += 1
-        self._time(self._last_tick)
+        self._time(tick)
         if q_target is not None:
             o_b, z_b = sensor_in_base(self.robot, np.asarray(q_target, float)[None], self.kin)
             origins, vectors, reasons = self._rejected[kind]
@@ -331,9 +297,11 @@ class SamplingObserver(NullObserver):
 
     def on_path(self, kind, q_start, q_goal, rows):
         if kind != "sample":
-            self._time(self._last_tick)
-            self.rec.log("/events", self.rr.TextLog(f"move ({kind}): {len(rows)} ticks",
-                                                    level="INFO"))
+            self._event(self._move, kind, len(rows), self._last_tick)
+
+    def _move(self, kind, ticks, tick):
+        self._time(tick)
+        self.rec.log("/events", self.rr.TextLog(f"move ({kind}): {ticks} ticks", level="INFO"))
 
     # ----- bulk sends -----
     def _submit(self) -> None:
@@ -346,10 +314,17 @@ class SamplingObserver(NullObserver):
         force = np.fromiter(self._force, np.int64, len(self._force))
         self._force = {k for k in self._force if k > last}
         first, self._first = self._first, False
+        prev, self._resync = self._resync, None
         if self._queue is None:
-            self._flush(buf, force, first)
+            self._flush(buf, force, first, prev)
+        elif not self.drop_when_behind:
+            self._queue.put(("ticks", self._flush, (buf, force, first, prev)))  # may wait
         else:
-            self._queue.put((buf, force, first))  # blocks if the sender is far behind
+            try:
+                self._queue.put_nowait(("ticks", self._flush, (buf, force, first, prev)))
+            except queue.Full:  # the real-time loop never waits for the viewer
+                self.dropped_ticks += sum(len(r[1]) for r in buf)
+                self._resync = np.asarray(buf[-1][1][-1], np.int64)
 
     def _work(self) -> None:
         while True:
@@ -358,11 +333,13 @@ class SamplingObserver(NullObserver):
                 return
             if self.error is None:
                 try:
-                    self._flush(*item)
+                    item[1](*item[2])
                 except Exception as e:  # reported by close(); the run goes on
                     self.error = e
 
-    def _flush(self, buf, force, first) -> None:
+    def _flush(self, buf, force, first, prev=None) -> None:
+        if prev is not None:  # after a dropped chunk: steps from the delta it ended at
+            self._prev_delta = prev
         t = np.concatenate([np.arange(r[0], r[0] + len(r[1]), dtype=np.int64) for r in buf])
         delta = np.concatenate([r[1] for r in buf]).astype(np.int64, copy=False)
         cur = np.concatenate([r[2] for r in buf]).astype(np.int64, copy=False)
@@ -456,25 +433,41 @@ class SamplingObserver(NullObserver):
             rms = f"{np.sqrt(np.mean(e ** 2)):.4f} mm" if e.size else "-"
             self._info(f"* samples: **{len(e)}**, model error RMS {rms}\n"
                        f"* rejected: {', '.join(f'{k} {v}' for k, v in self.rejections.items())}\n"
-                       f"* ticks: {self.ticks_seen} (motion logged at {self.ticks_logged})\n")
+                       f"* ticks: {self.ticks_seen} (motion logged at {self.ticks_logged})\n"
+                       + (f"* live view: {self.dropped_ticks} ticks and {self.dropped_events} "
+                          "events dropped while the sender was behind (the real-time loop "
+                          "never waits)\n" if self.dropped_ticks or self.dropped_events
+                          else ""))
         finally:
             close_recording(self.rec)
 
 
-def sampling_observer(path, scene, twin=None, *, command: str | None = None, **options):
-    """The observer that ``planecal rehearse`` / ``sample`` ``--rrd`` use
-    (``planecal.sampling.session.rerun_observer``). ``path`` goes through
-    ``recording_path`` (a directory or "auto" gives a generated name); the observer's
-    ``.path`` is the file written. ``options``: see ``SamplingObserver``; ``every`` and
-    ``series_every`` default to $PLANECAL_RERUN_EVERY / $PLANECAL_RERUN_SERIES_EVERY."""
+def sampling_observer(path, scene, twin=None, *, command: str | None = None, live=None,
+                      **options):
+    """The observer of ``planecal rehearse`` / ``sample`` ``--rrd`` and ``--live``.
+    ``path`` goes through ``recording_path`` (a directory or "auto" gives a generated
+    name; None with ``live``: no file); ``.path`` is the file written. ``live``: a
+    ``live.LiveOptions`` to serve the stream (``.live``: where), a real run's observer
+    then dropping what its sender cannot keep up with. ``options``: see
+    ``SamplingObserver``; ``every`` and ``series_every`` default to
+    $PLANECAL_RERUN_EVERY / $PLANECAL_RERUN_SERIES_EVERY."""
     command = command or ("rehearse" if twin is not None else "sample")
-    p = recording_path(path, command, scene.name)
+    p = None if path is None and live else recording_path(path, command, scene.name)
     options.setdefault("every", _env_int("PLANECAL_RERUN_EVERY", DEFAULT_EVERY))
     options.setdefault("series_every", _env_int("PLANECAL_RERUN_SERIES_EVERY", DEFAULT_EVERY))
-    kind = "rehearsal" if twin is not None else "real"
-    rec = open_recording(p, sampling_blueprint(scene, kind), name=f"{command} {scene.name}")
+    bp, name = sampling_blueprint(scene, "real" if twin is None else "rehearsal"), \
+        f"{command} {scene.name}"
+    view = None
+    if live:
+        from planecal.present.rerun.live import open_live
+        rec, view = open_live(bp, name, live, p)
+        options.setdefault("drop_when_behind", twin is None)
+    else:
+        rec = open_recording(p, bp, name=name)
     try:
-        return SamplingObserver(rec, scene, twin=twin, path=p, **options)
+        obs = SamplingObserver(rec, scene, twin=twin, path=p, **options)
     except BaseException:
         close_recording(rec)
         raise
+    obs.live = view
+    return obs

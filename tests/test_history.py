@@ -1,0 +1,250 @@
+"""Issue 24: the cell's history (planecal.history) and the drift check's statistics.
+
+The store is checked by what it must never do (lose an entry of two processes writing at
+once, write NaN, take a file that is not a history), the exceedance test against an
+enumeration of every arrangement (its null distribution is combinatorics, not a formula
+of ours) and against heavy-tailed draws (its false-alarm rate holds whatever the errors'
+distribution), and the commands end to end on synthetic samples of the fit's own model:
+calibrate, check (in control, and delta3 moved by 0.5 mrad), export, history list, show,
+diff and rollback.
+"""
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import subprocess
+import sys
+import time
+from math import comb
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from conftest import INITIAL, perturbed, synthetic_counts
+from planecal.cli import main
+from planecal.estimation.drift import exceedance_test, parameter_changes
+from planecal.history import Entry, History, InputRow, ParameterRow
+from planecal.io.samples import write_samples
+
+PY = sys.executable
+
+
+def entry(kind="check", **kw) -> Entry:
+    return Entry(kind=kind, outcome="ok", exit_code=0, created_utc="2026-01-01T00:00:00+00:00",
+                 planecal_version="test", **kw)
+
+
+# ----- the store --------------------------------------------------------------------------
+
+def test_an_entry_comes_back_as_written_and_nan_is_null(tmp_path):
+    h = History.open(str(tmp_path / "h.db"))
+    n = h.add(entry("calibrate", cell="c1", summary={"rms": float("nan"), "x": np.float64(2.5)},
+                    document={"a": np.array([1.0, np.inf])}, result_sha256="ab" * 32,
+                    inputs=[InputRow("samples", "s.tsv", "cd" * 32, 12)],
+                    parameters=[ParameterRow("delta3", 1e-4, float("nan"), "rad", "fitted")]))
+    m = h.add(entry("export", against=n, cell="c2"))
+    e = h.get(n)
+    assert e.summary == {"rms": None, "x": 2.5} and e.document == {"a": [1.0, None]}
+    assert e.parameters == [ParameterRow("delta3", 1e-4, None, "rad", "fitted")]
+    assert e.inputs == [InputRow("samples", "s.tsv", "cd" * 32, 12)]
+    assert h.find_result("ab" * 32) == n and h.find_result("ef" * 32) is None
+    assert [x.id for x in h.entries()] == [n, m] and [x.id for x in h.entries("c2")] == [m]
+    assert h.get(m).against == n
+
+
+def test_a_file_that_is_not_a_history_is_refused_in_one_line(tmp_path, capsys):
+    bad = tmp_path / "notes.db"
+    bad.write_text("not a database")
+    assert main(["history", "list", "--history", str(bad)]) == 2
+    assert "not an SQLite database" in capsys.readouterr().err
+    assert main(["history", "list", "--history", str(tmp_path / "none" / "h.db")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["history", "list", "--history", str(tmp_path / "fresh.db")]) == 2
+    assert "no history here yet" in capsys.readouterr().err
+    assert not (tmp_path / "fresh.db").exists()  # nothing written on a refusal
+    h = History.open(str(tmp_path / "old.db"))
+    with h.engine.begin() as conn:
+        conn.exec_driver_sql("UPDATE meta SET value = '99' WHERE key = 'schema_version'")
+    assert main(["history", "list", "--history", str(tmp_path / "old.db")]) == 2
+    err = capsys.readouterr().err
+    assert "schema version 99" in err and err.count("\n") == 1
+
+
+WRITER = """
+import sys, time
+from pathlib import Path
+from planecal.history import Entry, History, InputRow
+path, tag, n, go = sys.argv[1], sys.argv[2], int(sys.argv[3]), Path(sys.argv[4])
+h = History.open(path)
+while not go.exists():
+    time.sleep(0.001)
+for i in range(n):
+    h.add(Entry(kind="check", outcome="ok", exit_code=0, created_utc="t", planecal_version="t",
+                note=f"{tag}-{i}", inputs=[InputRow("run", f"{tag}{i}.tsv", "0" * 64, i)]))
+"""
+
+
+def test_two_processes_writing_one_history_at_once_lose_nothing(tmp_path):
+    """Two real processes, started together, each add 40 entries (with their inputs) to one
+    SQLite history, the schema created by whichever comes first: all 80 are there, each
+    with its inputs, numbered without a gap or a repeat."""
+    db, go = tmp_path / "h.db", tmp_path / "go"
+    procs = [subprocess.Popen([PY, "-c", WRITER, str(db), tag, "40", str(go)])
+             for tag in ("a", "b")]
+    time.sleep(0.5)  # both opened (or waiting to), then released at once
+    go.touch()
+    assert [p.wait(timeout=120) for p in procs] == [0, 0]
+    h = History.open(str(db))
+    got = h.entries()
+    assert sorted(e.note for e in got) == sorted(f"{t}-{i}" for t in "ab" for i in range(40))
+    assert [e.id for e in got] == list(range(1, 81))
+    notes = {e.note for e in got if e.note.startswith("a-")}
+    assert len(notes) == 40
+    assert all(len(h.get(e.id).inputs) == 1 for e in got[::7])
+
+
+# ----- the statistics --------------------------------------------------------------------
+
+def test_exceedance_distribution_is_the_count_over_every_arrangement():
+    """Under H0 every placement of the m run values among the n + m is equally likely:
+    P(X >= x) by enumerating all C(n + m, m) of them equals the test's p."""
+    n, m = 7, 4
+    k = (n + 1) // 2
+    counts = np.zeros(m + 1)
+    for run_ranks in itertools.combinations(range(n + m), m):  # ranks, 0 = largest
+        cal = [r for r in range(n + m) if r not in run_ranks]
+        kth = cal[k - 1]  # the k-th largest calibration value's rank
+        counts[sum(r < kth for r in run_ranks)] += 1
+    tail = np.cumsum(counts[::-1])[::-1] / comb(n + m, m)
+    cal_values = np.arange(n, dtype=float)[::-1] * 2 + 0.5  # any distinct values
+    for x in range(m + 1):
+        run = np.r_[np.full(x, 1e3), np.full(m - x, -1e3)]
+        t = exceedance_test(cal_values, run, 0.05)
+        assert t.exceed == x and t.p == pytest.approx(tail[x], rel=1e-12)
+
+
+def test_exceedance_false_alarm_rate_holds_for_heavy_tailed_errors():
+    """Errors with Student-t tails of 2 degrees of freedom (no finite variance): the
+    Gaussian F test of the variance ratio alarms far above alpha, the exceedance test at
+    its attained size (150 calibration, 30 run values, 20000 trials, within 3 sigma)."""
+    rng = np.random.default_rng(7)
+    trials = 20000
+    a, b = np.abs(rng.standard_t(2, (trials, 150))), np.abs(rng.standard_t(2, (trials, 30)))
+    first = [exceedance_test(a[i], b[i], 0.01) for i in range(20)]
+    size, critical = first[0].attained_alpha, first[0].critical
+    threshold = np.sort(a, axis=1)[:, 150 - 75]  # the 75th largest of each trial
+    x = np.sum(b > threshold[:, None], axis=1)
+    assert [t.exceed for t in first] == list(x[:20])
+    assert [t.rejected for t in first] == list(x[:20] >= critical)
+    alarms = int(np.sum(x >= critical))
+    assert 0.003 < size <= 0.01
+    assert abs(alarms - trials * size) < 3 * math.sqrt(trials * size)
+    f_alarms = np.sum(stats.f.sf(np.mean(b ** 2, 1) / np.mean(a ** 2, 1), 30, 150) <= 0.01)
+    assert f_alarms > 5 * trials * 0.01
+
+
+def test_diff_flags_a_change_beyond_both_stds_with_the_bonferroni_limit():
+    a = {"delta2": (1e-3, 1e-5), "delta3": (2e-3, 3e-5), "o_x": (0.03, None), "n1_z": (3.5, 1e-3)}
+    b = {"delta2": (1.02e-3, 1e-5), "delta3": (2.5e-3, 4e-5), "o_x": (0.03, None),
+         "n1_z": (3.5005, 1e-3)}
+    changes, limit = parameter_changes(a, b, 0.01)
+    assert limit == pytest.approx(stats.norm.isf(0.01 / 6))  # 3 parameters with a std
+    by = {c.name: c for c in changes}
+    assert by["delta3"].z == pytest.approx(5e-4 / 5e-5) and by["delta3"].significant
+    assert by["delta2"].z == pytest.approx(2e-5 / math.sqrt(2e-10))
+    assert not by["delta2"].significant and by["o_x"].z is None
+    assert by["n1_z"].std == pytest.approx(math.sqrt(2) * 1e-3)
+
+
+# ----- the commands on the fit's own model ------------------------------------------------
+
+@pytest.fixture(scope="module")
+def cell(robot, tmp_path_factory):
+    """A calibration run and three short runs of synthetic samples: two in the world of
+    the calibration, one with delta3 moved by +0.5 mrad; and the calibration's poses
+    measured again in the moved world (a recalibration after "maintenance")."""
+    from planecal.model.measurement import predict
+    rng = np.random.default_rng(5)
+    truth = perturbed(INITIAL, rng)
+    moved = truth.copy()
+    moved.joint_offsets = truth.joint_offsets + [0, 0, 5e-4, 0, 0, 0]
+    d = tmp_path_factory.mktemp("cell")
+
+    def noisy(dist):
+        return (dist + rng.normal(0, 5e-6, len(dist))) * 1e3
+
+    def run(name, n, params):
+        qe, dist = synthetic_counts(robot, params, n, rng)
+        write_samples(d / name, qe, noisy(dist))
+        return str(d / name), qe
+
+    cal, qe = run("cal.tsv", 150, truth)
+    write_samples(d / "recal.tsv", qe, noisy(predict(robot, qe, moved)))
+    return (d, cal, run("ok1.tsv", 30, truth)[0], run("ok2.tsv", 30, truth)[0],
+            run("moved.tsv", 30, moved)[0], str(d / "recal.tsv"))
+
+
+def test_calibrate_check_export_and_the_history_of_a_week(cell, capsys, monkeypatch):
+    d, cal, ok1, ok2, moved, _ = cell
+    monkeypatch.chdir(d)
+    db = str(d / "cell.db")
+    h = ["--history", db]
+    assert main(["calibrate", cal, "--out", "r.json", *h, "--note", "monday"]) == 0
+    assert "history: entry 1 (calibrate: ok)" in capsys.readouterr().out
+    for run in (ok1, ok2):
+        assert main(["check", run, "--against", "r.json", *h]) == 0
+        assert "IN CONTROL" in capsys.readouterr().out
+    assert main(["check", moved, "--against", "r.json", *h, "--json",
+                 "--out", "verdict.json"]) == 1
+    cap = capsys.readouterr()
+    v = json.loads(cap.out)
+    assert v == json.loads((d / "verdict.json").read_text())
+    assert v["format"] == "planecal-check/1"
+    assert v["verdict"] == "drifted" and v["moved"] == ["delta3"]
+    p = v["explanation"]["parameters"][0]
+    assert abs(p["amount"] - 5e-4) < 4 * p["std"] and p["std"] < 2e-5
+    assert v["explanation"]["explains"] and v["against_entry"] == 1
+    # the two runs that passed are the reference now: runs after one calibration are alike
+    assert v["reference"] == {"kind": "runs", "runs": [ok1, ok2], "samples": 60,
+                              "meaning": "earlier in-control runs of this result"}
+    assert main(["check", ok1, "--against", "r.json", "--no-history", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["reference"]["kind"] == "calibration"
+    assert "history: entry 4 (check: drifted)" in cap.err  # stdout holds the JSON only
+    assert main(["export", "r.json", "--out", "fd11.json", *h]) == 0
+    capsys.readouterr()
+    assert main(["history", "list", "--history", db]) == 0
+    out = capsys.readouterr().out
+    lines = [ln for ln in out.splitlines() if ln[:1].isdigit()]
+    assert [ln.split()[2] for ln in lines] == ["calibrate", "check", "check", "check", "export"]
+    assert "drifted" in lines[3] and "moved: J3 (delta3)" in lines[3] and "monday" in lines[0]
+    assert main(["history", "show", "5", "--history", db, "--json"]) == 0
+    e = json.loads(capsys.readouterr().out)
+    assert e["against"] == 1 and e["output"] == "fd11.json"
+    assert {i["role"] for i in e["inputs"]} == {"result", "scene", "robot"}
+
+
+def test_recalibration_diff_and_rollback(cell, capsys, monkeypatch):
+    d, cal, _, _, _, recal = cell
+    monkeypatch.chdir(d)
+    db = str(d / "week2.db")
+    h = ["--history", db]
+    assert main(["calibrate", cal, "--out", "a.json", *h]) == 0
+    assert main(["calibrate", recal, "--out", "b.json", *h, "--note", "after maintenance"]) == 0
+    capsys.readouterr()
+    assert main(["history", "diff", "1", "2", "--history", db, "--json"]) == 0
+    diff = json.loads(capsys.readouterr().out)
+    assert diff["significant"] == ["delta3"]
+    c3 = next(c for c in diff["changes"] if c["name"] == "delta3")
+    assert abs(c3["change"] - 5e-4) < 4 * c3["std"]
+    before = (d / "a.json").read_bytes()
+    assert main(["history", "rollback", "1", "--out", "back.json", *h]) == 0
+    assert "history: entry 3 (rollback: ok)" in capsys.readouterr().out
+    assert main(["export", "a.json", "--out", "direct.json", "--no-history"]) == 0
+    back, direct = (json.loads((d / f).read_text()) for f in ("back.json", "direct.json"))
+    assert back["qe0_counts"] == direct["qe0_counts"] and back["result"] == "history entry 1"
+    assert main(["history", "rollback", "1", "--out", "a.json", *h]) == 2  # not over a result
+    assert (d / "a.json").read_bytes() == before
+    assert main(["history", "diff", "1", "3", "--history", db]) == 2  # 3 is no calibration
+    assert "entry 3 is a rollback, not a calibration" in capsys.readouterr().err
