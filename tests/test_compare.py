@@ -125,7 +125,7 @@ def test_drift_check_on_the_twin_passes_in_its_world_and_names_j3_when_moved(wor
     scene = load_scene("thesis_final")
     w0, o0 = WorldRef("realistic", None, str(worlds / "t0.json")).build(scene)
     w1, o1 = WorldRef("realistic", None, str(worlds / "t1.json")).build(scene)
-    qe, d, plate, _ = twin_samples(scene, w0, RehearsalSettings(samples=150), 100, o0)
+    qe, d, plate, _, _ = twin_samples(scene, w0, RehearsalSettings(samples=150), 100, o0)
     cal = calibrate(robot, qe, d, nominal_params(scene), plate)
     fr = FittedResult.of(document(cal, robot), robot, "result")
     short = RehearsalSettings(samples=30)

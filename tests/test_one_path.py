@@ -59,7 +59,7 @@ def test_the_api_and_the_cli_give_the_same_numbers(cli_run):
     cal = h.find_result(file_sha256(d / "c.json"))
     e = h.entries(kind="validate")[-1]
     assert cal is not None and e.against == cal and e.output == str(out)
-    assert e.summary["ap_after_median_mm"] == pytest.approx(v["ap_after_mm"])
+    assert e.summary["ap_after_tool_median_mm"] == pytest.approx(v["ap_after_tool_mm"])
     assert e.world["truth_file"] == str(d / "t.json")
 
 

@@ -475,8 +475,6 @@ case("fit-not-converged", f"calibrate {RUN} --max-iter 1", {}, 1, "converge")
 # 16 samples with compliance: delta2's std 1.5x its limit (the model's mismatch: a robot
 # parameter must meet it; 40 samples at level offsets failed only through phi_y's
 # mismatch-inflated std, a warning now that the sensor's frame is judged at the noise)
-case("fit-not-converged", "calibrate {d}/s.tsv --max-iter 1", {"s.tsv": Rows(head=40)}, 1,
-     "did not converge")
 
 # ----- pipes and valid runs -----------------------------------------------------------------------
 case("pipe-predict-head", f"predict {RUN} --params {PARAMS}", {}, 0, None, pipe="head -1")

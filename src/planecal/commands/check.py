@@ -57,6 +57,15 @@ def add_arguments(p):
     add_history_arguments(p)
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import Files, scene_inputs, with_sidecars
+    from planecal.present.drift import CHECK_FORMAT
+    f = Files().read(*with_sidecars([args.run]), args.against,
+                     *with_sidecars(args.calibration_samples or []), *scene_inputs(args.scene))
+    return f.write(args.out, "--out", CHECK_FORMAT)
+
+
 def run(args) -> int:
     from planecal.estimation.drift import FittedResult, check_run, parse_suspects
     from planecal.formats.base import read_json

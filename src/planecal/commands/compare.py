@@ -26,6 +26,7 @@ from __future__ import annotations
 import sys
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import count
 from planecal.commands.history_options import (add_history_arguments, command_provenance,
                                                new_entry, open_history, record)
 from planecal.commands.verdict_options import add_verdict_arguments, emit_verdict, verdict_out
@@ -44,7 +45,7 @@ def add_arguments(p):
     p.add_argument("--repeatability-mm", type=float, default=None,
                    help="the robot's repeatability of the noise model, +- mm at the flange "
                         "(default: robot.json's)")
-    p.add_argument("--count-tolerance", type=int, default=2, metavar="N",
+    p.add_argument("--count-tolerance", type=count(1000, 0), default=2, metavar="N",
                    help="the most a pair's encoder counts may differ and still be one pose "
                         "(default %(default)s)")
     p.add_argument("--scene", default=None,
@@ -89,6 +90,19 @@ def _noise(args, robot) -> tuple[float, dict]:
         "source": "--repeatability-mm" if rep is not None else "robot.json"}
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.io_options import (Files, report_output, rrd_output, scene_inputs,
+                                              with_sidecars)
+    from planecal.present.agreement import COMPARE_FORMAT
+    f = Files().read(*with_sidecars([args.run, args.rehearsal]), args.params,
+                     *scene_inputs(args.scene))
+    f.write(args.out, "--out", COMPARE_FORMAT)
+    report_output(f, args.report, "--report")
+    rrd_output(f, args.rrd)
+    return f
+
+
 def run(args) -> int:
     from planecal.estimation.agreement import compare_runs, pair
     from planecal.estimation.drift import parse_suspects
@@ -96,8 +110,6 @@ def run(args) -> int:
     from planecal.model.levels import layout_for
     from planecal.present.agreement import COMPARE_FORMAT, compare_document, compare_text
 
-    if args.count_tolerance < 0:
-        raise InputError(f"--count-tolerance must be >= 0, got {args.count_tolerance}")
     given = [args.run, args.rehearsal, args.params]
     out = verdict_out(args, given, COMPARE_FORMAT)
     hist = open_history(args, given + [out])

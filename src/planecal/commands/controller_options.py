@@ -36,15 +36,3 @@ def current_qe0(text: str | None) -> np.ndarray | None:
     if any(abs(c) >= 2**62 for c in v):  # the robot's encoder range: the writer's check
         raise InputError(f"--current-qe0: {text[:60]}: not encoder counts")
     return np.array(v, np.int64)
-
-
-def checked_out(args, inputs=()):
-    """--out checked before any work (``io.outputs.check_output``): not an input, a
-    writable place, not a file other than a controller file planecal wrote (unless
-    --force). None without --out."""
-    from planecal.io.outputs import check_output
-    from planecal.present.controller import FORMAT, OFFSETS_FORMAT
-
-    if not args.out:
-        return None
-    return check_output(args.out, inputs, (FORMAT, OFFSETS_FORMAT), args.force)

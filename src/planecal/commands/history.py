@@ -21,8 +21,8 @@ from __future__ import annotations
 import json
 
 from planecal.base.errors import InputError
-from planecal.commands.controller_options import (add_controller_arguments, checked_out,
-                                                  current_qe0)
+from planecal.commands.controller_options import add_controller_arguments, current_qe0
+from planecal.commands.value_options import count
 
 ACTIONS = ("list", "show", "diff", "rollback")
 
@@ -30,7 +30,7 @@ ACTIONS = ("list", "show", "diff", "rollback")
 def add_arguments(p):
     from planecal.history import KINDS
     p.add_argument("action", choices=ACTIONS, help="list, show N, diff A B, rollback N")
-    p.add_argument("entries", nargs="*", type=int, metavar="N", help="entry numbers")
+    p.add_argument("entries", nargs="*", type=count(10**12), metavar="N", help="entry numbers")
     p.add_argument("--history", metavar="FILE|URL", default=None,
                    help="the history (default: $PLANECAL_HISTORY, else planecal.db in the "
                         "working folder)")
@@ -51,6 +51,16 @@ def add_arguments(p):
 _COUNTS = {"list": 0, "show": 1, "diff": 2, "rollback": 1}
 
 
+def files(args):
+    """What the output guard checks before the run (``commands.io_options``): rollback's
+    controller file."""
+    from planecal.commands.io_options import Files, scene_inputs
+    from planecal.io.outputs import YAML_MARK
+    from planecal.present.controller import FORMAT, OFFSETS_FORMAT
+    f = Files().read(*(scene_inputs(args.scene) if args.scene else []))
+    return f.write(args.out, "--out", (FORMAT, OFFSETS_FORMAT, YAML_MARK))
+
+
 def run(args) -> int:
     from planecal.history import History, location
 
@@ -62,7 +72,7 @@ def run(args) -> int:
         for flag in ("format", "out", "current_qe0", "note", "scene"):
             if getattr(args, flag):
                 raise InputError(f"--{flag.replace('_', '-')}: only for history rollback")
-    out = checked_out(args) if args.action == "rollback" else None
+    out = args.out if args.action == "rollback" else None  # checked before the run (files)
     hist = History.open(location(args.history), [out], create=args.action == "rollback")
     try:
         return {"list": _list, "show": _show, "diff": _diff,

@@ -203,9 +203,10 @@ def _history(args, hist, scene, doc: dict) -> None:
     prov = command_provenance(scene, [("calibrated", args.calibrated), ("truth", args.truth),
                                       ("run", args.run)])
     world = doc.get("world") or {"errors": doc.get("errors"), "truth_seeds": doc.get("truth_seeds")}
-    summary = {"ap_before_median_mm": doc.get("ap_before_median_mm"),
-               "ap_after_median_mm": doc.get("ap_after_median_mm"),
-               "truths": len(doc.get("truths") or []), "level": doc.get("level")}
+    summary = {k: doc.get(k) for k in ("ap_before_tool_median_mm", "ap_after_tool_median_mm",
+                                       "ap_after_tool_worst_mm", "ap_oracle_tool_median_mm")}
+    summary.update(truths=len(doc.get("truths") or []), level=doc.get("level"),
+                   where="the tool point (the laser's beam point), robot frame")
     record(hist, new_entry(args, "validate", "ok", 0, prov, robot_sha256=scene.robot.digest,
                            against=against, result_sha256=sha, world=world, summary=summary,
                            document=doc, output=args.out))

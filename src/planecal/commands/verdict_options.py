@@ -19,12 +19,11 @@ def add_verdict_arguments(p, alpha_help: str, suspects_help: str) -> None:
 
 
 def verdict_out(args, inputs, fmt: str):
-    """--alpha checked and --out through the output guard (None without it), before any
-    work."""
-    from planecal.io.outputs import check_output
+    """--alpha checked, and --out (the output guard checked it before the run: the
+    command's ``files``), None without it."""
     if not 0 < args.alpha < 1:
         raise InputError(f"--alpha must be in (0, 1), got {args.alpha}")
-    return check_output(args.out, inputs, fmt, args.force) if args.out else None
+    return args.out or None
 
 
 def emit_verdict(args, doc: dict, text, out) -> None:

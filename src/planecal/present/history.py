@@ -31,9 +31,10 @@ def what(e) -> str:
         src = f"entry {e.against}" if e.against else "a result file"
         return f"{fmt} of {src}" + (f" -> {e.output}" if e.output else " (printed)")
     if e.kind == "validate":
-        return (f"AP {_mm(s.get('ap_before_median_mm'))} nominal -> "
-                f"{_mm(s.get('ap_after_median_mm'))} calibrated (median over "
-                f"{s.get('truths')} truth(s))")
+        return (f"AP at the tool point {_mm(s.get('ap_before_tool_median_mm'))} nominal -> "
+                f"{_mm(s.get('ap_after_tool_median_mm'))} calibrated (median over "
+                f"{s.get('truths')} truth(s); the true model "
+                f"{_mm(s.get('ap_oracle_tool_median_mm'))})")
     return ""
 
 
