@@ -14,11 +14,13 @@ by the nominal model, the calibration at --level and at each level below it (on 
 poses), and the twin's own whole true model (the oracle: the floor no calibration of
 this world can go below; backlash, repeatability and whole counts are what it leaves).
 
-With no calibration given: for each truth seed, draw that world, rehearse a calibration
-set on its twin (the sampling run's planner with collision checks), calibrate it from the
-nominal values with the options every calibrating command takes (--level, --compliance,
---free, ...: the one calibration, ``estimation.calibrate``), and validate on the same
-world; the truths run on ``studies.distributed.Engine`` (--jobs 1: in this process).
+With no calibration given: for each truth seed T, draw that world, rehearse a calibration
+set on its twin with seed --seed + T (the sampling run's planner with collision checks;
+each truth its own draw of the poses and the noise: at --seed 0, truth T's run is
+``planecal rehearse --seed T``'s), calibrate it from the nominal values with the
+options every calibrating command takes (--level, --compliance, --free, ...: the one
+calibration, ``estimation.calibrate``), and validate on the same world; the truths run
+on ``studies.distributed.Engine`` (--jobs 1: in this process).
 Prints the per-truth figures with the median and the worst truth, then (--breakdown,
 default alone) the first truth again with each error source of the profile on alone (off:
 switched off in turn): what the calibration leaves of each, and which sources it cannot
@@ -64,7 +66,10 @@ def add_arguments(p):
     p.add_argument("--truth-seed", type=seed, default=None,
                    help="one truth seed (the same as --truth-seeds T)")
     p.add_argument("--samples", type=count(MAX_SAMPLES), default=150, help="rehearsal samples (default 150)")
-    p.add_argument("--seed", type=seed, default=0, help="rehearsal seed (poses, noise)")
+    p.add_argument("--seed", type=seed, default=0,
+                   help="rehearsal seed: truth T's calibration run is rehearsed with seed "
+                        "K + T (its poses and noise; at 0 it is `planecal rehearse --seed "
+                        "T`'s run)")
     p.add_argument("--offsets-all", action="store_true",
                    help="the ideal world with delta1 and delta6 != 0 as well (the realistic "
                         "one has them)")
@@ -180,8 +185,8 @@ def run(args) -> int:
         with engine:  # the scheduler reached before anything is said
             if not args.quiet:
                 print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): "
-                      f"rehearse {what} (seed {args.seed}), calibrate (level {cal.label}), "
-                      "validate...", file=sys.stderr, flush=True)
+                      f"rehearse {what} (seed {args.seed} + the truth's), calibrate "
+                      f"(level {cal.label}), validate...", file=sys.stderr, flush=True)
             doc = _truths(args, seeds, base, profile, scene, engine)
     if args.out:
         save_json(args.out, doc)
