@@ -1,5 +1,5 @@
 """planecal plan [--scene S] [--samples N] [--candidates M] [--seed K] --out POSES.json
-[--target-std-urad X | --target-ap-mm X] [--no-order]
+[--target-std-urad X | --target-ap-mm X] [--params R.json] [--no-order]
 [--measure R [--jobs J | --scheduler tcp://HOST:PORT]] [--level offsets|full|nonkinematic] [--compliance]
 [--free NAMES]
 
@@ -8,8 +8,16 @@ distribution) maximising det(J^T J) at the nominal parameters (greedy + Fedorov 
 ordered into the collision-checked tour that minimises robot time under the step limit
 (``sampling.tour.order``; ``--no-order`` keeps the design's order). With a target the
 sample count is the smallest (up to --samples) whose predicted offsets' std (the largest
-of the free offsets, urad) or predicted flange position error (mm, 1 sigma RMS over the
-candidates) meets it. Prints the robot time of the run before and after ordering (and of
+of the free offsets, urad) or predicted position error at the tool point (mm: the laser's
+beam point at the scene's standoff, robot frame, 1 sigma RMS over the candidates), times
+a margin of 1.25, meets it. --params R.json (an earlier calibration of this cell, from
+``calibrate --out``) aims the poses with its sensor pose, planes and offsets, so they
+measure on the real cell as planned (the nominal sensor pose is millimetres off), and
+adds the model's mismatch it showed to the tool-point prediction (its ``accuracy`` block:
+the share of its predicted tool-point error beyond the noise-only one, held as it is,
+since more poses do not average a systematic error down); without it the predictions are
+the noise model's alone, which a real robot's model mismatch exceeds several times.
+The offsets' std (table, --target-std-urad) is the noise model's in either case. Prints the robot time of the run before and after ordering (and of
 the random run), its travel per sample,  the predicted std (twin noise model) for the
 planned set and for the poses the sampling run itself would visit with the same seed
 ("random"); with --measure R also the measured spread on the twin over R runs each
@@ -34,9 +42,13 @@ def add_arguments(p):
                    help="choose the sample count: the fewest samples whose predicted std of "
                         "every free joint offset (delta2..delta5) is <= X urad")
     t.add_argument("--target-ap-mm", type=float, default=None, metavar="X",
-                   help="choose the sample count: the fewest samples whose predicted flange "
-                        "position error (1 sigma, RMS over the candidate poses, from the "
-                        "offsets' covariance) is <= X mm")
+                   help="choose the sample count: the fewest samples whose predicted "
+                        "position error at the tool point (the laser's beam point; 1 sigma, "
+                        "RMS over the candidate poses), times a margin of 1.25, is <= X mm")
+    p.add_argument("--params", default=None, metavar="R.json",
+                   help="an earlier calibration result of this cell: aim the poses with it "
+                        "and add the model's mismatch it showed to the tool-point "
+                        "prediction")
     p.add_argument("--no-order", action="store_true",
                    help="keep the design's order (do not order the poses for robot time)")
     p.add_argument("--candidates", type=count(MAX_CANDIDATES), default=1500, help="candidate poses (default 1500)")
@@ -59,6 +71,8 @@ def files(args):
     from planecal.commands.io_options import Files, report_output, scene_inputs
     from planecal.formats.poses import POSES_FORMAT
     f = Files().read(*scene_inputs(args.scene)).write(args.out, "--out", POSES_FORMAT)
+    if args.params:
+        f.read(args.params, role="--params")
     report_output(f, args.report, "--report")
     return f
 
@@ -81,6 +95,7 @@ def run(args) -> int:
         raise InputError(f"--measure needs at least 2 runs, got {args.measure}")
     scene = load_scene(args.scene)
     settings = calibration_settings(args, scene.robot, scene=scene)
+    model, mismatch = aim(args.params, scene)
     with contextlib.ExitStack() as stack:
         engine = None
         if args.measure:  # the engine's options checked and its scheduler reached first
@@ -98,7 +113,10 @@ def run(args) -> int:
             res = plan(scene, args.samples, args.candidates, args.seed, settings,
                        CollisionWorld(scene, clearance_m=0.01),
                        target_std_urad=args.target_std_urad, target_ap_mm=args.target_ap_mm,
-                       ordered=not args.no_order, progress=bar)
+                       ordered=not args.no_order, progress=bar, model=model,
+                       mismatch=mismatch)
+            if args.params:
+                res["aimed_with"] = str(args.params)
         finally:
             bar.close()
         if engine is not None:
@@ -131,6 +149,21 @@ def run(args) -> int:
     return 0
 
 
+def aim(path, scene):
+    """(``CommandModel``, ``Mismatch``) of --params' result, or (None, None)."""
+    if not path:
+        return None, None
+    from planecal.io.params import load_json, load_params
+    from planecal.sampling.poses import CommandModel
+    from planecal.studies.planning import Mismatch
+    params = load_params(path, scene.robot)
+    if params.n_planes != len(scene.plates):
+        raise InputError(f"{path}: {params.n_planes} plane(s), the scene {scene.name} has "
+                         f"{len(scene.plates)}: a result of another cell")
+    return CommandModel(params, scene.robot.qe0.copy()), Mismatch.of_result(load_json(path),
+                                                                             path)
+
+
 def format_robot_time(res: dict) -> str:
     """The plan's robot-time lines (and the target, if it chose the sample count)."""
     t = res["robot_time_s"]
@@ -139,13 +172,20 @@ def format_robot_time(res: dict) -> str:
     out = []
     if res.get("dropped"):  # poses the run could not reach from the others: not listed
         out.append(f"{res['dropped']}; the list holds the {n} the run visits")
+    mm = res.get("mismatch")
+    basis = (f"the noise model's with the model's mismatch {mm['source']} showed, "
+             f"{mm['mismatch_mm']:.3g} mm, in quadrature (held: more poses do not average it "
+             "down)" if mm else "the noise model's alone: a real robot's model mismatch "
+             "adds several times this; --params R.json of a first calibration adds it")
     if res.get("target"):
         g = res["target"]
-        what = "largest free offset std" if g["kind"] == "std" else "flange position error"
-        out.append(f"target: predicted {what} <= {g['value']:g} {g['unit']}: {n} samples")
-    ap = res["predicted_position_mm"]
-    out.append(f"predicted flange position error (1 sigma, RMS over the candidates): random "
-               f"{ap['random']:.4g} mm, planned {ap['planned']:.4g} mm")
+        what = ("largest free offset std" if g["kind"] == "std"
+                else "position error at the tool point")
+        out.append(f"target: predicted {what} x{g['margin']:g} (margin) <= {g['value']:g} "
+                   f"{g['unit']}: {n} samples")
+    ap = res["predicted_tool_mm"]
+    out.append(f"predicted position error at the tool point ({ap['where']}): random "
+               f"{ap['random']:.4g} mm, planned {ap['planned']:.4g} mm; predictions: {basis}")
     out.append(f"robot time (laser reads at {t['read_ticks_per_sample']} ticks): random "
                f"{t['random']:.0f} s, planned {t['planned_unordered']:.0f} s in the design's "
                f"order, {t['planned']:.0f} s "

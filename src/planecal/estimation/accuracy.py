@@ -74,14 +74,12 @@ def tool_point(robot: Robot, q: np.ndarray, params, side, standoff_m: float) -> 
     return (o + standoff_m * z) @ F[:3, :3].T + F[:3, 3]
 
 
-def tool_jacobian(robot: Robot, q: np.ndarray, side, cal: Calibration,
+def tool_jacobian(robot: Robot, q: np.ndarray, side, layout, params, names,
                   standoff_m: float) -> np.ndarray:
-    """(N, 3, p): the tool point's derivative by the calibration's free parameters
-    (``Covariance.names`` order), by central differences."""
-    res = cal.result
-    layout, p0 = res.layout, res.params
-    x0 = p0.to_vector(layout)
-    names = list(res.covariance.names)
+    """(N, 3, p): the tool point's derivative by the parameters ``names`` of ``layout`` at
+    ``params``, by central differences (a calibration's free ones: its ``Covariance.names``;
+    a plan's: the base set it designs for)."""
+    x0 = params.to_vector(layout)
     T = np.empty((len(q), 3, len(names)))
     for k, name in enumerate(names):
         i = layout.index(name)
@@ -89,8 +87,8 @@ def tool_jacobian(robot: Robot, q: np.ndarray, side, cal: Calibration,
         xp, xm = x0.copy(), x0.copy()
         xp[i] += h
         xm[i] -= h
-        T[:, :, k] = (tool_point(robot, q, p0.with_vector(xp, layout), side, standoff_m)
-                      - tool_point(robot, q, p0.with_vector(xm, layout), side, standoff_m)) \
+        T[:, :, k] = (tool_point(robot, q, params.with_vector(xp, layout), side, standoff_m)
+                      - tool_point(robot, q, params.with_vector(xm, layout), side, standoff_m)) \
             / (2 * h)
     return T
 
@@ -139,7 +137,8 @@ def accuracy(robot: Robot, cal: Calibration, qe, d_m, plate=None, direction=None
     q = counts_to_joints(robot, qe)
     side = backlash_sides(robot, q, direction)
     C = np.nan_to_num(res.covariance.matrix)
-    T = tool_jacobian(robot, q, side, cal, standoff)
+    T = tool_jacobian(robot, q, side, res.layout, res.params, list(res.covariance.names),
+                      standoff)
     per_pose = np.einsum("nik,kl,nil->n", T, C, T)
     tool_rms = float(np.sqrt(max(per_pose.mean(), 0.0)))
     # the noise model at these poses: the repeatability on the beam, the laser, the counts

@@ -25,11 +25,22 @@ the run's path checks keep the wrist in one branch (q5 > 0 in 99 % of the sample
 leaves delta5 ~10x less determined than poses mixing both wrist branches.
 
 Sample count from a target (``choose_count``): the smallest n whose D-optimal design's
-predicted std meets it -- ``target_std_urad``: the largest predicted (sandwich) std of the
-free joint offsets (delta2..delta5 by default); ``target_ap_mm``: the predicted flange
-position error (1 sigma, RMS over the candidate poses) that the offsets' covariance
-propagates to (``predicted_position_mm``; the offsets only, as validation's TCP spread).
-Bisection over n (the prediction falls with n; the result is checked, never assumed).
+predicted figure meets it -- ``target_std_urad``: the largest predicted (sandwich) std of
+the free joint offsets (delta2..delta5 by default); ``target_ap_mm``: the predicted
+position error at the tool point (the laser's beam point at the scene's standoff, robot
+frame, 1 sigma, RMS over the candidate poses: ``estimation.accuracy``'s figure, the
+sandwich covariance of every free parameter carried there), with in quadrature the model's
+mismatch an earlier calibration of the cell showed (``Mismatch``: its estimate's share
+beyond the noise, held: systematic, not averaged down by more poses; without one, the
+noise alone), times ``TARGET_MARGIN``. Bisection over n (the prediction falls with n; the result is checked,
+never assumed).
+
+Aiming (``model``, ``plan --params R.json``): the candidates are drawn, solved and
+predicted with an earlier calibration's cell (its sensor pose, planes and joint offsets:
+``sampling.poses.CommandModel``, what ``rehearse``/``sample --params`` aim with), so the
+planned distances are the true cell's to that calibration's accuracy, not to the nominal
+sensor pose's millimetres: a plan made from the nominal model of a real cell put 4 of 13
+poses out of the laser's range (issue 22).
 
 Robot time (``sampling.tour``): the planned poses are ordered into the tour from the
 calibration position that minimises the robot's ticks under the step limit (``tour.order``:
@@ -62,14 +73,56 @@ from planecal.formats.poses import POSES_FORMAT, PosesFile
 from planecal.estimation.identifiability import covariances
 
 
-def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = None):
+TARGET_MARGIN = 1.25  # a target is met when the predicted figure times this is within it
+TOOL_WHERE = ("the laser's beam point at the scene's standoff, robot frame, 1 sigma, rms over "
+              "the candidate poses")
+
+
+@dataclass(frozen=True)
+class Mismatch:
+    """What an earlier calibration of the cell said of its own accuracy (its ``accuracy``
+    block, ``estimation.accuracy``): the predicted tool-point error with the model's
+    mismatch in it (``tool_point_mm``) and from the noise model alone (``noise_only_mm``).
+    Their quadratic difference is the mismatch's share (``mismatch_mm``), which the plan
+    holds as it is: a model's mismatch with the robot is systematic, and more or better
+    poses do not average it down (an offsets-only fit of the realistic MC70 leaves 0.3-0.9
+    mm at the tool point at any sample count); only the noise's share falls with the
+    design."""
+    tool_point_mm: float
+    noise_only_mm: float
+    source: str
+
+    @property
+    def mismatch_mm(self) -> float:
+        return float(np.sqrt(max(self.tool_point_mm ** 2 - self.noise_only_mm ** 2, 0.0)))
+
+    @classmethod
+    def of_result(cls, doc: dict, path: str) -> "Mismatch":
+        """From a calibration result's ``accuracy`` block (``calibrate --out``)."""
+        acc = doc.get("accuracy") if isinstance(doc, dict) else None
+        if not isinstance(acc, dict):
+            raise InputError(f"{path}: accuracy: missing (a calibration result of planecal "
+                             "calibrate --out holds it)")
+        vals = []
+        for k in ("tool_point_mm", "noise_only_mm"):
+            v = acc.get(k)
+            if (isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v)
+                    or v < 0):
+                raise InputError(f"{path}: accuracy.{k}: a number >= 0 expected, got {v!r}")
+            vals.append(float(v))
+        return cls(*vals, str(path))
+
+
+def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = None,
+               model=None):
     """Up to m collision-free candidate poses: (qe (k,6) int64, q (k,6), plate (k,)). Each
     drawn sensor pose offers its solution in each wrist branch (the nearest to the
-    calibration position in that branch), so the design can mix the branches."""
+    calibration position in that branch), so the design can mix the branches. ``model``:
+    what the poses are aimed with (``sampling.poses.CommandModel``; default nominal)."""
     from planecal.sampling.poses import PoseGenerator, PoseSettings
 
     gen = PoseGenerator(scene, PoseSettings(cone_deg=scene.cone_deg,
-                                            distance_mm=tuple(scene.distance_mm)))
+                                            distance_mm=tuple(scene.distance_mm)), model)
     rng = np.random.default_rng(seed)
     q_ref = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     qe, qs, plate = [], [], []
@@ -96,7 +149,7 @@ def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = N
 RUN_POOL_SEED = 7_919  # added to the seed: the run-planner half of the candidate pool
 
 
-def candidate_pool(scene, m: int, seed: int, checker=None):
+def candidate_pool(scene, m: int, seed: int, checker=None, model=None):
     """The candidates of a plan: (qe, q, plate). Half from ``candidates`` (each drawn pose
     in both wrist branches, IK nearest to the calibration position), half the poses the
     sampling run's own planner visits (``run_design``, seed + ``RUN_POOL_SEED``: IK
@@ -104,15 +157,15 @@ def candidate_pool(scene, m: int, seed: int, checker=None):
     the second half is far richer (log det of 150 chosen of 1500: 22.8 from the first
     kind alone, 31.5 from both); without a checker, ``candidates`` only."""
     if checker is None:
-        return candidates(scene, m, seed, checker)
-    qe, q, plate = candidates(scene, m - m // 2, seed, checker)
-    qe2, pl2 = run_design(scene, m // 2, seed + RUN_POOL_SEED, checker)
+        return candidates(scene, m, seed, checker, model=model)
+    qe, q, plate = candidates(scene, m - m // 2, seed, checker, model=model)
+    qe2, pl2 = run_design(scene, m // 2, seed + RUN_POOL_SEED, checker, model=model)
     return (np.vstack([qe, qe2]), np.vstack([q, counts_to_joints(scene.robot, qe2)]),
             np.concatenate([plate, pl2]))
 
 
 def run_design(scene, n: int, seed: int, checker, clearance_m: float = 0.01,
-               with_visits: bool = False):
+               with_visits: bool = False, model=None):
     """The poses the sampling run itself would visit (its ``Planner``: IK from the
     previous pose, target and path collision-checked) for ``seed``, if every laser read
     succeeded: (qe, plate), and with ``with_visits`` its moves (``tour.Visit``s, for the
@@ -123,7 +176,8 @@ def run_design(scene, n: int, seed: int, checker, clearance_m: float = 0.01,
     rs = RunSettings.for_scene(scene, samples=n, seed=seed)
     q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     try:
-        visits = tour.visit(Planner(scene, rs.pose, checker), q0, n, seed, rs.max_attempts)
+        visits = tour.visit(Planner(scene, rs.pose, checker, model), q0, n, seed,
+                            rs.max_attempts)
     except RuntimeError as e:
         raise InputError(f"the sampling run's planner gave up: {e}") from None
     qe = np.array([v.goal for v in visits], np.int64).reshape(-1, 6)
@@ -176,12 +230,12 @@ def d_optimal(A: np.ndarray, n: int, max_passes: int = 20, tol: float = 1e-9):
     return chosen, float(logdet), passes, swaps
 
 
-def scaled_rows(scene, qe, plate, layout, free):
-    """The Jacobian (over ``layout``) at the scene's nominal parameters, and its free
-    columns scaled to unit RMS."""
+def scaled_rows(scene, qe, plate, layout, free, params=None):
+    """The Jacobian (over ``layout``) at ``params`` (default the scene's nominal ones), and
+    its free columns scaled to unit RMS."""
     from planecal.model.scene import nominal_params
-    nominal = nominal_params(scene)
-    _, J = predict_with_jacobian(scene.robot, qe, nominal, plate, layout)
+    params = nominal_params(scene) if params is None else params
+    _, J = predict_with_jacobian(scene.robot, qe, params, plate, layout)
     Jf = J[:, free]
     S = 1.0 / np.sqrt(np.mean(Jf ** 2, axis=0))
     return J, Jf * S
@@ -195,36 +249,41 @@ def predicted_std(J: np.ndarray, layout, free, joint_sigma: float, laser_sigma_m
     return np.sqrt(np.diag(cov["sandwich"])), np.sqrt(np.diag(cov["white"]))
 
 
-def position_rows(scene, q: np.ndarray, layout, free) -> np.ndarray:
-    """The flange position's sensitivity to each free joint offset at the joint angles q:
-    (k, 3, free offsets) [m/rad] (the geometric Jacobian's translation rows)."""
-    from planecal.model.kinematics import jacobian
-    offsets = layout.group("joint_offsets").names
-    fn = layout.names_of(free)
-    cols = [offsets.index(nm) for nm in fn if nm in offsets]
-    return jacobian(scene.robot.kinematics, q)[..., :3, :][..., cols]
+def tool_rows(scene, q: np.ndarray, params, layout, free) -> np.ndarray:
+    """The tool point's sensitivity to each free parameter at the joint angles q: (k, 3,
+    free) (``estimation.accuracy.tool_jacobian``: the beam point at the scene's standoff in
+    the robot's frame; no approach direction known, backlash on gravity's side)."""
+    from planecal.estimation.accuracy import tool_jacobian
+    from planecal.model.measurement import backlash_sides
+    side = backlash_sides(scene.robot, q, None)
+    return tool_jacobian(scene.robot, q, side, layout, params, layout.names_of(free),
+                         scene.standoff_m)
 
 
-def predicted_position_mm(Jpos: np.ndarray, cov_offsets: np.ndarray) -> float:
-    """RMS over the poses of the flange position error's std (1 sigma, 3D) [mm] that the
-    offsets' covariance propagates to: sqrt(mean_i trace(J_i C J_i^T))."""
-    var = np.einsum("kij,jl,kil->k", Jpos, cov_offsets, Jpos)
+def predicted_tool_mm(T: np.ndarray, cov: np.ndarray) -> float:
+    """RMS over the poses of the tool point's position error std (1 sigma, 3D) [mm] that
+    the free parameters' covariance propagates to: sqrt(mean_i trace(T_i C T_i^T))."""
+    var = np.einsum("kij,jl,kil->k", T, cov, T)
     return float(np.sqrt(max(np.mean(var), 0.0)) * 1e3)
 
 
 class Predictor:
-    """The predicted offsets' std (sandwich, the twin's noise model) and flange position
-    error of any subset of the candidates (rows of J)."""
+    """The predicted offsets' std (sandwich, the twin's noise model) and tool-point
+    position error (the noise model's, and in quadrature beside it ``mismatch_mm``: an
+    earlier calibration's mismatch share, ``Mismatch``) of any subset of the candidates
+    (rows of J)."""
 
-    def __init__(self, scene, J, layout, free, joint_sigma_rad, laser_sigma_m, Jpos):
+    def __init__(self, scene, J, layout, free, joint_sigma_rad, laser_sigma_m, T,
+                 mismatch_mm: float = 0.0):
         self.J, self.layout, self.free = J, layout, free
-        self.s, self.sig_l, self.Jpos = joint_sigma_rad, laser_sigma_m, Jpos
+        self.s, self.sig_l, self.T = joint_sigma_rad, laser_sigma_m, T
+        self.mismatch_mm = mismatch_mm
         fn = layout.names_of(free)
         offsets = layout.group("joint_offsets").names
         self.offsets = [i for i, nm in enumerate(fn) if nm in offsets]
 
     def __call__(self, rows) -> tuple[np.ndarray, float]:
-        """(sandwich std of the free parameters, predicted position error [mm])."""
+        """(sandwich std of the free parameters, predicted tool-point error [mm])."""
         return self.of_jacobian(self.J[rows])
 
     def of_jacobian(self, J: np.ndarray) -> tuple[np.ndarray, float]:
@@ -232,12 +291,12 @@ class Predictor:
         random run's."""
         v = noise_variance(J[:, self.layout.slice("joint_offsets")], self.s, self.sig_l)
         cov = covariances(J[:, self.free], v)["sandwich"]
-        o = self.offsets
-        return np.sqrt(np.diag(cov)), predicted_position_mm(self.Jpos, cov[np.ix_(o, o)])
+        return np.sqrt(np.diag(cov)), float(np.hypot(predicted_tool_mm(self.T, cov),
+                                                     self.mismatch_mm))
 
     def figure(self, rows, target: str) -> float:
         """The figure a target is about: the largest free offset std [urad] (``std``) or
-        the position error [mm] (``ap``)."""
+        the tool-point error [mm] (``ap``)."""
         std, ap = self(rows)
         return float(np.max(std[self.offsets]) * 1e6) if target == "std" else ap
 
@@ -245,7 +304,8 @@ class Predictor:
 def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
                  n_min: int, n_max: int, progress=None):
     """The smallest n in [n_min, n_max] whose D-optimal design has ``predictor.figure(target)``
-    <= value: (n, ``d_optimal``'s result); InputError when even n_max misses it."""
+    times ``TARGET_MARGIN`` <= value: (n, ``d_optimal``'s result); InputError when even
+    n_max misses it."""
     cache: dict = {}
 
     def fig(n):
@@ -256,19 +316,23 @@ def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
                 progress.update(step=0, note=f"n={n}: predicted {cache[n][0]:.4g}")
         return cache[n][0]
 
+    def met(n):
+        return fig(n) * TARGET_MARGIN <= value
+
     unit = "urad" if target == "std" else "mm"
-    if fig(n_max) > value:
+    if not met(n_max):
         raise InputError(f"--target-{target}-{unit} {value:g}: not reached with {n_max} "
-                         f"samples (predicted {fig(n_max):.4g} {unit}); allow more samples "
-                         f"(--samples is the most a target may choose) or candidates")
+                         f"samples (predicted {fig(n_max):.4g} {unit}, with the margin "
+                         f"x{TARGET_MARGIN:g} {fig(n_max) * TARGET_MARGIN:.4g}); allow more "
+                         f"samples (--samples is the most a target may choose) or candidates")
     if progress:  # reachable: the progress held until now is shown
         progress.release()
-    lo, hi = n_min, n_max  # fig(hi) <= value
-    if fig(lo) <= value:
+    lo, hi = n_min, n_max  # met(hi)
+    if met(lo):
         return lo, cache[lo][1]
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        if fig(mid) <= value:
+        if met(mid):
             hi = mid
         else:
             lo = mid
@@ -294,7 +358,9 @@ class _Design:
     logdet: float
     std: np.ndarray  # sandwich std of the free parameters
     white: np.ndarray  # white-noise std of the free parameters
-    ap_mm: float  # predicted flange position error
+    ap_mm: float  # predicted tool-point position error
+    model: object | None = None  # what the poses are aimed with (None: nominal)
+    mismatch: Mismatch | None = None
 
 
 @dataclass
@@ -323,17 +389,21 @@ class _Tour:
 def plan(scene, n: int, m: int, seed: int = 0, settings=None, checker=None,
          repeatability_mm: float | None = None, laser_noise_mm: float = 0.001,
          target_std_urad: float | None = None, target_ap_mm: float | None = None,
-         ordered: bool = True, progress=None) -> dict:
+         ordered: bool = True, progress=None, model=None,
+         mismatch: Mismatch | None = None) -> dict:
     """The planning study (module docstring). Returns the planned pose list (ordered for
     robot time unless ``ordered=False``), the random set of equal size, both predictions
     and the robot times. With a target (``target_std_urad`` or ``target_ap_mm``) ``n`` is
     the most samples it may choose. ``settings``: how the poses will be calibrated
     (``estimation.calibrate.CalibrationSettings``; default level offsets): the design is
     D-optimal for the base set the candidates can identify (``calibrate.base_set``).
-    ``progress``: a ``Progress`` of ``PLAN_STAGES`` steps (released once a target is met)."""
+    ``progress``: a ``Progress`` of ``PLAN_STAGES`` steps (released once a target is met).
+    ``model``: what the poses are aimed with (``sampling.poses.CommandModel``: an earlier
+    calibration's cell; default nominal); ``mismatch``: that calibration's (``Mismatch``),
+    which scales every prediction (module docstring)."""
     target = plan_target(n, m, target_std_urad, target_ap_mm)
     design = _design(scene, n, m, seed, settings, checker, repeatability_mm, laser_noise_mm,
-                     target, progress)
+                     target, progress, model, mismatch)
     start = joints_to_counts(scene.robot, scene.calibration_q if scene.calibration_q is not
                              None else np.zeros(6))
     _say(progress, f"the random run's {design.n} poses")
@@ -367,25 +437,35 @@ def plan_target(n: int, m: int, target_std_urad, target_ap_mm) -> tuple[str, flo
 
 
 def _design(scene, n: int, m: int, seed: int, settings, checker, repeatability_mm,
-            laser_noise_mm: float, target, progress) -> _Design:
+            laser_noise_mm: float, target, progress, model=None, mismatch=None) -> _Design:
     """The candidates (``candidate_pool``) and the D-optimal choice of n among them (or of
     the fewest that meet ``target``: ``choose_count``), with its prediction (the twin's
     noise model)."""
     from planecal.estimation.calibrate import CalibrationSettings, base_set
     from planecal.estimation.noise import repeatability_sigma, sample_sigma_m
     from planecal.model.scene import nominal_params
+    if target is not None and target[0] == "ap" and mismatch is not None \
+            and mismatch.mismatch_mm * TARGET_MARGIN > target[1]:
+        raise InputError(f"--target-ap-mm {target[1]:g}: not reachable by any poses: the "
+                         f"model's mismatch {mismatch.source} showed leaves "
+                         f"{mismatch.mismatch_mm:.3g} mm at the tool point on its own "
+                         f"(x{TARGET_MARGIN:g} margin: {mismatch.mismatch_mm * TARGET_MARGIN:.3g}"
+                         "); calibrate at a higher --level and plan from that result")
     settings = settings or CalibrationSettings()
     _say(progress, f"drawing {m} candidate poses")
-    qe, q, plate = candidate_pool(scene, m, seed, checker)
+    qe, q, plate = candidate_pool(scene, m, seed, checker, model)
     if len(qe) < n:
         raise InputError(f"only {len(qe)} collision-free candidates for {n} samples")
-    layout, bs = base_set(scene.robot, qe, nominal_params(scene), plate, settings)
+    params = nominal_params(scene) if model is None else model.params
+    layout, bs = base_set(scene.robot, qe, params, plate, settings)
     free = bs.mask(layout)
-    J, A = scaled_rows(scene, qe, plate, layout, free)
+    J, A = scaled_rows(scene, qe, plate, layout, free, params)
     rep = scene.robot.repeatability_m if repeatability_mm is None else repeatability_mm * 1e-3
     s = repeatability_sigma(scene.robot, rep) if rep > 0 else 0.0
     sig_l = sample_sigma_m(laser_noise_mm)
-    predictor = Predictor(scene, J, layout, free, s, sig_l, position_rows(scene, q, layout, free))
+    predictor = Predictor(scene, J, layout, free, s, sig_l,
+                          tool_rows(scene, q, params, layout, free),
+                          0.0 if mismatch is None else mismatch.mismatch_mm)
     if target is not None:
         _say(progress, f"choosing the sample count for the target ({target[0]} <= {target[1]:g})")
         n, (chosen, _, passes, swaps) = choose_count(A, predictor, *target,
@@ -395,7 +475,7 @@ def _design(scene, n: int, m: int, seed: int, settings, checker, repeatability_m
         _say(progress, f"choosing {n} D-optimal poses")
         chosen, _, passes, swaps = d_optimal(A, n)
     return _Design(qe, plate, layout, free, J, predictor, n, chosen, passes, swaps,
-                   *_prediction(predictor, J, J[chosen]))
+                   *_prediction(predictor, J, J[chosen]), model, mismatch)
 
 
 def _random_run(scene, d: _Design, seed: int, checker, start: np.ndarray) -> _RandomRun:
@@ -404,11 +484,13 @@ def _random_run(scene, d: _Design, seed: int, checker, start: np.ndarray) -> _Ra
     from planecal.sampling import tour
     n, robot = d.n, scene.robot
     if checker is not None:
-        qe_r, plate_r, visits_r = run_design(scene, n, seed, checker, with_visits=True)
+        qe_r, plate_r, visits_r = run_design(scene, n, seed, checker, with_visits=True,
+                                             model=d.model)
         time_r = tour.robot_time_s(visits_r, start, robot)
     else:
         qe_r, plate_r, time_r = d.qe[:n], d.plate[:n], tour.robot_time_s(d.qe[:n], start, robot)
-    J_r, _ = scaled_rows(scene, qe_r, plate_r, d.layout, d.free)
+    J_r, _ = scaled_rows(scene, qe_r, plate_r, d.layout, d.free,
+                         None if d.model is None else d.model.params)
     return _RandomRun(qe_r, plate_r, time_r, *_prediction(d.predictor, d.J, J_r))
 
 
@@ -483,12 +565,18 @@ def _result(scene, seed: int, d: _Design, r: _RandomRun, t: _Tour, ordered: bool
         "predicted_std_random": dict(zip(fn, r.std.tolist())),
         "predicted_white_std_planned": dict(zip(fn, d.white.tolist())),
         "predicted_white_std_random": dict(zip(fn, r.white.tolist())),
-        "predicted_position_mm": {"planned": d.ap_mm, "random": r.ap_mm},
+        "predicted_tool_mm": {"planned": d.ap_mm, "random": r.ap_mm, "where": TOOL_WHERE},
+        "aimed_with": None if d.model is None else "params",
+        "mismatch": None if d.mismatch is None else {
+            "tool_point_mm": d.mismatch.tool_point_mm,
+            "noise_only_mm": d.mismatch.noise_only_mm,
+            "mismatch_mm": d.mismatch.mismatch_mm, "source": d.mismatch.source},
         "noise": {"joint_sigma_rad": d.predictor.s, "laser_sample_sigma_m": d.predictor.sig_l},
     }
     if target is not None:
         res["target"] = {"kind": target[0], "value": target[1],
-                         "unit": "urad" if target[0] == "std" else "mm"}
+                         "unit": "urad" if target[0] == "std" else "mm",
+                         "margin": TARGET_MARGIN}
     return res
 
 
