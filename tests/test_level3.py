@@ -208,9 +208,34 @@ def test_a_level3_result_file_round_trips_and_the_cli_reports_its_accuracy(tmp_p
     a = doc["accuracy"]
     assert 0 < a["noise_only_mm"] and 0 < a["tool_point_mm"] < 1.0 and a["folds"] == 10
     assert f"predicted position error at the tool {a['tool_point_mm']:.3f} mm" in text
+    assert (a["one_calibration_p10_mm"] < a["tool_point_mm"] < a["one_calibration_p90_mm"]
+            and 1.0 <= a["error_directions"])
+    assert f"{a['one_calibration_p10_mm']:.3f}-{a['one_calibration_p90_mm']:.3f} mm" in text
     # every reported std is the covariance's
     cov = doc["covariance"]
     sd = dict(zip(cov["names"], (np.sqrt(np.diag(np.array(cov["matrix"], float))))))
     for r in doc["parameters"]:
         if r["std"] is not None:
             assert r["std"] == pytest.approx(sd[r["name"]], rel=1e-12), r["name"]
+
+
+def test_one_calibrations_error_band_against_the_chi_distribution():
+    """draw_band: one direction is |z| (10-90 %: 0.126-1.645 of the rms); k equal
+    directions are chi(k)/sqrt(k) (k = 3: 0.34-1.44); a rotated covariance changes nothing."""
+    from scipy import stats
+
+    from planecal.estimation.accuracy import draw_band
+    rng = np.random.default_rng(1)
+    T = np.zeros((50, 3, 4))
+    T[:, 0, 0] = 1.0  # the tool moves with parameter 0 only
+    lo, hi, k = draw_band(T, np.diag([4e-8, 1e-8, 1e-8, 1e-8]))
+    assert k == pytest.approx(1.0, abs=1e-9)
+    assert (lo, hi) == pytest.approx(stats.chi.ppf([0.1, 0.9], 1), rel=0.03)
+    T = rng.normal(size=(50, 3, 3))
+    G = np.einsum("nik,nil->kl", T, T) / 50
+    L = np.linalg.cholesky(np.linalg.inv(G))  # C = G^-1: three equal directions
+    Q = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    for C in (L @ L.T, L @ Q @ Q.T @ L.T):
+        lo, hi, k = draw_band(T, C * 1e-8)
+        assert k == pytest.approx(3.0, rel=1e-9)
+        assert (lo, hi) == pytest.approx(stats.chi.ppf([0.1, 0.9], 3) / np.sqrt(3), rel=0.03)

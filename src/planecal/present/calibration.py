@@ -307,6 +307,10 @@ def accuracy_lines(doc: dict) -> list[str]:
             f"the fit's residual level {a['residual_sigma_mm']:.4f} mm, the model's mismatch in "
             "it); from the noise model alone "
             f"{a['noise_only_mm']:.3f} mm ({a['noise_sigma_mm']:.4f} mm a sample)",
+            *([f"one calibration's own error is one draw about that rms: "
+               f"{a['one_calibration_p10_mm']:.3f}-{a['one_calibration_p90_mm']:.3f} mm "
+               f"(10-90 %; {a['error_directions']:.1f} effective directions)"]
+              if a.get("one_calibration_p90_mm") else []),
             (f"held-out residuals ({a['folds']}-fold cross-validation, {a.get('held_out')} "
              f"samples) rms {a['cv_residual_rms_mm']:.4f} mm against "
              f"{a['in_sample_rms_mm']:.4f} mm in the fit"

@@ -107,6 +107,14 @@ def _gauge_lines(v: dict) -> list[str]:
     return out
 
 
+def _predicted(t: dict) -> str:
+    """The calibration's own estimate and the band of one calibration's error about it."""
+    p, band = t.get("predicted_tool_mm"), t.get("predicted_band_mm")
+    if p is None:
+        return "-"
+    return f"{p:.3f}" + (f" [{band[0]:.3f}-{band[1]:.3f}]" if band else "")
+
+
 def _mm(x, fmt=".3f"):
     return "-" if x is None else format(x, fmt)
 
@@ -128,7 +136,7 @@ def format_truths(summary: dict, world: str, level: str = "offsets") -> str:
                        _mm(t["rp_after_tool_mm"]), _mm(t["gauge_error_before_mm"], "+.3f"),
                        _mm(t["gauge_error_after_mm"], "+.3f"), _mm(t["max_model_error_mm"]),
                        "-" if near is None else f"{max(near):.0f}",
-                       _mm(t.get("predicted_tool_mm"))])
+                       _predicted(t)])
     out = [f"ISO 9283 and gauge block on the twin, {world} world, {len(rows)} truth(s); "
            f"calibration at level {level} from the nominal values (and below it, on the "
            "same poses); AP at the tool point (the laser's beam point at its measuring "
@@ -142,7 +150,8 @@ def format_truths(summary: dict, world: str, level: str = "offsets") -> str:
            "figure; nearest: the ISO points' largest distance to a sample's tool point; "
            f"predicted: what the {level} calibration says of its own tool-point error, rms "
            "over its samples' poses, the fit's residual level in it, before any validation "
-           "(estimation.accuracy))", ""]
+           "(estimation.accuracy), with the 10-90 % band of one calibration's own error "
+           "about it)", ""]
     by_seed = {t["truth_seed"]: t for t in truths}
     for what, key in (("median", "median_truth_seed"), ("worst", "worst_truth_seed")):
         t = by_seed[summary[key]]

@@ -130,11 +130,12 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
                        scene.laser_range_mm)
         v["accuracy"] = acc.to_dict()
         v["predicted_tool_mm"] = acc.tool_point_mm
+        v["predicted_band_mm"] = [acc.one_calibration_p10_mm, acc.one_calibration_p90_mm]
     return v, fit, (qe, d, plate)
 
 
 TRUTH_KEYS = ("truth_seed", *FIGURE_KEYS, "ap_tool_ratio", "gauge_error_before_mm",
-              "gauge_error_after_mm", "predicted_tool_mm")
+              "gauge_error_after_mm", "predicted_tool_mm", "predicted_band_mm")
 LEVEL_KEYS = ("ap_after_tool_mm", "ap_after_flange_mm", "ap_after_tool_cell_mm",
               "rp_after_tool_mm")
 
