@@ -185,6 +185,17 @@ def fig_truths(out, v, world, level):
     flange = np.array([t["ap_after_flange_mm"] for t in truths], float)
     ax.plot(x, flange, "v", color="black", markersize=7,
             label=f"calibrated ({level}) at the flange")
+    pred = [(k, t["predicted_tool_mm"], t.get("predicted_band_mm")) for k, t in
+            enumerate(truths) if t.get("predicted_tool_mm") is not None]
+    if pred:  # what the calibration said of itself before the validation
+        xk = x[[k for k, _, _ in pred]] + (len(models) - 3) / 2 * w
+        y = np.array([p for _, p, _ in pred], float)
+        band = [b for _, _, b in pred]
+        err = (np.array([[p - b[0], b[1] - p] for (_, p, _), b in zip(pred, band)]).T
+               if all(band) else None)
+        ax.errorbar(xk, y, yerr=err, fmt="o", color="dimgray", markersize=5, capsize=3,
+                    label=f"calibrated ({level}): its own estimate"
+                    + (", 10-90 % of one calibration" if err is not None else ""))
     med = float(np.median(series[-2]))
     ax.axhline(med, color=AFTER, linestyle="--", linewidth=1,
                label=f"median, calibrated ({level}): {med:.3g} mm")
@@ -201,7 +212,10 @@ def fig_truths(out, v, world, level):
                 f"Pose accuracy at the tool point of the nominal model, the calibration at "
                 f"level {level} and each level below it, and the twin's own true model (the "
                 "floor), on the same poses, one world per truth seed; triangles: the "
-                "validated calibration's AP at the flange (logarithmic axis).")
+                "validated calibration's AP at the flange; grey points: what that "
+                "calibration predicted of its own tool-point error before the validation "
+                "(rms over its samples' poses), with the band one calibration's error falls "
+                "in 10-90 % of the time (logarithmic axis).")
 
 
 def fig_breakdown(out, bd, level):
