@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from planecal.cli import main
+from planecal.studies import design as D
 from planecal.studies import planning as P
 
 
@@ -28,24 +29,24 @@ def small_plan(cell):
     layout = level1_layout(len(scene.plates))
     free = layout.free_from_names(None)
     qe, q, plate = P.candidate_pool(scene, 120, 4, world)
-    J, A = P.scaled_rows(scene, qe, plate, layout, free)
-    pred = P.Predictor(scene, J, layout, free, 1.1e-5, 1e-7,
-                       P.tool_rows(scene, q, nominal_params(scene), layout, free))
+    J, A = D.scaled_rows(scene, qe, plate, layout, free)
+    pred = D.Predictor(scene, J, layout, free, 1.1e-5, 1e-7,
+                       D.tool_rows(scene, q, nominal_params(scene), layout, free))
     return A, pred
 
 
 @pytest.mark.parametrize("kind", ["std", "ap"])
 def test_choose_count_is_the_smallest_n_meeting_the_target(small_plan, kind):
     A, pred = small_plan
-    figs = {n: pred.figure(P.d_optimal(A, n)[0], kind) for n in range(13, 61)}
-    target = figs[40] * P.TARGET_MARGIN * 1.0001  # a target that n = 40 meets, with margin
-    n, (chosen, *_rest) = P.choose_count(A, pred, kind, target, 13, 60)
-    assert figs[n] * P.TARGET_MARGIN <= target and len(chosen) == n
+    figs = {n: pred.figure(D.d_optimal(A, n)[0], kind) for n in range(13, 61)}
+    target = figs[40] * D.TARGET_MARGIN * 1.0001  # a target that n = 40 meets, with margin
+    n, (chosen, *_rest) = D.choose_count(A, pred, kind, target, 13, 60)
+    assert figs[n] * D.TARGET_MARGIN <= target and len(chosen) == n
     # every smaller n misses it (the figure need not fall monotonically: checked, not assumed
     # -- bisection finds a crossing; here the figures fall with n)
-    assert all(figs[m] * P.TARGET_MARGIN > target for m in range(13, n))
-    with pytest.raises(P.InputError, match=f"--target-{kind}-"):
-        P.choose_count(A, pred, kind, min(figs.values()) * 0.5, 13, 60)
+    assert all(figs[m] * D.TARGET_MARGIN > target for m in range(13, n))
+    with pytest.raises(D.InputError, match=f"--target-{kind}-"):
+        D.choose_count(A, pred, kind, min(figs.values()) * 0.5, 13, 60)
 
 
 def test_tool_point_error_matches_the_kinematic_chain(cell, small_plan):
@@ -63,7 +64,7 @@ def test_tool_point_error_matches_the_kinematic_chain(cell, small_plan):
     p0 = nominal_params(scene)
     rng = np.random.default_rng(0)
     q = scene.calibration_q + rng.normal(0, 0.3, (5, 6))
-    T = P.tool_rows(scene, q, p0, layout, free)
+    T = D.tool_rows(scene, q, p0, layout, free)
     names = layout.names_of(free)
 
     def tip(p):
@@ -78,9 +79,9 @@ def test_tool_point_error_matches_the_kinematic_chain(cell, small_plan):
         np.testing.assert_allclose(T[:, :, names.index(name)], fd, atol=2e-5, err_msg=name)
     C = np.diag(rng.uniform(1e-10, 1e-9, len(names)))
     want = np.sqrt(np.mean([np.trace(Ti @ C @ Ti.T) for Ti in T])) * 1e3
-    assert P.predicted_tool_mm(T, C) == pytest.approx(want, rel=1e-12)
+    assert D.predicted_tool_mm(T, C) == pytest.approx(want, rel=1e-12)
     A, pred = small_plan
-    rows = P.d_optimal(A, 20)[0]
+    rows = D.d_optimal(A, 20)[0]
     base = pred.figure(rows, "ap")
     pred.mismatch_mm = 0.3
     try:

@@ -7,7 +7,7 @@ import pytest
 
 from planecal.cli import main
 from planecal.model.scene import load_scene
-from planecal.studies.planning import d_optimal
+from planecal.studies.design import d_optimal
 from planecal.studies.validation import ValidationSettings, iso_points, validate
 
 

@@ -10,7 +10,7 @@ study's ``CalibrationSettings``: the level, the compliance, the candidates, the 
 kept): exactly what ``planecal calibrate`` would fit from such poses. The predicted std of
 the base set: the unweighted fit's sandwich covariance under the twin's noise model
 (repeatability projected per pose + the laser's 100-reading mean;
-``planning.predicted_std``, as ``plan``).
+``design.predicted_std``, as ``plan``).
 """
 from __future__ import annotations
 
@@ -46,7 +46,8 @@ def layout_study(scene, settings: CalibrationSettings = CalibrationSettings(),
     (identifiable), excluded (with reason and combination), rank, predicted std of the
     base set (SI units) and its ratio to each parameter's ``practical_std``."""
     from planecal.model.scene import nominal_params
-    from planecal.studies.planning import candidates, predicted_std
+    from planecal.studies.design import predicted_std
+    from planecal.studies.planning import candidates
 
     if samples < 13:
         raise InputError(f"--samples must be at least 13, got {samples}")

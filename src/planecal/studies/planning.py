@@ -10,11 +10,7 @@ parameters (all we know before calibrating) over the free parameters, columns sc
 unit RMS over the candidates (so units do not matter; D-optimality is invariant to column
 scaling anyway, the scaling only conditions the arithmetic).
 
-Algorithm: greedy forward selection (each step adds the candidate with the largest
-prediction variance a^T M^-1 a, Sherman-Morrison updates, M0 = 1e-6 I), then Fedorov
-exchange passes (swap a chosen and a free candidate when it raises det M:
-(1 + d_j)(1 - d_i) + d_ij^2 > 1 + tol) until no swap helps. Each candidate is used at most
-once (a repeated pose only averages noise, the real run samples each pose once).
+Algorithm and prediction: ``studies.design`` (D-optimal choice, greedy + Fedorov exchange).
 
 Prediction: the offsets' std of the unweighted fit, sandwich covariance with the twin's
 noise model (``studies.common``: repeatability projected per pose + laser buffer mean), for
@@ -64,53 +60,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from planecal.model.measurement import predict_with_jacobian
-from planecal.model.encoder import counts_in_range, counts_to_joints, joints_to_counts
 from planecal.base.errors import InputError
-from planecal.estimation.noise import noise_variance
 from planecal.formats.base import read_json, validate
 from planecal.formats.poses import POSES_FORMAT, PosesFile
-from planecal.estimation.identifiability import covariances
-
-
-TARGET_MARGIN = 1.25  # a target is met when the predicted figure times this is within it
-TOOL_WHERE = ("the laser's beam point at the scene's standoff, robot frame, 1 sigma, rms over "
-              "the candidate poses")
-
-
-@dataclass(frozen=True)
-class Mismatch:
-    """What an earlier calibration of the cell said of its own accuracy (its ``accuracy``
-    block, ``estimation.accuracy``): the predicted tool-point error with the model's
-    mismatch in it (``tool_point_mm``) and from the noise model alone (``noise_only_mm``).
-    Their quadratic difference is the mismatch's share (``mismatch_mm``), which the plan
-    holds as it is: a model's mismatch with the robot is systematic, and more or better
-    poses do not average it down (an offsets-only fit of the realistic MC70 leaves 0.3-0.9
-    mm at the tool point at any sample count); only the noise's share falls with the
-    design."""
-    tool_point_mm: float
-    noise_only_mm: float
-    source: str
-
-    @property
-    def mismatch_mm(self) -> float:
-        return float(np.sqrt(max(self.tool_point_mm ** 2 - self.noise_only_mm ** 2, 0.0)))
-
-    @classmethod
-    def of_result(cls, doc: dict, path: str) -> "Mismatch":
-        """From a calibration result's ``accuracy`` block (``calibrate --out``)."""
-        acc = doc.get("accuracy") if isinstance(doc, dict) else None
-        if not isinstance(acc, dict):
-            raise InputError(f"{path}: accuracy: missing (a calibration result of planecal "
-                             "calibrate --out holds it)")
-        vals = []
-        for k in ("tool_point_mm", "noise_only_mm"):
-            v = acc.get(k)
-            if (isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v)
-                    or v < 0):
-                raise InputError(f"{path}: accuracy.{k}: a number >= 0 expected, got {v!r}")
-            vals.append(float(v))
-        return cls(*vals, str(path))
+from planecal.model.encoder import counts_in_range, counts_to_joints, joints_to_counts
+from planecal.studies.design import (TARGET_MARGIN, TOOL_WHERE, Mismatch, Predictor,
+                                     choose_count, d_optimal, predicted_std, scaled_rows,
+                                     tool_rows)
 
 
 def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = None,
@@ -183,160 +139,6 @@ def run_design(scene, n: int, seed: int, checker, clearance_m: float = 0.01,
     qe = np.array([v.goal for v in visits], np.int64).reshape(-1, 6)
     plate = np.array([v.plate for v in visits], int)
     return (qe, plate, visits) if with_visits else (qe, plate)
-
-
-def d_optimal(A: np.ndarray, n: int, max_passes: int = 20, tol: float = 1e-9):
-    """Indices of n rows of A (M, p) maximising det(A_S^T A_S): greedy + Fedorov exchange.
-    Returns (indices, log det, passes, swaps)."""
-    M, p = A.shape
-    if n > M:
-        raise InputError(f"cannot choose {n} poses from {M} candidates")
-    Minv = np.eye(p) * 1e6
-    chosen = []
-    free = np.ones(M, bool)
-    for _ in range(n):
-        d = np.einsum("ij,jk,ik->i", A, Minv, A)
-        d[~free] = -np.inf
-        j = int(np.argmax(d))
-        a = A[j]
-        Ma = Minv @ a
-        Minv -= np.outer(Ma, Ma) / (1.0 + a @ Ma)
-        chosen.append(j)
-        free[j] = False
-    chosen = np.array(chosen)
-    swaps = 0
-    passes = 0
-    for passes in range(1, max_passes + 1):
-        improved = False
-        for pos in range(n):
-            G = A[chosen].T @ A[chosen]
-            Minv = np.linalg.inv(G)
-            i = chosen[pos]
-            ai = A[i]
-            MA = A @ Minv  # (M, p)
-            d_all = np.einsum("ij,ij->i", MA, A)
-            d_ij = MA @ ai
-            gain = (1 + d_all) * (1 - d_all[i]) + d_ij ** 2
-            gain[~free] = -np.inf
-            j = int(np.argmax(gain))
-            if gain[j] > 1 + tol:
-                chosen[pos] = j
-                free[i], free[j] = True, False
-                swaps += 1
-                improved = True
-        if not improved:
-            break
-    sign, logdet = np.linalg.slogdet(A[chosen].T @ A[chosen])
-    return chosen, float(logdet), passes, swaps
-
-
-def scaled_rows(scene, qe, plate, layout, free, params=None):
-    """The Jacobian (over ``layout``) at ``params`` (default the scene's nominal ones), and
-    its free columns scaled to unit RMS."""
-    from planecal.model.scene import nominal_params
-    params = nominal_params(scene) if params is None else params
-    _, J = predict_with_jacobian(scene.robot, qe, params, plate, layout)
-    Jf = J[:, free]
-    S = 1.0 / np.sqrt(np.mean(Jf ** 2, axis=0))
-    return J, Jf * S
-
-
-def predicted_std(J: np.ndarray, layout, free, joint_sigma: float, laser_sigma_m: float):
-    """Sandwich and white-noise std of the free parameters for the Jacobian J (over
-    ``layout``) and the twin's noise model."""
-    v = noise_variance(J[:, layout.slice("joint_offsets")], joint_sigma, laser_sigma_m)
-    cov = covariances(J[:, free], v)
-    return np.sqrt(np.diag(cov["sandwich"])), np.sqrt(np.diag(cov["white"]))
-
-
-def tool_rows(scene, q: np.ndarray, params, layout, free) -> np.ndarray:
-    """The tool point's sensitivity to each free parameter at the joint angles q: (k, 3,
-    free) (``estimation.accuracy.tool_jacobian``: the beam point at the scene's standoff in
-    the robot's frame; no approach direction known, backlash on gravity's side)."""
-    from planecal.estimation.accuracy import tool_jacobian
-    from planecal.model.measurement import backlash_sides
-    side = backlash_sides(scene.robot, q, None)
-    return tool_jacobian(scene.robot, q, side, layout, params, layout.names_of(free),
-                         scene.standoff_m)
-
-
-def predicted_tool_mm(T: np.ndarray, cov: np.ndarray) -> float:
-    """RMS over the poses of the tool point's position error std (1 sigma, 3D) [mm] that
-    the free parameters' covariance propagates to: sqrt(mean_i trace(T_i C T_i^T))."""
-    var = np.einsum("kij,jl,kil->k", T, cov, T)
-    return float(np.sqrt(max(np.mean(var), 0.0)) * 1e3)
-
-
-class Predictor:
-    """The predicted offsets' std (sandwich, the twin's noise model) and tool-point
-    position error (the noise model's, and in quadrature beside it ``mismatch_mm``: an
-    earlier calibration's mismatch share, ``Mismatch``) of any subset of the candidates
-    (rows of J)."""
-
-    def __init__(self, scene, J, layout, free, joint_sigma_rad, laser_sigma_m, T,
-                 mismatch_mm: float = 0.0):
-        self.J, self.layout, self.free = J, layout, free
-        self.s, self.sig_l, self.T = joint_sigma_rad, laser_sigma_m, T
-        self.mismatch_mm = mismatch_mm
-        fn = layout.names_of(free)
-        offsets = layout.group("joint_offsets").names
-        self.offsets = [i for i, nm in enumerate(fn) if nm in offsets]
-
-    def __call__(self, rows) -> tuple[np.ndarray, float]:
-        """(sandwich std of the free parameters, predicted tool-point error [mm])."""
-        return self.of_jacobian(self.J[rows])
-
-    def of_jacobian(self, J: np.ndarray) -> tuple[np.ndarray, float]:
-        """The same for the Jacobian rows J of any poses (over the same layout), e.g. the
-        random run's."""
-        v = noise_variance(J[:, self.layout.slice("joint_offsets")], self.s, self.sig_l)
-        cov = covariances(J[:, self.free], v)["sandwich"]
-        return np.sqrt(np.diag(cov)), float(np.hypot(predicted_tool_mm(self.T, cov),
-                                                     self.mismatch_mm))
-
-    def figure(self, rows, target: str) -> float:
-        """The figure a target is about: the largest free offset std [urad] (``std``) or
-        the tool-point error [mm] (``ap``)."""
-        std, ap = self(rows)
-        return float(np.max(std[self.offsets]) * 1e6) if target == "std" else ap
-
-
-def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
-                 n_min: int, n_max: int, progress=None):
-    """The smallest n in [n_min, n_max] whose D-optimal design has ``predictor.figure(target)``
-    times ``TARGET_MARGIN`` <= value: (n, ``d_optimal``'s result); InputError when even
-    n_max misses it."""
-    cache: dict = {}
-
-    def fig(n):
-        if n not in cache:
-            res = d_optimal(A, n)
-            cache[n] = (predictor.figure(res[0], target), res)
-            if progress:
-                progress.update(step=0, note=f"n={n}: predicted {cache[n][0]:.4g}")
-        return cache[n][0]
-
-    def met(n):
-        return fig(n) * TARGET_MARGIN <= value
-
-    unit = "urad" if target == "std" else "mm"
-    if not met(n_max):
-        raise InputError(f"--target-{target}-{unit} {value:g}: not reached with {n_max} "
-                         f"samples (predicted {fig(n_max):.4g} {unit}, with the margin "
-                         f"x{TARGET_MARGIN:g} {fig(n_max) * TARGET_MARGIN:.4g}); allow more "
-                         f"samples (--samples is the most a target may choose) or candidates")
-    if progress:  # reachable: the progress held until now is shown
-        progress.release()
-    lo, hi = n_min, n_max  # met(hi)
-    if met(lo):
-        return lo, cache[lo][1]
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if met(mid):
-            hi = mid
-        else:
-            lo = mid
-    return hi, cache[hi][1]
 
 
 PLAN_STAGES = 6  # progress steps of ``plan``
