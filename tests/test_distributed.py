@@ -443,3 +443,30 @@ def test_bootstrap_fits_are_the_same_on_a_local_cluster(cluster, tmp_path):
                      results=out, resume=True)  # two more subsets per size: 4 fits run
     assert len(R.read_results(out)[1]) == 12
     assert more["sizes"][0]["fits"] == 6
+
+
+def test_a_close_that_runs_out_kills_the_local_workers():
+    # Engine.close bounds the client's and the cluster's close (CLOSE_TIMEOUT_S each): an
+    # interrupted map once took over a minute to exit on a loaded machine. Where the
+    # cluster's close runs out, its worker processes are killed, not left behind.
+    class Slow:
+        def __init__(self):
+            self.timeouts = []
+
+        def close(self, timeout=None):
+            self.timeouts.append(timeout)
+            raise TimeoutError("a close that does not finish")
+
+    worker = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    try:
+        eng = D.Engine(jobs=2)
+        eng.client, eng._cluster, eng._pids = Slow(), Slow(), [worker.pid]
+        client, cluster = eng.client, eng._cluster
+        eng.close()
+        assert worker.wait(timeout=10) == -signal.SIGKILL
+        assert client.timeouts == [D.CLOSE_TIMEOUT_S] and cluster.timeouts == [D.CLOSE_TIMEOUT_S]
+        assert eng.client is None and eng._pids == []
+    finally:
+        if worker.poll() is None:
+            worker.kill()
+            worker.wait()

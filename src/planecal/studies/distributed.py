@@ -47,6 +47,7 @@ from __future__ import annotations
 import importlib
 import logging
 import os
+import signal
 import uuid
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
@@ -59,6 +60,7 @@ from planecal.studies.cluster import (TLSFiles, check_reach, client_security, pa
 from planecal.studies.results import ResultsFile, canonical_key, encode
 
 CONNECT_TIMEOUT_S = 10.0
+CLOSE_TIMEOUT_S = 10.0  # each of the client's and the local cluster's close, at most
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
               "MUJOCO_GL": "disable"}
 # dask's settings for planecal's workers: no statistical profiler (it samples the running
@@ -183,6 +185,7 @@ class Engine:
         self.untuned: int = 0  # workers of a --scheduler cluster without WORKER_CONFIG
         self.client = None
         self._cluster = None
+        self._pids: list[int] = []  # the local cluster's worker processes
         self._logs = None
 
     # -- lifecycle
@@ -237,6 +240,7 @@ class Engine:
                 # exception (Engine.map), so only CRITICAL lines are shown
                 silence_logs=logging.CRITICAL)
         self.client = Client(self._cluster, set_as_default=False)
+        self._pids = [int(v) for v in self.client.run(os.getpid).values()]
 
     def _connect(self) -> None:
         from distributed import Client
@@ -268,13 +272,29 @@ class Engine:
         self.client.gather(rest)
 
     def close(self) -> None:
+        """Close the client and the local cluster, each within ``CLOSE_TIMEOUT_S``: a
+        study stopped by Ctrl-C on a loaded machine exits (the client's own default, twice
+        dask's connect timeout, and the cluster's unbounded close once held an interrupted
+        map for over a minute); where the cluster's close runs out, its worker processes
+        are killed."""
         try:
             if self.client is not None:
-                self.client.close()
+                try:
+                    self.client.close(timeout=CLOSE_TIMEOUT_S)
+                except (TimeoutError, OSError):
+                    pass  # the cluster's close below ends what is left
             if self._cluster is not None:
-                self._cluster.close()
+                try:
+                    self._cluster.close(timeout=CLOSE_TIMEOUT_S)
+                except (TimeoutError, OSError):
+                    for pid in self._pids:
+                        try:
+                            os.kill(pid, signal.SIGKILL)
+                        except ProcessLookupError:
+                            pass
         finally:
             self.client = self._cluster = None
+            self._pids = []
             if self._logs is not None:
                 self._logs.__exit__(None, None, None)
                 self._logs = None
