@@ -273,6 +273,11 @@ def stop_after_3(i, r, seen=[]):
         time.sleep(600)  # the test kills us here
 
 if __name__ == "__main__":
+    import signal
+    # Ctrl-C's KeyboardInterrupt whatever the test run was started with: a shell starts a
+    # background job ignoring SIGINT, the ignoring is inherited, and then the SIGINT below
+    # never arrives (`.ci/run &` hung here for 60 s)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     st = MCSettings(mode="synthetic", samples=30, runs=6)
     with Engine(jobs=2) as eng:
         print("pids", *[e["pid"] for e in eng.worker_env()], flush=True)
@@ -446,8 +451,8 @@ def test_bootstrap_fits_are_the_same_on_a_local_cluster(cluster, tmp_path):
 
 
 def test_a_close_that_runs_out_kills_the_local_workers():
-    # Engine.close bounds the client's and the cluster's close (CLOSE_TIMEOUT_S each): an
-    # interrupted map once took over a minute to exit on a loaded machine. Where the
+    # Engine.close bounds the client's and the cluster's close (CLOSE_TIMEOUT_S each), so
+    # a stopped study exits even where the scheduler no longer answers; where the
     # cluster's close runs out, its worker processes are killed, not left behind.
     class Slow:
         def __init__(self):

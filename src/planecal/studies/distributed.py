@@ -272,11 +272,10 @@ class Engine:
         self.client.gather(rest)
 
     def close(self) -> None:
-        """Close the client and the local cluster, each within ``CLOSE_TIMEOUT_S``: a
-        study stopped by Ctrl-C on a loaded machine exits (the client's own default, twice
-        dask's connect timeout, and the cluster's unbounded close once held an interrupted
-        map for over a minute); where the cluster's close runs out, its worker processes
-        are killed."""
+        """Close the client and the local cluster, each within ``CLOSE_TIMEOUT_S``, so a
+        stopped study exits even where the scheduler no longer answers (the client's own
+        default is twice dask's connect timeout, the cluster's close has none); where the
+        cluster's close runs out, its worker processes are killed."""
         try:
             if self.client is not None:
                 try:
