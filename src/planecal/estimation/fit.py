@@ -27,7 +27,8 @@ import numpy as np
 
 from planecal.estimation.identifiability import Covariance, Identifiability, uncertainty
 from planecal.estimation.noise import noise_variance, row_weights
-from planecal.estimation.solver import Iteration, Prior, SolverOptions, Status, least_squares
+from planecal.estimation.solver import (Iteration, Prior, SolverOptions, Status, least_squares,
+                                       prior_weight)
 from planecal.model.cell_params import CellParams
 from planecal.model.layout import ParamLayout, level1_layout
 from planecal.model.measurement import (Joints, has_backlash, joints_of_counts, predict,
@@ -223,36 +224,46 @@ class Result:
 
 # ----- the fit -----------------------------------------------------------------------------
 
-def _residuals(pb: Problem):
+class _Residuals:
     """The solver's residual function over the free parameters: (r, J of the free columns,
-    row weights) at the samples ``rows``; the counts turned into joint angles once."""
-    opt, layout, free = pb.options, pb.layout, pb.free
-    joints = pb.joints
-    x_all = pb.initial.to_vector(layout)
-    weighted = opt.joint_sigma_rad is not None
-    offsets = layout.mask(layout.group("joint_offsets").names)
-    need = free | offsets if weighted else free
-    cols_f = np.flatnonzero(free[need])
-    cols_o = np.flatnonzero(offsets[need])
-    first = [pb.at_initial if pb.at_initial is not None and not weighted else None]
+    row weights) at the samples ``rows``; the counts turned into joint angles once. It
+    keeps the joint offsets' columns of its last Jacobian (``offsets_J``): the noise
+    model's rows (``_noise_var``) at the solution, without another evaluation."""
 
-    def fun(xf, rows):
-        if first[0] is not None:  # the first call: at the initial values, every row
-            d, J = first[0]
-            first[0] = None
-            if np.array_equal(xf, x_all[free]) and np.asarray(rows).all():
+    def __init__(self, pb: Problem):
+        opt, layout, free = pb.options, pb.layout, pb.free
+        self.pb, self.x_all = pb, pb.initial.to_vector(layout)
+        self.weighted = opt.joint_sigma_rad is not None
+        offsets = layout.mask(layout.group("joint_offsets").names)
+        noise = self.weighted or opt.noise_joint_sigma_rad is not None
+        self.need = free | offsets if noise else free
+        self.cols_f = np.flatnonzero(free[self.need])
+        self.cols_o = np.flatnonzero(offsets[self.need]) if noise else None
+        self.offsets_J: np.ndarray | None = None
+        # the first call: at the initial values, every row (the caller's evaluation)
+        self.first = pb.at_initial if pb.at_initial is not None and not self.weighted else None
+
+    def __call__(self, xf, rows):
+        pb, free = self.pb, self.pb.free
+        if self.first is not None:
+            d, J = self.first
+            self.first = None
+            if np.array_equal(xf, self.x_all[free]) and np.asarray(rows).all():
+                if self.cols_o is not None:
+                    self.offsets_J = J[:, pb.layout.mask(
+                        pb.layout.group("joint_offsets").names)]
                 return d - pb.d_m, J[:, free], None
-        x = x_all.copy()
+        x = self.x_all.copy()
         x[free] = xf
-        d, J = predict_joints_with_jacobian(pb.robot, joints.rows(rows),
-                                            pb.initial.with_vector(x, layout), pb.plate[rows],
-                                            layout, need)
-        if not weighted:
-            return d - pb.d_m[rows], J, None
-        w = row_weights(J[:, cols_o], opt.joint_sigma_rad, opt.distance_sigma_m)
-        return d - pb.d_m[rows], J[:, cols_f], w
-
-    return fun
+        d, J = predict_joints_with_jacobian(pb.robot, pb.joints.rows(rows),
+                                            pb.initial.with_vector(x, pb.layout),
+                                            pb.plate[rows], pb.layout, self.need)
+        if self.cols_o is not None:
+            self.offsets_J = J[:, self.cols_o]
+        if not self.weighted:
+            return d - pb.d_m[rows], J[:, self.cols_f], None
+        w = row_weights(self.offsets_J, pb.options.joint_sigma_rad, pb.options.distance_sigma_m)
+        return d - pb.d_m[rows], J[:, self.cols_f], w
 
 
 @dataclass(frozen=True, eq=False)
@@ -319,18 +330,16 @@ TEMPER = 2.0  # the prior rows are weighed against twice the residuals' std (a t
 # posterior: the residuals hold the robot's mismatch with the model, which is not white noise;
 # on three_plates' realistic truths 0-4, 2 of the level-3 fits' tool error 1x, 2x and 3x the
 # residuals gave median 0.22, 0.13, 0.14 mm over two seeds)
-def _noise_var(pb: Problem, params: CellParams, used: np.ndarray) -> np.ndarray | None:
+def _noise_var(pb: Problem, offsets_J: np.ndarray | None) -> np.ndarray | None:
     """Each used sample's variance under the noise model of ``FitOptions`` (the
-    repeatability on the beam and the sensor's own, ``noise.noise_variance``) at the
-    solution, or None when the options hold no noise model."""
+    repeatability on the beam and the sensor's own, ``noise.noise_variance``) from the
+    joint offsets' columns of the solver's last Jacobian (at the solution, or within the
+    last step below the improvement limit), or None when the options hold no noise model."""
     opt = pb.options
     s = opt.joint_sigma_rad if opt.joint_sigma_rad is not None else opt.noise_joint_sigma_rad
     if s is None:
         return None
-    offsets = pb.layout.mask(pb.layout.group("joint_offsets").names)
-    _, J = predict_joints_with_jacobian(pb.robot, pb.joints.rows(used), params,
-                                        pb.plate[used], pb.layout, offsets)
-    return noise_variance(J, s, opt.distance_sigma_m)
+    return noise_variance(offsets_J, s, opt.distance_sigma_m)
 
 
 def solve(problem: Problem) -> Result:
@@ -366,7 +375,8 @@ def _solve(pb: Problem, x0: np.ndarray | None = None) -> Result:
     opt, layout, free = pb.options, pb.layout, pb.free
     prior = _prior(pb)
     start = pb.initial.to_vector(layout)[free] if x0 is None else x0
-    sol = least_squares(_residuals(pb), start, len(pb), opt, prior)
+    fun = _Residuals(pb)
+    sol = least_squares(fun, start, len(pb), opt, prior)
     x = pb.initial.to_vector(layout)
     x[free] = sol.x
     params = pb.initial.with_vector(x, layout)
@@ -374,14 +384,13 @@ def _solve(pb: Problem, x0: np.ndarray | None = None) -> Result:
     # residuals over all samples (outliers included), for reporting
     final_r = r if sol.used.all() else predict(pb.robot, pb.qe, params, pb.plate,
                                                pb.direction) - pb.d_m
-    v = _noise_var(pb, params, sol.used)
+    v = _noise_var(pb, fun.offsets_J)
     if prior is not None:  # the posterior covariance: the prior rows join the data's
         P, rp = prior.rows(sol.x, J.shape[1])
-        Jw, rw = (J, r) if w is None else (J * w[:, None], r * w)
-        vp = None if v is None else np.concatenate([v if w is None else v * w ** 2,
-                                                    np.full(len(P), opt.prior_sigma_m ** 2)])
-        ident, cov, sigma = uncertainty(np.vstack([Jw, P]), np.concatenate([rw, rp]), layout,
-                                        free, opt, noise_var=vp)
+        wp = None if w is None else np.concatenate([w, np.full(len(P), prior_weight(w))])
+        vp = None if v is None else np.concatenate([v, np.full(len(P), opt.prior_sigma_m ** 2)])
+        ident, cov, sigma = uncertainty(np.vstack([J, P]), np.concatenate([r, rp]), layout,
+                                        free, opt, weights=wp, noise_var=vp)
     else:
         ident, cov, sigma = uncertainty(J, r, layout, free, opt, weights=w, noise_var=v)
     return Result(pb, params, sol.converged, sol.iterations, sol.initial_cost,

@@ -4,7 +4,7 @@ rows, and k-sigma outlier elimination over the rows (MuJoCo's ``minimize.py`` ha
 shape: a residual function in, the solution, a status and an iteration log out).
 
 Prior rows (``PriorRows``: a parameter prior, a known length) join the weighted residuals
-of every iteration. The residual function ``fun(x, rows) -> (r, J, w)`` gives, at the free parameters x, the
+of every iteration, weighed as rows of a typical sample (``prior_weight``). The residual function ``fun(x, rows) -> (r, J, w)`` gives, at the free parameters x, the
 residuals r of the rows ``rows`` (a bool mask over all rows), their Jacobian J (len(r),
 len(x)) and row weights w (None: unweighted; held for one iteration, re-evaluated at the
 next). One iteration solves W J dx = -W r in the least-squares sense; iteration stops when
@@ -125,6 +125,13 @@ def _normal_equations(Jw: np.ndarray, rw: np.ndarray, scale: bool):
     return G * S[:, None] * S[None, :], S * (Jw.T @ rw), S
 
 
+def prior_weight(w: np.ndarray | None) -> float:
+    """The weight of the prior rows beside data rows of weights ``w``: their rms (1 for
+    unweighted rows). A prior row is a residual in the data's units (a distance); weighted
+    rows are whitened (r / std), so a prior row joins them as a row of a typical sample."""
+    return 1.0 if w is None or not len(w) else float(np.sqrt(np.mean(w ** 2)))
+
+
 def _with_prior(J, r, w, x, prior: PriorRows | None):
     Jw, rw = (J, r) if w is None else (J * w[:, None], r * w)
     if prior is None:
@@ -132,7 +139,8 @@ def _with_prior(J, r, w, x, prior: PriorRows | None):
     P, rp = prior.rows(x, Jw.shape[1])
     if not len(rp):
         return Jw, rw
-    return np.vstack([Jw, P]), np.concatenate([rw, rp])
+    k = prior_weight(w)
+    return np.vstack([Jw, k * P]), np.concatenate([rw, k * rp])
 
 
 def _lm_step(fun, x, used, H, g, rw, w, S, lam):
