@@ -2,6 +2,7 @@
 cone (uniform over its solid angle), distance in range; flange pose and IK consistent with
 the nominal sensor mounting."""
 import json
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -144,3 +145,61 @@ def test_bad_settings_are_one_line_input_errors(scene, kw, msg):
     with pytest.raises(InputError, match=msg) as e:
         PoseGenerator(scene, PoseSettings(**kw))
     assert "\n" not in str(e.value)
+
+
+class _Segments:
+    """A collision checker that clears every configuration but only the listed straight
+    paths (either way): a cell where one route is open."""
+
+    def __init__(self, *open_paths):
+        self.open = [(np.asarray(a, float), np.asarray(b, float)) for a, b in open_paths]
+
+    def check_config(self, q):
+        return _Verdict(True)
+
+    def check_path(self, q0, q1):
+        return _Verdict(any((np.allclose(q0, a) and np.allclose(q1, b))
+                            or (np.allclose(q0, b) and np.allclose(q1, a))
+                            for a, b in self.open))
+
+
+@dataclass
+class _Verdict:
+    ok: bool
+    pair: tuple | None = None
+
+
+def test_a_detour_leaves_the_way_the_robot_came_in_where_nothing_else_is_clear(scene):
+    """Issue 22's 450-sample rehearsal gave up at sample 159: from a pose on a plate with
+    the wrist folded, every path out (to the next target, backed out along the beam, to
+    both hubs) was blocked, while the route the robot came in by was clear. The detour now
+    takes it back (each leg checked again) and goes on from there."""
+    from planecal.sampling.planner import Detour, Plan, route_back
+    gen = PoseGenerator(scene, PoseSettings())
+    rng = np.random.default_rng(3)
+    q = [gen.joint_target(gen.draw(rng, 0), scene.calibration_q, rng) for _ in range(4)]
+    prev, via, here, goal = q
+    came = Plan(7, prev, [], {}, q=here, via=[(via, gen.counts_target(via))])
+    back = route_back(came)
+    assert [list(b) for b in back] == [list(via), list(prev)]  # nearest first
+    # only the legs it came by and prev -> goal are open: no other detour is clear
+    det = Detour(gen, _Segments((here, via), (via, prev), (prev, goal)))
+    assert det.find(here, goal) is None
+    legs = det.find(here, goal, back)
+    assert [list(v) for v, _ in legs] == [list(via), list(prev)]
+    assert all(np.array_equal(c, gen.counts_target(v)) for v, c in legs)
+    # a leg back that is no longer clear is not taken
+    assert Detour(gen, _Segments((here, via), (prev, goal))).find(here, goal, back) is None
+
+
+def test_the_rehearsal_that_gave_up_at_sample_159_completes(tmp_path):
+    from planecal.cli import main
+    from planecal.io.samples import read_samples
+    out = tmp_path / "r.tsv"
+    assert main(["rehearse", "--scene", "three_plates", "--errors", "realistic", "--seed", "4",
+                 "--samples", "450", "--out", str(out), "-q"]) == 0
+    side = json.loads((tmp_path / "r.tsv.json").read_text())
+    assert side["status"] == "complete" and len(read_samples(out).qe) == 450
+    # the way back travels with the run (a resume takes it where the robot still is)
+    rb = side["route_back"]
+    assert len(rb["from_counts"]) == 6 and 1 <= len(rb["counts"]) <= 3

@@ -266,7 +266,7 @@ def test_a_given_planner_supplies_the_targets(scene, tmp_path):
         def index_matters(self):
             return False
 
-        def plan(self, q_start, index, rng_state, budget):
+        def plan(self, q_start, index, rng_state, budget, back=()):
             from planecal.model.encoder import counts_to_joints
             out = Plan(index, q_start, [], rng_state)
             out.qe_goal = targets[index]

@@ -13,6 +13,7 @@ from pydantic import AfterValidator, Field
 
 from planecal.formats.base import (
     M_AS_MM, Bool, Int, Interval, Model, Num, Ranged, Record, Str, problem, short)
+from planecal.formats.poses import Counts
 
 SIDECAR_FORMAT = "planecal-run/1"
 STATUSES = ("running", "complete", "stopped", "gave_up", "error")
@@ -150,6 +151,14 @@ DistanceOrRange = Annotated[Any, AfterValidator(_distance_or_range), Field(json_
                                    "minItems": 2, "maxItems": 2}]})]
 
 
+class RouteBack(Record):
+    """The way the robot came in to its last pose (``sampling.collect.Cursor.back``):
+    the configurations it passed, nearest first, as counts, and the counts it leads back
+    from; a resumed run takes it only if the robot is still there."""
+    from_counts: Counts
+    counts: Annotated[list[Counts], Field(min_length=1, max_length=64)]
+
+
 class SidecarFile(Record):
     """``RUN.tsv.json``; keys added by later versions are kept."""
     format: SidecarTag
@@ -173,6 +182,7 @@ class SidecarFile(Record):
     max_step_counts: Count = 0
     sessions: Sessions = 1
     rng_state: RngState | None = None
+    route_back: RouteBack | None = None
     sample_file: Str | None = None
     plates: PlateCount | None = None
     updated_utc: Str | None = None

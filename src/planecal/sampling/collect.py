@@ -32,7 +32,7 @@ import numpy as np
 
 from planecal.sampling.driver import Driver, plan_move
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
-from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource
+from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource, route_back
 from planecal.sampling.steps import DWELL_TICKS
 
 REJECT_KINDS = ("collision", "laser", "unreachable")
@@ -130,9 +130,12 @@ class Tally:
 @dataclass
 class Cursor:
     """Where a collection stands between samples: the configuration the robot was last
-    sent to (the next path starts there) and the random state of the next plan."""
+    sent to (the next path starts there), the random state of the next plan and the way
+    the robot came in (``planner.route_back``; empty where not known: a first sample, a
+    robot moved since)."""
     q: np.ndarray
     rng_state: dict
+    back: tuple = ()
 
 
 def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target: int,
@@ -153,7 +156,8 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
         return tally.in_a_row >= max_attempts
 
     while tally.samples < target:
-        req = (cursor.q, tally.samples, cursor.rng_state, max_attempts - tally.in_a_row)
+        req = (cursor.q, tally.samples, cursor.rng_state, max_attempts - tally.in_a_row,
+               cursor.back)
         plan = background.take(*req, idle=acquirer.idle) if background else planner.plan(*req)
         tally.planning_s += plan.check_time_s
         if plan.exhausted and not plan.rejections:  # a pose list, done: what it could give
@@ -168,9 +172,10 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
             return tally
         cursor.rng_state = plan.rng_after
         if background:  # plan the next pose while the robot moves (assuming this one succeeds)
-            background.submit(plan.q, tally.samples + 1, cursor.rng_state, max_attempts)
+            background.submit(plan.q, tally.samples + 1, cursor.rng_state, max_attempts,
+                              route_back(plan))
         got = acquirer.acquire(plan)
-        cursor.q = plan.q
+        cursor.q, cursor.back = plan.q, route_back(plan)
         if not got.laser.ok:
             tally.laser_give_ups[got.laser.reason] += 1
             if reject("laser", plan.q, f"laser: {got.laser.describe()}"):

@@ -13,7 +13,9 @@ When the straight path is blocked -- typically the wrist turning over from one b
 the other next to the plate -- a detour is tried (``Detour``): back out along the beam,
 move there (the wrist turns over far from the plate), approach along the target's beam.
 Its two via-points and three straight legs are checked like any path; the plan then
-carries the via-points.
+carries the via-points. Where no detour is clear from here, the robot leaves the way it
+came in (``back``: the previous plan's via-points reversed, then the pose it left) and goes
+on from there, straight or by a detour; every leg is checked again.
 """
 from __future__ import annotations
 
@@ -72,7 +74,8 @@ class PlanSource(Protocol):
     ahead of time; ``index_matters``: the plan depends on the sample index."""
     pure: bool
 
-    def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int) -> Plan: ...
+    def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int,
+             back: tuple = ()) -> Plan: ...
 
     def index_matters(self) -> bool: ...
 
@@ -139,8 +142,28 @@ class Detour:
         c = self.poses.counts_target(v)
         return (v, c) if counts_in_range(self.robot, c) else None
 
-    def find(self, q0: np.ndarray, q1: np.ndarray) -> list | None:
-        """[(q, counts), (q, counts)] of a clear detour from q0 to q1, or None."""
+    def find(self, q0: np.ndarray, q1: np.ndarray, back: tuple = ()) -> list | None:
+        """[(q, counts), ...] of a clear detour from q0 to q1, or None: backed out along
+        the beam at both ends, else through a hub, else (``back``: the configurations the
+        robot came in by, nearest first) the way it came, then on as from there."""
+        via = self._around(q0, q1)
+        if via is not None or not back:
+            return via
+        c, at, legs = self.checker, q0, []
+        for q in back:  # the legs it came by, each checked again
+            q = np.asarray(q, float)
+            ch = self.poses.counts_target(q)
+            if not (counts_in_range(self.robot, ch) and c.check_config(q).ok
+                    and c.check_path(at, q).ok):
+                return None
+            legs.append((q, ch))
+            at = q
+        if c.check_path(at, q1).ok:
+            return legs
+        on = self._around(at, q1)
+        return None if on is None else legs + on
+
+    def _around(self, q0: np.ndarray, q1: np.ndarray) -> list | None:
         for d in RETRACT_M:
             a, b = self._retract(q0, d), self._retract(q1, d)
             if a is None or b is None:
@@ -158,6 +181,13 @@ class Detour:
         return None
 
 
+def route_back(plan: Plan) -> tuple:
+    """The configurations a plan's robot came in by, nearest first: its via-points
+    reversed, then the pose it left (``Detour.find``'s ``back``)."""
+    return tuple(np.array(q, float) for q, _ in reversed(plan.via)) + (
+        np.array(plan.q_start, float),)
+
+
 class Planner:
     """Random poses (``poses.PoseGenerator``), IK, collision checks, and detours where the
     wrist branch is drawn (``ik_choice`` wrist). Pure: the random state comes in and goes
@@ -173,7 +203,8 @@ class Planner:
         # wrist branches; with the nearest solution a blocked pose is drawn again
         self.detour = Detour(self.poses, checker) if pose.ik_choice == "wrist" else None
 
-    def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int) -> Plan:
+    def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int,
+             back: tuple = ()) -> Plan:
         rng = np.random.default_rng()
         rng.bit_generator.state = rng_state
         t0 = time.perf_counter()
@@ -193,7 +224,7 @@ class Planner:
                 continue
             why = check_move(self.checker, q_start, q)
             if why is not None and self.detour and why.startswith("collision (path)"):
-                out.via = self.detour.find(q_start, q) or []
+                out.via = self.detour.find(q_start, q, back) or []
                 why = None if out.via else why
             if why is not None:
                 out.rejections.append(("collision", q, why))
@@ -236,9 +267,10 @@ class ListPlanner:
     def index_matters(self) -> bool:
         return False
 
-    def plan(self, q_start, index, rng_state, budget):
+    def plan(self, q_start, index, rng_state, budget, back=()):
         """The next pose of the list reachable on a straight path; else the next one
-        reachable by a detour; the poses passed over stay for later."""
+        reachable by a detour (``Detour.find``, ``back`` the way the robot came in); the
+        poses passed over stay for later."""
         t0 = time.perf_counter()
         out = Plan(index, q_start, [], rng_state)
         blocked = []
@@ -251,7 +283,8 @@ class ListPlanner:
             blocked.append((j, q, why))
         else:
             for j, q, why in blocked:
-                via = self.detour.find(q_start, q) if why.startswith("collision (path)") else None
+                via = (self.detour.find(q_start, q, back) if why.startswith("collision (path)")
+                       else None)
                 if via:
                     self._take(out, j, q, via)
                     break
@@ -364,5 +397,7 @@ def can_fork() -> bool:
 
 def _same_request(a, b, index_matters: bool) -> bool:
     # the budget (a[3]) may differ: giving up early is decided while consuming the plan
+    back_a, back_b = (r[4] if len(r) > 4 else () for r in (a, b))
     return (np.array_equal(a[0], b[0]) and a[2] == b[2]
-            and (a[1] == b[1] or not index_matters))
+            and (a[1] == b[1] or not index_matters) and len(back_a) == len(back_b)
+            and all(np.array_equal(u, v) for u, v in zip(back_a, back_b)))

@@ -49,7 +49,7 @@ from typing import Callable
 
 import numpy as np
 
-from planecal.model.encoder import counts_to_joints
+from planecal.model.encoder import counts_to_joints, joints_to_counts
 from planecal.base.errors import InputError
 from planecal.base.interrupts import stop_reason
 from planecal.formats.run import SIDECAR_FORMAT
@@ -204,6 +204,7 @@ class SamplingRun:
         self.stats = RunStats(tick_s=scene.robot.tick_s)
         self._cursor = Cursor(np.zeros(6), np.random.default_rng(settings.seed).bit_generator.state)
         self.recent_rejections: deque = deque(maxlen=RECENT_REJECTIONS)
+        self._route_back: dict | None = None  # a resumed run's, from the sidecar
         self.resume = resume
         if resume:
             self._restore(load_sidecar(self.out))
@@ -222,6 +223,7 @@ class SamplingRun:
         self.recent_rejections.extend(side.get("recent_rejections", []))
         if side.get("rng_state"):
             self._cursor.rng_state = side["rng_state"]
+        self._route_back = side.get("route_back")
         st.robot_time_s = st.ticks * self.robot.tick_s
 
     # -- sidecar
@@ -242,11 +244,22 @@ class SamplingRun:
             "ticks": st.ticks, "robot_time_s": round(st.robot_time_s, 3), **st.per_sample(),
             "wall_time_s": round(st.wall_time_s, 3), "max_step_counts": st.max_step_counts,
             "sessions": st.sessions, "rng_state": self._cursor.rng_state,
+            "route_back": self._route_back_counts(),
             "sample_file": self.out.name, "plates": len(self.scene.plates),
             "updated_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         }
         side.update(self.extra)
         return side
+
+    def _route_back_counts(self) -> dict | None:
+        """The way the robot came in (``Cursor.back``) as counts, with the counts it
+        leads back from: a resumed run takes it only if the robot is still there."""
+        c = self._cursor
+        if not c.back:
+            return None
+        qe0 = self.model.qe0
+        return {"from_counts": joints_to_counts(self.robot, c.q, qe0).tolist(),
+                "counts": [joints_to_counts(self.robot, q, qe0).tolist() for q in c.back]}
 
     def _save(self) -> None:
         # no fsync: resume recounts the samples from the (fsynced) sample file
@@ -306,6 +319,10 @@ class SamplingRun:
             drv.start()
             self._save()
             self._cursor.q = counts_to_joints(self.robot, drv.commanded_counts, self.model.qe0)
+            rb = self._route_back  # the way back of the last session, where the robot is
+            if rb and np.array_equal(rb["from_counts"], drv.commanded_counts):
+                self._cursor.back = tuple(counts_to_joints(self.robot, c, self.model.qe0)
+                                          for c in rb["counts"])
             if st.samples < s.samples:
                 res = self.checker.check_config(self._cursor.q)
                 if not res.ok:
