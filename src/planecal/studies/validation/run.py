@@ -13,9 +13,9 @@ from planecal.studies.validation.settings import WHERE, ValidationSettings
 
 CUBE_RULE = ("centred on the tool point of the samples' medoid (the sample whose tool point "
              "is nearest all the others in sum; the next nearer the middle where the robot "
-             "has no path there from its start), with that sample's flange orientation; "
-             "edge 80 % of the sample flange positions' smallest 10-90 % range (at most "
-             "250 mm), "
+             "has no path there from its start, or where no cube fits), with that sample's "
+             "flange orientation; edge 80 % of the sample flange positions' smallest "
+             "10-90 % range (at most 250 mm), "
              "shrunk by 0.75 until every model's five poses are reachable, collision-free "
              "and inside the calibrated region (the samples' flange hull + 50 mm, their "
              "joint ranges + 2 deg)")
@@ -123,19 +123,21 @@ def _place(scene, commanders, samples, st, mover, region, checker):
     and may reach outside the region (``cube.outside_region_mm`` says how far)."""
     order = medoid_order(samples.tool)
     start = mover.drv.commanded_counts
-    k = next((int(i) for i in order[:CENTRES] if mover.path_ok(start, samples.counts[i])),
-             int(order[0]))
-    center, R, q_ref = samples.tool[k], samples.flange[k, :3, :3], samples.q[k]
+    ks = [int(i) for i in order[:CENTRES] if mover.path_ok(start, samples.counts[i])]
     given = st.cube_edge_m is not None
-    edge = st.cube_edge_m if given else default_edge(samples.flange[:, :3, 3])
-    for attempt in range(SHRINKS + 1):
-        try:
-            return plan_iso(scene, commanders, center, edge, R, q_ref, mover, region, checker,
-                            inside=not given), k
-        except InputError:
-            if given or attempt == SHRINKS:
-                raise
-            edge *= SHRINK
+    for n, k in enumerate(ks or [int(order[0])]):  # the next centre where no cube fits
+        center, R, q_ref = samples.tool[k], samples.flange[k, :3, :3], samples.q[k]
+        edge = st.cube_edge_m if given else default_edge(samples.flange[:, :3, 3])
+        for attempt in range(SHRINKS + 1):
+            try:
+                return plan_iso(scene, commanders, center, edge, R, q_ref, mover, region,
+                                checker, inside=not given), k
+            except InputError:
+                if given or (attempt == SHRINKS and n == max(len(ks), 1) - 1):
+                    raise
+                if attempt == SHRINKS:
+                    break
+                edge *= SHRINK
     raise AssertionError("unreachable")
 
 
