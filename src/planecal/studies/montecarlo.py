@@ -13,6 +13,8 @@ laser noise). A realistic world also has errors the fit's model does not (geomet
 compliance, gear error, backlash, laser linearity): its residuals exceed the noise, and the
 offsets absorb part of those errors, differently for every set of poses. The analysis
 reports that as it is (``analyze``: ``world``, ``mismatch``); it does not widen the bound.
+A scene's known lengths (two plates' separation) join the samples' rows in the bounds at
+their declared std, as they join the fit.
 
 Summary (``analyze``) per free parameter: bias, empirical std, and, as the RMS over runs
 of each run's value: the white-noise bound ``mean(v) (J^T J)^-1``, the sandwich (the true
@@ -103,6 +105,20 @@ def truth_for(st: MCSettings, k: int):
 
 # ----- one run --------------------------------------------------------------------------------
 
+def _with_references(Jf, v, layout, free, truth, references):
+    """The samples' rows (Jacobian over the free parameters, variances) and the scene's
+    known lengths' (``estimation.fit.FitPrior``: two plates' tilt and gap at the truth, at
+    their declared std): the information the fit has, which the bounds describe."""
+    if not references:
+        return Jf, v
+    from planecal.estimation.fit import FitPrior, reference_rows
+    sigma = float(np.sqrt(np.mean(v)))  # the rows weighed as distances of this std
+    x = truth.to_vector(layout)
+    prior = FitPrior(None, x, free, tuple(reference_rows(layout, r, sigma) for r in references))
+    P, _ = prior.rows(x[free], Jf.shape[1])
+    return np.vstack([Jf, P]), np.concatenate([v, np.full(len(P), sigma ** 2)])
+
+
 def run_one(job) -> dict:
     """One Monte Carlo run: job = (settings, k). Pure function of (settings, k)."""
     from planecal.model.scene import nominal_params
@@ -127,7 +143,8 @@ def run_one(job) -> dict:
     _, J = predict_with_jacobian(robot, qe, truth, plate, layout)
     v = sample_variance(robot, J[:, layout.slice("joint_offsets")], s, sample_sigma,
                         st.quantized())
-    cov = covariances(J[:, free], v)
+    Jb, vb = _with_references(J[:, free], v, layout, free, truth, scene.references)
+    cov = covariances(Jb, vb)
     # identifiability with every parameter of the layout free, at the truth
     every = np.ones(len(layout), bool)
     ident_all, _, _ = uncertainty(J, np.sqrt(v), layout, every)
