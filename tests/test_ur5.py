@@ -323,3 +323,16 @@ def test_the_ur5_demo_works_at_any_seed(tmp_path):
         for pd in ident["mismatch_inflated"]:  # the sensor's frame only, within at the noise
             assert pd["parameter"] in ("o_x", "o_y", "o_z", "phi_y", "phi_z")
             assert pd["noise_std"] < pd["limit"] < pd["std"]
+
+
+def test_validates_cube_moves_to_the_next_centre_where_none_fits_the_first(tmp_path):
+    """ur5_table truth 4 (its run since the sampling's route back): at the samples' medoid
+    ISO pose P5 is in collision at every edge down to 7.5 % of the first; validate stopped
+    with 'give a smaller --cube-mm', which no edge cured. The default cube now takes the
+    next centre nearer the middle and says which (its medoid rank)."""
+    out = tmp_path / "v.json"
+    assert main(["validate", "--scene", "ur5_table", "--truth-seeds", "4", "--level", "offsets",
+                 "--breakdown", "none", "--cycles", "3", "--gauge-repeats", "1",
+                 "--no-history", "--out", str(out), "-q"]) == 0
+    cube = json.loads(out.read_text())["cube"]
+    assert cube["medoid_rank"] > 0 and cube["inside_region"]
