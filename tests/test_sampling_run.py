@@ -281,6 +281,52 @@ def test_a_given_planner_supplies_the_targets(scene, tmp_path):
     assert np.array_equal(read_samples(out).qe, np.array(targets))
 
 
+def test_a_resume_takes_the_way_back_only_where_the_robot_still_is(scene, tmp_path):
+    """The way the robot came in (``Cursor.back``: where a detour may leave when nothing
+    else is clear) travels in the sidecar; a resumed run hands it to its planner when the
+    robot stands where it was recorded, and none when the robot was moved since."""
+    from planecal.model.encoder import counts_to_joints
+    from planecal.sampling.planner import Plan
+
+    targets = [joints_to_counts(scene.robot, scene.calibration_q + dq)
+               for dq in np.deg2rad([[0, 0, 0, 0, 2, 0], [1, -1, 1, 0, 0, 3],
+                                     [0, 1, 0, 2, -2, 0], [0, 0, 1, 0, 1, 0]])]
+
+    class Targets:
+        pure = False
+
+        def __init__(self):
+            self.backs = []
+
+        def index_matters(self):
+            return False
+
+        def plan(self, q_start, index, rng_state, budget, back=()):
+            self.backs.append(back)
+            out = Plan(index, q_start, [], rng_state)
+            out.qe_goal = targets[index]
+            out.q = counts_to_joints(scene.robot, out.qe_goal)
+            return out
+
+    out = tmp_path / "RUN.tsv"
+    cell = FakeCell(scene)
+    first = Targets()
+    SamplingRun(Driver(cell, cell, AlwaysEnabled(), scene.robot), scene, settings(2), out,
+                NullChecker(), planner=first).run()
+    assert len(first.backs[0]) == 0 and len(first.backs[1]) == 1  # nothing before the first
+    rb = load_sidecar(out)["route_back"]
+    assert rb["from_counts"] == targets[1].tolist() and rb["counts"] == [targets[0].tolist()]
+    for start, expect in ((targets[1], [targets[0]]), (targets[0], [])):
+        copy = tmp_path / f"copy{len(expect)}.tsv"
+        copy.write_bytes(out.read_bytes())
+        sidecar_path(copy).write_text(sidecar_path(out).read_text())
+        cell2, again = FakeCell(scene, start_counts=start), Targets()
+        SamplingRun(Driver(cell2, cell2, AlwaysEnabled(), scene.robot), scene, settings(3),
+                    copy, NullChecker(), planner=again, resume=True).run()
+        got = [joints_to_counts(scene.robot, q) for q in again.backs[0]]
+        assert [list(c) for c in got] == [list(c) for c in expect]
+
+
 def test_following_monitor_drops_enable_when_the_robot_stops_following(scene, tmp_path):
     class Brakes(FakeCell):
         """The dead-man switch is released after tick ``at``: the robot stands still."""
