@@ -253,30 +253,39 @@ def test_background_planning_gives_the_same_run(scene, tmp_path, two_plates):
     assert results[0] == results[1]
 
 
+class Targets:
+    """A given planner: sample i goes to ``targets[i]`` (counts), straight; it keeps the
+    way back (``back``) each request handed it."""
+    pure = False
+
+    def __init__(self, robot, targets):
+        self.robot, self.targets = robot, targets
+        self.backs = []
+
+    def index_matters(self):
+        return False
+
+    def plan(self, q_start, index, rng_state, budget, back=()):
+        from planecal.model.encoder import counts_to_joints
+        from planecal.sampling.planner import Plan
+        self.backs.append(back)
+        out = Plan(index, q_start, [], rng_state)
+        out.qe_goal = self.targets[index]
+        out.q = counts_to_joints(self.robot, out.qe_goal)
+        return out
+
+
+def _targets(scene, degrees):
+    return [joints_to_counts(scene.robot, scene.calibration_q + dq) for dq in np.deg2rad(degrees)]
+
+
 def test_a_given_planner_supplies_the_targets(scene, tmp_path):
     """A pose list instead of random poses: the run visits exactly those counts."""
-    from planecal.sampling.planner import Plan
-
-    targets = [joints_to_counts(scene.robot, scene.calibration_q + dq)
-               for dq in np.deg2rad([[0, 0, 0, 0, 2, 0], [1, -1, 1, 0, 0, 3], [0, 1, 0, 2, -2, 0]])]
-
-    class ListPlanner:
-        pure = False
-
-        def index_matters(self):
-            return False
-
-        def plan(self, q_start, index, rng_state, budget, back=()):
-            from planecal.model.encoder import counts_to_joints
-            out = Plan(index, q_start, [], rng_state)
-            out.qe_goal = targets[index]
-            out.q = counts_to_joints(scene.robot, out.qe_goal)
-            return out
-
+    targets = _targets(scene, [[0, 0, 0, 0, 2, 0], [1, -1, 1, 0, 0, 3], [0, 1, 0, 2, -2, 0]])
     out = tmp_path / "RUN.tsv"
     cell = FakeCell(scene)
     stats = SamplingRun(Driver(cell, cell, AlwaysEnabled(), scene.robot), scene, settings(3),
-                        out, NullChecker(), planner=ListPlanner()).run()
+                        out, NullChecker(), planner=Targets(scene.robot, targets)).run()
     assert stats.status == "complete"
     assert np.array_equal(read_samples(out).qe, np.array(targets))
 
@@ -285,32 +294,11 @@ def test_a_resume_takes_the_way_back_only_where_the_robot_still_is(scene, tmp_pa
     """The way the robot came in (``Cursor.back``: where a detour may leave when nothing
     else is clear) travels in the sidecar; a resumed run hands it to its planner when the
     robot stands where it was recorded, and none when the robot was moved since."""
-    from planecal.model.encoder import counts_to_joints
-    from planecal.sampling.planner import Plan
-
-    targets = [joints_to_counts(scene.robot, scene.calibration_q + dq)
-               for dq in np.deg2rad([[0, 0, 0, 0, 2, 0], [1, -1, 1, 0, 0, 3],
-                                     [0, 1, 0, 2, -2, 0], [0, 0, 1, 0, 1, 0]])]
-
-    class Targets:
-        pure = False
-
-        def __init__(self):
-            self.backs = []
-
-        def index_matters(self):
-            return False
-
-        def plan(self, q_start, index, rng_state, budget, back=()):
-            self.backs.append(back)
-            out = Plan(index, q_start, [], rng_state)
-            out.qe_goal = targets[index]
-            out.q = counts_to_joints(scene.robot, out.qe_goal)
-            return out
-
+    targets = _targets(scene, [[0, 0, 0, 0, 2, 0], [1, -1, 1, 0, 0, 3], [0, 1, 0, 2, -2, 0],
+                               [0, 0, 1, 0, 1, 0]])
     out = tmp_path / "RUN.tsv"
     cell = FakeCell(scene)
-    first = Targets()
+    first = Targets(scene.robot, targets)
     SamplingRun(Driver(cell, cell, AlwaysEnabled(), scene.robot), scene, settings(2), out,
                 NullChecker(), planner=first).run()
     assert len(first.backs[0]) == 0 and len(first.backs[1]) == 1  # nothing before the first
@@ -320,7 +308,7 @@ def test_a_resume_takes_the_way_back_only_where_the_robot_still_is(scene, tmp_pa
         copy = tmp_path / f"copy{len(expect)}.tsv"
         copy.write_bytes(out.read_bytes())
         sidecar_path(copy).write_text(sidecar_path(out).read_text())
-        cell2, again = FakeCell(scene, start_counts=start), Targets()
+        cell2, again = FakeCell(scene, start_counts=start), Targets(scene.robot, targets)
         SamplingRun(Driver(cell2, cell2, AlwaysEnabled(), scene.robot), scene, settings(3),
                     copy, NullChecker(), planner=again, resume=True).run()
         got = [joints_to_counts(scene.robot, q) for q in again.backs[0]]
