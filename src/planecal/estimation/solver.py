@@ -4,8 +4,9 @@ rows, and k-sigma outlier elimination over the rows (MuJoCo's ``minimize.py`` ha
 shape: a residual function in, the solution, a status and an iteration log out).
 
 Prior rows (``PriorRows``: a parameter prior, a known length) join the weighted residuals
-of every iteration, weighed as rows of a typical sample (``prior_weight``). The residual function ``fun(x, rows) -> (r, J, w)`` gives, at the free parameters x, the
-residuals r of the rows ``rows`` (a bool mask over all rows), their Jacobian J (len(r),
+of every iteration, weighed as rows of a typical sample (``prior_weight``). The residual
+function ``fun(x, rows) -> (r, J, w)`` gives, at the free parameters x, the residuals r of
+the rows ``rows`` (a bool mask over all rows), their Jacobian J (len(r),
 len(x)) and row weights w (None: unweighted; held for one iteration, re-evaluated at the
 next). One iteration solves W J dx = -W r in the least-squares sense; iteration stops when
 the mean absolute correction falls below ``improvement_limit`` (the seed's end condition,

@@ -171,11 +171,11 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
                             if tally.in_a_row >= max_attempts else plan.reason)
             return tally
         cursor.rng_state = plan.rng_after
+        back = route_back(plan)
         if background:  # plan the next pose while the robot moves (assuming this one succeeds)
-            background.submit(plan.q, tally.samples + 1, cursor.rng_state, max_attempts,
-                              route_back(plan))
+            background.submit(plan.q, tally.samples + 1, cursor.rng_state, max_attempts, back)
         got = acquirer.acquire(plan)
-        cursor.q, cursor.back = plan.q, route_back(plan)
+        cursor.q, cursor.back = plan.q, back
         if not got.laser.ok:
             tally.laser_give_ups[got.laser.reason] += 1
             if reject("laser", plan.q, f"laser: {got.laser.describe()}"):

@@ -397,7 +397,6 @@ def can_fork() -> bool:
 
 def _same_request(a, b, index_matters: bool) -> bool:
     # the budget (a[3]) may differ: giving up early is decided while consuming the plan
-    back_a, back_b = (r[4] if len(r) > 4 else () for r in (a, b))
     return (np.array_equal(a[0], b[0]) and a[2] == b[2]
-            and (a[1] == b[1] or not index_matters) and len(back_a) == len(back_b)
-            and all(np.array_equal(u, v) for u, v in zip(back_a, back_b)))
+            and (a[1] == b[1] or not index_matters) and len(a[4]) == len(b[4])
+            and all(np.array_equal(u, v) for u, v in zip(a[4], b[4])))

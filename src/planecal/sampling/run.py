@@ -317,12 +317,12 @@ class SamplingRun:
         st.status, st.reason, st.in_a_row = "running", None, 0
         try:
             drv.start()
-            self._save()
             self._cursor.q = counts_to_joints(self.robot, drv.commanded_counts, self.model.qe0)
             rb = self._route_back  # the way back of the last session, where the robot is
             if rb and np.array_equal(rb["from_counts"], drv.commanded_counts):
                 self._cursor.back = tuple(counts_to_joints(self.robot, c, self.model.qe0)
                                           for c in rb["counts"])
+            self._save()  # (with the way back: a session stopped before a sample keeps it)
             if st.samples < s.samples:
                 res = self.checker.check_config(self._cursor.q)
                 if not res.ok:

@@ -124,21 +124,21 @@ def _place(scene, commanders, samples, st, mover, region, checker):
     order = medoid_order(samples.tool)
     start = mover.drv.commanded_counts
     ks = [int(i) for i in order[:CENTRES] if mover.path_ok(start, samples.counts[i])]
+    ks = ks or [int(order[0])]
     given = st.cube_edge_m is not None
-    for n, k in enumerate(ks or [int(order[0])]):  # the next centre where no cube fits
+    edges = [st.cube_edge_m if given else default_edge(samples.flange[:, :3, 3])]
+    if not given:
+        for _ in range(SHRINKS):
+            edges.append(edges[-1] * SHRINK)
+    for k in ks[:1] if given else ks:  # the next centre where no cube fits
         center, R, q_ref = samples.tool[k], samples.flange[k, :3, :3], samples.q[k]
-        edge = st.cube_edge_m if given else default_edge(samples.flange[:, :3, 3])
-        for attempt in range(SHRINKS + 1):
+        for edge in edges:
             try:
                 return plan_iso(scene, commanders, center, edge, R, q_ref, mover, region,
                                 checker, inside=not given), k
-            except InputError:
-                if given or (attempt == SHRINKS and n == max(len(ks), 1) - 1):
-                    raise
-                if attempt == SHRINKS:
-                    break
-                edge *= SHRINK
-    raise AssertionError("unreachable")
+            except InputError as e:
+                last = e
+    raise last
 
 
 def _cube(plan, samples, centre, region, st) -> dict:
