@@ -28,7 +28,7 @@ import numpy as np
 
 from planecal.base.errors import InputError
 from planecal.estimation.fit import (SIGMA_START_M, FitOptions, FitPrior, Problem, Result,
-                                     reference_rows, solve)
+                                     solve)
 from planecal.estimation.identifiability import DEFAULT_TOL, BaseSet, Excluded, select_base
 from planecal.estimation.noise import repeatability_sigma, row_weights
 from planecal.model.cell_params import CellParams
@@ -192,9 +192,8 @@ def base_set(robot: Robot, qe, initial: CellParams, plate, settings: Calibration
     w = row_weights(J[:, layout.slice("joint_offsets")], options.joint_sigma_rad,
                     options.distance_sigma_m)
     if references:
-        prior = FitPrior(None, initial.to_vector(layout), np.ones(len(layout), bool),
-                         tuple(reference_rows(layout, r, options.prior_sigma_m or SIGMA_START_M)
-                               for r in references))
+        prior = FitPrior.of(layout, initial.to_vector(layout), np.ones(len(layout), bool),
+                            references, options.prior_sigma_m or SIGMA_START_M)
         P, _ = prior.rows(initial.to_vector(layout), len(layout))
         J = np.vstack([J, P])
         w = None if w is None else np.concatenate([w, np.ones(len(P))])

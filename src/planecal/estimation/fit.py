@@ -234,11 +234,11 @@ class _Residuals:
         opt, layout, free = pb.options, pb.layout, pb.free
         self.pb, self.x_all = pb, pb.initial.to_vector(layout)
         self.weighted = opt.joint_sigma_rad is not None
-        offsets = layout.mask(layout.group("joint_offsets").names)
+        self.offsets = layout.mask(layout.group("joint_offsets").names)
         noise = self.weighted or opt.noise_joint_sigma_rad is not None
-        self.need = free | offsets if noise else free
+        self.need = free | self.offsets if noise else free
         self.cols_f = np.flatnonzero(free[self.need])
-        self.cols_o = np.flatnonzero(offsets[self.need]) if noise else None
+        self.cols_o = np.flatnonzero(self.offsets[self.need]) if noise else None
         self.offsets_J: np.ndarray | None = None
         # the first call: at the initial values, every row (the caller's evaluation)
         self.first = pb.at_initial if pb.at_initial is not None and not self.weighted else None
@@ -250,8 +250,7 @@ class _Residuals:
             self.first = None
             if np.array_equal(xf, self.x_all[free]) and np.asarray(rows).all():
                 if self.cols_o is not None:
-                    self.offsets_J = J[:, pb.layout.mask(
-                        pb.layout.group("joint_offsets").names)]
+                    self.offsets_J = J[:, self.offsets]
                 return d - pb.d_m, J[:, free], None
         x = self.x_all.copy()
         x[free] = xf
@@ -275,6 +274,15 @@ class FitPrior:
     x_all: np.ndarray  # the initial values over the layout
     free: np.ndarray  # the free mask
     references: tuple  # (plane a's and b's layout positions (3,) each, separation, weights (4,))
+
+    @classmethod
+    def of(cls, layout: ParamLayout, x_all: np.ndarray, free: np.ndarray, references,
+           sigma_m: float, param: Prior | None = None) -> "FitPrior":
+        """The rows of ``param`` (or none) and of the scene's known lengths
+        (``model.scene.LengthReference``, ``reference_rows``) weighed as distances of std
+        ``sigma_m``, at the layout's values ``x_all`` with the ``free`` mask."""
+        return cls(param, x_all, free,
+                   tuple(reference_rows(layout, r, sigma_m) for r in references))
 
     def rows(self, x: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
         from planecal.model.planes import parallel_rows
@@ -308,11 +316,9 @@ def _prior(pb: Problem) -> FitPrior | None:
         idx = np.array([i for i, _ in given], int)
         param = Prior(idx, np.array([pb.options.prior_sigma_m / sd for _, sd in given]),
                       x_all[pb.free][idx])
-    refs = tuple(reference_rows(pb.layout, ref, pb.options.prior_sigma_m)
-                 for ref in pb.references)
-    if param is None and not refs:
+    if param is None and not pb.references:
         return None
-    return FitPrior(param, x_all, pb.free, refs)
+    return FitPrior.of(pb.layout, x_all, pb.free, pb.references, pb.options.prior_sigma_m, param)
 
 
 def reference_rows(layout: ParamLayout, ref, sigma_m: float) -> tuple:

@@ -33,7 +33,7 @@ import numpy as np
 
 from planecal.base.errors import InputError
 from planecal.estimation.calibrate import CalibrationSettings, calibrate
-from planecal.estimation.fit import FitOptions
+from planecal.estimation.fit import FitOptions, FitPrior
 from planecal.estimation.identifiability import covariances, uncertainty
 from planecal.estimation.noise import sample_variance
 from planecal.model.layout import ParamLayout
@@ -111,11 +111,9 @@ def _with_references(Jf, v, layout, free, truth, references):
     their declared std): the information the fit has, which the bounds describe."""
     if not references:
         return Jf, v
-    from planecal.estimation.fit import FitPrior, reference_rows
     sigma = float(np.sqrt(np.mean(v)))  # the rows weighed as distances of this std
     x = truth.to_vector(layout)
-    prior = FitPrior(None, x, free, tuple(reference_rows(layout, r, sigma) for r in references))
-    P, _ = prior.rows(x[free], Jf.shape[1])
+    P, _ = FitPrior.of(layout, x, free, references, sigma).rows(x[free], Jf.shape[1])
     return np.vstack([Jf, P]), np.concatenate([v, np.full(len(P), sigma ** 2)])
 
 
