@@ -22,11 +22,12 @@ posterior one of the fit (its priors, the scene's known lengths, the base set), 
 One calibration's own error is one draw of the parameters' error, and it lies mostly
 along a few directions, so it scatters about the predicted rms: ``draw_band`` gives the
 10-90 % band of that draw (``one_calibration_p10_mm``..``p90_mm``) and the effective number
-of directions. Measured (three_plates, realistic, level 3, 150 samples, truths 0-4): the
-estimate 0.187-0.200 mm, the calibrations' actual tool-point error (calibrated against the
-twin's true model, rms over the samples' poses) 0.065-0.247 mm, rms over the five 0.16:
-right on average, with 1.8-2.4 directions, so one calibration is within 1.5x of a perfect
-estimate with probability 0.54-0.61 (all five: 0.06).
+of directions. Measured (three_plates, realistic, level 3, 150 samples, truths 0-19): the
+estimate 0.160-0.207 mm, the calibrations' actual tool-point error (calibrated against the
+twin's true model, rms over the samples' poses) 0.079-0.406 mm, rms over the twenty 0.191
+against the estimates' 0.181: right on average, with 1.8-2.4 directions, so one
+calibration is within 1.5x of a perfect estimate with probability 0.54-0.61 (all five:
+0.06).
 
 Beside them, the held-out residual: ``folds``-fold cross-validation over the samples, each
 fold's distances predicted by a calibration (the same settings) of the other samples. Its
@@ -44,10 +45,10 @@ import numpy as np
 
 from planecal.base.errors import InputError
 from planecal.estimation.calibrate import Calibration, calibrate
-from planecal.estimation.noise import repeatability_sigma, sample_variance
+from planecal.estimation.noise import repeatability_sigma, sample_sigma_m, sample_variance
 from planecal.model.encoder import counts_to_joints
-from planecal.model.measurement import (backlash_sides, joints_of_counts, kinematics_of,
-                                        predict, sensor_in_base)
+from planecal.model.measurement import (Joints, backlash_sides, kinematics_of, predict,
+                                        predict_joints_with_jacobian, sensor_in_base)
 from planecal.model.robot import Robot
 
 FOLDS = 10
@@ -168,7 +169,6 @@ def accuracy(robot: Robot, cal: Calibration, qe, d_m, plate=None, direction=None
     """The accuracy figures of ``cal``, a calibration of these samples (module docstring).
     ``laser_noise_mm``: a reading's noise (the noise model's; the repeatability is
     robot.json's)."""
-    from planecal.estimation.noise import sample_sigma_m
     res = cal.result
     qe = np.asarray(qe)
     n = len(qe)
@@ -183,11 +183,11 @@ def accuracy(robot: Robot, cal: Calibration, qe, d_m, plate=None, direction=None
     tool_rms = float(np.sqrt(max(per_pose.mean(), 0.0)))
     lo, hi, directions = draw_band(T, C)
     # the noise model at these poses: the repeatability on the beam, the laser, the counts
-    joints = joints_of_counts(robot, qe, direction)
-    from planecal.model.measurement import predict_joints_with_jacobian
-    _, J = predict_joints_with_jacobian(robot, joints, res.params, plate, res.layout)
-    v = sample_variance(robot, J[:, res.layout.slice("joint_offsets")],
-                        repeatability_sigma(robot), sample_sigma_m(laser_noise_mm), True)
+    offsets = res.layout.mask(res.layout.group("joint_offsets").names)
+    _, J = predict_joints_with_jacobian(robot, Joints.of(q, side), res.params, plate,
+                                        res.layout, offsets)
+    v = sample_variance(robot, J, repeatability_sigma(robot), sample_sigma_m(laser_noise_mm),
+                        True)
     noise_sigma = float(np.sqrt(v.mean()))
     scale = noise_sigma / res.sigma_m if res.sigma_m > 0 else 0.0
     cv = cross_validate(robot, qe, d_m, res.initial, plate, cal.settings, direction,
