@@ -118,11 +118,18 @@ def scaled_rows(scene, qe, plate, layout, free, params=None):
     return J, Jf * S
 
 
+def design_covariances(J: np.ndarray, layout, free, joint_sigma: float,
+                       laser_sigma_m: float) -> dict:
+    """The free parameters' covariances (``identifiability.covariances``: white, sandwich,
+    CRB) for the Jacobian J (over ``layout``) of some poses under the twin's noise model."""
+    v = noise_variance(J[:, layout.slice("joint_offsets")], joint_sigma, laser_sigma_m)
+    return covariances(J[:, free], v)
+
+
 def predicted_std(J: np.ndarray, layout, free, joint_sigma: float, laser_sigma_m: float):
     """Sandwich and white-noise std of the free parameters for the Jacobian J (over
     ``layout``) and the twin's noise model."""
-    v = noise_variance(J[:, layout.slice("joint_offsets")], joint_sigma, laser_sigma_m)
-    cov = covariances(J[:, free], v)
+    cov = design_covariances(J, layout, free, joint_sigma, laser_sigma_m)
     return np.sqrt(np.diag(cov["sandwich"])), np.sqrt(np.diag(cov["white"]))
 
 
@@ -166,10 +173,14 @@ class Predictor:
     def of_jacobian(self, J: np.ndarray) -> tuple[np.ndarray, float]:
         """The same for the Jacobian rows J of any poses (over the same layout), e.g. the
         random run's."""
-        v = noise_variance(J[:, self.layout.slice("joint_offsets")], self.s, self.sig_l)
-        cov = covariances(J[:, self.free], v)["sandwich"]
-        return np.sqrt(np.diag(cov)), float(np.hypot(predicted_tool_mm(self.T, cov),
-                                                     self.mismatch_mm))
+        return self.of_covariances(design_covariances(J, self.layout, self.free, self.s,
+                                                      self.sig_l))
+
+    def of_covariances(self, cov: dict) -> tuple[np.ndarray, float]:
+        """The same from the poses' ``design_covariances``."""
+        sand = cov["sandwich"]
+        return np.sqrt(np.diag(sand)), float(np.hypot(predicted_tool_mm(self.T, sand),
+                                                      self.mismatch_mm))
 
     def figure(self, rows, target: str) -> float:
         """The figure a target is about: the largest free offset std [urad] (``std``) or

@@ -65,7 +65,7 @@ from planecal.formats.base import read_json, validate
 from planecal.formats.poses import POSES_FORMAT, PosesFile
 from planecal.model.encoder import counts_in_range, counts_to_joints, joints_to_counts
 from planecal.studies.design import (TARGET_MARGIN, TOOL_WHERE, Mismatch, Predictor,
-                                     choose_count, d_optimal, predicted_std, scaled_rows,
+                                     choose_count, d_optimal, design_covariances, scaled_rows,
                                      tool_rows)
 
 
@@ -300,8 +300,9 @@ def _prediction(p: Predictor, J_all: np.ndarray, J: np.ndarray):
     """(log det of the design scaled as the candidates J_all, sandwich and white std of the
     free parameters, predicted position error [mm]) of the poses whose Jacobian rows are J."""
     A = J[:, p.free] / np.sqrt(np.mean(J_all[:, p.free] ** 2, axis=0))
-    std, white = predicted_std(J, p.layout, p.free, p.s, p.sig_l)
-    return float(np.linalg.slogdet(A.T @ A)[1]), std, white, p.of_jacobian(J)[1]
+    cov = design_covariances(J, p.layout, p.free, p.s, p.sig_l)
+    std, ap = p.of_covariances(cov)
+    return float(np.linalg.slogdet(A.T @ A)[1]), std, np.sqrt(np.diag(cov["white"])), ap
 
 
 def _tour(scene, d: _Design, checker, q0: np.ndarray, start: np.ndarray, ordered: bool,
