@@ -1,8 +1,9 @@
 """planecal predict SAMPLES --params P.json
 
-Prints one tab-separated line per sample: index, measured_mm, predicted_mm, error_mm
-(the model error, predicted - measured: the one sign of planecal, docs/FORMATS.md). Index
-is 0-based over the samples kept (laser zeros are skipped, as in calibrate). A result made
+Prints a header row (index, measured_mm, predicted_mm, error_mm) and one tab-separated line
+per sample: the model error is predicted - measured, the one sign of planecal
+(docs/FORMATS.md). Index is 0-based over the samples kept (laser zeros are skipped, as in
+calibrate). A result made
 for another robot than --robot is refused.
 """
 from __future__ import annotations
@@ -14,6 +15,9 @@ from planecal.base.errors import InputError
 from planecal.io.params import load_params
 from planecal.model.robot import load_robot
 from planecal.io.samples import read_samples
+
+
+HEADER = ("index", "measured_mm", "predicted_mm", "error_mm")
 
 
 def add_arguments(p):
@@ -37,6 +41,7 @@ def run(args) -> int:
                          f"{args.params} holds {params.n_planes} plane(s)")
     d = predict(robot, s.qe, params, s.plate) * 1e3
     out = sys.stdout
+    out.write("\t".join(HEADER) + "\n")
     for i, (m, p) in enumerate(zip(s.d_mm, d)):
         out.write(f"{i}\t{m:.4f}\t{p:.4f}\t{p - m:.4f}\n")
     return 0
