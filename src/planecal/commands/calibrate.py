@@ -44,7 +44,7 @@ def add_arguments(p):
     p.add_argument("samples", nargs="+", help="sample file(s), seed format (7.1.4)")
     p.add_argument("--initial", help="initial parameter file (JSON); default: the scene's "
                                      "nominal values")
-    add_scene_argument(p, "the nominal values and robot")
+    add_scene_argument(p, "the nominal values and robot", "the runs' sidecars")
     p.add_argument("--out", help="write the result (JSON) here")
     p.add_argument("--force", action="store_true",
                    help="replace --out even if it is not an earlier result file")

@@ -11,13 +11,13 @@ from __future__ import annotations
 from planecal.base.errors import InputError
 
 
-def add_scene_argument(p, what: str, reads: str | None = "run") -> None:
-    """--scene for ``what`` (e.g. "the nominal values and robot"); ``reads``: what the
-    command takes its cell from ("run", "result", "run or result"), None for a command
-    that makes a new run or study."""
+def add_scene_argument(p, what: str, reads: str | None = "the run's sidecar") -> None:
+    """--scene for ``what`` (e.g. "the nominal values and robot"); ``reads``: the record
+    the command takes its cell from (e.g. "the runs' sidecars"), None for a command that
+    makes a new run or study."""
     from planecal.model.scene import DEFAULT_SCENE
-    where = (f"default: the {reads}'s (its record of the cell; a --scene that contradicts "
-             f"it is refused), else {DEFAULT_SCENE}") if reads else f"default {DEFAULT_SCENE}"
+    where = (f"default: the one {reads} records (a --scene that contradicts it is "
+             f"refused), else {DEFAULT_SCENE}") if reads else f"default {DEFAULT_SCENE}"
     p.add_argument("--scene", default=None, metavar="NAME|FILE",
                    help=f"scene for {what} ({where})")
 

@@ -88,7 +88,7 @@ def run(args) -> int:
     from planecal.present.tables import table
     from planecal.studies.planning import plan, plan_target
 
-    from planecal.commands.report_options import write_command_report
+    from planecal.jobs.report import write_command_report
 
     target = plan_target(args.samples, args.candidates, args.target_std_urad, args.target_ap_mm)
     if args.measure and args.measure < 2:
@@ -145,7 +145,7 @@ def run(args) -> int:
         print(f"measured: {args.measure} twin runs each (std of the estimates over the runs)")
     save_json(args.out, res)
     print(f"pose list written to {args.out}")
-    write_command_report(args.report, args.out, scene=str(scene.path))
+    write_command_report(args.report, args.out, scene=scene)
     return 0
 
 

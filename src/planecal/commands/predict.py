@@ -15,7 +15,7 @@ def add_arguments(p):
     p.add_argument("samples", help="sample file, seed format (7.1.4)")
     p.add_argument("--params", required=True, help="parameter file (JSON)")
     add_scene_argument(p, "the robot, laser window and plates the samples are checked "
-                          "against", reads="run or result")
+                          "against", reads="the run's sidecar and --params' provenance")
     p.add_argument("--robot", default=None, metavar="NAME|DIR",
                    help="the robot the samples must be of (default: the cell's; another "
                         "is refused)")

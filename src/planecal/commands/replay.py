@@ -26,7 +26,7 @@ def add_arguments(p):
     from planecal.commands.cell_options import add_scene_argument
     p.add_argument("samples", help="sample file, seed format (7.1.4)")
     p.add_argument("--params", required=True, help="parameter file: the twin's truth")
-    add_scene_argument(p, "the plates and robot", reads="run or result")
+    add_scene_argument(p, "the plates and robot", reads="the run's sidecar and --params' provenance")
     p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
                    help="the twin robot's error profile where the files record none "
                         "(default realistic)")

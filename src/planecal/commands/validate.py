@@ -51,7 +51,7 @@ from planecal.commands.value_options import (MAX_ITERATIONS, MAX_SAMPLES, count,
 def add_arguments(p):
     from planecal.commands.cell_options import add_scene_argument
     add_scene_argument(p, "the truths' runs, or the cell of --calibrated and --run",
-                       reads="run and result")
+                       reads="--run's sidecar and --calibrated's provenance")
     p.add_argument("--out", help="write the result (JSON) here")
     p.add_argument("--rrd", default=None, metavar="FILE",
                    help="also write a Rerun recording of the validation (the median truth's)")

@@ -107,6 +107,7 @@ def calibrate_files(req: CalibrateRequest) -> Calibrated:
     """``planecal calibrate``: the runs in their cell, the calibration, its report on
     stdout, the result file (--out), the HTML report and the recording. The outputs were
     checked before the run (the output guard)."""
+    from planecal.jobs.report import write_command_report
     from planecal.present.calibration import text
 
     runs = read_runs(req.samples, req.scene)
@@ -119,22 +120,10 @@ def calibrate_files(req: CalibrateRequest) -> Calibrated:
     if req.out:
         done.result.write(req.out)
         print(f"result written to {req.out}")
-    write_report(req.report, req.out or done.doc, samples=list(req.samples), scene=runs.scene)
+    write_command_report(req.report, req.out or done.doc, samples=list(req.samples),
+                         scene=runs.scene)
     if req.rrd:
         from planecal.present.rerun import log_fit_to_file
         path = log_fit_to_file(req.rrd, done.calibration, runs.samples, runs.scene)
         print(f"recording written to {path}")
     return done
-
-
-def write_report(report_dir, result, samples=None, scene=None) -> None:
-    """The report of a command's result (a dict or a file) into ``report_dir``, if given
-    (``present.report.write_report``), in ``scene`` (a Scene, a name or a path)."""
-    if not report_dir:
-        return
-    from planecal.present.report import write_report as write
-    from planecal.model.scene import Scene
-    where = str(scene.path) if isinstance(scene, Scene) else scene
-    print(f"report written to {write(result, report_dir, samples=samples, scene=where)}")
-
-

@@ -13,7 +13,7 @@ from planecal.jobs.results import read_runs_and_result
 REPLAY_FORMAT = "planecal-replay/1"
 
 
-def _robot_agrees(robot_flag, cell, where) -> None:
+def robot_agrees(robot_flag, cell, where) -> None:
     """--robot, where given, must be the cell's robot (its name and description)."""
     if robot_flag is None:
         return
@@ -31,7 +31,7 @@ def predict(samples, params, scene=None, robot=None) -> int:
     from planecal.model.measurement import predict as distance
 
     runs, result = read_runs_and_result([samples], params, scene)
-    _robot_agrees(robot, runs.scene, samples)
+    robot_agrees(robot, runs.scene, samples)
     s, p = runs.samples, result.params
     if s.plate.max() >= p.n_planes:
         raise InputError(f"{samples}: samples refer to plate {s.plate.max() + 1}, "

@@ -132,6 +132,11 @@ class CalibrationResult:
     def robot(self):
         return self.scene.robot
 
+    @property
+    def claim(self) -> CellClaim | None:
+        """The cell the result records (what runs read beside it must agree with)."""
+        return result_claim(self.doc, self.source)
+
     def model(self):
         """The calibrated model (``estimation.compensate.CalibratedModel``)."""
         from planecal.estimation.compensate import CalibratedModel
@@ -179,16 +184,24 @@ def not_a_calibration(r: CalibrationResult) -> str | None:
 REFUSALS: tuple[Callable[[CalibrationResult], str | None], ...] = (not_a_calibration,)
 
 
-def read_runs_and_result(run_paths, result_path, scene=None):
-    """(``jobs.runs.Runs``, ``CalibrationResult``) of one cell: the runs' sidecars, the
-    result's provenance and ``scene`` must agree (``jobs.cell.resolve_cell``)."""
+def cell_of(run_paths, result_path=None, scene=None):
+    """The one cell of runs and a result read together: their sidecars, the result's
+    provenance and ``scene`` must agree (``jobs.cell.resolve_cell``)."""
     from planecal.formats.base import read_json
-    from planecal.jobs.runs import read_runs, read_sidecar, run_claim
+    from planecal.jobs.runs import read_sidecar, run_claim
 
     claims = [run_claim(p, read_sidecar(p)) for p in run_paths]
-    doc = read_json(result_path, "calibration result")
-    cell = resolve_cell([*claims, result_claim(doc, str(result_path), Path(result_path).parent)],
-                        scene)
+    if result_path is not None:
+        doc = read_json(result_path, "calibration result")
+        claims.append(result_claim(doc, str(result_path), Path(result_path).parent))
+    return resolve_cell(claims, scene)
+
+
+def read_runs_and_result(run_paths, result_path, scene=None):
+    """(``jobs.runs.Runs``, ``CalibrationResult``) of one cell (``cell_of``)."""
+    from planecal.jobs.runs import read_runs
+
+    cell = cell_of(run_paths, result_path, scene)
     return read_runs(run_paths, cell), read_result(result_path, cell)
 
 
