@@ -18,7 +18,7 @@ def add_scene_argument(p, what: str, reads: str | None = "the run's sidecar") ->
     from planecal.model.scene import DEFAULT_SCENE
     where = (f"default: the one {reads} records (a --scene that contradicts it is "
              f"refused), else {DEFAULT_SCENE}") if reads else f"default {DEFAULT_SCENE}"
-    p.add_argument("--scene", default=None, metavar="NAME|FILE",
+    p.add_argument("--scene", default=None if reads else DEFAULT_SCENE, metavar="NAME|FILE",
                    help=f"scene for {what} ({where})")
 
 

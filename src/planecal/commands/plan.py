@@ -33,8 +33,8 @@ from planecal.commands.value_options import MAX_CANDIDATES, MAX_RUNS, MAX_SAMPLE
 
 
 def add_arguments(p):
-    from planecal.model.scene import DEFAULT_SCENE
-    p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
+    from planecal.commands.cell_options import add_scene_argument
+    add_scene_argument(p, "the planned poses", reads=None)
     p.add_argument("--samples", type=count(MAX_SAMPLES), default=150,
                    help="poses to choose (default 150; with a target: the most it may choose)")
     t = p.add_mutually_exclusive_group()

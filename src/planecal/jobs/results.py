@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from planecal.base.errors import InputError
+from planecal.base.errors import InputError, RunFailed
 from planecal.jobs.cell import CellClaim, resolve_cell
 from planecal.model.cell_params import CellParams
 from planecal.model.scene import Scene
@@ -62,10 +62,15 @@ class CalibrationResult:
         from planecal.formats.params import provenance, result_document
         from planecal.present.calibration import document
 
-        doc = result_document(document(cal, scene.robot, accuracy),
-                              provenance([*inputs, ("scene", scene.path),
-                                          ("robot", scene.robot.source)],
-                                         scene.name, scene.robot.name))
+        try:
+            doc = result_document(document(cal, scene.robot, accuracy),
+                                  provenance([*inputs, ("scene", Path(scene.path).resolve()),
+                                              ("robot", scene.robot.source)],
+                                             scene.name, scene.robot.name))
+        except ValueError as e:  # a fit that ended outside any plausible cell
+            raise RunFailed(f"the fit ended outside any plausible cell ({e}): samples of "
+                            f"another cell than scene {scene.name}? (a run's sidecar names "
+                            "its cell; give --scene for a file without one)") from None
         return cls(doc, cal.result.params, scene, "calibration")
 
     @classmethod
