@@ -14,9 +14,11 @@ compliance of J2 and J3 (gravity torque from robot.json's link masses). --free o
 the candidates.
 
 Several sample files may be given; a file's samples are on the plate named in its 8th
-column, or on plate 1. Without --initial the default scene's nominal values (the thesis
-cell's measured initial values) are the starting point. Readings outside the scene's laser
-window are refused. --out is checked before the fit (not an input, a writable place, not
+column, or on plate 1. The cell is the one the runs' sidecars record (they must agree; a
+--scene that names another is refused; a file without a sidecar takes --scene, else the
+others' cell, else thesis_final: ``planecal.jobs.runs``). Without --initial the cell's
+nominal values are the starting point. Readings outside the cell's laser window are
+refused. --out is checked before the fit (not an input, a writable place, not
 a file other than an earlier result unless --force) and records the inputs with their
 SHA-256 (provenance).
 
@@ -24,7 +26,10 @@ The calibration is recorded in the cell's history (``--history``, default planec
 the working folder; docs/HISTORY.md) with its result and provenance, whatever its outcome.
 
 Exit 0 when the fit converged and identified every free parameter; 1 when it did not (the
-report and --out are still written, with the reason in one line); 2 on bad input.
+report and --out are still written, with the reason in one line, and the result's
+``status`` says so: ``not_identifiable`` or ``max_iterations``, which export and urdf
+refuse); 2 on bad input. The pipeline is ``planecal.jobs.calibrate``: the demo and the
+Python API take the same.
 """
 
 from __future__ import annotations

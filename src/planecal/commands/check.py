@@ -22,6 +22,9 @@ others, e.g. o_x,n1_z) is fitted alone to the run with the rest held at the resu
 values: the amount (the run's value minus the result's) in robot terms (J3 (delta3),
 mrad) with its std, the significant ones named, the best explanation first.
 
+The run, the result and its calibration samples are read in their one cell (the runs'
+sidecars, the result's provenance; a --scene that names another is refused).
+
 Prints the verdict (--json: the JSON verdict instead), writes it to --out (format
 planecal-check/1), and records it in the cell's history, linked to the calibration entry
 that wrote RESULT.json. Exit 0: in control; 1: drifted; 2: bad input.

@@ -153,10 +153,11 @@ def aim(path, scene):
     """(``CommandModel``, ``Mismatch``) of --params' result, or (None, None)."""
     if not path:
         return None, None
-    from planecal.io.params import load_json, load_params
+    from planecal.io.params import load_json
+    from planecal.jobs.results import read_result
     from planecal.sampling.poses import CommandModel
     from planecal.studies.planning import Mismatch
-    params = load_params(path, scene.robot)
+    params = read_result(path, scene).params  # of this cell (its provenance's)
     if params.n_planes != len(scene.plates):
         raise InputError(f"{path}: {params.n_planes} plane(s), the scene {scene.name} has "
                          f"{len(scene.plates)}: a result of another cell")

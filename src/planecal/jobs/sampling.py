@@ -242,7 +242,8 @@ def command_model(req: SamplingRequest, scene, side=None):
     sidecar's record of it)."""
     import numpy as np
 
-    from planecal.io.params import load_json, load_params
+    from planecal.io.params import load_json
+    from planecal.jobs.results import read_result
     from planecal.model.scene import nominal_params
     from planecal.sampling.poses import CommandModel
 
@@ -254,7 +255,8 @@ def command_model(req: SamplingRequest, scene, side=None):
               "--encoder-offsets", file=sys.stderr)
     if not params_path and not offsets_path:
         return None, None
-    params = load_params(params_path) if params_path else nominal_params(scene)
+    params = (read_result(params_path, scene).params  # a result of this cell
+              if params_path else nominal_params(scene))
     qe0 = scene.robot.qe0.copy()
     if offsets_path:
         doc = load_json(offsets_path)
