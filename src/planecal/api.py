@@ -6,8 +6,9 @@
     val = planecal.validate(cal, run)                    # ISO 9283 AP/RP at the tool point
     s = planecal.load_samples("RUN.tsv")                 # a sample file (mm on disk, m here)
 
-Each call wraps the code the commands use (``planecal.io.samples``, ``planecal.estimation.fit``,
-``planecal.studies``); nothing is computed twice. Lengths are metres, angles radians;
+Each call is the job the commands run (``planecal.jobs``: a run read in the cell its
+sidecar records, the one calibration pipeline and its result document, ``planecal.studies``
+for the twin); nothing is computed twice. Lengths are metres, angles radians;
 the results print a readable summary (``repr``). Imports are lazy: ``import planecal``
 loads none of this.
 """

@@ -11,25 +11,15 @@ from pathlib import Path
 from planecal.jobs.cell import CellClaim
 
 
-def _recorded_runs(doc, result) -> list[Path]:
-    """The sample files the result's provenance records that are here."""
-    prov = doc.get("provenance") if isinstance(doc, dict) else None
-    found = []
-    for e in (prov.get("inputs") or []) if isinstance(prov, dict) else []:
-        if isinstance(e, dict) and e.get("role") == "samples" and e.get("path"):
-            p = Path(str(e["path"]))
-            cands = [p] if p.is_absolute() else [p, Path(result).parent / p]
-            found += [c for c in cands if c.is_file()][:1]
-    return found
-
-
 def _cell_scene(doc, result, samples, scene):
     """The scene (a path) of a calibration result's page, or ``scene`` (the page's own
     fallback) where a recorded scene is not here."""
+    from planecal.io.params import recorded_samples
     from planecal.jobs.results import cell_of, result_claim
     from planecal.jobs.runs import read_sidecar, run_claim
 
-    paths = [Path(p) for p in samples] if samples else _recorded_runs(doc, result)
+    paths = ([Path(p) for p in samples] if samples
+             else recorded_samples(doc, result, strict=False))  # the page notes the others
     claims: list[CellClaim | None] = [result_claim(doc, str(result), Path(result).parent)]
     claims += [run_claim(p, read_sidecar(p)) for p in paths if p.is_file()]
     if scene is None and any(c is not None and c.find() is None for c in claims):

@@ -74,14 +74,15 @@ class CalibrationResult:
         return cls(doc, cal.result.params, scene, "calibration")
 
     @classmethod
-    def from_document(cls, doc, where: str, scene=None, claims=(),
+    def from_document(cls, doc, where: str, scene=None,
                       near: Path | None = None) -> "CalibrationResult":
         """A result or parameter document (a file's, a history entry's) in the cell it
-        records (``jobs.cell.resolve_cell`` with ``claims`` and ``scene``); made for that
-        cell's robot (``io.params.check_robot``), else refused."""
+        records (``jobs.cell.resolve_cell`` with ``scene``: --scene, or the cell of runs
+        read beside it); made for that cell's robot (``io.params.check_robot``), else
+        refused."""
         from planecal.io.params import check_robot, params_from_dict
 
-        cell = resolve_cell([result_claim(doc, where, near), *claims], scene)
+        cell = resolve_cell([result_claim(doc, where, near)], scene)
         check_robot(doc, cell.robot, where)
         return cls(doc, params_from_dict(doc, where), cell, where)
 
@@ -210,11 +211,11 @@ def read_runs_and_result(run_paths, result_path, scene=None):
     return read_runs(run_paths, cell), read_result(result_path, cell)
 
 
-def read_result(path, scene=None, claims=()) -> CalibrationResult:
+def read_result(path, scene=None) -> CalibrationResult:
     """A result (or parameter) file (``CalibrationResult.from_document``)."""
     from planecal.formats.base import read_json
     doc = read_json(path, "calibration result")
     if not isinstance(doc, dict):
         from planecal.io.params import params_from_dict
         params_from_dict(doc, str(path))  # says what the file is not, in one line
-    return CalibrationResult.from_document(doc, str(path), scene, claims, Path(path).parent)
+    return CalibrationResult.from_document(doc, str(path), scene, Path(path).parent)
