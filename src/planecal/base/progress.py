@@ -113,7 +113,8 @@ class Progress:
         fmt = ("{desc} {n_fmt}/{total_fmt} {bar:24} {elapsed}<{remaining} {postfix}"
                if self.total else "{desc} {elapsed} {postfix}")
         self._bar = tqdm(total=self.total or None, initial=self.done, desc=self.label,
-                         unit=self.unit or " " + self.label, file=self.stream, leave=True,
+                         unit=self.unit or " " + self.label, file=self.stream,
+                         leave=bool(self.total),  # a stage's bar goes when it is done
                          dynamic_ncols=True, mininterval=0.1, bar_format=fmt)
         self._bar.set_postfix_str(self._postfix(), refresh=True)
 
@@ -202,3 +203,44 @@ def stage(label: str, note: str | None = None, quiet: bool = False) -> Progress:
         if not p.off and p._bar is None:
             p._print(p.line(), clock())
     return p
+
+
+_COMPILES: list = []  # the one numba compile listener of this process, once installed
+
+
+def report_compiles(cache: str) -> None:
+    """Say numba's compilations (the first run after an install compiles the model's and
+    the twin's kernels: ~10-20 s of one core; later runs load them from ``cache``): each
+    of planecal's kernels as it starts to compile, and the count of the functions compiled
+    so far, to the open progress (``report``), else a ``stage`` of its own."""
+    if _COMPILES:
+        return
+    from numba.core import event
+
+    class Compiles(event.Listener):
+        def __init__(self):
+            self.depth, self.count, self.kernel, self.bar = 0, 0, "", None
+
+        def on_start(self, ev) -> None:
+            f = ev.data["dispatcher"].py_func
+            name = f"{f.__module__}.{f.__qualname__}"
+            if self.depth == 0 and not _OPEN and _SINK[0] is None:
+                self.bar = stage("compiling kernels", f"first run only, then cached in {cache}")
+            self.depth += 1
+            if name.startswith("planecal."):
+                self.kernel = name[len("planecal."):]
+            self.say()
+
+        def on_end(self, ev) -> None:
+            self.depth -= 1
+            self.count += 1
+            self.say()
+            if self.depth == 0 and self.bar is not None:
+                self.bar.close()
+                self.bar = None
+
+        def say(self) -> None:
+            report(what=f"compiling {self.kernel} ({self.count} functions done)")
+
+    _COMPILES.append(Compiles())
+    event.register("numba:compile", _COMPILES[0])

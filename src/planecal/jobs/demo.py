@@ -14,6 +14,7 @@ from typing import Callable
 import numpy as np
 
 from planecal.base.errors import RunFailed
+from planecal.base.progress import stage
 
 DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
 
@@ -89,7 +90,8 @@ def _calibrate(req: DemoRequest, settings, run_file, truth_file, result_file):
     runs = read_runs([run_file])
     print(f"\n== calibration (level {settings.label}) from the scene's nominal values "
           f"({len(runs.samples)} samples)")
-    done = calibrate_runs(runs, settings)
+    with stage("demo: calibration", "the fit, then its accuracy (10-fold cross-validation)"):
+        done = calibrate_runs(runs, settings)
     print(text(done.doc, runs.samples.n_zero))
     done.result.write(result_file)
     if req.rrd:
@@ -116,11 +118,12 @@ def _position_error(req: DemoRequest, done, truth_file):
     from planecal.studies.validation import ValidationSettings, validate
 
     scene, samples, cal = done.runs.scene, done.runs.samples, done.calibration
-    world, opts = run_world(done.runs.runs[0], truth_file).build(scene)
-    st = ValidationSettings(cycles=DEMO_CYCLES, seed=req.seed, gauge=False)
-    v = validate(scene, world, CalibratedModel(scene.robot, cal.params, cal.settings.label),
-                 samples.qe, st, CollisionWorld(scene, clearance_m=st.clearance_m),
-                 options=opts)
+    with stage("demo: position error", "ISO 9283 on the same twin"):
+        world, opts = run_world(done.runs.runs[0], truth_file).build(scene)
+        st = ValidationSettings(cycles=DEMO_CYCLES, seed=req.seed, gauge=False)
+        v = validate(scene, world, CalibratedModel(scene.robot, cal.params, cal.settings.label),
+                     samples.qe, st, CollisionWorld(scene, clearance_m=st.clearance_m),
+                     options=opts)
     print(f"\n== position error in the calibrated region (ISO 9283 AP: the worst of five poses "
           f"in a {v['cube']['edge_m'] * 1e3:.0f} mm cube among the samples, {DEMO_CYCLES} "
           f"cycles, on the same twin, at {where_text(v)}, robot frame)")

@@ -314,7 +314,7 @@ def run_one(item: Item) -> dict:
             acq = RestAcquirer(twin, rs.laser)
         start = twin.current_counts.copy()
         clock = Clock(acq, start, rs.nominal_step_counts, rs.dwell_ticks)
-        rec, tally = MemoryRecorder(), Tally()
+        rec, tally = MemoryRecorder(rs.samples), Tally()
         collect(planner, clock, rec, rs.samples,
                 Cursor(counts_to_joints(robot, start),
                        np.random.default_rng(item.seed).bit_generator.state),

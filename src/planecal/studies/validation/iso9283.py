@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.progress import report
 from planecal.model.encoder import counts_to_joints
 from planecal.studies.validation.settings import ValidationSettings
 
@@ -199,6 +200,7 @@ def iso9283(twin, plan: IsoPlan, st: ValidationSettings, mover: "Mover", standof
         n = 2 + len(tcps)  # tool point, flange, each named TCP
         att = np.zeros((st.cycles, 5, n, 3))
         for j in range(st.cycles):
+            report(j + 1, st.cycles, f"ISO 9283: the {name} model's cycle")
             for i in range(5):
                 mover.go(cs[i], f"ISO pose P{i + 1}")
                 Tf, Ts = twin.flange_pose(), twin.sensor_pose()

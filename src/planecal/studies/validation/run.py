@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.progress import report
 from planecal.studies.validation.cube import (CENTRES, SHRINK, SHRINKS, SamplePoses,
                                               default_edge, medoid_order, nearest_sample_m)
 from planecal.studies.validation.gauge import gauge_block, predicted_spread
@@ -133,6 +134,7 @@ def _place(scene, commanders, samples, st, mover, region, checker):
     for k in ks[:1] if given else ks:  # the next centre where no cube fits
         center, R, q_ref = samples.tool[k], samples.flange[k, :3, :3], samples.q[k]
         for edge in edges:
+            report(what=f"placing the ISO cube ({edge * 1e3:.0f} mm)")
             try:
                 return plan_iso(scene, commanders, center, edge, R, q_ref, mover, region,
                                 checker, inside=not given), k
