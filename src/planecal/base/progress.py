@@ -49,12 +49,14 @@ def quiet() -> bool:
 def report(k: int | None = None, n: int | None = None, what: str | None = None) -> None:
     """Progress inside the current unit of work: ``k`` of ``n`` (either may be None) of
     ``what``; to the engine's sink where one is set, else the innermost open ``Progress``
-    (its ``within``), else nowhere."""
+    that is not held (its ``within``), else nowhere."""
     sink = _SINK[0]
     if sink is not None:
         sink(k, n, what)
-    elif _OPEN:
-        _OPEN[-1].within(k, n, what)
+        return
+    shown = [p for p in _OPEN if not p._held]  # a held one is not shown yet
+    if shown:
+        shown[-1].within(k, n, what)
 
 
 @contextmanager
