@@ -490,7 +490,7 @@ def _identifiability_section(sec, ctx: Context) -> None:
         else:
             sec.text(text)
     if ident and not warned:
-        sec.finding("No unidentifiable, weak or strongly correlated parameters.", ok=True)
+        sec.finding("No unidentifiable or weakly identifiable parameters.", ok=True)
     sec.figure(fig_singular_values(out, ident))
     summary = [["samples used", doc.get("samples_used", "–")],
                ["outliers", ", ".join(str(i) for i in doc.get("outliers", [])) or "none"],
