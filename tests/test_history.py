@@ -278,3 +278,24 @@ def test_diff_of_two_models_of_the_same_samples_tests_nothing(tmp_path, capsys, 
     d = json.loads(capsys.readouterr().out)
     assert d["independent"] is True and d["basis"] is None
     assert all(c["std"] is not None for c in d["changes"] if c["name"] in ("delta2", "o_x"))
+
+
+def test_check_flags_no_suspect_on_a_run_in_control(tmp_path, capsys, monkeypatch):
+    """issue 33: check on an in-control run of the realistic twin listed J4 as "significant
+    yes" (z -3.3 beyond the Bonferroni limit 3.14): a lone offset fitted to 40 residuals
+    that hold the model's mismatch, not a move. The distribution-free test decides; on a
+    run in control the z's rank the suspects and flag none."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["rehearse", "--out", "cal.tsv", "--truth-out", "t.json", "-q"]) == 0
+    assert main(["calibrate", "cal.tsv", "--out", "r.json", "-q", "--no-history"]) == 0
+    assert main(["rehearse", "--out", "day.tsv", "--truth", "t.json", "--seed", "12",
+                 "--samples", "40", "-q"]) == 0
+    capsys.readouterr()
+    assert main(["check", "day.tsv", "--against", "r.json", "--no-history", "--json"]) == 0
+    v = json.loads(capsys.readouterr().out)
+    assert v["verdict"] == "in_control" and v["moved"] == []
+    assert max(abs(s["z"]) for s in v["suspects"]) > v["z_limit"]  # the case that was flagged
+    assert not any(s["significant"] for s in v["suspects"])
+    assert main(["check", "day.tsv", "--against", "r.json", "--no-history"]) == 0
+    out = capsys.readouterr().out
+    assert " yes " not in out and "the run is in control: none moved" in out

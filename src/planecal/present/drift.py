@@ -108,8 +108,10 @@ def check_text(doc: dict) -> str:
         lines.append("IN CONTROL: the run errs as the reference did (exit 0)")
     else:
         lines.append("DRIFTED: the run errs more than the reference did (exit 1)")
+    flag = (f"significant where |z| > {doc['z_limit']:.2f}" if doc["verdict"] == "drifted"
+            else "the run is in control: none moved, |z| only ranks them")
     lines.append(f"suspects, each alone with the rest held at the result's values (the run's "
-                 f"value minus the result's; significant where |z| > {doc['z_limit']:.2f}):")
+                 f"value minus the result's; {flag}):")
     lines.append(table(SUSPECT_HEADERS, suspect_rows(doc["suspects"]), "lrrrll"))
     if doc["no_effect"]:
         lines.append(f"no effect on these samples: {', '.join(doc['no_effect'])}")
