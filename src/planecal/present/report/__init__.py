@@ -121,7 +121,7 @@ def write_report(result, out_dir, samples=None, scene: str | None = None) -> Pat
     try:
         ctx = Context(doc=doc, out_dir=stage, source=source, samples=samples, scene=scene)
         try:
-            with progress_stage(f"report ({kind})", "reading its inputs"):
+            with progress_stage(f"report ({kind})", "its inputs and figures"):
                 page = module.build(ctx)
         except (KeyError, TypeError, ValueError, IndexError) as e:
             raise InputError(f"{where}: not a complete {kind} result ({type(e).__name__}: "
