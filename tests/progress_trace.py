@@ -7,8 +7,10 @@ CPU seconds a call, measured by ``scripts/bench_progress.py``), and nothing else
 trace is the lines the command prints in a run whose only time is its counted work, the
 same on a loaded machine as on an idle one. Or the CPU clock of the thread that runs the
 command (``Trace.cpu``), for work of no fixed cost a call (a figure's drawing): time it
-spent working, not waiting for a core, nor other threads' (a sampling run's planner). ``planecal.base.progress`` reads the same clock for its plain
-lines, and every line written to stdout or stderr is stamped with it.
+spent working, not waiting for a core, nor other threads' (BLAS's, which spin while they
+wait: a process's CPU clock read 1-8 s for the same fit). ``planecal.base.progress``
+reads the same clock for its plain lines, and every line written to stdout or stderr is
+stamped with it.
 
     trace = Trace.of(monkeypatch, ["check_path", "check_config"])
     code = trace.run(["plan", "--out", "p.json"])

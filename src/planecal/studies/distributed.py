@@ -57,10 +57,11 @@ from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 import numpy as np
 
 from planecal.base.errors import InputError
-from planecal.base.progress import Progress, reporting_to, stage
+from planecal.base.progress import Progress, stage
 from planecal.studies.cluster import (TLSFiles, check_reach, client_security, parse_address,
                                       probe, tls_env)
 from planecal.studies.results import ResultsFile, canonical_key, encode
+from planecal.studies.run_reports import PROGRESS_TOPIC, forward, reported
 
 CONNECT_TIMEOUT_S = 10.0
 CLOSE_TIMEOUT_S = 10.0  # each of the client's and the local cluster's close, at most
@@ -76,8 +77,6 @@ WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.system-monitor.interval": "5s",
                  "distributed.worker.memory.monitor-interval": "1s"}
 _QUIET_LOGGERS = ("distributed", "tornado", "bokeh")
-PROGRESS_TOPIC = "planecal-progress"  # a run's ``report`` from a worker, to the client's bar
-REPORT_EVERY_S = 0.25  # a worker sends at most one report of a run this often
 WAIT_STEP_S = 0.25  # a start-up wait says how long it has waited this often
 
 
@@ -431,8 +430,8 @@ class Engine:
         topic = f"{PROGRESS_TOPIC}-{tag}"
         call = fn
         if progress is not None:
-            self.client.subscribe_topic(topic, functools.partial(_forward, progress))
-            call = functools.partial(_reported, fn, topic)
+            self.client.subscribe_topic(topic, functools.partial(forward, progress))
+            call = functools.partial(reported, fn, topic)
         futs = {}
         for i in todo:
             f = self.client.submit(call, items[i], i, key=f"{name}-{tag}-{i}", pure=False) \
@@ -449,30 +448,6 @@ class Engine:
                 self.client.unsubscribe_topic(topic)
             if futs:  # stopped early (an error, Ctrl-C, the caller stopped): cancel the rest
                 self.client.cancel([f for _, f in futs.values()])
-
-
-def _reported(fn: Callable, topic: str, item, index: int):
-    """``fn(item)`` on a worker, what it ``report``s sent to the client as an event of
-    ``topic`` (at most one every ``REPORT_EVERY_S``)."""
-    from distributed import get_worker
-    worker = get_worker()
-    last = [-REPORT_EVERY_S]
-
-    def sink(k, n, what):
-        now = time.monotonic()
-        if now - last[0] >= REPORT_EVERY_S:
-            last[0] = now
-            worker.log_event(topic, {"run": index, "k": k, "n": n, "what": what})
-
-    with reporting_to(sink):
-        return fn(item)
-
-
-def _forward(progress, event) -> None:
-    """A worker's report (``_reported``) into the client's bar (on the client's thread)."""
-    _, msg = event
-    what = " ".join(s for s in (f"run {msg['run'] + 1}:", msg.get("what")) if s)
-    progress.within(msg.get("k"), msg.get("n"), what)
 
 
 def _env_plugin():

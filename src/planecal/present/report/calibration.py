@@ -10,10 +10,9 @@ identifiability findings as text.
 The result file holds the parameters, not the samples: the per-sample figures recompute
 the model error with ``planecal.model.measurement.predict`` from the initial and final
 parameters on the samples given (or recorded in the result's provenance), with their
-approach directions (level 3's backlash), and show them only when
-the recomputed RMS reproduces the file's ``residual_rms_mm`` and
-``residual_rms_initial_mm`` (so a wrong sample file or wrong initial values are said,
-not drawn).
+approach directions (level 3's backlash), and show them only when the recomputed RMS
+reproduces the file's ``residual_rms_mm`` and ``residual_rms_initial_mm`` (so a wrong
+sample file or wrong initial values are said, not drawn).
 """
 from __future__ import annotations
 
@@ -32,6 +31,7 @@ from planecal.present.report.page import Page
 # the recomputed RMS must match the file's to this (relative; the fit's own last step
 # below the improvement limit is far smaller)
 RMS_MATCH = 1e-3
+ANNOTATE_ALL_MAX, STRONG = 20, 0.9  # all correlations shown up to 20 parameters, beyond |rho|>=0.9
 
 
 def _fmt(v: float | None, scale: float = 1.0, digits: int = 4) -> str:
@@ -289,14 +289,9 @@ def correlation(cov: dict) -> tuple[list[str], np.ndarray]:
     return names, R
 
 
-ANNOTATE_ALL_MAX = 20  # parameters up to which every cell shows its number
-STRONG = 0.9  # beyond that, the cells that show theirs (|rho| off the diagonal)
-
-
 def fig_correlation(out, cov: dict):
-    """The correlation matrix; every cell's number up to ``ANNOTATE_ALL_MAX`` parameters,
-    beyond that (level 3: 60, cells of 15 px, 3,600 texts that took seconds to draw
-    and could not be read) the strong pairs' only."""
+    """The correlation matrix; each cell's number up to ``ANNOTATE_ALL_MAX`` parameters,
+    the strong pairs' beyond (level 3's 60: 3,600 texts, seconds to draw, unreadable)."""
     from matplotlib.colors import TwoSlopeNorm
     names, R = correlation(cov)
     n = len(names)
@@ -386,9 +381,7 @@ def _model_errors(doc: dict, scene, samples, final, initial, initial_from,
     used = np.ones(len(samples), bool)
     outl = [int(i) for i in doc.get("outliers", []) if 0 <= int(i) < len(samples)]
     used[outl] = False
-    # with the samples' approach directions: level 3's backlash takes each joint's flank
-    # from them (without, the flank from gravity: a level-3 result's own samples read
-    # 0.034 mm rms where its fit left 0.010, and were called not its samples)
+    # the approach directions: level 3's backlash flanks (without: 0.034 mm for 0.010)
     r1 = predict(scene.robot, samples.qe, final, samples.plate,
                  samples.direction) - samples.d_mm * 1e-3
     rms1 = _rms_mm(r1, used)
