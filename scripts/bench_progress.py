@@ -48,7 +48,9 @@ COMMANDS = [
 
 def costs() -> None:
     """Part 1 (module docstring)."""
+    import contextlib
     import importlib
+    import io
 
     from planecal.cli import main
     from progress_trace import COSTS
@@ -75,7 +77,8 @@ def costs() -> None:
                      ["report", f"{d}/c.json", "--out", f"{d}/rep", "-q"],
                      ["validate", "--truth-seeds", "0", "--breakdown", "none", "--jobs", "1",
                       "-q"]):
-            main(argv)
+            with contextlib.redirect_stdout(io.StringIO()):
+                main(argv)
     for key, (n, t) in stats.items():
         print(f"cost_{key}_ms: {t / n * 1e3:.3f}" if n else f"cost_{key}_ms: none called")
 
