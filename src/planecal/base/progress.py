@@ -171,7 +171,12 @@ class Progress:
 
     def _print(self, line: str, now: float) -> None:
         self._printed, self._shown, self._last = self.done, line, now
-        print(line, file=self.stream, flush=True)
+        try:
+            print(line, file=self.stream, flush=True)
+        except (ValueError, OSError):  # its stream is gone (a bar left open by a failure):
+            self.off = True  # the work it reports on must not fail for it
+            if self in _OPEN:
+                _OPEN.remove(self)
 
     def step(self, k: int = 1) -> None:
         """``k`` more units done (a study's run, a plan); closed when the total is done."""
@@ -179,8 +184,9 @@ class Progress:
         if self.done >= self.total:
             self.close()
 
-    def close(self, final: str | None = None) -> None:
-        """The last state (and ``final``, e.g. why the work stopped, on a line of its own)."""
+    def close(self, final: str | None = None, last: bool = True) -> None:
+        """The last state (and ``final``, e.g. why the work stopped, on a line of its own);
+        ``last`` False: no last line (work that never started)."""
         with self._lock:
             if self._closed:
                 return
@@ -189,7 +195,7 @@ class Progress:
                 _OPEN.remove(self)
             if self._bar is not None:
                 self._bar.close()
-            elif not self.off and self.total and self.done != self._printed:
+            elif last and not self.off and self.total and self.done != self._printed:
                 self._print(self.line(), clock())
             if final and not self.off:
                 print(final, file=self.stream, flush=True)
