@@ -234,3 +234,14 @@ def test_the_engine_says_its_start_and_its_workers_runs(capsys):
     assert "workers up after" in err and "warmed up after" in err
     assert "runs 0/2  run 1: steps " in err or "runs 1/2  run 2: steps " in err \
         or "runs 0/2  run 2: steps " in err, err
+
+
+def test_a_bar_left_open_on_a_closed_stream_fails_no_work(clock):
+    """A bar a failure left open (its stream closed since) took every later report of the
+    process and raised 'I/O operation on closed file' inside the work: now it stops."""
+    buf = io.StringIO()
+    left = Progress("samples", 150, stream=buf)
+    buf.close()
+    clock.t += 5
+    report(1, 4, "samples")  # no exception
+    assert left.off and left not in P._OPEN
