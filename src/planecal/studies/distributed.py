@@ -153,7 +153,11 @@ def worker_env_lines(tls: TLSFiles | None = None) -> list[str]:
 
 
 def _set_worker_env() -> None:
+    """A worker's process: no GL, and no progress of its own on its stderr (a compile's,
+    say): what its runs report goes to the client's bar (``run_reports``)."""
+    from planecal.base.progress import set_quiet
     os.environ.setdefault("MUJOCO_GL", "disable")
+    set_quiet(True)
 
 
 class Engine:
