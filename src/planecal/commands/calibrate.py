@@ -95,10 +95,10 @@ def run(args) -> int:
         path = log_fit_to_file(args.rrd, cal, samples, scene)
         print(f"recording written to {path}")
     why = cal.failure()
-    record(hist, _entry(args, doc, out, why))
+    unrecorded = record(hist, _entry(args, doc, out, why))
     if why:
         raise RunFailed(why)
-    return 0
+    return unrecorded
 
 
 def _entry(args, doc: dict, out, why: str | None):

@@ -30,8 +30,8 @@ from __future__ import annotations
 
 from planecal.base.errors import InputError
 from planecal.commands.history_options import (add_history_arguments, command_provenance,
-                                               new_entry, open_history, record, result_link,
-                                               result_scene, sample_worlds)
+                                               consult, new_entry, open_history, record,
+                                               result_link, result_scene, sample_worlds)
 from planecal.commands.verdict_options import add_verdict_arguments, emit_verdict, verdict_out
 
 MIN_REFERENCE_RUNS = 2
@@ -90,7 +90,7 @@ def run(args) -> int:
         raise InputError(f"{args.run}: samples on plate {run_s.plate.max() + 1}, the result "
                          f"holds {fr.params.n_planes} plane(s)")
     sha, against = result_link(hist, args.against)
-    ref_paths = _reference_runs(args, hist, against)
+    ref_paths = consult(hist, lambda h: _reference_runs(args, h, against), [])
     refs = [read_samples(p, scene) for p in ref_paths]
     chk = check_run(fr, (cal.qe, cal.d_mm * 1e-3, cal.plate),
                     (run_s.qe, run_s.d_mm * 1e-3, run_s.plate), args.alpha,

@@ -59,7 +59,6 @@ def run(args) -> int:
     req = ControllerFile(args.format, out, qe0, str(args.result), sha)
     written = write_controller_file(doc, params, scene, req)
     prov = command_provenance(scene, [("result", args.result)])
-    record(hist, new_entry(args, "export", "ok", 0, prov, robot_sha256=scene.robot.digest,
-                           against=against, result_sha256=sha, summary=written,
-                           output=str(out) if out else None))
-    return 0
+    return record(hist, new_entry(args, "export", "ok", 0, prov, robot_sha256=scene.robot.digest,
+                                  against=against, result_sha256=sha, summary=written,
+                                  output=str(out) if out else None))

@@ -62,6 +62,7 @@ def files(args):
 
 
 def run(args) -> int:
+    from planecal.commands.history_options import check_labels
     from planecal.history import History, location
 
     want = _COUNTS[args.action]
@@ -73,7 +74,10 @@ def run(args) -> int:
             if getattr(args, flag):
                 raise InputError(f"--{flag.replace('_', '-')}: only for history rollback")
     out = args.out if args.action == "rollback" else None  # checked before the run (files)
-    hist = History.open(location(args.history), [out], create=args.action == "rollback")
+    if args.action == "rollback":
+        check_labels(args)
+    hist = History.open(location(args.history), [out], create=args.action == "rollback",
+                        new=False)
     try:
         return {"list": _list, "show": _show, "diff": _diff,
                 "rollback": _rollback}[args.action](args, hist, out)
@@ -137,7 +141,7 @@ def _rollback(args, hist, out) -> int:
                          e.result_sha256 or "0" * 64)
     written = write_controller_file(doc, params_from_dict(doc, where), scene, req)
     prov = command_provenance(scene, [])
-    record(hist, new_entry(args, "rollback", "ok", 0, prov, robot_sha256=scene.robot.digest,
-                           against=e.id, result_sha256=e.result_sha256, summary=written,
-                           output=str(out) if out else None, world=e.world))
-    return 0
+    return record(hist, new_entry(args, "rollback", "ok", 0, prov,
+                                  robot_sha256=scene.robot.digest, against=e.id,
+                                  result_sha256=e.result_sha256, summary=written,
+                                  output=str(out) if out else None, world=e.world))
