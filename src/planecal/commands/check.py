@@ -72,6 +72,7 @@ def run(args) -> int:
     from planecal.io.params import check_robot, recorded_samples
     from planecal.io.samples import read_many, read_samples
     from planecal.present.drift import CHECK_FORMAT, check_document, check_text
+    from planecal.sampling.runfiles import check_run_robot
 
     given = [args.run, args.against, *(args.calibration_samples or [])]
     out = verdict_out(args, given, CHECK_FORMAT)
@@ -84,6 +85,8 @@ def run(args) -> int:
     if not cal_paths:
         raise InputError(f"{args.against}: records no calibration samples; give them with "
                          "--calibration-samples")
+    for p in [args.run, *cal_paths]:
+        check_run_robot(p, scene.robot)
     fr = FittedResult.of(doc, scene.robot, args.against)
     cal, run_s = read_many(cal_paths, scene), read_samples(args.run, scene)
     if run_s.plate.max(initial=0) >= fr.params.n_planes:
