@@ -104,8 +104,12 @@ def _show(args, hist, _out) -> int:
 
 def _calibration(hist, n: int):
     e = hist.get(n)
-    if e.kind != "calibrate" or not isinstance(e.document, dict):
+    if e.kind != "calibrate" or not isinstance(e.document, dict) and not e.problems:
         raise InputError(f"history {hist.label}: entry {n} is a {e.kind}, not a calibration")
+    if e.problems:
+        raise InputError(f"history {hist.label}: entry {n} holds what planecal does not write "
+                         f"({'; '.join(e.problems[:2])}): it cannot be used (history show "
+                         f"{n} says what)")
     return e
 
 
