@@ -145,19 +145,23 @@ def record(hist, entry, json_out: bool = False) -> int:
         hist.close()
     print(f"history: entry {n} ({entry.kind}: {entry.outcome}) in {hist.label}",
           file=sys.stderr if json_out else sys.stdout)
+    if hist.unread is not None:  # recorded, but a lookup during the work had failed
+        print(f"planecal: history: not consulted: {hist.unread}", file=sys.stderr)
     return 0
 
 
 def consult(hist, read, default):
     """``read(hist)``, a lookup in the history during the work; where the history fails,
-    one line on stderr and ``default`` (the work goes on without it)."""
+    ``default`` (the work goes on without it) and the failure kept for ``record``'s one
+    line."""
     from planecal.history import HistoryError
     if hist is None:
         return default
     try:
         return read(hist)
     except HistoryError as e:
-        print(f"planecal: history: not consulted: {e}", file=sys.stderr)
+        if hist.unread is None:
+            hist.unread = e
         return default
 
 

@@ -36,6 +36,11 @@ from planecal.io.outputs import SQLITE_MAGIC
 ADVISORY_KEY = 0x706C616E6563616C  # "planecal": the schema's advisory lock on PostgreSQL
 
 
+_LOCKED = ("database is locked", "lock timeout", "canceling statement")
+_READ_ONLY = ("readonly", "read-only", "permission denied")
+_DAMAGED = ("malformed", "not a database", "no such table", "no such column", "decode")
+
+
 class HistoryError(InputError):
     """A history that cannot be opened, read or written: one line naming it and the cause
     (``Place.error``)."""
@@ -46,16 +51,17 @@ def failure(place: Place, e: BaseException, doing: str) -> HistoryError:
     orig = getattr(e, "orig", None) or e
     text = str(orig).strip() or type(orig).__name__
     first = text.splitlines()[0]
+    first = first if len(first) <= 200 else first[:197] + "..."
     low = first.lower()
-    if "database is locked" in low or "lock timeout" in low or "canceling statement" in low:
+    if any(k in low for k in _LOCKED):
         why = f"locked: another process held it longer than {wait_s():g} s ({first})"
-    elif "readonly" in low or "read-only" in low or "permission denied" in low:
+    elif any(k in low for k in _READ_ONLY):
         why = f"cannot be written ({first})"
-    elif "connection" in low or "could not" in low or "timeout" in low or "server" in low:
-        why = f"cannot reach the server ({first})"
-    elif "malformed" in low or "not a database" in low or "no such table" in low \
-            or "no such column" in low or "does not exist" in low:
+    elif any(k in low for k in _DAMAGED) or (not place.sqlite and "does not exist" in low
+                                               and not low.startswith("connection")):
         why = f"damaged ({first})"
+    elif not place.sqlite:
+        why = f"cannot reach the server ({first})"
     else:
         why = first
     return HistoryError(place.error(f"{doing}: {why}"))
@@ -105,6 +111,8 @@ def sqlite_engine(path: Path, write: bool, immutable: bool = False):
     @event.listens_for(engine, "connect")
     def _connect(dbapi_connection, _record):
         dbapi_connection.isolation_level = None  # planecal, not the driver, begins
+        # text that is not UTF-8 (a hand's, a damaged page) is read, marked, not a failure
+        dbapi_connection.text_factory = lambda b: b.decode("utf-8", "replace")
 
     @event.listens_for(engine, "begin")
     def _begin(conn):

@@ -12,6 +12,7 @@ version it reads.
 from __future__ import annotations
 
 import logging
+import sys
 
 from planecal.history import backend, schema
 from planecal.history.backend import HistoryError
@@ -105,8 +106,9 @@ def _create_or_upgrade(engine, place: Place) -> None:
             where = (backend.backup_file(place, version) if place.sqlite
                      else f"schema {backend.backup_postgres(conn, version)}")
             schema.upgrade(conn, version)
-            log.warning("history %s: upgraded from schema version %d to %d (the version-%d "
-                        "copy: %s)", place.label, version, schema.SCHEMA_VERSION, version, where)
+            print(f"planecal: history {place.label}: upgraded from schema version {version} to "
+                  f"{schema.SCHEMA_VERSION} (the version-{version} copy: {where})",
+                  file=sys.stderr)
 
 
 def _wal(engine) -> None:

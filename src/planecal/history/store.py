@@ -89,6 +89,7 @@ class History:
         self.place = place
         self.label = place.label
         self.version = version
+        self.unread: HistoryError | None = None  # a lookup that failed (commands' ``consult``)
 
     @classmethod
     def open(cls, where: str, inputs=(), create: bool = True, new: bool = True) -> "History":

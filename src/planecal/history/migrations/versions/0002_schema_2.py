@@ -36,6 +36,7 @@ def upgrade() -> None:
                 b.add_column(sa.Column("id", sa.Integer, primary_key=True, autoincrement=True))
     if sqlite:  # numbers a version-1 history may have freed (its last entry deleted: its
         # inputs and parameters are still there) are not given again
+        op.execute("DELETE FROM sqlite_sequence WHERE name = 'entries'")
         op.execute("INSERT INTO sqlite_sequence (name, seq) SELECT 'entries', max(m) FROM "
                    "(SELECT max(id) AS m FROM entries UNION ALL SELECT max(entry_id) FROM "
                    "inputs UNION ALL SELECT max(entry_id) FROM parameters) WHERE m IS NOT NULL "
