@@ -21,7 +21,6 @@ import pytest
 from history_db import PG_PASSWORD_ENV, db  # noqa: F401  (the fixture)
 from test_history_store import BASE, calibration_entry, cli, one_line
 from planecal.history import History
-from planecal.history.place import place_of
 
 SECRET = "s3cr%40t-pw"  # percent-encoded "s3cr@t-pw"
 
@@ -49,6 +48,7 @@ def test_a_password_is_never_shown_whatever_the_url(url, capsys, tmp_path):
 
 
 def test_the_label_keeps_what_names_the_database():
+    from planecal.history.place import place_of
     p = place_of("postgresql://cell:pw@db.shop:5433/planecal?password=pw2&sslmode=require")
     assert p.label == ("postgresql+psycopg://cell:***@db.shop:5433/planecal?password=***"
                        "&sslmode=require")
