@@ -127,16 +127,17 @@ def test_eight_processes_record_into_a_fresh_history_at_once(db, tmp_path):
 
 HOLDER = """
 import sys, time
+from sqlalchemy import text
 from planecal.history import History
-from planecal.history.schema import tables
 h = History.open(sys.argv[1])
-_, _, entries, inputs, _ = tables()
 with h.engine.connect().execution_options(planecal_write=True) as c, c.begin():
     if c.dialect.name == "postgresql":  # what SQLite's write lock is: no other writer
         c.exec_driver_sql("LOCK TABLE entries IN EXCLUSIVE MODE")
-    n = c.execute(entries.insert().values(kind="check", outcome="ok", exit_code=0,
-                                          created_utc="t", note="held")).inserted_primary_key[0]
-    c.execute(inputs.insert().values(entry_id=n, role="run", path="held.tsv"))
+    c.execute(text("INSERT INTO entries (kind, created_utc, outcome, exit_code, note) "
+                   "VALUES ('check', 't', 'ok', 0, 'held')"))
+    n = c.execute(text("SELECT max(id) FROM entries")).scalar()
+    c.execute(text("INSERT INTO inputs (entry_id, role, path) VALUES (:n, 'run', 'held.tsv')"),
+              {"n": n})
     print("holding", flush=True)
     time.sleep(600)
 """
