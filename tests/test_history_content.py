@@ -255,3 +255,33 @@ def test_an_older_history_is_upgraded_with_a_backup_beside_it(db, tmp_path, caps
     assert [(e.id, e.note) for e in h.entries()] == [(1, "v1-1"), (2, "v1-2"), (4, None)]
     assert [i.path for i in h.get(2).inputs] == ["r2.tsv"]
     h.close()
+
+
+def test_a_read_only_history_can_be_read(tmp_path, capsys):
+    """The file and its folder immutable (chattr +i: not even root writes there, as on a
+    read-only medium): list and show answer (every transaction took the write lock, so a
+    read-only history could not even be listed); a command that records is refused in one
+    line before its work."""
+    import shutil
+    import subprocess
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    where = folder / "h.db"
+    h = History.open(str(where))
+    h.add(calibration_entry())
+    h.close()
+    chattr = shutil.which("chattr")
+    if chattr is None or subprocess.run([chattr, "+i", str(where), str(folder)],
+                                        capture_output=True).returncode:
+        pytest.skip("chattr +i is not available here (root on a file system that has it)")
+    try:
+        rc, out, _ = cli(capsys, "history", "list", "--history", where)
+        assert rc == 0 and "1 entries" in out
+        rc, out, _ = cli(capsys, "history", "show", "1", "--history", where)
+        assert rc == 0 and "calibrate" in out
+        rc, out, err = cli(capsys, "export", BASE / "result.json", "--out",
+                           tmp_path / "fd11.json", "--history", where)
+        assert rc == 2 and "cannot" in one_line(err) and not (tmp_path / "fd11.json").exists()
+    finally:
+        subprocess.run([chattr, "-i", str(where), str(folder)], check=True)
+    assert sorted(p.name for p in folder.iterdir()) == ["h.db"]
