@@ -73,13 +73,13 @@ def history_files(args) -> list:
     from pathlib import Path
 
     from planecal.history import location
-    from planecal.history.place import is_url
+    from planecal.history.place import place_of
     if not hasattr(args, "history") or getattr(args, "no_history", False):
         return []
-    where = location(args.history)
-    if is_url(where):
+    path = place_of(location(args.history)).path  # sqlite:///PATH too
+    if path is None:
         return []
-    return [Path(where)] + [Path(where + s) for s in ("-wal", "-shm", "-journal")]
+    return [path] + [Path(f"{path}{s}") for s in ("-wal", "-shm", "-journal")]
 
 
 def new_entry(args, kind: str, outcome: str, exit_code: int, prov: dict, **fields):
