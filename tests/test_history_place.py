@@ -166,3 +166,31 @@ def test_cell_and_note_are_one_line_within_the_limits_before_the_work(db, flag, 
     rc, stdout, _ = cli(capsys, "history", "show", "1", "--json", "--history", db.where)
     e = json.loads(stdout)
     assert e["cell"] == "c" * 200 and e["note"] == "n" * 2000
+
+
+def test_a_read_only_role_lists_and_is_refused_before_the_work(db, capsys, tmp_path,
+                                                              monkeypatch):
+    """On the server, a login that may only SELECT: list and show answer; a command that
+    records is refused in one line before its work (it failed after it)."""
+    if db.backend != "postgresql":
+        pytest.skip("a role is a server's (test_history_content reads a read-only file)")
+    h = History.open(db.where)
+    h.add(calibration_entry())
+    h.close()
+    role = "ro_" + db.where.rsplit("_", 1)[1][:12]
+    name = db.where.rsplit("/", 1)[1]
+    db.execute(f"CREATE ROLE {role} LOGIN PASSWORD 'ro-pw'",
+               f'GRANT CONNECT ON DATABASE "{name}" TO {role}',
+               f"GRANT SELECT ON ALL TABLES IN SCHEMA public TO {role}")
+    try:
+        monkeypatch.setenv("PGPASSWORD", "ro-pw")
+        url = db.where.replace("//planecal@", f"//{role}@")
+        rc, out, _ = cli(capsys, "history", "list", "--history", url)
+        assert rc == 0 and "1 entries" in out
+        rc, out, err = cli(capsys, "export", BASE / "result.json", "--out",
+                           tmp_path / "fd11.json", "--history", url)
+        assert rc == 2 and "cannot be written" in one_line(err)
+        assert not (tmp_path / "fd11.json").exists()
+    finally:
+        monkeypatch.setenv("PGPASSWORD", os.environ[PG_PASSWORD_ENV])
+        db.execute(f"DROP OWNED BY {role}", f"DROP ROLE {role}")

@@ -92,7 +92,21 @@ def prepare(engine, place: Place, write: bool, new: bool = True) -> int:
         _create_or_upgrade(engine, place)
     if place.sqlite:
         _wal(engine)
+    else:
+        _may_insert(engine, place)
     return schema.SCHEMA_VERSION
+
+
+def _may_insert(engine, place: Place) -> None:
+    """PostgreSQL: a role that may only read is refused before the work, not after it."""
+    from sqlalchemy import text
+    with engine.connect() as conn, conn.begin():
+        for t in ("entries", "inputs", "parameters"):
+            if not conn.execute(text("SELECT has_table_privilege(:t, 'INSERT')"),
+                                {"t": t}).scalar():
+                raise HistoryError(place.error(f"cannot be written (this login may not add "
+                                               f"rows to {t}: a read-only role lists and "
+                                               "shows, it does not record)"))
 
 
 def _create_or_upgrade(engine, place: Place) -> None:
