@@ -743,7 +743,7 @@ case("check-result-sigma-string", "check {base}/run.tsv --against {d}/r.json "
 case("check-run-of-another-robot", "check {d}/r.tsv --against {base}/result.json",
      {"r.tsv": Rows(head=30), "r.tsv.json": Mut("run.tsv.json", set=(
          (("robot",), "Universal Robots UR5 (nominal DH)"), (("sample_file",), "r.tsv")))}, 2,
-     "a run of the robot")
+     "Universal Robots UR5")
 case("check-run-too-short", "check {d}/r.tsv --against {base}/result.json",
      {"r.tsv": Rows(head=5)}, 2, "cannot show a drift")
 case("rehearse-truth-of-another-robot", "rehearse --truth {d}/t.json --samples 5 --out {d}/o.tsv",

@@ -105,25 +105,6 @@ def command_provenance(scene, inputs) -> dict:
     return provenance(files, scene.name, scene.robot.name)
 
 
-def result_scene(doc: dict, given: str | None):
-    """The scene of a command reading a result: ``given`` (--scene), else the scene file
-    the result's provenance records (if it is here), else its scene's name, else the
-    default scene."""
-    from pathlib import Path
-
-    from planecal.model.scene import DEFAULT_SCENE, load_scene
-    if given:
-        return load_scene(given)
-    prov = doc.get("provenance") if isinstance(doc, dict) else None
-    prov = prov if isinstance(prov, dict) else {}
-    for i in prov.get("inputs") or []:
-        if isinstance(i, dict) and i.get("role") == "scene" and i.get("path") \
-                and Path(str(i["path"])).is_file():
-            return load_scene(str(i["path"]))
-    name = prov.get("scene")
-    return load_scene(name if isinstance(name, str) and name else DEFAULT_SCENE)
-
-
 NOT_RECORDED = 3  # the exit code of a command whose work is done but not recorded
 
 
@@ -150,24 +131,10 @@ def record(hist, entry, json_out: bool = False) -> int:
     return 0
 
 
-def consult(hist, read, default):
-    """``read(hist)``, a lookup in the history during the work; where the history fails,
-    ``default`` (the work goes on without it) and the failure kept for ``record``'s one
-    line."""
-    from planecal.history import HistoryError
-    if hist is None:
-        return default
-    try:
-        return read(hist)
-    except HistoryError as e:
-        if hist.unread is None:
-            hist.unread = e
-        return default
-
-
 def result_link(hist, path) -> tuple[str, int | None]:
     """(SHA-256 of a result file, the calibrate entry of ``hist`` that wrote it or None)."""
     from planecal.base.paths import file_sha256
+    from planecal.history import consult
     sha = file_sha256(path)
     return sha, consult(hist, lambda h: h.find_result(sha), None)
 
@@ -177,11 +144,3 @@ def parameter_rows(doc: dict) -> list:
     from planecal.history import ParameterRow
     from planecal.present.calibration import parameter_rows as rows
     return [ParameterRow(r.name, r.value, r.std, r.unit, r.status) for r in rows(doc)]
-
-
-def sample_worlds(paths) -> dict | list | None:
-    """The worlds the sample files were made in (their sidecars'): one, a list, or None."""
-    from planecal.sampling.runfiles import run_world
-    worlds = [w for w in (run_world(p) for p in paths) if w is not None]
-    unique = [w for k, w in enumerate(worlds) if w not in worlds[:k]]
-    return None if not unique else unique[0] if len(unique) == 1 else unique

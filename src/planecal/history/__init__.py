@@ -7,8 +7,8 @@ each backend is opened (``backend``, ``opening``), its values checked in and out
 ``estimation.drift`` and ``estimation.agreement``, the tables in ``present.history``."""
 from planecal.history.backend import HistoryError
 from planecal.history.place import DEFAULT_FILE, ENV, location
-from planecal.history.store import KINDS, Entry, History, InputRow, ParameterRow
+from planecal.history.store import KINDS, Entry, History, InputRow, ParameterRow, consult
 from planecal.history.values import check_label, clean
 
 __all__ = ["DEFAULT_FILE", "ENV", "KINDS", "Entry", "History", "HistoryError", "InputRow",
-           "ParameterRow", "check_label", "clean", "location"]
+           "ParameterRow", "check_label", "clean", "consult", "location"]

@@ -272,3 +272,17 @@ def _parameter(m, k: int, rd: Reader) -> ParameterRow:
     return ParameterRow(name, rd.number(m["value"], f"{where}.value"),
                         rd.number(m["std"], f"{where}.std"), rd.text(m["unit"], f"{where}.unit"),
                         rd.text(m["status"], f"{where}.status"))
+
+
+def consult(hist, read, default):
+    """``read(hist)``, a lookup in the history during a command's work (None: no history);
+    where the history fails, ``default`` (the work goes on without it), the failure kept
+    for the one line ``commands.history_options.record`` prints."""
+    if hist is None:
+        return default
+    try:
+        return read(hist)
+    except HistoryError as e:
+        if hist.unread is None:
+            hist.unread = e
+        return default
