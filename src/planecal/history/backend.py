@@ -100,13 +100,12 @@ def check_file(place: Place, inputs, write: bool, new: bool = True) -> None:
 def sqlite_engine(path: Path, write: bool, immutable: bool = False):
     """An engine on the file: read-write (writes begin IMMEDIATE) or read-only."""
     from sqlalchemy import create_engine, event
-    from sqlalchemy.pool import NullPool
     if write:
         url = f"sqlite+pysqlite:///{path}"
     else:
         opts = "mode=ro&immutable=1" if immutable else "mode=ro"
         url = f"sqlite+pysqlite:///file:{quote(str(path))}?{opts}&uri=true"
-    engine = create_engine(url, poolclass=NullPool, connect_args={"timeout": wait_s()})
+    engine = create_engine(url, connect_args={"timeout": wait_s()})
 
     @event.listens_for(engine, "connect")
     def _connect(dbapi_connection, _record):
@@ -195,14 +194,13 @@ def backup_file(place: Place, version: int) -> Path:
 
 def postgres_engine(place: Place):
     from sqlalchemy import create_engine
-    from sqlalchemy.pool import NullPool
     ms = int(wait_s() * 1000)
     try:
         import psycopg  # noqa: F401
     except ImportError:
         raise HistoryError(place.error("PostgreSQL needs psycopg 3: pip install "
                                        "'planecal[postgresql]'")) from None
-    return create_engine(place.url, poolclass=NullPool, connect_args={
+    return create_engine(place.url, pool_size=1, connect_args={  # one connection, reused
         "connect_timeout": max(2, int(wait_s())),
         "options": f"-c lock_timeout={ms} -c statement_timeout={ms}",
         "application_name": "planecal"})
