@@ -200,7 +200,7 @@ def postgres_engine(place: Place):
     except ImportError:
         raise HistoryError(place.error("PostgreSQL needs psycopg 3: pip install "
                                        "'planecal[postgresql]'")) from None
-    return create_engine(place.url, pool_size=1, connect_args={  # one connection, reused
+    return create_engine(place.url, pool_size=1, pool_pre_ping=True, connect_args={
         "connect_timeout": max(2, int(wait_s())),
         "options": f"-c lock_timeout={ms} -c statement_timeout={ms}",
         "application_name": "planecal"})

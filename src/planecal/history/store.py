@@ -17,6 +17,7 @@ no password, and the cause).
 """
 from __future__ import annotations
 
+import sqlite3
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -105,7 +106,7 @@ class History:
             engine, version = cls._engine(place, create, new)
         except HistoryError:
             raise
-        except (SQLAlchemyError, OSError) as e:
+        except (SQLAlchemyError, sqlite3.Error, OSError) as e:  # sqlite3: its backup API
             raise backend.failure(place, e, "cannot open it") from None
         return cls(engine, place, version)
 
@@ -119,7 +120,7 @@ class History:
             backend.create_file(place)
         engine = backend.sqlite_engine(place.path, write)
         try:
-            return engine, opening.prepare(engine, place, write)
+            return engine, opening.prepare(engine, place, write, new)
         except SQLAlchemyError as e:
             wal = place.path.with_name(place.path.name + "-wal")
             why = str(e).lower()
@@ -141,7 +142,7 @@ class History:
                 yield conn
         except HistoryError:
             raise
-        except (SQLAlchemyError, OSError) as e:
+        except (SQLAlchemyError, sqlite3.Error, OSError) as e:
             raise backend.failure(self.place, e, doing) from None
 
     # ----- writing -----
