@@ -32,3 +32,70 @@ def test_realistic_twin_keeps_a_turned_base_frame(public_robots):
         # six std of the profile's own draw, per axis
         assert _rotation_angle(E[:3, :3]) < 6 * np.sqrt(3) * g.base.rotation_rad
         assert np.linalg.norm(E[:3, 3]) < 6 * np.sqrt(3) * g.base.translation_m
+
+
+def _lines(text: str, needle: str) -> list[str]:
+    return [ln for ln in text.splitlines() if needle in ln]
+
+
+def test_irb4600_import_repairs_inertias_snaps_the_wrist_and_allows_touching_hulls(public_robots):
+    """The IRB 4600's URDF (compas-fab): negative inertia diagonals are left out with one
+    warning naming each link (before: imported, then MuJoCo's traceback in the twin);
+    joint_6's pitch 1.57076 is snapped, said with the flange's move, so the wrist is
+    spherical and IK closed-form (before: silently numeric); link 4's hull swallowing
+    link 6's is found by sampling and allowed with its reason in shapes.json (before: 0
+    of 200 configurations clear, and scene new blamed the plates)."""
+    from planecal.model.ik import solver_name
+    folder, out, err = public_robots.get("irb4600")
+    robot = load_robot(folder)
+    bad = _lines(err, "<inertia> is no rigid body's")
+    assert len(bad) == 6 and all(f"link 'link_{k}'" in "".join(bad) for k in range(1, 7))
+    doc = json.loads((folder / "robot.json").read_text())
+    assert len(doc["masses"]) == 6 and not any("inertia_kg_m2" in m for m in doc["masses"])
+    snap = _lines(err, "joint origins joint_6 pitch 1.57076")
+    assert len(snap) == 1 and "turns 36.3 urad" in snap[0], err
+    assert solver_name(robot) == "analytic"
+    shapes = json.loads((folder / "shapes.json").read_text())
+    pairs = {frozenset(p["pieces"]): p["why"] for p in shapes["allowed_pairs"]}
+    assert frozenset(("link_4_collision", "link_6_collision")) in pairs
+    assert "200 of 200 random configurations" in pairs[frozenset(("link_4_collision",
+                                                                   "link_6_collision"))]
+    (line,) = _lines(out, "self-collision:")
+    assert line.startswith("self-collision: 0% of 200") and "95% with the 1" in line
+
+
+def test_irb4600_twin_builds_and_its_default_cell_is_placed(public_robots, tmp_path):
+    """With the inertias repaired the twin's MuJoCo model compiles (before: "inertia must
+    have positive eigenvalues"), and scene new places a plate (before: 0% of poses clear
+    at every placement)."""
+    from planecal.cli import main
+    from planecal.twin.mjcf import robot_spec
+    folder = public_robots.get("irb4600")[0]
+    model = robot_spec(load_robot(folder)).compile()
+    assert model.nbody >= 8
+    cell = tmp_path / "cell.json"
+    assert main(["scene", "new", "--robot", str(folder), "--out", str(cell), "-q"]) == 0
+
+
+def test_puma_without_collision_or_velocities_imports_with_warnings(public_robots):
+    """A URDF without <collision>, masses or velocities (the PUMA 560 of rtb-data): the
+    visual hulls are the checker's envelopes, said in one line naming the links, and the
+    controller's speed a stated default; its 1.570796325 rad angles are snapped (before:
+    the import refused for want of velocities)."""
+    folder, out, err = public_robots.get("puma560")
+    (env,) = _lines(err, "have no <collision>")
+    assert "link1, link2, link3, link4, link5, link6, link7" in env
+    (vel,) = _lines(err, "no velocity limit")
+    assert "j1, j2, j3, j4, j5, j6" in vel and "1 rad/s" in vel
+    (snap,) = _lines(err, "joint origins j1 roll 1.570796325")
+    shapes = json.loads((folder / "shapes.json").read_text())
+    col = [p for p in shapes["pieces"] if p["use"] == "collision"]
+    assert len(col) == 7 and all("visual element" in p["what"] for p in col)
+    from planecal.cli import main
+    import contextlib
+    import io
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["robot", "show", str(folder)]) == 0
+    assert "collision: checked: 7 pieces" in buf.getvalue() and "7 envelope(s) are visual hulls" \
+        in buf.getvalue()

@@ -235,6 +235,25 @@ def repeatability_line(robot) -> str:
             "robot.json's repeatability_mm)")
 
 
+def collision_status(robot) -> str:
+    """What the collision checker checks of the arm, in one line (shapes.json)."""
+    import json
+
+    from planecal.model.geometry import robot_shapes, shapes_path
+    try:
+        shapes = robot_shapes(robot)
+    except InputError:
+        return "NOT CHECKED: no shapes.json (the twin and the checker need one)"
+    if shapes.unchecked:
+        return f"NOT CHECKED: {shapes.unchecked}"
+    doc = json.loads(shapes_path(robot).read_text(encoding="utf-8"))
+    hulls = [p["name"] for p in doc["pieces"] if "visual element" in (p.get("what") or "")]
+    return (f"checked: {sum(p.use in ('both', 'collision') for p in shapes.pieces)} pieces, "
+            f"{len(shapes.allowed_pairs)} pair(s) allowed (shapes.json says why)"
+            + (f"; {len(hulls)} envelope(s) are visual hulls (the URDF has no <collision> "
+               "there)" if hulls else ""))
+
+
 def _chain_table(robot) -> None:
     k = robot.kinematics
     print(f"{'joint':<6} {'alpha_deg':>10} {'a_mm':>9} {'beta_deg':>9} {'theta0_deg':>10} "
@@ -269,7 +288,8 @@ def _show(args) -> int:
             "reach_m": reach_m(robot.kinematics), "masses": len(robot.masses),
             "shapes": parts, "errors": {p: profile_source(p, robot) for p in ("ideal", "realistic")},
             "repeatability_mm": robot.repeatability_m * 1e3,
-            "repeatability_source": "robot.json" if robot.repeatability_given else "default"}
+            "repeatability_source": "robot.json" if robot.repeatability_given else "default",
+            "collision": collision_status(robot)}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -280,6 +300,7 @@ def _show(args) -> int:
     print("shapes: " + ("none (no shapes.json: the twin and the checker need them)" if parts is None
                         else f"{parts['visual']} visual, {parts['collision']} collision pieces")
           + f"; masses: {len(robot.masses)}")
+    print(f"collision: {info['collision']}")
     print(repeatability_line(robot))
     for p, src in info["errors"].items():
         print(f"error profile {p}: {src}")

@@ -10,7 +10,7 @@
   of 90 deg is taken as that multiple (the URDF's rounding: 1.57076 for pi/2 is 3.7e-5
   rad short, and breaks a spherical wrist by microns, so that no closed-form inverse
   kinematics applies); each snap is reported with how far it moves the flange.
-* ``inertia_problem``: an inertia a rigid body cannot have (an eigenvalue <= 0, or one
+* ``inertia_problem``: an inertia a rigid body cannot have (a negative eigenvalue, or one
   above the sum of the other two: MuJoCo refuses both); the import leaves it out with a
   warning (the link is a point mass at its centre of mass: the gravity torque, all the
   twin takes from it, is unchanged).
@@ -126,8 +126,8 @@ def inertia_problem(J: np.ndarray) -> str | None:
     """Why a symmetric 3x3 inertia is not a rigid body's (module docstring), or None."""
     ev = np.linalg.eigvalsh(0.5 * (J + J.T))
     scale = max(float(np.abs(ev).max()), 1e-300)
-    if ev.min() <= 1e-12 * scale:
-        return f"eigenvalue {ev.min():.4g} kg m^2, an inertia's are positive"
+    if ev.min() < -1e-12 * scale:  # 0: a point mass or a thin rod, which the twin takes
+        return f"eigenvalue {ev.min():.4g} kg m^2, an inertia's are not negative"
     if ev[2] > ev[0] + ev[1] + 1e-9 * scale:
         return (f"eigenvalues {ev[0]:.4g}, {ev[1]:.4g}, {ev[2]:.4g} kg m^2 break the "
                 "triangle inequality, the largest at most the sum of the others")

@@ -78,6 +78,7 @@ class Imported:
     model: object = None  # yourdfpy's Robot, right angles snapped: what the chain is of
     snapped: list = field(default_factory=list)  # (joint, axis, written, snapped)
     snap_rad: float = SNAP_RAD
+    unchecked: str | None = None  # why the arm has no collision pieces (shapes.json's)
 
 
 def _yourdfpy(path: Path, **kw):
@@ -299,8 +300,7 @@ def shapes_and_masses(path: Path, imp: Imported, u, packages: dict, visual_from:
     as the visuals too: for a URDF whose visual meshes are missing or unreadable)."""
     W = world_poses(u.robot, imp.root)
     G = link_frames(imp.kin, np.zeros(N))
-    turned = {imp.root, *(j.child for j in imp.joints)}  # the links that must have a shape
-    from_visual, shapeless = [], []
+    from_visual = []
     for link in u.robot.links:
         body = imp.body_of.get(link.name)
         if body is None:
@@ -310,8 +310,6 @@ def shapes_and_masses(path: Path, imp: Imported, u, packages: dict, visual_from:
         if not collisions and link.visuals:  # the checker's envelope: the visual's hull
             collisions, what = link.visuals, "the visual element's hull (no <collision>)"
             from_visual.append(link.name)
-        elif not collisions and link.name in turned:
-            shapeless.append(link.name)
         kinds = (("visual", collisions if visual_from == "collision" else link.visuals),
                  ("collision", collisions))
         for use, elements in kinds:
@@ -342,10 +340,18 @@ def shapes_and_masses(path: Path, imp: Imported, u, packages: dict, visual_from:
             f"links {', '.join(from_visual)} have no <collision>: the collision checker takes "
             "their visual elements' convex hulls (grown by its margin) as their envelopes; "
             "check them against the real arm")
-    if shapeless:
+    shaped = {p.link for p in imp.pieces if p.use == "collision"}
+    bare = [b for b in range(N + 1) if b not in shaped]
+    if not shaped:
+        imp.unchecked = (f"{path.name} has no <collision> or <visual> elements: the checker "
+                         "sees only the tool and the cell, never the arm's links")
+        imp.warnings.append(f"the robot is not checked for collisions: {imp.unchecked} "
+                            "(shapes.json says so; give it pieces, docs/ROBOTS.md)")
+    elif bare:
+        links = {b: [n for n, v in imp.body_of.items() if v == b] for b in bare}
         imp.warnings.append(
-            f"links {', '.join(shapeless)} have no <collision> or <visual>: the collision "
-            "checker cannot see them (not checked against the arm or the cell)")
+            "no shape on " + "; ".join(f"body {b} (links {', '.join(links[b])})" for b in bare)
+            + ": the collision checker cannot see those links")
 
 
 def _piece(path: Path, name: str, body: int, use: str, geom, M: np.ndarray,
@@ -521,7 +527,8 @@ def shapes_document(path: Path, imp: Imported) -> dict:
                       "link frames (planecal robot import)",
             "pieces": [{"name": p.name, "link": p.link, "use": p.use,
                         "primitives": [p.primitive], **({"what": p.what} if p.what else {})}
-                       for p in imp.pieces]}
+                       for p in imp.pieces],
+            **({"unchecked": imp.unchecked} if imp.unchecked else {})}
 
 
 def write(out: Path, robot_doc: dict, shapes_doc: dict, imp: Imported) -> None:
