@@ -99,3 +99,49 @@ def test_puma_without_collision_or_velocities_imports_with_warnings(public_robot
         assert main(["robot", "show", str(folder)]) == 0
     assert "collision: checked: 7 pieces" in buf.getvalue() and "7 envelope(s) are visual hulls" \
         in buf.getvalue()
+
+
+def test_scene_new_adds_plates_until_the_cell_identifies(public_robots, tmp_path, capsys):
+    """The KR 210's one-plate default cell leaves delta2 0.9995 correlated with the
+    plate's normal (its predicted std moves the tool point 2.5 mm): scene new says so and
+    adds a plate (before: it wrote the one-plate cell without a word), then states the
+    predicted tool error and the robot time per sample of the default run."""
+    from planecal.cli import main
+    folder = public_robots.get("kr210")[0]
+    cell = tmp_path / "cell.json"
+    assert main(["scene", "new", "--robot", str(folder), "--out", str(cell)]) == 0
+    cap = capsys.readouterr()
+    (first,) = _lines(cap.err, "not enough: 1 plate(s), level offsets")
+    assert "delta2's predicted std" in first and "with n1_x" in first
+    doc = json.loads(cell.read_text())
+    assert len(doc["plates"]) == 2
+    (checked,) = _lines(cap.out, "checked: 2 plate(s), level offsets")
+    assert "identifiable" in checked and "predicted tool error" in checked
+    assert "s per sample (thesis_final: 17.1 s)" in checked
+    assert "Checked by planecal scene new" in doc["description"]
+
+
+def test_scene_new_refuses_a_level_no_default_cell_identifies(public_robots, tmp_path, capsys):
+    from planecal.cli import main
+    folder = public_robots.get("kr210")[0]
+    cell = tmp_path / "cell.json"
+    assert main(["scene", "new", "--robot", str(folder), "--out", str(cell), "--level",
+                 "nonkinematic", "-q"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no default cell of up to 3 plates" in err, err
+    assert "3 plate(s), level nonkinematic" in err and "not identifiable" in err
+    assert not cell.exists()
+
+
+def test_cell_check_on_the_thesis_cell_and_the_ur5_table():
+    """The bound is met where the project's own cells calibrate (thesis_final, the
+    UR5's table): the predicted tool error of their default runs is the noise model's
+    few hundredths of a mm, and thesis_final's robot time is the reference's."""
+    from planecal.model.scene import load_scene
+    from planecal.studies.cell_check import REFERENCE_S_PER_SAMPLE, check_cell
+    from repo import repo_path
+    v = check_cell(load_scene(repo_path("scenes", "thesis_final.json")))
+    assert v.ok and v.tool_mm < 0.1, v.line()
+    assert v.seconds_per_sample == pytest.approx(REFERENCE_S_PER_SAMPLE, rel=0.02)
+    u = check_cell(load_scene(repo_path("scenes", "ur5_table.json")))
+    assert u.ok and u.tool_mm < 0.1, u.line()
