@@ -126,6 +126,7 @@ def run(args) -> int:
 
 
 def _import(args) -> int:
+    from planecal.io import urdf_description as ud
     from planecal.io import urdf_import as ui
     from planecal.model.geometry import robot_link_meshes
     from planecal.model.robot import load_robot
@@ -140,10 +141,10 @@ def _import(args) -> int:
                              else args.snap_rad)
     ui.shapes_and_masses(path, imp, u, _packages(args.package),
                          "collision" if args.visual == "collision" else "visual")
-    enc = ui.EncoderSettings(args.counts_per_rev, args.encoder_bits, args.tick_s,
+    enc = ud.EncoderSettings(args.counts_per_rev, args.encoder_bits, args.tick_s,
                              args.speed_fraction, args.max_step_counts, args.trip_step_counts,
                              args.repeatability_mm, args.payload_kg, args.controller)
-    doc = ui.description(path, imp, args.name or imp.name, enc)
+    doc = ud.description(path, imp, args.name or imp.name, enc)
     doc["encoder"]["coupling"] = coupling  # checked (non-singular C) with the rest on load
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:
