@@ -215,7 +215,7 @@ def _summary(robot, imp, worst: float, parts: dict, clear) -> None:
     if clear is not None:
         before, after, n, samples = clear
         print(f"self-collision: {before:.0%} of {samples} random configurations clear of the "
-              f"arm itself" + (f", {after:.0%} with the {n} always-touching pair(s) allowed"
+              f"arm itself" + (f", {after:.0%} with the {n} pair(s) found allowed"
                                if n else ""))
     print(repeatability_line(robot))
     for note in imp.notes:

@@ -1,12 +1,17 @@
-"""Pairs of a robot's collision pieces that touch in (nearly) every configuration: what
-``planecal robot import`` allows in shapes.json, each with its reason.
+"""Pairs of a robot's collision pieces that touch in (nearly) every configuration, or
+that the structure keeps side by side: what ``planecal robot import`` allows in
+shapes.json, each with its reason.
 
 A URDF's collision meshes are often coarse hulls: the IRB 4600's link 4 swallows link 6,
 so no configuration of the arm is clear of itself and every plate placement of
 ``scene new`` fails. The checker cannot tell such a pair apart at any angle, so checking
-it says nothing about the arm: sampled at ``SAMPLES`` random configurations within the
-limits, a pair within the checker's clearance in at least ``ALWAYS`` of them is allowed
-(not checked), as ``models/ur5/shapes.json`` allows the UR's nested wrist by hand.
+it says nothing about the arm. Sampled at ``SAMPLES`` random configurations within the
+limits, a pair is allowed (not checked) when it is within the checker's clearance in at
+least ``ALWAYS`` of them, or when it is within it in some and never more than
+``NESTED_M`` apart in any: the structure holds the two side by side whatever the joints
+do (a UR's nested wrist: forearm and wrist 2 stay 0-11 mm apart on the UR10, 0-24 mm on
+the UR10e; base and upper arm 0-12 mm), so the checker's verdict on them is the hulls'
+margin, not the arm's motion -- as ``models/ur5/shapes.json`` allows those pairs by hand.
 """
 from __future__ import annotations
 
@@ -16,29 +21,42 @@ from planecal.model.robot import Robot
 
 SAMPLES = 200
 ALWAYS = 0.95  # share of the sampled configurations a pair must touch in to be allowed
+NESTED_M = 0.03  # a pair never farther apart than this is held side by side (allowed)
 
 
 def always_touching(robot: Robot, samples: int = SAMPLES, seed: int = 0,
-                    allowed=()) -> tuple[list[dict], float, float]:
+                    links=None) -> tuple[list[dict], float, float]:
     """(allowed pairs as shapes.json writes them, {pieces, why}; the share of the sampled
-    configurations clear of the arm itself before, and after allowing them). ``allowed``:
-    pairs shapes.json allows already."""
+    configurations clear of the arm itself before, and after allowing them). ``links``:
+    the robot's collision pieces (``geometry.robot_link_meshes``) without the pairs its
+    shapes.json allows (default: its shapes.json, those pairs skipped)."""
     from planecal.safety.collision import CollisionWorld
-    world = CollisionWorld(None, robot=robot, tools=[], static=[], allowed_pairs=allowed)
+    world = CollisionWorld(None, robot=robot, links=links, tools=[], static=[])
     pairs = world.pairs
     if not pairs:
         return [], 1.0, 1.0
     rng = np.random.default_rng(seed)
     Q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1], (samples, robot.n_joints))
-    touch = np.array([world.distances(q) <= world.clearance_m for q in Q])  # (samples, pairs)
+    D = np.array([world.distances(q) for q in Q])  # (samples, pairs) [m]
+    touch = D <= world.clearance_m
     share = touch.mean(axis=0)
-    keep = share >= ALWAYS
-    out = [{"pieces": [a, b],
-            "why": (f"within the checker's clearance ({world.clearance_m * 1e3:g} mm) in "
-                    f"{int(touch[:, k].sum())} of {samples} random configurations: their "
-                    "hulls overlap whatever the joints do, so checking them says nothing "
-                    "(found by planecal robot import)")}
-           for k, (a, b, _) in enumerate(pairs) if keep[k]]
+    always = share >= ALWAYS
+    nested = ~always & touch.any(axis=0) & (D.max(axis=0) <= NESTED_M)
+    keep = always | nested
+    out = []
+    for k, (a, b, _) in enumerate(pairs):
+        n = f"within the checker's clearance ({world.clearance_m * 1e3:g} mm) in " \
+            f"{int(touch[:, k].sum())} of {samples} random configurations"
+        if always[k]:
+            why = (f"{n}: their hulls overlap whatever the joints do, so checking them says "
+                   "nothing")
+        elif nested[k]:
+            why = (f"{n} and never more than {D[:, k].max() * 1e3:.1f} mm apart in any: the "
+                   "structure holds them side by side (a nested joint), so the checker's "
+                   "verdict on them is the hulls' margin, not the arm's motion")
+        else:
+            continue
+        out.append({"pieces": [a, b], "why": f"{why} (found by planecal robot import)"})
     before = float((~touch.any(axis=1)).mean())
     after = float((~touch[:, ~keep].any(axis=1)).mean()) if (~keep).any() else 1.0
     return out, before, after
