@@ -158,3 +158,28 @@ def test_found_pairs_are_those_the_ur5_allows_by_hand():
     by_hand = {frozenset(p) for p in robot_shapes(robot).allowed_pairs}
     assert {frozenset(p["pieces"]) for p in found} == by_hand
     assert before < 0.5 < after
+
+
+def test_scene_new_allows_tool_pieces_a_wrist_hull_swallows(public_robots, tmp_path):
+    """The PUMA 560's wrist (link5's visual hull, its only envelope) holds the flange
+    adapter in every configuration: scene new finds it by sampling and the scene allows
+    the pair with its reason, which the collision checker then skips (before: every
+    target was rejected for that pair; the cell failed at 0 %)."""
+    from pathlib import Path
+    from planecal.safety.collision import CollisionWorld
+    from planecal.sampling.default_cell import (PLATE_M, _load, document, tool_contacts,
+                                                workspace)
+    robot = load_robot(public_robots.get("puma560")[0])
+    ws = workspace(robot)
+    found = tool_contacts(robot, str(public_robots.get("puma560")[0]), "x", tmp_path, 0.0,
+                          ws, PLATE_M, lambda m: None)
+    pairs = {frozenset(p["pieces"]): p["why"] for p in found}
+    assert frozenset(("link5_collision", "flange_adapter")) in pairs
+    assert "200 of 200 random configurations" in pairs[frozenset(("link5_collision",
+                                                                   "flange_adapter"))]
+    from planecal.sampling.default_cell import plate
+    doc = document(str(Path(public_robots.get("puma560")[0]).resolve()), "x",
+                   [plate("plate1", [0.5, 0.0, 0.4], 0.0, 15.0, PLATE_M, 0.0)], 0.0, "",
+                   allowed=found)
+    world = CollisionWorld(_load(doc, tmp_path))
+    assert ("link5_collision", "flange_adapter", "allowed") in world.skipped_pairs

@@ -25,38 +25,41 @@ NESTED_M = 0.03  # a pair never farther apart than this is held side by side (al
 
 
 def always_touching(robot: Robot, samples: int = SAMPLES, seed: int = 0,
-                    links=None) -> tuple[list[dict], float, float]:
+                    links=None, scene=None) -> tuple[list[dict], float, float]:
     """(allowed pairs as shapes.json writes them, {pieces, why}; the share of the sampled
     configurations clear of the arm itself before, and after allowing them). ``links``:
     the robot's collision pieces (``geometry.robot_link_meshes``) without the pairs its
-    shapes.json allows (default: its shapes.json, those pairs skipped)."""
+    shapes.json allows (default: its shapes.json, those pairs skipped). With a ``scene``:
+    the pairs of its tool's pieces with the arm's instead (``scene new``; the arm's own
+    pairs are its shapes.json's business)."""
     from planecal.safety.collision import CollisionWorld
-    world = CollisionWorld(None, robot=robot, links=links, tools=[], static=[])
-    pairs = world.pairs
-    if not pairs:
+    world = CollisionWorld(scene, robot=robot, links=links, static=[],
+                           tools=None if scene is not None else [])
+    tool = {p.name for p in world.parts if p.kind == "tool"}
+    mine = np.array([scene is None or bool(tool & {a, b}) for a, b, _ in world.pairs], bool)
+    if not mine.any():
         return [], 1.0, 1.0
     rng = np.random.default_rng(seed)
     Q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1], (samples, robot.n_joints))
-    D = np.array([world.distances(q) for q in Q])  # (samples, pairs) [m]
+    D = np.array([world.distances(q) for q in Q])[:, mine]  # (samples, pairs) [m]
+    names = [p for p, m in zip(world.pairs, mine) if m]
     touch = D <= world.clearance_m
-    share = touch.mean(axis=0)
-    always = share >= ALWAYS
+    always = touch.mean(axis=0) >= ALWAYS
     nested = ~always & touch.any(axis=0) & (D.max(axis=0) <= NESTED_M)
     keep = always | nested
     out = []
-    for k, (a, b, _) in enumerate(pairs):
-        n = f"within the checker's clearance ({world.clearance_m * 1e3:g} mm) in " \
-            f"{int(touch[:, k].sum())} of {samples} random configurations"
-        if always[k]:
-            why = (f"{n}: their hulls overlap whatever the joints do, so checking them says "
-                   "nothing")
-        elif nested[k]:
-            why = (f"{n} and never more than {D[:, k].max() * 1e3:.1f} mm apart in any: the "
-                   "structure holds them side by side (a nested joint), so the checker's "
-                   "verdict on them is the hulls' margin, not the arm's motion")
-        else:
+    for k, (a, b, _) in enumerate(names):
+        if not keep[k]:
             continue
-        out.append({"pieces": [a, b], "why": f"{why} (found by planecal robot import)"})
+        n = (f"within the checker's clearance ({world.clearance_m * 1e3:g} mm) in "
+             f"{int(touch[:, k].sum())} of {samples} random configurations")
+        why = (f"{n}: their hulls overlap whatever the joints do, so checking them says "
+               "nothing" if always[k] else
+               f"{n} and never more than {D[:, k].max() * 1e3:.1f} mm apart in any: the "
+               "structure holds them side by side (a nested joint), so the checker's "
+               "verdict on them is the hulls' margin, not the arm's motion")
+        out.append({"pieces": [a, b], "why": f"{why} (found by planecal "
+                                             f"{'scene new' if scene else 'robot import'})"})
     before = float((~touch.any(axis=1)).mean())
     after = float((~touch[:, ~keep].any(axis=1)).mean()) if (~keep).any() else 1.0
     return out, before, after

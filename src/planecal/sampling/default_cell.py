@@ -98,8 +98,9 @@ def _r(v) -> list[float]:
 
 
 def document(robot_ref: str, name: str, plates: list[dict], floor_z: float,
-             description: str, positions: dict | None = None) -> dict:
+             description: str, positions: dict | None = None, allowed=()) -> dict:
     return {"format": "planecal-scene/1", "name": name, "description": description,
+            **({"allowed_pairs": list(allowed)} if allowed else {}),
             "robot": robot_ref,
             "sensor": {"origin_m": [0.0, 0.0, SENSOR_OUT_M], "phi_y_rad": SENSOR_PITCH,
                        "phi_z_rad": 0.0, "range_mm": [65.0, 95.0]},
@@ -174,11 +175,12 @@ def default_cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder:
     best = None
     middle = (DISTANCES[len(DISTANCES) // 2], HEIGHTS[len(HEIGHTS) // 2])
     az = ws["azimuth"]
+    ws["allowed"] = tool_contacts(robot, robot_ref, name, folder, floor_z, ws, size, log)
     for f, h in sorted(((f, h) for f in DISTANCES for h in HEIGHTS),  # ties: the middle
                        key=lambda fh: abs(fh[0] - middle[0]) + abs(fh[1] - middle[1])):
         c = [f * ws["reach"] * np.cos(az), f * ws["reach"] * np.sin(az), floor_z + h * above]
         doc = document(robot_ref, name, [plate("plate1", c, az, TILT_DEG, size, floor_z)],
-                       floor_z, "")
+                       floor_z, "", allowed=ws["allowed"])
         sc = score(_load(doc, folder))
         log(f"plate at {f:.2f} of the reach, {c[2] - floor_z:.2f} m up (at least): {sc:.0%} of "
             f"{POSES} poses reachable and clear")
@@ -201,6 +203,22 @@ def default_cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder:
                     "plates by hand (docs/FORMATS.md) and check them with planecal layouts")
 
 
+def tool_contacts(robot: Robot, robot_ref: str, name: str, folder: Path, floor_z: float,
+                  ws: dict, size, log) -> list[dict]:
+    """The pairs of the tool's pieces with the arm's that touch whatever the joints do
+    (``safety.self_contact``: a wrist hull that swallows the flange swallows the adapter
+    on it too), each logged with its reason: the scene allows them."""
+    from planecal.safety.self_contact import always_touching
+    c = [0.5 * ws["reach"], 0.0, floor_z + 0.5]
+    doc = document(robot_ref, name, [plate("plate1", c, 0.0, TILT_DEG, size, floor_z)],
+                   floor_z, "")
+    found, _, _ = always_touching(robot, scene=_load(doc, folder))
+    for p in found:
+        log(f"the arm's {p['pieces'][0]} and the tool's {p['pieces'][1]}: allowed (not "
+            f"checked): {p['why']}")
+    return found
+
+
 def _cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder: Path,
           floor_z: float, log, ws: dict, size, f: float, c) -> tuple[dict, object]:
     """The default cell's document of ``n_plates`` plates, the first at ``c``, and its
@@ -216,7 +234,7 @@ def _cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder: Path,
             f"{ws['reach']:.2f} m horizontal reach, tilted {TILT_DEG:g} deg (the others more); "
             f"the sensor {SENSOR_OUT_M * 1e3:.0f} mm out on the flange axis, the beam "
             f"pitched {np.rad2deg(SENSOR_PITCH):.0f} deg off it; no obstacles.")
-    doc = document(robot_ref, name, plates, floor_z, desc)
+    doc = document(robot_ref, name, plates, floor_z, desc, allowed=ws["allowed"])
     scene = _load(doc, folder)
     for i in range(1, len(plates)):
         log(f"plate{i + 1}: {score(scene, i):.0%} of {POSES} poses reachable and clear")
