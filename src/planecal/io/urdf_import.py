@@ -40,6 +40,7 @@ from planecal.io.urdf_checks import SNAP_RAD, check_tree, inertia_problem, snap_
 from planecal.model.kinematics import Kinematics, fk, from_axes, link_frames, rpy_angles
 
 MATCH_M = 1e-9  # the imported flange's largest difference from the URDF's (m and rotation)
+SILENT_RAD = 1e-9  # snaps this small (pi/2 written to 11 digits) are not worth a warning
 N = 6
 REFUSED = {"prismatic": "a prismatic joint (planecal models revolute arms)",
            "continuous": "continuous (no limits): planecal needs lower and upper limits on "
@@ -279,7 +280,7 @@ def check_flange(path: Path, imp: Imported, kin: Kinematics | None = None, n: in
     if not worst <= MATCH_M:
         raise RunFailed(f"{path}: the imported chain's flange is {worst:.3g} m off the URDF's "
                         f"(at most {MATCH_M:g}): not imported")
-    if imp.snapped:
+    if imp.snapped and max(abs(w - n) for _, _, w, n in imp.snapped) > SILENT_RAD:
         _, move, turn = _flange_difference(_yourdfpy(path, build_scene_graph=True), imp, kin,
                                            n, seed)
         which = ", ".join(f"{joint} {axis} {was!r}" for joint, axis, was, _ in imp.snapped)
