@@ -218,3 +218,21 @@ def test_scene_new_warns_of_a_robot_time_far_above_the_thesis_cell(tmp_path, cap
     assert per > 3 * 17.1
     (warn,) = _lines(cap.err, "of robot time per sample is far above thesis_final's 17.1 s")
     assert f"{per * 150 / 3600:.1f} h" in warn
+
+
+def test_generic_profile_stiffens_an_arm_heavier_than_its_size_class(public_robots):
+    """The KR 210's URDF carries 3,300 kg of moving links: its generic joints are stiffened
+    by their gravity torque over the MC70's, so their deflection class in radians is the
+    MC70's (before: stiffness by reach alone, 6.6x the MC70's deflection: AP after an
+    offsets calibration 4.9 mm)."""
+    from planecal.twin.generic_profile import gravity_class
+    from planecal.twin.profile import load_profile
+    robot = load_robot(public_robots.get("kr210")[0])
+    prof, mc = load_profile("realistic", robot).doc, load_profile("realistic",
+                                                                  load_robot("mc70")).doc
+    pl = (mc.payload.mass_kg, np.array(mc.payload.com_m))
+    own, ref = gravity_class(robot, pl), gravity_class(load_robot("mc70"), pl)
+    for j in (1, 2):
+        assert own[j] / ref[j] > 5
+        k, k_mc = prof.joints.stiffness_nm_per_rad[j], mc.joints.stiffness_nm_per_rad[j]
+        assert own[j] / k == pytest.approx(ref[j] / k_mc, rel=1e-12)

@@ -6,15 +6,17 @@ profile"):
 * lengths (the geometry's a and d stds, the base and flange frame translations) by the
   robot's reach over the MC70's (``kinematics.reach_m``: 2.83 m);
 * joint stiffness and the torque that holds a loaded joint on one flank (backlash
-  preload), joint by joint, by the gravity torque the robot's own masses put on that
-  joint over the MC70's on its (``model.gravity.joint_torques``, the profile's sensor on
-  the flange, the 90th percentile of |torque| over ``TORQUE_SAMPLES`` random
-  configurations within the limits): a joint is built for the torque it carries, so its
-  deflection under gravity stays the MC70's class in radians (by reach times payload over
-  2.83 m and 70 kg, the torque class, where robot.json has no masses; without
-  ``payload_kg`` by reach alone, and it says so). Reach alone made a KR 210 (3,300 kg of
-  moving links in its URDF) 6.6 times as compliant as the MC70 in radians: 4.9 mm at the
-  tool after an offsets calibration, against the MC70's class;
+  preload) by the torque class a joint is built for: reach times payload over the MC70's
+  (2.83 m, 70 kg; without ``payload_kg`` in robot.json by reach alone, and it says so),
+  or, joint by joint, the gravity torque the robot's own masses put on that joint over
+  the MC70's on its where that is larger (``model.gravity.joint_torques``, the profile's
+  sensor on the flange, the 90th percentile of |torque| over ``TORQUE_SAMPLES`` random
+  configurations within the limits): a joint carries its arm, so an arm heavier than its
+  size class deflects no more than the MC70 in radians. By size alone a KR 210 (3,300 kg
+  of moving links in its URDF) was 6.6 times as compliant as the MC70: 4.9 mm at the
+  tool after an offsets calibration. Not the masses alone: ROS-Industrial's KUKA
+  descriptions carry 2 kg placeholders on every link, which would make a KR 120's joints
+  13 times softer than the MC70's;
 * the joints' repeatability by the robot's over the MC70's 0.07 mm (the same 0.81 share
   of it): robot.json's datasheet figure, or where it states none the MC70's scaled by
   reach (``model.robot.default_repeatability_m``, the one default every consumer reads);
@@ -71,7 +73,7 @@ def scaling(robot, payload=None) -> dict:
     if robot.masses:
         ref = gravity_class(load_robot("mc70"), payload)
         own = gravity_class(robot, payload)
-        joints = [float(o / r) if r > 0 else torque for o, r in zip(own, ref)]
+        joints = [max(torque, float(o / r)) if r > 0 else torque for o, r in zip(own, ref)]
     return {"length": length, "payload": pay, "torque": torque, "repeatability": rep,
             "joints": joints}
 
@@ -85,10 +87,11 @@ def generic_document(name: str, robot) -> tuple[dict, str]:
     if name == "ideal":
         how = (f"the generic 'ideal' profile ({path}), used as it is (it holds no number "
                "of the robot's own)")
-    elif f["joints"] is not None:
+    elif f["joints"] is not None and max(f["joints"][1:3]) > f["torque"]:
         how = (f"the generic '{name}' profile ({path}), the MC70's scaled by reach "
                f"{f['length']:.3g}, the joints' stiffness by their gravity torque over the "
-               f"MC70's (J2 {f['joints'][1]:.3g}, J3 {f['joints'][2]:.3g}: robot.json's masses)")
+               f"MC70's where above the size class {f['torque']:.3g} (J2 {f['joints'][1]:.3g}, "
+               f"J3 {f['joints'][2]:.3g}: robot.json's masses)")
     else:
         how = (f"the generic '{name}' profile ({path}), the MC70's scaled by reach "
                f"{f['length']:.3g}" + (f" and payload {f['payload']:.3g}" if f["payload"]
