@@ -72,7 +72,7 @@ def run(args) -> int:
     ref = robot_reference(args.robot, out)
     quiet = args.quiet
     log = (lambda m: None) if quiet else (lambda m: print(m, file=sys.stderr))
-    unchecked = collision_status(robot)
+    unchecked = _unchecked(robot)
     if unchecked:
         print(f"planecal scene: warning: {robot.name}'s links are not checked for collisions "
               f"({unchecked}): the cell's poses are checked for the tool and the plates only",
@@ -103,7 +103,7 @@ def run(args) -> int:
     return 0
 
 
-def collision_status(robot) -> str | None:
+def _unchecked(robot) -> str | None:
     """Why the robot's links are not checked for collisions (shapes.json), or None."""
     from planecal.model.geometry import robot_shapes
     try:
