@@ -103,7 +103,7 @@ def test_puma_without_collision_or_velocities_imports_with_warnings(public_robot
 
 def test_scene_new_adds_plates_until_the_cell_identifies(public_robots, tmp_path, capsys):
     """The KR 210's one-plate default cell leaves delta2 0.9995 correlated with the
-    plate's normal (its predicted std moves the tool point 2.5 mm): scene new says so and
+    plate's normal (its predicted std moves the tool point 0.91 mm): scene new says so and
     adds a plate (before: it wrote the one-plate cell without a word), then states the
     predicted tool error and the robot time per sample of the default run."""
     from planecal.cli import main

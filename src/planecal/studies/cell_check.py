@@ -10,18 +10,23 @@ the sandwich std that ``plan`` and ``layouts`` predict).
 
 The bound: every parameter of the level that moves the tool point (the arm's and the
 sensor's) must be determined well enough that its predicted std alone moves the tool
-point by at most ``BOUND_MM``: an angle's std times its lever (the arm's reach for the
-arm's angles, the sensor's standoff for the sensor's), a length's std as it is. The
-plates' parameters (the cell's, not the robot's) and level 3's terms are held to their
-``practical_std`` (what ``calibrate`` calls identifiable in practice). Every joint offset
-the level frees (delta2..delta5: a plane cannot see delta1, delta6) must be in the base
-set. At level offsets; at full and nonkinematic, whose parameters are many and correlated
-(the tool point's error is what they are for, stated beside), every parameter is held to
-``PRACTICAL_SHARE`` of its practical std (the realistic world's mismatch inflates a fit's
-std over the noise model's: the KR 210's one-plate cell at level full is at 0.95 of it,
-and its calibration there could not identify delta4 and alpha2; three plates: 0.094). Chosen on thesis_final (one plate: 0.056 mm at most), ur5_table (0.10 mm), the
-KR 16's and the IRB 4600's one-plate cells (< 0.1 mm); the KR 210's one-plate cell, whose
-delta2 is 0.9994 correlated with the plate's normal, gives 2.8 mm.
+point by at most ``BOUND_MM``, RMS over the run's poses (its std times its column of the
+tool point's Jacobian, ``design.tool_rows``: the beam point at the standoff, in the
+robot's frame). The plates' parameters (the cell's, not the robot's: they do not move
+the tool point) are held to ``PRACTICAL_SHARE`` of their ``practical_std`` (what
+``calibrate`` calls identifiable in practice). Every joint offset the level frees
+(delta2..delta5: a plane cannot see delta1, delta6) must be in the base set. Chosen on
+thesis_final (one plate: 0.056 mm at most), ur5_table (0.091 mm), the KR 16's and the IRB
+4600's one-plate cells (0.064, 0.073 mm), the MC70's default one-plate cell (0.069 mm);
+the KR 210's one-plate cell, whose delta2 is 0.9995 correlated with the plate's normal,
+gives 0.91 mm (two plates: 0.068 mm).
+
+That at level offsets. At full and nonkinematic, whose parameters are many and
+correlated (the tool point's error is what they are for, stated beside), every
+parameter is held to ``PRACTICAL_SHARE`` of its practical std (the realistic world's
+mismatch inflates a fit's std over the noise model's: the KR 210's one-plate cell at
+level full is at 0.95 of it, and its calibration there could not identify delta4 and
+alpha2; three plates: 0.094).
 
 The robot time per sample is stated against thesis_final's (``REFERENCE_S_PER_SAMPLE``:
 17 s, measured the same way) and warned about above ``SLOW_FACTOR`` times it.
@@ -74,26 +79,12 @@ class CellVerdict:
         return self.seconds_per_sample > SLOW_FACTOR * REFERENCE_S_PER_SAMPLE
 
 
-def _lever(layout, name: str, reach: float, standoff: float, level: str) -> float | None:
-    """m of tool-point motion per unit of the parameter, or None (held to practical_std)."""
-    if level != "offsets":
-        return None
-    unit = layout.param(name).unit
-    group = next(g for g in layout.groups if name in g.names)
-    if group.kind == "plane" or unit not in ("rad", "m"):
-        return None
-    if unit == "m":
-        return 1.0
-    return standoff if group.kind == "sensor_angles" else reach
-
-
 def check_cell(scene, level: str = "offsets", samples: int = SAMPLES, seed: int = 0,
                checker=None) -> CellVerdict:
     """The cell's verdict at ``level`` (module docstring)."""
     from planecal.estimation.calibrate import CalibrationSettings, base_set
     from planecal.estimation.noise import repeatability_sigma, sample_sigma_m
     from planecal.model.encoder import counts_to_joints, joints_to_counts
-    from planecal.model.kinematics import reach_m
     from planecal.model.levels import PLANE_BLIND_OFFSETS
     from planecal.model.measurement import predict_with_jacobian
     from planecal.model.scene import nominal_params
@@ -120,9 +111,10 @@ def check_cell(scene, level: str = "offsets", samples: int = SAMPLES, seed: int 
     cov = design_covariances(J, layout, free, repeatability_sigma(robot, robot.repeatability_m),
                              sample_sigma_m(0.001))["sandwich"]
     std = np.sqrt(np.diag(cov))
-    tool = predicted_tool_mm(tool_rows(scene, counts_to_joints(robot, qe), nominal, layout,
-                                       free), cov)
-    reach, standoff = reach_m(robot.kinematics), scene.standoff_m
+    T = tool_rows(scene, counts_to_joints(robot, qe), nominal, layout, free)
+    tool = predicted_tool_mm(T, cov)
+    # each parameter's lever: how far a unit of it moves the tool point, RMS over the poses
+    levers = np.sqrt(np.mean(np.sum(T ** 2, axis=1), axis=0))
     reasons, worst, worst_mm, practical = [], "", 0.0, ("", 0.0)
     wanted = [n for n in layout.group("joint_offsets").names if n not in PLANE_BLIND_OFFSETS]
     for name in wanted:
@@ -131,7 +123,7 @@ def check_cell(scene, level: str = "offsets", samples: int = SAMPLES, seed: int 
             reasons.append(f"{name} cannot be determined ({why})")
     corr = cov / np.outer(std, std)
     for k, name in enumerate(bs.base):
-        lever = _lever(layout, name, reach, standoff, settings.level)
+        lever = levers[k] if settings.level == "offsets" and levers[k] > 0 else None
         if lever is None:
             ratio = std[k] / layout.practical_std([name])[0]
             practical = max(practical, (name, ratio), key=lambda t: t[1])
