@@ -168,6 +168,9 @@ def _bad(tmp_path, edit) -> Path:
      r"link 'arm/link_3': a link name with '/' cannot name its mesh files"),
     ("escape", lambda s: s.replace('"link_3"', '"../../link_3"'),
      r"link '../../link_3': a link name with '/'"),
+    ("limit", lambda s: re.sub(r'(<joint name="joint_a4" type="revolute">.*?lower=")[^"]*"',
+                               r'\1-100"', s, flags=re.S),
+     r"bad\.urdf \(as .*robot\)/robot\.json: joint_limits_deg\[3\]\[0\]: -5729\.58 deg"),
 ])
 def test_bad_urdf_is_refused_and_nothing_is_written(tmp_path, capsys, what, edit, needle):
     """A loop of joints (before: the import hung), a NaN origin (a traceback), a link

@@ -149,9 +149,12 @@ def _import(args) -> int:
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:
         ui.write(tmp, doc, ui.shapes_document(path, imp), imp)
-        robot = load_robot(tmp)  # what the files say, validated
+        try:  # what the files say, validated; a problem named in the URDF's terms
+            robot = load_robot(tmp)
+            parts = {k: len(robot_link_meshes(robot, k)) for k in ("visual", "collision")}
+        except InputError as e:
+            raise InputError(str(e).replace(str(tmp), f"{path} (as {out})")) from None
         worst = ui.check_flange(path, imp, robot.kinematics)
-        parts = {k: len(robot_link_meshes(robot, k)) for k in ("visual", "collision")}
         clear = _allow_touching(tmp, robot, parts, imp) if parts["collision"] else None
         os.replace(tmp, out)
     finally:
