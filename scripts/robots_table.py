@@ -13,7 +13,7 @@ Markdown table for docs/ROBOTS.md (``--out``) and every step's output under ``--
 The arms come from public wheels on PyPI, pinned, fetched with ``pip download --no-deps``
 into ``$PLANECAL_CACHE_DIR/public-robots`` (else ``~/.cache/planecal/public-robots``);
 only each arm's URDF and package folder are unpacked. Only ``--package NAME=DIR`` (where a
-URDF's meshes are) and ``--scene`` (the cell, until calibrate takes it from the run) are
+URDF's meshes are) and rehearse's ``--scene`` (the cell; every later step takes it from the run) are
 given beyond the defaults; ``--jobs 1`` keeps validate to one process on a shared machine.
 
     python scripts/robots_table.py [--arms ur10e,kr210] [--work DIR] [--out TABLE.md]
@@ -151,20 +151,20 @@ def chain(arm: Arm, work: Path) -> Row:
         return row
     for level in ("offsets", "full", "nonkinematic"):
         out = f"cal_{level}.json"
-        if run(row, f"calibrate_{level}", ["calibrate", "run.tsv", *sc, "--level", level,
+        if run(row, f"calibrate_{level}", ["calibrate", "run.tsv", "--level", level,
                                            "--out", out], work) == 0:
             acc = json.loads((work / out).read_text()).get("accuracy") or {}
             row.figures[f"predicted_{level}_mm"] = acc.get("tool_point_mm")
-            if run(row, f"validate_{level}", ["validate", *sc, "--calibrated", out, "--truth",
+            if run(row, f"validate_{level}", ["validate", "--calibrated", out, "--truth",
                                               "truth.json", "--run", "run.tsv", "--out",
                                               f"val_{level}.json", "--jobs", "1"], work) == 0:
                 v = json.loads((work / f"val_{level}.json").read_text())
                 row.figures["ap_before_mm"] = v.get("ap_before_tool_mm")
                 row.figures[f"ap_after_{level}_mm"] = v.get("ap_after_tool_mm")
     if row.steps.get("calibrate_offsets") == 0:
-        run(row, "export", ["export", "cal_offsets.json", *sc, "--format", "offsets", "--out",
+        run(row, "export", ["export", "cal_offsets.json", "--format", "offsets", "--out",
                             "offsets.json"], work)
-        run(row, "urdf", ["urdf", *sc, "--params", "cal_offsets.json", "--out", "cal.urdf"],
+        run(row, "urdf", ["urdf", "--params", "cal_offsets.json", "--out", "cal.urdf"],
             work)
     return row
 
