@@ -20,7 +20,10 @@ import sys
 from pathlib import Path
 
 from planecal.base.errors import InputError
+from planecal.commands.value_options import bounded
 from planecal.model.levels import LEVELS
+
+FLOOR_LIMIT_M = 20.0  # the scene file's own bound on heights (formats.scene.CELL_M)
 
 
 def add_arguments(p):
@@ -35,7 +38,8 @@ def add_arguments(p):
                    help="what the cell must identify on its default run's poses (default "
                         "%(default)s)")
     p.add_argument("--name", help="the scene's name (default: the file's stem)")
-    p.add_argument("--floor-z", type=float, default=0.0, metavar="M",
+    p.add_argument("--floor-z", type=bounded(-FLOOR_LIMIT_M, FLOOR_LIMIT_M, "m"), default=0.0,
+                   metavar="M",
                    help="the floor (or table) height in the robot's base frame (default "
                         "%(default)s: the base stands on it)")
 

@@ -148,17 +148,16 @@ def run(args) -> int:
         args.errors, None if seeds is None else tuple(seeds), args.samples, args.seed,
         args.offsets_all, args.poses, args.breakdown, args.breakdown_truth, args.calibrated,
         args.truth, args.run, args.quiet))
-    _history(args, hist, scene, doc)
-    return 0
+    return _history(args, hist, scene, doc)
 
 
-def _history(args, hist, scene, doc: dict) -> None:
+def _history(args, hist, scene, doc: dict) -> int:
     """The validation's entry in the cell's history (linked to the calibration it
     validated, where it read one)."""
     from planecal.commands.history_options import (command_provenance, new_entry, record,
                                                    result_link)
     if hist is None:
-        return
+        return 0
     sha, against = result_link(hist, args.calibrated) if args.calibrated else (None, None)
     prov = command_provenance(scene, [("calibrated", args.calibrated), ("truth", args.truth),
                                       ("run", args.run)])
@@ -167,7 +166,7 @@ def _history(args, hist, scene, doc: dict) -> None:
                                        "ap_after_tool_worst_mm", "ap_oracle_tool_median_mm")}
     summary.update(truths=len(doc.get("truths") or []), level=doc.get("level"),
                    where="the tool point (the laser's beam point), robot frame")
-    record(hist, new_entry(args, "validate", "ok", 0, prov, robot_sha256=scene.robot.digest,
+    return record(hist, new_entry(args, "validate", "ok", 0, prov, robot_sha256=scene.robot.digest,
                            against=against, result_sha256=sha, world=world, summary=summary,
                            document=doc, output=args.out))
 

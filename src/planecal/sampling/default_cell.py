@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.base.errors import RunFailed
+from planecal.base.errors import InputError, RunFailed
 from planecal.model.encoder import counts_to_joints, joints_to_counts
 from planecal.model.kinematics import fk, frames
 from planecal.model.robot import Robot
@@ -115,6 +115,9 @@ def _load(doc: dict, folder: Path):
         json.dump(doc, f)
     try:
         return load_scene(f.name)
+    except InputError as e:  # named as the cell, not the temporary file it is read from
+        raise InputError(str(e).replace(f.name, f"the default cell (floor_z_m "
+                                                f"{doc['floor_z_m']:g})")) from None
     finally:
         Path(f.name).unlink(missing_ok=True)
 

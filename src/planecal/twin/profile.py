@@ -135,7 +135,8 @@ def save_truth(path, twin, errors: str | None = None, truth_seed: int | None = N
     drawn with, the robot's true geometry and the gear phases (``world``; extra keys a
     parameter-file reader keeps)."""
     from planecal.io.params import PARAMS_FORMAT, params_to_dict, save_json
-    doc = {"format": PARAMS_FORMAT, **params_to_dict(twin.truth)}
+    doc = {"format": PARAMS_FORMAT, **params_to_dict(twin.truth),
+           "robot": {"name": twin.robot.name, "sha256": twin.robot.digest}}
     kin = twin.true_kinematics
     world = {"errors": None if errors is None else str(errors), "truth_seed": truth_seed,
              "gear_phases_rad": list(twin.world.gear_phases),
@@ -201,8 +202,26 @@ def load_world(scene: Scene, path) -> Truth:
         kin = Kinematics(np.array(k.alpha_rad), np.array(k.a_m), np.array(k.beta_rad),
                          np.array(k.theta_rad), np.array(k.d_m), frames["base"],
                          frames["flange"])
+        _same_robot(kin, scene.robot, path)
     return Truth(params, kin, tuple(float(v) for v in w.gear_phases_rad),
                  tuple(float(v) for v in w.laser_linearity_phases_rad))
+
+
+def _same_robot(kin: Kinematics, robot: Robot, path) -> None:
+    """InputError where a truth file's true geometry is not a drawn error away from the
+    robot's nominal one (a truth file of another robot, written before truth files recorded
+    their robot): no error profile moves a length by 5 cm or a twist by 0.1 rad."""
+    nom = robot.kinematics
+    if len(kin.a) != len(nom.a):
+        raise InputError(f"{path}: world.kinematics holds {len(kin.a)} joints, the robot "
+                         f"{robot.name!r} {len(nom.a)}: a truth file of another robot")
+    for name, tol, unit in (("a", 0.05, "m"), ("d", 0.05, "m"), ("alpha", 0.1, "rad")):
+        dev = np.abs(getattr(kin, name) - getattr(nom, name))
+        j = int(np.argmax(dev))
+        if dev[j] > tol:
+            raise InputError(f"{path}: world.kinematics.{name}{'_rad' if unit == 'rad' else '_m'}"
+                             f"[{j}] is {getattr(kin, name)[j]:.4g} {unit}, robot {robot.name!r} "
+                             f"has {getattr(nom, name)[j]:.4g}: a truth file of another robot")
 
 
 def truth_file_errors(path) -> str | None:
