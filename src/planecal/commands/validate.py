@@ -4,15 +4,19 @@
 [--breakdown alone|off|none] [--breakdown-truth T] [--jobs J] [--level L]
 [--compliance] [--free NAMES] [--calibrated R.json --truth T.json --run RUN.tsv]
 
-ISO 9283 pose accuracy AP and repeatability RP (P1..P5 in a cube inside the calibrated
-region, 30 cycles) and the gauge-block test (seed 9.3) on the twin, in the world of an
-error profile (--errors, default realistic). AP is measured where the tool is: at the
-tool point (the laser's beam point at its measuring centre; each model commands its own
-estimate of it onto the ISO point), with the flange and the scene's named TCPs (and
---tcp-mm's) beside it, in the robot's frame and the cell frame. Every truth is commanded
-by the nominal model, the calibration at --level and at each level below it (on the same
-poses), and the twin's own whole true model (the oracle: the floor no calibration of
-this world can go below; backlash, repeatability and whole counts are what it leaves).
+ISO 9283 pose accuracy AP and repeatability RP (P1..P5, 30 cycles) in two cubes -- one
+centred on a calibration sample (near the samples), and the standard's (the largest cube
+inside the samples' flange hull) -- and the gauge-block test (seed 9.3, aimed with the
+calibrated model; where it cannot be measured, why, beside the ISO figures) on the twin,
+in the world of an error profile (--errors, default realistic). AP is measured where the
+tool is: at the tool point (the laser's beam point at its measuring centre; each model
+commands its own estimate of it onto the ISO point), with the flange and the scene's named
+TCPs (and --tcp-mm's) beside it, in the robot's frame (J1's axis and zero) and the cell
+frame. Every truth is commanded by the nominal model, the calibration at --level and at
+each level below it (on the same poses), each level's floor (its own model with the
+parameters that best fit the twin's true tool points at the samples' poses: the best a
+calibration of that level can do) and the twin's own whole true model (the oracle,
+backlash by the approach direction: repeatability and whole counts are what it leaves).
 
 With no calibration given: for each truth seed T, draw that world, rehearse a calibration
 set on its twin with seed --seed + T (the sampling run's planner with collision checks;
@@ -22,9 +26,10 @@ options every calibrating command takes (--level, --compliance, --free, ...: the
 calibration, ``estimation.calibrate``), and validate on the same world; the truths run
 on ``studies.distributed.Engine`` (--jobs 1: in this process).
 Prints the per-truth figures with the median and the worst truth, then (--breakdown,
-default alone) the first truth again with each error source of the profile on alone (off:
-switched off in turn): what the calibration leaves of each, and which sources it cannot
-remove (docs/ERRORS.md).
+default alone) the first truth again without the noise (the same poses rehearsed
+noise-free: the noise's share apart) and with each error source of the profile on alone
+(off: switched off in turn, the noise off too): what the calibration leaves of each, and
+what limits it (docs/ERRORS.md).
 
 With --calibrated, --truth and --run: validate an existing calibration result (any level)
 in the world it was made in: the truth file of ``rehearse --truth`` holds that world (the
@@ -114,14 +119,16 @@ def _tcp(text):
 
 CELL_FRAME_NOTE = (
     "AP is measured as ISO 9283 does, in the robot's base coordinate system (registered to "
-    "its first axis and that axis's zero), at the tool point. After a plane calibration the "
+    "its first axis and that axis's zero, which a laser tracker finds on the robot; a plane "
+    "cell has no such reference), at the tool point, in two cubes: the near-sample cube "
+    "(centred on a calibration sample: accuracy near the samples) and the standard's (the "
+    "largest cube inside the samples' flange hull). After a plane calibration the "
     "flange's AP also holds the flange frame's error, which the calibrated sensor pose "
     "absorbs at the tool point (right for the laser, not for another tool on the flange). "
-    "The cell frame "
-    "adds the robot's placement in the cell and J1's zero offset delta1: a plane "
-    "calibration cannot see them (the plates move with the robot), so they stay in any "
-    "position taken from a drawing of the cell, but not in work located by the calibrated "
-    "plates.")
+    "The cell frame adds the robot's placement in the cell and J1's zero offset delta1: a "
+    "plane calibration cannot see them (the plates move with the robot), so they stay in "
+    "any position taken from a drawing of the cell (the cell column: millimetres where "
+    "delta1 is), but not in work located by the calibrated plates.")
 
 
 def files(args):
@@ -293,13 +300,17 @@ def _validate_given(args, scene, st) -> dict:
     from planecal.present.validation import format_validation
     from planecal.twin.profile import load_profile
 
-    model, _ = load_calibrated(scene.robot, args.calibrated)
-    qe = read_samples(args.run).qe
+    from planecal.studies.validation.floors import ModelClass
+    model, cdoc = load_calibrated(scene.robot, args.calibrated)
+    run = read_samples(args.run)
+    qe = run.qe
     ref = recorded_world(scene, args.run, args.truth, args.errors, None, default="ideal")
     world, opts = ref.build(scene)
     profile = load_profile(ref.errors, scene.robot)
     checker = CollisionWorld(scene, clearance_m=st.clearance_m)
-    v = validate(scene, world, model, qe, st, checker, None, opts)
+    v = validate(scene, world, model, qe, st, checker,
+                 ModelClass.of_document(scene.robot, cdoc, len(scene.plates)), opts,
+                 run.direction)
     v["scene"] = scene.name
     v["calibration"] = {}
     v["truth_offsets_rad"] = world.params.joint_offsets
