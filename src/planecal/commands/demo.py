@@ -160,7 +160,8 @@ def _position_error(args, scene, samples, cal, run_file, truth_file):
     from planecal.twin.world import recorded_world
 
     world, opts = recorded_world(scene, run_file, truth_file).build(scene)
-    st = ValidationSettings(cycles=DEMO_CYCLES, seed=args.seed, gauge=False)
+    st = ValidationSettings(cycles=DEMO_CYCLES, seed=args.seed, gauge=False,
+                            standard_cube=False)
     v = validate(scene, world, CalibratedModel(scene.robot, cal.params, cal.settings.label),
                  samples.qe, st, CollisionWorld(scene, clearance_m=st.clearance_m),
                  options=opts)
@@ -170,7 +171,8 @@ def _position_error(args, scene, samples, cal, run_file, truth_file):
     b, a = v["ap_before_tool_mm"], v["ap_after_tool_mm"]
     worse = ": the calibration made it worse" if a > b else ""
     print(f"before calibration {b:.3f} mm, after {a:.3f} mm ({change(b, a)}{worse}); the "
-          f"twin's own true model {v['ap_oracle_tool_mm']:.3f} mm (backlash, repeatability); "
+          f"twin's own true model {v['ap_oracle_tool_mm']:.3f} mm (repeatability, whole "
+          f"counts); "
           f"at the flange {v['ap_before_flange_mm']:.3f} -> {v['ap_after_flange_mm']:.3f} mm; "
           f"repeatability RP {v['rp_after_tool_mm']:.3f} mm")
     return world, opts, v

@@ -102,8 +102,9 @@ def fig_ap_rp(out, v):
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=8)
     return save(fig, out, "ap_rp", "AP and RP",
                 "Pose accuracy AP at the tool point per pose for every model on the same poses "
-                "(the oracle is the twin's own true model: what backlash, repeatability and "
-                "whole counts leave), the validated calibration's RP (l̄ + 3 S_l) and its AP "
+                "(the oracle is the twin's whole true model, backlash by the approach "
+                "direction: what repeatability and whole counts leave), the validated "
+                "calibration's RP (l̄ + 3 S_l) and its AP "
                 "at the flange (triangles), on a logarithmic axis.")
 
 

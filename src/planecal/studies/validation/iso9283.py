@@ -290,7 +290,9 @@ def iso9283(twin, plan: IsoPlan, st: ValidationSettings, mover: "Mover", standof
         at = [_figures(att[:, :, k], commanded[k], Finv) for k in range(n)]
         out["models"][name] = {"tool": at[0], "flange": at[1],
                                "tcps": dict(zip(tcps, at[2:])), "counts": cs,
-                               "tool_in_flange_m": t}
+                               "tool_in_flange_m": t,
+                               "direction": None if plan.direction is None
+                               else plan.direction[name]}
     return out
 
 
