@@ -30,7 +30,7 @@ def runs(tmp_path_factory):
 @pytest.mark.parametrize("world", ["realistic", "ideal"])
 def test_truths_and_their_medians(runs, world):
     v = runs[world]
-    assert v["format"] == "planecal-validate/2"
+    assert v["format"] == "planecal-validate/3"
     assert v["errors"] == world and v["level"] == "offsets"
     t = v["truths"]
     assert [r["truth_seed"] for r in t] == [0, 1]
@@ -208,7 +208,11 @@ def test_validate_level_full_commands_every_level_on_the_same_poses(tmp_path):
     off, full = v["levels"]
     assert off["level"] == "offsets" and full["level"] == "full + compliance"
     assert full["ap_after_tool_mm"] == v["ap_after_tool_mm"]
-    assert set(v["iso"]["models"]) == {"nominal", "offsets", "full + compliance", "oracle"}
+    assert set(v["iso"]["models"]) == {"nominal", "offsets", "full + compliance",
+                                       "floor: offsets", "floor: full + compliance", "oracle"}
+    # each level's floor lies below the level's calibration and above the oracle
+    for r in v["levels"]:
+        assert v["ap_oracle_tool_mm"] < r["ap_floor_tool_mm"] < r["ap_after_tool_mm"], r
     assert full["ap_after_tool_mm"] < v["ap_before_tool_mm"] / 3
     assert full["max_model_error_mm"] < off["max_model_error_mm"]
     assert v["ap_oracle_tool_mm"] < min(off["ap_after_tool_mm"], full["ap_after_tool_mm"])

@@ -36,13 +36,15 @@ in the world it was made in: the truth file of ``rehearse --truth`` holds that w
 robot's true geometry, the gear and laser phases), the run's sidecar names its error
 profile.
 
---out writes JSON (format planecal-validate/2; a /1 file, whose ``ap_after_mm`` was the
+--out writes JSON (format planecal-validate/3; a /1 file, whose ``ap_after_mm`` was the
 flange's, is refused by ``planecal report``): ``truths`` (per truth ``ap_before_tool_mm``,
-``ap_after_tool_mm``, ``ap_oracle_tool_mm``, ``rp_after_tool_mm``, the same ``_flange_``,
-``_cell_``, each level's under ``levels``, the named TCPs', the ISO points' distances to
-the nearest sample), their medians and worsts (``ap_after_tool_median_mm``, ...),
+``ap_after_tool_mm``, ``ap_floor_tool_mm``, ``ap_oracle_tool_mm``, ``rp_after_tool_mm``,
+the same ``_flange_``, ``_cell_`` and in the standard's cube ``_standard_``, each level's
+under ``levels``, the named TCPs', the ISO points' distances to the nearest sample in each
+cube, ``gauge_failed``), their medians and worsts (``ap_after_tool_median_mm``, ...),
 ``breakdown``, ``level``, and the median truth's details under the single-truth keys
-(``iso``, ``cube``, ``gauge``, ...).
+(``iso``, ``iso_standard``, ``cube``, ``standard_cube``, ``floors``, ``cell_frame``,
+``gauge``, ...).
 """
 from __future__ import annotations
 
@@ -138,7 +140,7 @@ def files(args):
     from planecal.studies.validation import FORMAT, OLD_FORMATS
     f = Files().read(*scene_inputs(args.scene), *profile_inputs(args.errors, args.scene),
                      args.poses, args.calibrated, args.truth, *with_sidecars([args.run]))
-    f.write(args.out, "--out", (FORMAT, *OLD_FORMATS))  # a /1 file is validate's own too
+    f.write(args.out, "--out", (FORMAT, *OLD_FORMATS))  # a /1 or /2 file is validate's own too
     rrd_output(f, args.rrd)
     return f
 

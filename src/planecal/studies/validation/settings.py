@@ -5,9 +5,10 @@ from dataclasses import dataclass
 
 from planecal.base.errors import InputError
 
-FORMAT = "planecal-validate/2"
-# /1 (before issue 22) measured AP at the flange under ``ap_after_mm``: refused, not misread
-OLD_FORMATS = ("planecal-validate/1",)
+FORMAT = "planecal-validate/3"
+# /1 (before issue 22) measured AP at the flange under ``ap_after_mm``: refused, not misread;
+# /2 (before issue 31): one cube, no floors, an oracle without backlash (still reported)
+OLD_FORMATS = ("planecal-validate/1", "planecal-validate/2")
 # the nominal model, the validated one, its level's floor (``floors``: the best that
 # level's model does), the twin's own whole true model
 ROLES = ("before", "after", "floor", "oracle")
