@@ -218,7 +218,9 @@ def _history(args, hist, scene, doc: dict) -> None:
                                       ("run", args.run)])
     world = doc.get("world") or {"errors": doc.get("errors"), "truth_seeds": doc.get("truth_seeds")}
     summary = {k: doc.get(k) for k in ("ap_before_tool_median_mm", "ap_after_tool_median_mm",
-                                       "ap_after_tool_worst_mm", "ap_oracle_tool_median_mm")}
+                                       "ap_after_tool_worst_mm", "ap_oracle_tool_median_mm",
+                                       "ap_floor_tool_median_mm",
+                                       "ap_after_tool_standard_median_mm")}
     summary.update(truths=len(doc.get("truths") or []), level=doc.get("level"),
                    where="the tool point (the laser's beam point), robot frame")
     record(hist, new_entry(args, "validate", "ok", 0, prov, robot_sha256=scene.robot.digest,

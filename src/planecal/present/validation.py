@@ -313,20 +313,25 @@ def _limits(bd: dict, level: str) -> list[str]:
                        f"{ns['without_mm']:.3f} mm{alone}. A richer model does not remove "
                        "it; more samples, or poses that average it down, do.")
         else:
-            out.append(f"the noise ({ns['what']}) adds {ns['share_mm']:.3f} mm: with every "
-                       f"source AP after is {ns['with_mm']:.3f} mm, without the noise "
-                       f"{ns['without_mm']:.3f} mm{alone}.")
+            adds = (f"adds {ns['share_mm']:.3f} mm" if ns["share_mm"] >= 0.005 else
+                    "adds nothing measurable here (its draw through the fit may even offset "
+                    "some of the mismatch)")
+            out.append(f"the noise ({ns['what']}) {adds}: with every source AP after is "
+                       f"{ns['with_mm']:.3f} mm, on the same poses rehearsed without the "
+                       f"noise {ns['without_mm']:.3f} mm{alone}.")
     cr = cannot_remove(bd)
     big = [c for c in cr if c["ap_after_tool_share_mm"] >= 0.005]
     if big:
-        how = ("with it switched off, all but the noise drops by" if bd["mode"] == "off"
-               else "alone, without noise, it adds")
-        out.append(f"without the noise, a calibration at level {level} leaves of: " + "; ".join(
-            f"{c['what']} ({how} {c['ap_after_tool_share_mm']:.3f} mm; "
-            + ("in the level's model: the fit does not take all of it"
-               if c["modelled"] else "not in the level's model") + ")" for c in big)
-            + ". A source outside the model is absorbed only where it looks like one of the "
-              "model's parameters in the calibrated region.")
+        how = ("switched off, all but the noise drops by" if bd["mode"] == "off"
+               else "alone, without the noise, it adds")
+        out.append(f"what a calibration at level {level} leaves of each source, the noise "
+                   "kept out: " + "; ".join(
+                       f"{c['what']}: {c['ap_after_tool_share_mm']:.3f} mm ({how} that; "
+                       + ("in the level's model: the fit does not take all of it"
+                          if c["modelled"] else "not in the level's model") + ")"
+                       for c in big)
+                   + ". A source outside the model is absorbed only where it looks like one "
+                     "of the model's parameters in the calibrated region.")
     small = [c for c in cr if c["ap_after_tool_share_mm"] < 0.005]
     if small:
         out.append("less than 5 um of AP here (a negative share: the sources partly cancel "
