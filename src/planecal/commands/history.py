@@ -123,19 +123,18 @@ def _diff(args, hist, _out) -> int:
 
 def _rollback(args, hist, out) -> int:
     """Calibration N's controller file, with export's writer; a rollback entry."""
-    from planecal.commands.history_options import (command_provenance, new_entry, record,
-                                                   result_scene)
-    from planecal.io.params import check_robot, params_from_dict
-    from planecal.present.controller import ControllerFile, write_controller_file
+    from planecal.commands.history_options import command_provenance, new_entry, record
+    from planecal.jobs.exports import write_controller
+    from planecal.jobs.results import CalibrationResult
+    from planecal.present.controller import ControllerFile
 
     e = _calibration(hist, args.entries[0])
-    doc = e.document
-    scene = result_scene(doc, args.scene)
     where = f"history entry {e.id}"
-    check_robot(doc, scene.robot, where)
+    result = CalibrationResult.from_document(e.document, where, args.scene)
     req = ControllerFile(args.format, out, current_qe0(args.current_qe0), where,
                          e.result_sha256 or "0" * 64)
-    written = write_controller_file(doc, params_from_dict(doc, where), scene, req)
+    written = write_controller(result, req, args.force)
+    scene = result.scene
     prov = command_provenance(scene, [])
     record(hist, new_entry(args, "rollback", "ok", 0, prov, robot_sha256=scene.robot.digest,
                            against=e.id, result_sha256=e.result_sha256, summary=written,

@@ -72,25 +72,6 @@ def command_provenance(scene, inputs) -> dict:
     return provenance(files, scene.name, scene.robot.name)
 
 
-def result_scene(doc: dict, given: str | None):
-    """The scene of a command reading a result: ``given`` (--scene), else the scene file
-    the result's provenance records (if it is here), else its scene's name, else the
-    default scene."""
-    from pathlib import Path
-
-    from planecal.model.scene import DEFAULT_SCENE, load_scene
-    if given:
-        return load_scene(given)
-    prov = doc.get("provenance") if isinstance(doc, dict) else None
-    prov = prov if isinstance(prov, dict) else {}
-    for i in prov.get("inputs") or []:
-        if isinstance(i, dict) and i.get("role") == "scene" and i.get("path") \
-                and Path(str(i["path"])).is_file():
-            return load_scene(str(i["path"]))
-    name = prov.get("scene")
-    return load_scene(name if isinstance(name, str) and name else DEFAULT_SCENE)
-
-
 def record(hist, entry, json_out: bool = False) -> int | None:
     """Write ``entry`` (nothing without a history); the line saying where goes to stdout
     beside the command's other "written to" lines (to stderr where stdout carries JSON,
@@ -118,11 +99,3 @@ def parameter_rows(doc: dict) -> list:
     from planecal.history import ParameterRow
     from planecal.present.calibration import parameter_rows as rows
     return [ParameterRow(r.name, r.value, r.std, r.unit, r.status) for r in rows(doc)]
-
-
-def sample_worlds(paths) -> dict | list | None:
-    """The worlds the sample files were made in (their sidecars'): one, a list, or None."""
-    from planecal.sampling.runfiles import run_world
-    worlds = [w for w in (run_world(p) for p in paths) if w is not None]
-    unique = [w for k, w in enumerate(worlds) if w not in worlds[:k]]
-    return None if not unique else unique[0] if len(unique) == 1 else unique

@@ -206,9 +206,26 @@ class EncoderOffsetsBlock(Model):
     reason: Str | None = None
 
 
+STATUSES = ("converged", "not_identifiable", "max_iterations")
+
+
+def _status(v):
+    if v not in STATUSES:
+        raise problem(f"{v!r} is not a fit status ({', '.join(STATUSES)})")
+    return v
+
+
+FitStatus = Annotated[Str, AfterValidator(_status), Field(
+    description="converged: the fit converged and identified every free parameter; "
+                "not_identifiable: it converged, but the samples cannot identify a free "
+                "parameter; max_iterations: it did not converge",
+    json_schema_extra={"enum": list(STATUSES)})]
+
+
 class ResultFile(ParamsFile):
     """What ``planecal calibrate --out`` writes."""
     format: ResultTag = None
+    status: FitStatus | None = None
     std: StdBlock
     residual_rms_mm: NonNeg
     residual_rms_initial_mm: NonNeg

@@ -161,11 +161,12 @@ def _jsonable(v):
     raise TypeError(f"not JSON serializable: {type(v).__name__}")
 
 
-def recorded_samples(doc: dict, result_path, flag: str = "--samples") -> list[Path]:
+def recorded_samples(doc: dict, result_path, flag: str = "--samples",
+                     strict: bool = True) -> list[Path]:
     """The sample files a result's provenance records (role ``samples``), found here with
     the recorded content (relative paths: from the working directory, then beside the
     result). InputError for a recorded file that is missing or changed (naming ``flag``,
-    the option that gives them instead)."""
+    the option that gives them instead); not ``strict``: those left out."""
     prov = doc.get("provenance") if isinstance(doc, dict) else None
     entries = prov.get("inputs") if isinstance(prov, dict) else None
     found = []
@@ -175,12 +176,16 @@ def recorded_samples(doc: dict, result_path, flag: str = "--samples") -> list[Pa
         p = Path(str(e["path"]))
         cands = [p] if p.is_absolute() else [p, Path(result_path).parent / p]
         hit = next((c for c in cands if c.is_file()), None)
+        if hit is None and not strict:
+            continue
         if hit is None:
             raise InputError(f"{result_path}: its samples file {p} is not here; give the "
                              f"calibration's samples with {flag}")
         with open(hit, "rb") as f:
             digest = hashlib.file_digest(f, "sha256").hexdigest()
         if e.get("sha256") and digest != e["sha256"]:
+            if not strict:
+                continue
             raise InputError(f"{hit}: not the samples file {result_path} was made from (its "
                              f"SHA-256 differs); give the calibration's samples with {flag}")
         found.append(hit)

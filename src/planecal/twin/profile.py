@@ -95,7 +95,7 @@ def load_profile(name_or_path: str | Path, robot: Robot) -> ErrorProfile:
 def draw_geometry(robot: Robot, profile: ErrorProfile, rng: np.random.Generator) -> Kinematics:
     """The robot's true geometry: robot.json's, every parameter moved by a normal draw of
     the profile's std (beta only where consecutive axes are parallel), the base and
-    flange frames by a translation and a small rotation."""
+    flange frames (robot.json's) moved by a translation and a small rotation."""
     nom = robot.kinematics
     g = profile.doc.geometry
     if g is None:
@@ -108,8 +108,10 @@ def draw_geometry(robot: Robot, profile: ErrorProfile, rng: np.random.Generator)
     d = nom.d + rng.normal(0.0, g.d_m)
     b = rng.normal(0.0, g.beta_rad)
     beta[par] = b[par]
+    # the base error composed with robot.json's base frame as the calibration's model does
+    # (measurement.kinematics_of: frame_error(base) @ nominal base), the flange's likewise
     base = frame_error(np.concatenate([rng.normal(0.0, g.base.translation_m, 3),
-                                       rng.normal(0.0, g.base.rotation_rad, 3)]))
+                                       rng.normal(0.0, g.base.rotation_rad, 3)])) @ nom.base
     flange = nom.flange @ frame_error(np.concatenate([rng.normal(0.0, g.flange.translation_m, 3),
                                                       rng.normal(0.0, g.flange.rotation_rad, 3)]))
     return Kinematics(alpha, a, beta, nom.theta, d, base, flange)
