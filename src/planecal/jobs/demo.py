@@ -117,17 +117,20 @@ def _position_error(req: DemoRequest, done, truth_file):
 
     scene, samples, cal = done.runs.scene, done.runs.samples, done.calibration
     world, opts = run_world(done.runs.runs[0], truth_file).build(scene)
-    st = ValidationSettings(cycles=DEMO_CYCLES, seed=req.seed, gauge=False)
+    st = ValidationSettings(cycles=DEMO_CYCLES, seed=req.seed, gauge=False,
+                            standard_cube=False)
     v = validate(scene, world, CalibratedModel(scene.robot, cal.params, cal.settings.label),
                  samples.qe, st, CollisionWorld(scene, clearance_m=st.clearance_m),
-                 options=opts)
+                 cal.result, opts, samples.direction)  # its level's floor beside it
     print(f"\n== position error in the calibrated region (ISO 9283 AP: the worst of five poses "
           f"in a {v['cube']['edge_m'] * 1e3:.0f} mm cube among the samples, {DEMO_CYCLES} "
           f"cycles, on the same twin, at {where_text(v)}, robot frame)")
     b, a = v["ap_before_tool_mm"], v["ap_after_tool_mm"]
     worse = ": the calibration made it worse" if a > b else ""
     print(f"before calibration {b:.3f} mm, after {a:.3f} mm ({change(b, a)}{worse}); the "
-          f"twin's own true model {v['ap_oracle_tool_mm']:.3f} mm (backlash, repeatability); "
+          f"level's floor {v['ap_floor_tool_mm']:.3f} mm (the best its model does), the "
+          f"twin's own true model {v['ap_oracle_tool_mm']:.3f} mm (repeatability, whole "
+          f"counts); "
           f"at the flange {v['ap_before_flange_mm']:.3f} -> {v['ap_after_flange_mm']:.3f} mm; "
           f"repeatability RP {v['rp_after_tool_mm']:.3f} mm")
     return world, opts, v
