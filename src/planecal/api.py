@@ -240,11 +240,13 @@ def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
 @dataclass(repr=False)
 class Validation:
     """ISO 9283 pose accuracy (AP) and repeatability (RP) [m], the worst of P1..P5 in the
-    robot's frame: at the tool point (the laser's beam point at its measuring centre) and
-    at the flange, each for the nominal model, the calibration (any level) and the twin's
-    own whole true model (the floor: what backlash, repeatability and whole counts leave);
-    the gauge-block length error; ``details`` is the dict of
-    ``planecal.studies.validation.validate`` (mm, as ``planecal validate`` writes)."""
+    robot's frame, in the near-sample cube: at the tool point (the laser's beam point at
+    its measuring centre) and at the flange, each for the nominal model, the calibration
+    (any level) and the twin's own whole true model (backlash by the approach direction:
+    what repeatability and whole counts leave); the gauge-block length error (None where
+    the block could not be measured: ``details["gauge_failed"]`` says why); ``details`` is
+    the dict of ``planecal.studies.validation.validate`` (mm, as ``planecal validate``
+    writes: the standard's cube, the level's floor, the cell frame)."""
     ap_tool_nominal_m: float
     ap_tool_calibrated_m: float
     ap_tool_oracle_m: float
@@ -252,8 +254,8 @@ class Validation:
     ap_flange_calibrated_m: float
     ap_flange_oracle_m: float
     rp_tool_calibrated_m: float
-    gauge_error_nominal_m: float
-    gauge_error_calibrated_m: float
+    gauge_error_nominal_m: float | None
+    gauge_error_calibrated_m: float | None
     details: dict
 
     def __repr__(self) -> str:
@@ -281,8 +283,8 @@ def validate(calibration: CalibratedCell, rehearsal: Rehearsal, *, cycles: int =
     checker = CollisionWorld(sc, clearance_m=st.clearance_m)
     model = CalibratedModel(sc.robot, calibration.params, calibration.level)
     v = run_validation(sc, rehearsal.world, model, rehearsal.samples.counts, st, checker,
-                       calibration.result, rehearsal.options)
-    return Validation(*(v[k] * 1e-3 for k in (
+                       calibration.result, rehearsal.options, rehearsal.samples.direction)
+    return Validation(*(None if v[k] is None else v[k] * 1e-3 for k in (
         "ap_before_tool_mm", "ap_after_tool_mm", "ap_oracle_tool_mm", "ap_before_flange_mm",
         "ap_after_flange_mm", "ap_oracle_flange_mm", "rp_after_tool_mm",
         "gauge_error_before_mm", "gauge_error_after_mm")), v)

@@ -82,10 +82,10 @@ def run(args) -> int:
                                                                 fit_options(args, robot)),
         args.scene, args.initial, args.out, args.report, args.rrd))
     why = done.failure()
-    record(hist, _entry(args, done, why))
+    unrecorded = record(hist, _entry(args, done, why))
     if why:
         raise RunFailed(why)
-    return 0
+    return unrecorded
 
 
 def _entry(args, done, why: str | None):

@@ -58,8 +58,7 @@ def run(args) -> int:
     written, result = export(ExportRequest(args.result, sha, args.format, out, qe0, args.scene,
                                            args.force))
     prov = command_provenance(result.scene, [("result", args.result)])
-    record(hist, new_entry(args, "export", "ok", 0, prov,
-                           robot_sha256=result.scene.robot.digest, against=against,
-                           result_sha256=sha, summary=written,
-                           output=str(out) if out else None))
-    return 0
+    return record(hist, new_entry(args, "export", "ok", 0, prov,
+                                  robot_sha256=result.scene.robot.digest, against=against,
+                                  result_sha256=sha, summary=written,
+                                  output=str(out) if out else None))

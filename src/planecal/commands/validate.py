@@ -4,15 +4,19 @@
 [--breakdown alone|off|none] [--breakdown-truth T] [--jobs J] [--level L]
 [--compliance] [--free NAMES] [--calibrated R.json --truth T.json --run RUN.tsv]
 
-ISO 9283 pose accuracy AP and repeatability RP (P1..P5 in a cube inside the calibrated
-region, 30 cycles) and the gauge-block test (seed 9.3) on the twin, in the world of an
-error profile (--errors, default realistic). AP is measured where the tool is: at the
-tool point (the laser's beam point at its measuring centre; each model commands its own
-estimate of it onto the ISO point), with the flange and the scene's named TCPs (and
---tcp-mm's) beside it, in the robot's frame and the cell frame. Every truth is commanded
-by the nominal model, the calibration at --level and at each level below it (on the same
-poses), and the twin's own whole true model (the oracle: the floor no calibration of
-this world can go below; backlash, repeatability and whole counts are what it leaves).
+ISO 9283 pose accuracy AP and repeatability RP (P1..P5, 30 cycles) in two cubes -- one
+centred on a calibration sample (near the samples), and the standard's (the largest cube
+inside the samples' flange hull) -- and the gauge-block test (seed 9.3, aimed with the
+calibrated model; where it cannot be measured, why, beside the ISO figures) on the twin,
+in the world of an error profile (--errors, default realistic). AP is measured where the
+tool is: at the tool point (the laser's beam point at its measuring centre; each model
+commands its own estimate of it onto the ISO point), with the flange and the scene's named
+TCPs (and --tcp-mm's) beside it, in the robot's frame (J1's axis and zero) and the cell
+frame. Every truth is commanded by the nominal model, the calibration at --level and at
+each level below it (on the same poses), each level's floor (its own model with the
+parameters that best fit the twin's true tool points at the samples' poses: the best a
+calibration of that level can do) and the twin's own whole true model (the oracle,
+backlash by the approach direction: repeatability and whole counts are what it leaves).
 
 With no calibration given: for each truth seed T, draw that world, rehearse a calibration
 set on its twin with seed --seed + T (the sampling run's planner with collision checks;
@@ -22,22 +26,25 @@ options every calibrating command takes (--level, --compliance, --free, ...: the
 calibration, ``estimation.calibrate``), and validate on the same world; the truths run
 on ``studies.distributed.Engine`` (--jobs 1: in this process).
 Prints the per-truth figures with the median and the worst truth, then (--breakdown,
-default alone) the first truth again with each error source of the profile on alone (off:
-switched off in turn): what the calibration leaves of each, and which sources it cannot
-remove (docs/ERRORS.md).
+default alone) the first truth again without the noise (the same poses rehearsed
+noise-free: the noise's share apart) and with each error source of the profile on alone
+(off: switched off in turn, the noise off too): what the calibration leaves of each, and
+what limits it (docs/ERRORS.md).
 
 With --calibrated, --truth and --run: validate an existing calibration result (any level)
 in the world it was made in: the truth file of ``rehearse --truth`` holds that world (the
 robot's true geometry, the gear and laser phases), the run's sidecar names its error
 profile.
 
---out writes JSON (format planecal-validate/2; a /1 file, whose ``ap_after_mm`` was the
+--out writes JSON (format planecal-validate/3; a /1 file, whose ``ap_after_mm`` was the
 flange's, is refused by ``planecal report``): ``truths`` (per truth ``ap_before_tool_mm``,
-``ap_after_tool_mm``, ``ap_oracle_tool_mm``, ``rp_after_tool_mm``, the same ``_flange_``,
-``_cell_``, each level's under ``levels``, the named TCPs', the ISO points' distances to
-the nearest sample), their medians and worsts (``ap_after_tool_median_mm``, ...),
+``ap_after_tool_mm``, ``ap_floor_tool_mm``, ``ap_oracle_tool_mm``, ``rp_after_tool_mm``,
+the same ``_flange_``, ``_cell_`` and in the standard's cube ``_standard_``, each level's
+under ``levels``, the named TCPs', the ISO points' distances to the nearest sample in each
+cube, ``gauge_failed``), their medians and worsts (``ap_after_tool_median_mm``, ...),
 ``breakdown``, ``level``, and the median truth's details under the single-truth keys
-(``iso``, ``cube``, ``gauge``, ...).
+(``iso``, ``iso_standard``, ``cube``, ``standard_cube``, ``floors``, ``cell_frame``,
+``gauge``, ...).
 """
 from __future__ import annotations
 
@@ -118,7 +125,7 @@ def files(args):
     from planecal.studies.validation import FORMAT, OLD_FORMATS
     f = Files().read(*run_scene_inputs([args.run] if args.run else [], args.scene),
                      *profile_inputs(args.errors, args.scene), args.poses, args.calibrated, args.truth, *with_sidecars([args.run]))
-    f.write(args.out, "--out", (FORMAT, *OLD_FORMATS))  # a /1 file is validate's own too
+    f.write(args.out, "--out", (FORMAT, *OLD_FORMATS))  # a /1 or /2 file is validate's own too
     rrd_output(f, args.rrd)
     return f
 
@@ -148,26 +155,27 @@ def run(args) -> int:
         args.errors, None if seeds is None else tuple(seeds), args.samples, args.seed,
         args.offsets_all, args.poses, args.breakdown, args.breakdown_truth, args.calibrated,
         args.truth, args.run, args.quiet))
-    _history(args, hist, scene, doc)
-    return 0
+    return _history(args, hist, scene, doc)
 
 
-def _history(args, hist, scene, doc: dict) -> None:
+def _history(args, hist, scene, doc: dict) -> int:
     """The validation's entry in the cell's history (linked to the calibration it
     validated, where it read one)."""
     from planecal.commands.history_options import (command_provenance, new_entry, record,
                                                    result_link)
     if hist is None:
-        return
+        return 0
     sha, against = result_link(hist, args.calibrated) if args.calibrated else (None, None)
     prov = command_provenance(scene, [("calibrated", args.calibrated), ("truth", args.truth),
                                       ("run", args.run)])
     world = doc.get("world") or {"errors": doc.get("errors"), "truth_seeds": doc.get("truth_seeds")}
     summary = {k: doc.get(k) for k in ("ap_before_tool_median_mm", "ap_after_tool_median_mm",
-                                       "ap_after_tool_worst_mm", "ap_oracle_tool_median_mm")}
+                                       "ap_after_tool_worst_mm", "ap_oracle_tool_median_mm",
+                                       "ap_floor_tool_median_mm",
+                                       "ap_after_tool_standard_median_mm")}
     summary.update(truths=len(doc.get("truths") or []), level=doc.get("level"),
                    where="the tool point (the laser's beam point), robot frame")
-    record(hist, new_entry(args, "validate", "ok", 0, prov, robot_sha256=scene.robot.digest,
+    return record(hist, new_entry(args, "validate", "ok", 0, prov, robot_sha256=scene.robot.digest,
                            against=against, result_sha256=sha, world=world, summary=summary,
                            document=doc, output=args.out))
 

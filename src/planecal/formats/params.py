@@ -17,7 +17,7 @@ import math
 from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 from pydantic import AfterValidator, Field, Strict, ValidationError
 
@@ -206,6 +206,19 @@ class EncoderOffsetsBlock(Model):
     reason: Str | None = None
 
 
+class IdentifiabilityBlock(Record):
+    """The fit's identifiability report; the residual level a drift check reads is typed."""
+    sigma_mm: NonNeg | None = None
+    weighted: Bool = False
+    variance_factor: NonNeg | None = None
+
+
+class CalibrationBlock(Record):
+    """The calibration's settings; its noise model is typed (a weighted result's check)."""
+    joint_sigma_rad: NonNeg | None = None
+    distance_sigma_m: NonNeg | None = None
+
+
 STATUSES = ("converged", "not_identifiable", "max_iterations")
 
 
@@ -234,7 +247,8 @@ class ResultFile(ParamsFile):
     converged: Bool
     outliers: list[Count]
     samples_used: Count
-    identifiability: dict[str, Any]
+    identifiability: IdentifiabilityBlock
+    calibration: CalibrationBlock | None = None
     free: list[Str]
     provenance: Provenance | None = None
     model_error: Str | None = None

@@ -22,7 +22,7 @@ import numpy as np
 from planecal.base.errors import InputError
 from planecal.model.cell_params import CellParams
 from planecal.formats.base import json_values, read_json, validate
-from planecal.formats.params import PARAMS_FORMAT, ParamsFile
+from planecal.formats.params import PARAMS_FORMAT, RESULT_FORMAT, ParamsFile, ResultFile
 
 
 def params_to_dict(p: CellParams) -> dict:
@@ -73,8 +73,12 @@ def kinematics_to_dict(geometry, base, compliance) -> dict:
 
 def params_from_dict(d, path: str = "<params>") -> CellParams:
     """CellParams from a parsed parameter (or result) file, validated by
-    ``planecal.formats.params.ParamsFile``; one-line InputError otherwise."""
-    pf = validate(ParamsFile, d, path, "parameter file")
+    ``planecal.formats.params.ParamsFile`` (a result file, ``format`` planecal-result/1,
+    by ``ResultFile``: every field a command may read from it, its controller offsets
+    and its residual level included); one-line InputError otherwise."""
+    result = isinstance(d, dict) and d.get("format") == RESULT_FORMAT
+    pf = validate(ResultFile if result else ParamsFile, d, path,
+                  "result file" if result else "parameter file")
     s = pf.sensor
     k = pf.kinematics
     extra = {} if k is None else {

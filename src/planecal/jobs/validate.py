@@ -44,14 +44,16 @@ class ValidateRequest:
 
 CELL_FRAME_NOTE = (
     "AP is measured as ISO 9283 does, in the robot's base coordinate system (registered to "
-    "its first axis and that axis's zero), at the tool point. After a plane calibration the "
+    "its first axis and that axis's zero, which a laser tracker finds on the robot; a plane "
+    "cell has no such reference), at the tool point, in two cubes: the near-sample cube "
+    "(centred on a calibration sample: accuracy near the samples) and the standard's (the "
+    "largest cube inside the samples' flange hull). After a plane calibration the "
     "flange's AP also holds the flange frame's error, which the calibrated sensor pose "
     "absorbs at the tool point (right for the laser, not for another tool on the flange). "
-    "The cell frame "
-    "adds the robot's placement in the cell and J1's zero offset delta1: a plane "
-    "calibration cannot see them (the plates move with the robot), so they stay in any "
-    "position taken from a drawing of the cell, but not in work located by the calibrated "
-    "plates.")
+    "The cell frame adds the robot's placement in the cell and J1's zero offset delta1: a "
+    "plane calibration cannot see them (the plates move with the robot), so they stay in "
+    "any position taken from a drawing of the cell (the cell column: millimetres where "
+    "delta1 is), but not in work located by the calibrated plates.")
 
 
 def validate(req: ValidateRequest) -> tuple[dict, object]:
@@ -179,6 +181,7 @@ def _validate_given(req: ValidateRequest) -> tuple[dict, object]:
     from planecal.present.validation import format_validation
     from planecal.safety.collision import CollisionWorld
     from planecal.studies.validation import FORMAT, summarize, validate
+    from planecal.studies.validation.floors import ModelClass
     from planecal.twin.profile import load_profile
     from planecal.twin.world import sources_on
 
@@ -190,7 +193,9 @@ def _validate_given(req: ValidateRequest) -> tuple[dict, object]:
         world, opts = ref.build(scene)
         profile = load_profile(ref.errors, scene.robot)
         checker = CollisionWorld(scene, clearance_m=req.settings.clearance_m)
-        v = validate(scene, world, model, runs.samples.qe, req.settings, checker, None, opts)
+        v = validate(scene, world, model, runs.samples.qe, req.settings, checker,
+                     ModelClass.of_document(scene.robot, result.doc, len(scene.plates)), opts,
+                     runs.samples.direction)  # the level's floor from the result's own class
     v["scene"] = scene.name
     v["calibration"] = {}
     v["truth_offsets_rad"] = world.params.joint_offsets

@@ -80,7 +80,8 @@ def check(req: CheckRequest, hist=None, against=None) -> Checked:
     if run_s.plate.max(initial=0) >= fr.params.n_planes:
         raise InputError(f"{req.run}: samples on plate {run_s.plate.max() + 1}, the result "
                          f"holds {fr.params.n_planes} plane(s)")
-    ref_paths = reference_runs(hist, against, req.run, req.reference)
+    from planecal.history import consult  # a history that fails here: the calibration's
+    ref_paths = consult(hist, lambda h: reference_runs(h, against, req.run, req.reference), [])
     refs = read_runs(ref_paths, cell).runs if ref_paths else ()
     chk = check_run(fr, (cal.qe, cal.d_mm * 1e-3, cal.plate),
                     (run_s.qe, run_s.d_mm * 1e-3, run_s.plate), req.alpha,

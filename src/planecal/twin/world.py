@@ -140,12 +140,13 @@ SOURCES = {
     "compliance": "gravity compliance",
     "gear": "gear transmission error",
     "backlash": "backlash",
-    "noise": "repeatability and encoder quantisation",
+    "noise": "repeatability, encoder quantisation and the laser's noise",
     "laser_linearity": "laser linearity",
     "thermal": "thermal growth",
 }
 SHORT = {"geometry": "link lengths, twists and frames", "compliance": "joint compliance",
-         "gear": "gear error", "backlash": "backlash", "noise": "repeatability, quantisation",
+         "gear": "gear error", "backlash": "backlash",
+         "noise": "repeatability, quantisation, laser noise",
          "laser_linearity": "laser linearity", "thermal": "thermal growth"}
 MISMATCH = ("geometry", "compliance", "gear", "backlash", "laser_linearity", "thermal")
 
@@ -175,7 +176,7 @@ def sources_on(robot, world, options) -> list[str]:
           and any(k is not None for k in options.stiffness_nm_per_rad),
           "gear": any(a > 0 for _, a, _ in options.gear),
           "backlash": options.backlash_rad is not None and bool(np.any(options.backlash_rad)),
-          "noise": rep > 0 or options.quantization,
+          "noise": rep > 0 or options.quantization or options.laser_noise_mm > 0,
           "laser_linearity": options.laser_linearity_mm > 0,
           "thermal": options.thermal is not None}
     return [k for k in SOURCES if on[k]]
@@ -200,7 +201,7 @@ def without(world, options, off):
         elif f == "backlash":
             kw.update(backlash_rad=None, backlash_preload_nm=None)
         elif f == "noise":
-            kw.update(repeatability_mm=0.0, quantization=False)
+            kw.update(repeatability_mm=0.0, quantization=False, laser_noise_mm=0.0)
         elif f == "laser_linearity":
             kw["laser_linearity_mm"] = 0.0
         else:
