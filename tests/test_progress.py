@@ -220,20 +220,20 @@ def test_sweep_plans_on_the_planning_bar(monkeypatch, tmp_path):
     assert any(ln.startswith("sweep: 2 runs") and "samples" in ln for ln in err)
 
 
-def test_the_engine_says_its_start_and_its_workers_runs(capsys):
+def test_the_engine_says_its_start_and_its_workers_runs(capsys, monkeypatch):
     """A local Dask cluster: its start-up (workers up, the warm-up: montecarlo's 18 s and
     validate's 65 s before their first line under load) and what each run reports on its
     worker, forwarded to the client's bar through dask's events."""
     from planecal.studies.distributed import Engine, warm_twin
     from progress_runs import reporting_run
+    monkeypatch.setattr(P, "INTERVAL_S", 0.0)  # every change a line: none missed by timing
     with Engine(jobs=2, progress=True, warmup=warm_twin) as eng:
         bar = Progress("runs", 2)
         assert eng.map(reporting_run, [3, 4], progress=bar) == [6, 8]
     err = capsys.readouterr().err
     assert "engine  starting a local Dask cluster of 2 worker processes" in err
     assert "workers up after" in err and "warmed up after" in err
-    assert "runs 0/2  run 1: steps " in err or "runs 1/2  run 2: steps " in err \
-        or "runs 0/2  run 2: steps " in err, err
+    assert "  run 1: steps " in err and "  run 2: steps " in err, err
 
 
 def test_a_bar_left_open_on_a_closed_stream_fails_no_work(clock):
