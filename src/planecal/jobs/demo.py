@@ -202,9 +202,10 @@ def verdict(v: dict, level: str, why: str | None) -> str:
                 f"{a:.3f} mm ({where}). Do not use it.")
     else:
         head = (f"The calibration works: the position error fell from {b:.3f} to {a:.3f} mm "
-                f"(x{b / a:.1f}; {where}); the best a model at level {level} does on this "
-                f"robot is {v['ap_floor_tool_mm']:.3f} mm (its floor), the twin's own true "
-                f"model {v['ap_oracle_tool_mm']:.3f} mm (repeatability, whole counts).")
+                f"(x{b / a:.1f}; {where}). The best a model at level {level} does on this "
+                f"robot is {v['ap_floor_tool_mm']:.3f} mm (its floor; the twin's own true model "
+                f"{v['ap_oracle_tool_mm']:.3f} mm): the step from there to {a:.3f} mm is what "
+                "this calibration's data leave (the plates' geometry, the samples' noise).")
     mean, spread = SEED_FIXED_DISTANCE["after", "random"]
     _, square = SEED_FIXED_DISTANCE["after", "fixed"]
     seed = (f"The seed's MC70, calibrated at level offsets on one plate, then read {mean:.2f} mm "
