@@ -159,7 +159,7 @@ def test_demo_end_to_end(tmp_path, capsys):
     assert main(["demo", "--samples", "40", "--seed", "3", "--dir", str(tmp_path),
                  "--errors", "ideal"]) == 0
     out = capsys.readouterr().out
-    assert "3 reported standard deviations of the truth" in out
+    assert "within 3 reported std, as the noise alone puts them" in out
     r = json.loads((tmp_path / "result.json").read_text())
     t = json.loads((tmp_path / "truth.json").read_text())
     err = np.abs(np.array(r["joint_offsets_rad"]) - t["joint_offsets_rad"])[1:5]

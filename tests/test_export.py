@@ -73,3 +73,25 @@ def test_export_refuses_to_overwrite_its_input(tmp_path, capsys):
     assert main(["export", str(src), "--out", str(src)]) == 2
     assert "an input" in capsys.readouterr().err
     assert json.loads(src.read_text())["joint_offsets_rad"][1] == 0.000762
+
+
+def test_a_kept_joint_that_changes_says_why(tmp_path, capsys):
+    """issue 33: export printed J6 "kept: not fitted (current value)" beside a change of -2
+    counts. The change is J4's and J5's offsets through the wrist coupling; the line says
+    so, with the count the coupling gives (-g6 (C^-1 delta)_6, rounded)."""
+    run, cal = tmp_path / "r.tsv", tmp_path / "cal.json"
+    assert main(["rehearse", "--out", str(run), "--samples", "40", "-q"]) == 0
+    assert main(["calibrate", str(run), "--out", str(cal), "-q"]) == 0
+    capsys.readouterr()
+    assert main(["export", str(cal), "--out", str(tmp_path / "fd11.json")]) == 0
+    lines = {ln.split()[0]: ln for ln in capsys.readouterr().out.splitlines() if ln[:1] == "J"}
+    d = json.loads((tmp_path / "fd11.json").read_text())
+    delta = np.array(d["joint_offsets_rad"])
+    assert delta[5] == 0 and "delta6" in d["kept_current"]
+    coupled = -ROBOT.gains[5] * (np.linalg.inv(ROBOT.coupling) @ delta)[5]
+    assert abs(coupled) > 0.5  # this run's delta4 and delta5 move J6's zero by a count or more
+    assert d["change_counts"][5] == int(np.rint(coupled))
+    assert lines["J6"].endswith(f"kept: delta6 not fitted (0); {d['change_counts'][5]:+d} from "
+                                "J4's and J5's offsets through the wrist coupling (their "
+                                "motors' zeros move q6 unless J6's zero follows)")
+    assert lines["J1"].endswith("kept: not fitted (current value)")  # no coupling, no change

@@ -187,3 +187,54 @@ def test_recalibration_diff_and_rollback(cell, db, capsys, monkeypatch):
     assert (d / "a.json").read_bytes() == before
     assert main(["history", "diff", "1", "3", "--history", db]) == 2  # 3 is no calibration
     assert "entry 3 is a rollback, not a calibration" in capsys.readouterr().err
+
+
+def test_diff_of_two_models_of_the_same_samples_tests_nothing(tmp_path, capsys, monkeypatch):
+    """issue 33: history diff 1 2 of an offsets fit and a full fit of the same samples
+    called them "two independent calibrations" and flagged J5 significant: the same draws
+    fitted by two models, whose offsets mean different things (level offsets' absorb what
+    level full's geometry holds). The diff says so and tests nothing; two fits of one model
+    to independent samples are still tested."""
+    monkeypatch.chdir(tmp_path)
+    h = ["--history", str(tmp_path / "h.db")]
+    assert main(["rehearse", "--out", "r.tsv", "-q"]) == 0
+    assert main(["calibrate", "r.tsv", "--out", "a.json", "-q", *h]) == 0
+    assert main(["calibrate", "r.tsv", "--out", "b.json", "--level", "full", "-q", *h]) == 0
+    capsys.readouterr()
+    assert main(["history", "diff", "1", "2", *h]) == 0
+    out = capsys.readouterr().out
+    assert "A and B fit the same samples with two models (level offsets; level full)" in out
+    assert "independent" not in out and "SIGNIFICANT" not in out and "no significance test" in out
+    assert main(["history", "diff", "1", "2", *h, "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["independent"] is False and d["significant"] == []
+    assert all(c["std"] is None and c["z"] is None for c in d["changes"])
+    # the same model, another run of the same cell: two independent calibrations, tested
+    assert main(["rehearse", "--out", "s.tsv", "--seed", "5", "-q"]) == 0
+    assert main(["calibrate", "s.tsv", "--out", "c.json", "-q", *h]) == 0
+    capsys.readouterr()
+    assert main(["history", "diff", "1", "3", *h, "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["independent"] is True and d["basis"] is None
+    assert all(c["std"] is not None for c in d["changes"] if c["name"] in ("delta2", "o_x"))
+
+
+def test_check_flags_no_suspect_on_a_run_in_control(tmp_path, capsys, monkeypatch):
+    """issue 33: check on an in-control run of the realistic twin listed J4 as "significant
+    yes" (z -3.3 beyond the Bonferroni limit 3.14): a lone offset fitted to 40 residuals
+    that hold the model's mismatch, not a move. The distribution-free test decides; on a
+    run in control the z's rank the suspects and flag none."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["rehearse", "--out", "cal.tsv", "--truth-out", "t.json", "-q"]) == 0
+    assert main(["calibrate", "cal.tsv", "--out", "r.json", "-q", "--no-history"]) == 0
+    assert main(["rehearse", "--out", "day.tsv", "--truth", "t.json", "--seed", "12",
+                 "--samples", "40", "-q"]) == 0
+    capsys.readouterr()
+    assert main(["check", "day.tsv", "--against", "r.json", "--no-history", "--json"]) == 0
+    v = json.loads(capsys.readouterr().out)
+    assert v["verdict"] == "in_control" and v["moved"] == []
+    assert max(abs(s["z"]) for s in v["suspects"]) > v["z_limit"]  # the case that was flagged
+    assert not any(s["significant"] for s in v["suspects"])
+    assert main(["check", "day.tsv", "--against", "r.json", "--no-history"]) == 0
+    out = capsys.readouterr().out
+    assert " yes " not in out and "the run is in control: none moved" in out

@@ -100,3 +100,35 @@ def test_replay_takes_the_world_from_the_run_and_its_truth_file(tmp_path, capsys
     assert main(["replay", str(run), "--params", str(cell), "--truth-seed", "4"]) == 2
     err = capsys.readouterr().err
     assert "--truth-seed 4" in err and "records truth seed 3" in err and err.count("\n") == 1
+
+
+def test_a_calibration_result_is_replayed_as_its_own_model(tmp_path, capsys):
+    """issue 33: replay r1.tsv --params cal.json (the README's old form) put the world's
+    errors on the calibrated cell and reported twin - measured -3.73 mm where the run's
+    truth file gives +0.005 mm, and nothing said which to give. A calibration result is
+    its model exactly: twin - measured is its own model error (the fit's residuals, ray
+    cast), the output says so and names the truth file for the run's world; a flag that
+    would put a world on it is refused."""
+    run, truth, cal = tmp_path / "r.tsv", tmp_path / "t.json", tmp_path / "cal.json"
+    assert main(["rehearse", "--out", str(run), "--samples", "40", "--truth-out", str(truth),
+                 "-q"]) == 0
+    assert main(["calibrate", str(run), "--out", str(cal), "-q"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "R.json"
+    assert main(["replay", str(run), "--params", str(cal), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"twin: the model of {cal} exactly, a calibration result" in text
+    assert "give its truth file (rehearse --truth-out)" in text
+    r = json.loads(out.read_text())
+    doc = json.loads(cal.read_text())
+    assert r["summary"]["rms_diff_mm"] == pytest.approx(doc["residual_rms_mm"], rel=1e-6)
+    assert abs(r["summary"]["mean_diff_mm"]) < 0.05  # not the -3.7 mm of a world counted twice
+    assert r["summary"]["max_abs_twin_minus_analytic_mm"] < 1e-6
+    assert r["errors"] == "ideal" and r["truth_seed"] is None
+    # the truth file: the world the run was made in, to the noise
+    assert main(["replay", str(run), "--params", str(truth), "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["summary"]["rms_diff_mm"] < 0.1
+    for flag in (["--errors", "realistic"], ["--truth-seed", "0"]):
+        assert main(["replay", str(run), "--params", str(cal)] + flag) == 2
+        err = capsys.readouterr().err
+        assert "is a calibration result" in err and err.count("\n") == 1

@@ -144,6 +144,32 @@ def test_wrong_samples_are_said_not_drawn(results, tmp_path):
     assert "distances.png" in imgs  # the distances are what the file holds, whatever it is
 
 
+def test_level3_report_draws_the_model_error_of_its_own_samples(tmp_path, capsys):
+    """issue 33: a level-3 report said its very samples were "not the samples of this
+    result" (their model error recomputed without the approach directions, so level 3's
+    backlash took the gravity flank: 0.034 mm rms where the fit left 0.010). The report's
+    recomputed RMS is the result file's."""
+    from planecal.io.samples import read_samples
+    from planecal.model.measurement import predict
+    from planecal.model.scene import load_scene
+    from planecal.io.params import params_from_dict
+    run, cal, out = tmp_path / "r.tsv", tmp_path / "cal3.json", tmp_path / "rep"
+    assert main(["rehearse", "--out", str(run), "--samples", "150", "-q"]) == 0
+    assert main(["calibrate", str(run), "--level", "nonkinematic", "--out", str(cal),
+                 "--report", str(out)]) == 0
+    capsys.readouterr()
+    html = (out / "index.html").read_text(encoding="utf-8")
+    assert "not the samples" not in html
+    assert {"error_after.png", "error_per_sample.png"} <= set(figures(out / "index.html"))
+    doc = json.loads(cal.read_text())
+    s = read_samples(run)
+    robot = load_scene("thesis_final").robot
+    r = predict(robot, s.qe, params_from_dict(doc), s.plate, s.direction) - s.d_mm * 1e-3
+    assert np.sqrt(np.mean(r ** 2)) * 1e3 == pytest.approx(doc["residual_rms_mm"], rel=1e-6)
+    flank = predict(robot, s.qe, params_from_dict(doc), s.plate) - s.d_mm * 1e-3
+    assert np.sqrt(np.mean(flank ** 2)) * 1e3 > 1.5 * doc["residual_rms_mm"]  # it matters
+
+
 def test_samples_recorded_in_the_provenance_are_used_and_checked(results, tmp_path):
     doc = json.loads(results["demo"].read_text())
     entry = {"role": "samples", "path": str(results["tsv"]), "sha256": sha256(results["tsv"]),

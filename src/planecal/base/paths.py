@@ -74,10 +74,14 @@ def cache_dir() -> Path:
 def numba_cache() -> None:
     """Point numba's on-disk cache at ``cache_dir()/numba`` (call before ``njit(cache=True)``
     makes a function), unless the user chose a folder (``$NUMBA_CACHE_DIR``). numba falls
-    back to its own places if that folder cannot be written."""
+    back to its own places if that folder cannot be written. A compilation (the first run
+    only) is said as progress (``base.progress.report_compiles``)."""
     from numba import config
+
+    from planecal.base.progress import report_compiles
     if not config.CACHE_DIR:
         config.CACHE_DIR = str(cache_dir() / "numba")
+    report_compiles(config.CACHE_DIR)
 
 
 def file_sha256(path) -> str:

@@ -76,7 +76,7 @@ def engine_from_args(args, warmup: Callable[[], Any] | None = None) -> Engine:
     before the runs (``studies.distributed.warm_twin``)."""
     return Engine(jobs=args.jobs, scheduler=args.scheduler, warmup=warmup,
                   notify=lambda m: print(f"note: {m}", file=sys.stderr, flush=True),
-                  tls=tls_from_args(args), insecure=args.insecure)
+                  tls=tls_from_args(args), insecure=args.insecure, progress=True)
 
 
 def add_results_arguments(p) -> None:

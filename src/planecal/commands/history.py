@@ -114,16 +114,19 @@ def _calibration(hist, n: int):
 
 
 def _diff(args, hist, _out) -> int:
-    from planecal.estimation.drift import parameter_changes
-    from planecal.present.drift import diff_document, diff_text
+    from planecal.estimation.drift import diff_basis, parameter_changes
+    from planecal.present.drift import diff_document, diff_text, model_words
     a, b = (_calibration(hist, n) for n in args.entries)
+    basis = diff_basis(*({i.sha256 for i in e.inputs if i.role == "samples"} for e in (a, b)),
+                       *(model_words(e.document) for e in (a, b)))
     changes, limit = parameter_changes({p.name: (p.value, p.std) for p in a.parameters},
                                        {p.name: (p.value, p.std) for p in b.parameters},
-                                       args.alpha)
+                                       args.alpha, independent=basis is None)
     if args.json:
-        print(json.dumps(diff_document(a.id, b.id, changes, limit, args.alpha), indent=2))
+        print(json.dumps(diff_document(a.id, b.id, changes, limit, args.alpha, basis),
+                         indent=2))
     else:
-        print(diff_text(a.id, b.id, changes, limit, args.alpha))
+        print(diff_text(a.id, b.id, changes, limit, args.alpha, basis))
     if a.robot_sha256 and b.robot_sha256 and a.robot_sha256 != b.robot_sha256:
         print(f"note: entries {a.id} and {b.id} were made for different robot descriptions")
     return 0

@@ -10,7 +10,10 @@ the run was made in, as its files say (``jobs.runs.run_world``):
 P's own world when P is a truth file (rehearse --truth-out), else the world the sample
 file's sidecar names (a rehearsal's error profile and truth seed); --errors and
 --truth-seed choose it only where nothing is recorded (default realistic, seed 0), and
-are refused where they contradict the record. In a world of a profile the joints carry
+are refused where they contradict the record. A calibration result as P is replayed as its
+own model exactly (its parameters already hold what they absorbed of the world's errors:
+the world's errors on them would count twice; --errors and --truth-seed are refused with
+it). In a world of a profile the joints carry
 its errors at rest (compliance, gear error; no noise), so twin - analytic shows what the
 errors the model lacks do to each distance; --errors ideal: the robot is the nominal model
 exactly (twin = analytic to ~1e-9 mm).
@@ -25,7 +28,10 @@ from planecal.jobs.predict import REPLAY_FORMAT
 def add_arguments(p):
     from planecal.commands.cell_options import add_scene_argument
     p.add_argument("samples", help="sample file, seed format (7.1.4)")
-    p.add_argument("--params", required=True, help="parameter file: the twin's truth")
+    p.add_argument("--params", required=True,
+                   help="the twin's truth: the run's truth file (rehearse --truth-out: the "
+                        "world it was made in) or a parameter file; a calibration result is "
+                        "replayed as its own model, no world's errors added")
     add_scene_argument(p, "the plates and robot", reads="the run's sidecar and --params' provenance")
     p.add_argument("--errors", default=None, metavar="ideal|realistic|FILE.json",
                    help="the twin robot's error profile where the files record none "

@@ -75,9 +75,9 @@ def run(args) -> int:
     n_runs = len(spec.cells()) * spec.runs
     with engine as eng:  # the scheduler reached before anything is made
         make_folder(out, "--out")
+        runs = Progress(f"sweep: {n_runs} runs, {eng.describe()}", n_runs, hold=True)
         bar = Progress("planning", len(plans_needed(spec)), unit=" plans")
-        res = run_sweep(spec, results, eng, resume=args.resume,
-                        progress=Progress(f"sweep: {n_runs} runs, {eng.describe()}", n_runs),
+        res = run_sweep(spec, results, eng, resume=args.resume, progress=runs,
                         plan_progress=bar)
     text = format_sweep(res)
     print(text)

@@ -44,6 +44,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.progress import report
 from planecal.estimation.calibrate import Calibration, calibrate
 from planecal.estimation.noise import repeatability_sigma, sample_sigma_m, sample_variance
 from planecal.model.encoder import counts_to_joints
@@ -143,7 +144,8 @@ def cross_validate(robot: Robot, qe, d_m, initial, plate, settings, direction=No
     n = len(d_m)
     plate = np.zeros(n, int) if plate is None else np.asarray(plate, int)
     out = np.full(n, np.nan)
-    for f in np.array_split(np.random.default_rng(seed).permutation(n), folds):
+    for k, f in enumerate(np.array_split(np.random.default_rng(seed).permutation(n), folds)):
+        report(k + 1, folds, "cross-validation: fold")
         keep = np.setdiff1d(np.arange(n), f)
         dk = None if direction is None else np.asarray(direction)[keep]
         try:

@@ -20,6 +20,8 @@ from typing import Callable, Protocol
 
 import numpy as np
 
+from planecal.base.progress import report
+
 
 class Status(Enum):
     CONVERGED = "converged"
@@ -190,6 +192,7 @@ def least_squares(fun: Callable, x0: np.ndarray, n_rows: int,
     initial_r, initial_cost = r.copy(), cost(r, w)
     history = [_log(0, r, used)]
     for it in range(1, opt.max_iter + 1):
+        report(it, None, "fit: iteration")
         Jw, rw = _with_prior(J, r, w, x, prior)
         H, g, S = _normal_equations(Jw, rw, opt.scale)
         if opt.method == "gn":

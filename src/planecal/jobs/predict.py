@@ -58,6 +58,26 @@ class ReplayRequest:
     out: str | None = None
 
 
+# what --params means when it is a calibration result (issue 33: the world's errors put on
+# a calibrated cell counted twice what its parameters had absorbed of them: twin - measured
+# -3.73 mm where the run's truth file gives +0.005)
+CALIBRATION_TWIN = (
+    "a calibration result: --params is the twin's truth, and a calibration's parameters "
+    "already hold what they absorbed of the world's errors, so none is added (twin - "
+    "measured is the calibration's own model error). For the twin of the world the run was "
+    "made in, give its truth file (rehearse --truth-out)")
+
+
+def _refuse_a_world(req: ReplayRequest) -> None:
+    """--errors or --truth-seed with a calibration result (``CALIBRATION_TWIN``): one line."""
+    for flag, given in (("--errors", req.errors), ("--truth-seed", req.truth_seed)):
+        if given is not None:
+            raise InputError(f"{flag} {given}: {req.params} is a calibration result, whose "
+                             "parameters already hold what they absorbed of the world's "
+                             "errors: replay puts no world on it (for the world the run was "
+                             "made in, give its truth file: rehearse --truth-out)")
+
+
 def replay(req: ReplayRequest) -> dict:
     """The replay (``studies.replay``), printed and written to --out: its document."""
     from planecal.io.params import save_json
@@ -65,12 +85,16 @@ def replay(req: ReplayRequest) -> dict:
     from planecal.present.replay import format_replay
     from planecal.studies.replay import replay as replay_run, replay_world
     from planecal.twin.profile import load_profile
-    from planecal.twin.world import sources_on
+    from planecal.twin.world import WorldRef, sources_on
 
     runs, result = read_runs_and_result([req.samples], req.params, req.scene)
     scene, s, params = runs.scene, runs.samples, result.params
     truth_file = req.params if result.doc.get("world") else None
-    ref = run_world(runs.runs[0], truth_file, req.errors, req.truth_seed)
+    if result.is_result:  # a calibration: the twin is its model, no world's errors on it
+        _refuse_a_world(req)
+        ref = WorldRef("ideal")
+    else:
+        ref = run_world(runs.runs[0], truth_file, req.errors, req.truth_seed)
     profile = load_profile(ref.errors, scene.robot)
     world = opts = None
     if profile.name != "ideal" or truth_file is not None:
@@ -83,7 +107,9 @@ def replay(req: ReplayRequest) -> dict:
     res["profile"] = str(profile.path)
     res["truth_seed"] = None if world is None else ref.truth_seed
     res["world"] = ref.to_dict()
-    if world is None:
+    if result.is_result:
+        print(f"twin: the model of {req.params} exactly, {CALIBRATION_TWIN}")
+    elif world is None:
         print(f"twin: the ideal world (the nominal model exactly, truth = {req.params})")
     else:
         on = sources_on(scene.robot, world, opts)

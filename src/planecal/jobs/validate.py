@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from planecal.base.errors import InputError
+from planecal.base.progress import stage
 
 
 @dataclass(frozen=True)
@@ -187,12 +188,14 @@ def _validate_given(req: ValidateRequest) -> tuple[dict, object]:
     runs, result = read_runs_and_result([req.run], req.calibrated, req.scene)
     scene, model = runs.scene, result.model()
     ref = run_world(runs.runs[0], req.truth, req.errors, None, default="ideal")
-    world, opts = ref.build(scene)
-    profile = load_profile(ref.errors, scene.robot)
-    checker = CollisionWorld(scene, clearance_m=req.settings.clearance_m)
-    v = validate(scene, world, model, runs.samples.qe, req.settings, checker,
-                 ModelClass.of_document(scene.robot, result.doc, len(scene.plates)), opts,
-                 runs.samples.direction)  # the level's floor from the result's own class
+    with stage("validate", f"ISO 9283 and the gauge block on the twin of {ref.describe()}",
+               quiet=req.quiet):
+        world, opts = ref.build(scene)
+        profile = load_profile(ref.errors, scene.robot)
+        checker = CollisionWorld(scene, clearance_m=req.settings.clearance_m)
+        v = validate(scene, world, model, runs.samples.qe, req.settings, checker,
+                     ModelClass.of_document(scene.robot, result.doc, len(scene.plates)), opts,
+                     runs.samples.direction)  # the level's floor from the result's own class
     v["scene"] = scene.name
     v["calibration"] = {}
     v["truth_offsets_rad"] = world.params.joint_offsets

@@ -151,7 +151,7 @@ def _fd11(req: ControllerFile, robot, scene, delta, fitted, kept, label) -> dict
           f"{'rounding_urad':>13}  offset")
     for j in range(6):
         name = f"delta{j + 1}"
-        how = "calibrated" if name in fitted else "kept: not fitted (current value)"
+        how = "calibrated" if name in fitted else _kept(robot, delta, j, int(change[j]))
         print(f"J{j + 1:<5} {delta[j] * 1e6:>11.1f} {qe0[j]:>9d} {new[j]:>9d} "
               f"{change[j]:>+8d} {residual[j] * 1e6:>13.3f}  {how}")
     print(f"rounding to whole counts moves the flange by {tcp * 1e6:.2f} um at the "
@@ -168,6 +168,21 @@ def _fd11(req: ControllerFile, robot, scene, delta, fitted, kept, label) -> dict
         save_json(req.out, doc)
         print(f"written to {req.out}")
     return doc
+
+
+def _kept(robot, delta, j: int, change: int) -> str:
+    """Why a joint not fitted still changes its encoder zero: the other joints' offsets
+    through the wrist coupling (``qe0' = qe0 - g (C^-1 delta)``; on the MC70 q6 = x6 +
+    b x4 + c x5: the zeros of J4's and J5's motors move q6 unless J6's zero follows)."""
+    if change == 0:
+        return "kept: not fitted (current value)"
+    inv = np.linalg.inv(robot.coupling)
+    via = [f"J{k + 1}'s" for k in range(len(delta)) if k != j and inv[j, k] and delta[k]]
+    if not via:
+        return f"kept: not fitted ({change:+d}: rounding)"
+    return (f"kept: delta{j + 1} not fitted (0); {change:+d} from {' and '.join(via)} offsets "
+            f"through the wrist coupling (their motors' zeros move q{j + 1} unless "
+            f"J{j + 1}'s zero follows)")
 
 
 def _offsets(req: ControllerFile, robot, delta, fitted, kept, label) -> dict:

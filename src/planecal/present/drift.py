@@ -118,8 +118,10 @@ def check_text(doc: dict) -> str:
         lines.append("IN CONTROL: the run errs as the reference did (exit 0)")
     else:
         lines.append("DRIFTED: the run errs more than the reference did (exit 1)")
+    flag = (f"significant where |z| > {doc['z_limit']:.2f}" if doc["verdict"] == "drifted"
+            else "the run is in control: none moved, |z| only ranks them")
     lines.append(f"suspects, each alone with the rest held at the result's values (the run's "
-                 f"value minus the result's; significant where |z| > {doc['z_limit']:.2f}):")
+                 f"value minus the result's; {flag}):")
     lines.append(table(SUSPECT_HEADERS, suspect_rows(doc["suspects"]), "lrrrll"))
     if doc["no_effect"]:
         lines.append(f"no effect on these samples: {', '.join(doc['no_effect'])}")
@@ -149,6 +151,18 @@ def _explanation_lines(doc: dict) -> list[str]:
     return out
 
 
+def model_words(doc: dict | None) -> str:
+    """What a result fitted, in words (history diff): its level and the settings that
+    change the model (free parameters, a geometry prior, the arm's scale, weights)."""
+    from planecal.present.calibration import label
+    doc = doc if isinstance(doc, dict) else {}
+    cal = doc.get("calibration") if isinstance(doc.get("calibration"), dict) else {}
+    extra = [f"{k.replace('_', ' ')} {cal[k]}" for k in ("free", "geometry_prior_m_rad")
+             if cal.get(k) is not None]
+    extra += [k.replace("_", " ") for k in ("free_scale", "weighted") if cal.get(k)]
+    return "level " + label(doc) + (f" ({', '.join(extra)})" if extra else "")
+
+
 def diff_rows(changes: list[Change]) -> list[list[str]]:
     rows = []
     for c in changes:
@@ -162,10 +176,18 @@ def diff_rows(changes: list[Change]) -> list[list[str]]:
     return rows
 
 
-def diff_text(a: int, b: int, changes: list[Change], limit: float, alpha: float) -> str:
+def diff_text(a: int, b: int, changes: list[Change], limit: float, alpha: float,
+              basis: str | None = None) -> str:
+    """The diff table; ``basis``: why A and B are not two independent calibrations of one
+    model (``estimation.drift.diff_basis``; None: they are, and the changes are tested)."""
+    if basis:
+        head = f"history diff {a} -> {b}: change = B - A; {basis}"
+        return "\n".join([head, table(["parameter", "unit", f"A ({a})", f"B ({b})", "change"],
+                                      [r[:5] for r in diff_rows(changes)], "llrrr")])
     head = (f"history diff {a} -> {b}: change = B - A, std = sqrt(std_A^2 + std_B^2) (two "
-            f"independent calibrations); significant where |z| > {limit:.2f} (alpha {alpha:g} "
-            f"over the {sum(c.std is not None for c in changes)} parameters with a std)")
+            f"independent calibrations of one model); significant where |z| > {limit:.2f} "
+            f"(alpha {alpha:g} over the {sum(c.std is not None for c in changes)} parameters "
+            "with a std)")
     body = table(["parameter", "unit", f"A ({a})", f"B ({b})", "change", "std", "z", ""],
                  diff_rows(changes), "llrrrrrl")
     sig = [param_label(c.name) for c in changes if c.significant]
@@ -173,8 +195,10 @@ def diff_text(a: int, b: int, changes: list[Change], limit: float, alpha: float)
     return "\n".join([head, body, tail])
 
 
-def diff_document(a: int, b: int, changes: list[Change], limit: float, alpha: float) -> dict:
-    return {"a": a, "b": b, "alpha": alpha, "z_limit": limit,
+def diff_document(a: int, b: int, changes: list[Change], limit: float, alpha: float,
+                  basis: str | None = None) -> dict:
+    return {"a": a, "b": b, "alpha": alpha, "z_limit": limit, "independent": basis is None,
+            "basis": basis,
             "changes": [{"name": c.name, "label": param_label(c.name), "a": c.a, "b": c.b,
                          "std_a": c.std_a, "std_b": c.std_b, "change": c.change,
                          "std": c.std, "z": c.z, "significant": c.significant}

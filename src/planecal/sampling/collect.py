@@ -30,6 +30,7 @@ from typing import Callable, Protocol
 
 import numpy as np
 
+from planecal.base.progress import report
 from planecal.sampling.driver import Driver, plan_move
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource, route_back
@@ -195,22 +196,25 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
 
 
 class MemoryRecorder:
-    """Samples and rejections in memory (studies)."""
+    """Samples and rejections in memory (studies), each said as progress of ``total``
+    (``base.progress.report``: a study's run on a worker shows it on the client's bar)."""
 
-    def __init__(self):
+    def __init__(self, total: int | None = None):
         self.counts: list[np.ndarray] = []
         self.d_mm: list[float] = []
         self.plates: list[int] = []
         self.directions: list[np.ndarray] = []
+        self.total = total
 
     def sample(self, index, counts, d_mm, plan, direction):
         self.counts.append(np.asarray(counts, np.int64).copy())
         self.d_mm.append(float(d_mm))
         self.plates.append(int(plan.plate))
         self.directions.append(np.asarray(direction, np.int8).copy())
+        report(len(self.counts), self.total, "samples")
 
     def reject(self, kind, q, reason):
-        pass
+        report(len(self.counts), self.total, "samples")
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(qe (N,6) int64, d (N,) m, plate (N,), direction (N,6) int8: the approach

@@ -84,15 +84,19 @@ def _move(kind: str):
 def _session(ses: Session, scene, settings, link, laser, enable, checker, lock):
     drv = Driver(link, laser, enable, scene.robot, ses.observer)
     progress = Progress("samples", settings.samples)
-    moves = {}
+    moves, started = {}, False
     try:
         drv.start()
         if ses.start != "here":
             moves["start_ticks"] = _move(ses.start)(drv, scene, checker)
+        started = True
     except PathBlocked as e:
         raise InputError(f"--start {ses.start}: {e}") from None
     except EnableDropped:
         raise RunFailed(f"--start {ses.start}: enable dropped on the way; nothing sampled") from None
+    finally:
+        if not started:  # no run: its bar closed here (an open one takes the process's reports)
+            progress.close(last=False)
     run = SamplingRun(drv, scene, settings, ses.out, checker, resume=ses.resume,
                       background=ses.background, hold_while_planning=ses.hold_while_planning,
                       progress=partial(show_run, progress), extra=ses.extra, lock=lock, planner=ses.planner,

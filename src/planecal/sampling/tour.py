@@ -47,6 +47,7 @@ from typing import Sequence
 
 import numpy as np
 
+from planecal.base.progress import report
 from planecal.sampling.steps import DWELL_TICKS, n_steps
 
 READ_TICKS = 102  # median ticks of one laser read on the twin (100 at least: the buffer)
@@ -150,18 +151,21 @@ class Clock:
 # ----- what a planner makes the run do ----------------------------------------------------------
 
 class _Moves:
-    """A collect-core recorder keeping each sample's move (``collect.Recorder``)."""
+    """A collect-core recorder keeping each sample's move (``collect.Recorder``), and
+    saying how many of ``samples`` are planned (``base.progress.report``)."""
 
-    def __init__(self):
+    def __init__(self, samples: int):
         self.visits: list[Visit] = []
+        self.samples = samples
 
     def sample(self, index, counts, d_mm, plan, direction) -> None:
         self.visits.append(Visit(np.asarray(plan.qe_goal, np.int64).copy(),
                                  [np.asarray(c, np.int64).copy() for _, c in plan.via],
                                  int(plan.plate)))
+        report(len(self.visits), self.samples, "poses planned")
 
     def reject(self, kind, q, reason) -> None:
-        pass
+        report(len(self.visits), self.samples, "poses planned")
 
 
 def visit(planner, start_q: np.ndarray, samples: int, seed: int = 0,
@@ -171,7 +175,7 @@ def visit(planner, start_q: np.ndarray, samples: int, seed: int = 0,
     succeeds (``collect`` with ``PlansOnly``). RuntimeError when the planner gives up;
     with ``short`` the moves up to there and why it gave up (None: it did not)."""
     from planecal.sampling.collect import Cursor, PlansOnly, Tally, collect
-    rec, tally = _Moves(), Tally()
+    rec, tally = _Moves(samples), Tally()
     collect(planner, PlansOnly(), rec, samples,
             Cursor(np.asarray(start_q, float), np.random.default_rng(seed).bit_generator.state),
             tally, max_attempts)
@@ -363,7 +367,10 @@ def order(counts, start, checker=None, scene=None, blocked: str = "avoid",
     if scene is None:
         raise ValueError("order: a collision checker needs the scene")
     edges = _EdgeChecker(scene, checker, nodes, D, blocked, nominal)
+    rounds = 0
     while True:
+        rounds += 1
+        report(rounds, None, f"order: {edges.paths // 2} moves checked, search round")
         C = edges.matrix()
         path = solve_path(C, identity, exact_max)
         if path_cost(C, [0, *identity]) < path_cost(C, [0, *path]):
@@ -408,6 +415,7 @@ class _EdgeChecker:
 
     def check(self, todo) -> None:
         for a, b in sorted(todo):
+            report(self.paths // 2, None, "order: moves checked")  # each 10-20 ms
             qa, qb = self.q[a], self.q[b]
             self.paths += 2
             if self.checker.check_path(qa, qb).ok and self.checker.check_path(qb, qa).ok:

@@ -44,10 +44,12 @@ once per cache folder, not once per worker.
 """
 from __future__ import annotations
 
+import functools
 import importlib
 import logging
 import os
 import signal
+import time
 import uuid
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
@@ -55,9 +57,11 @@ from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.progress import Progress, stage
 from planecal.studies.cluster import (TLSFiles, check_reach, client_security, parse_address,
                                       probe, tls_env)
 from planecal.studies.results import ResultsFile, canonical_key, encode
+from planecal.studies.run_reports import PROGRESS_TOPIC, forward, reported
 
 CONNECT_TIMEOUT_S = 10.0
 CLOSE_TIMEOUT_S = 10.0  # each of the client's and the local cluster's close, at most
@@ -73,12 +77,16 @@ WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.system-monitor.interval": "5s",
                  "distributed.worker.memory.monitor-interval": "1s"}
 _QUIET_LOGGERS = ("distributed", "tornado", "bokeh")
+WAIT_STEP_S = 0.25  # a start-up wait says how long it has waited this often
 
 
 class Steps(Protocol):
-    """Progress per completed item (``studies.common.Progress``)."""
+    """Progress per completed item (``base.progress.Progress``), and inside the runs."""
 
     def step(self, k: int = 1) -> None: ...
+
+    def within(self, k: int | None = None, n: int | None = None,
+               what: str | None = None) -> None: ...
 
 
 # ----- the engine -------------------------------------------------------------------------------
@@ -145,7 +153,11 @@ def worker_env_lines(tls: TLSFiles | None = None) -> list[str]:
 
 
 def _set_worker_env() -> None:
+    """A worker's process: no GL, and no progress of its own on its stderr (a compile's,
+    say): what its runs report goes to the client's bar (``run_reports``)."""
+    from planecal.base.progress import set_quiet
     os.environ.setdefault("MUJOCO_GL", "disable")
+    set_quiet(True)
 
 
 class Engine:
@@ -159,7 +171,8 @@ class Engine:
                  connect_timeout_s: float = CONNECT_TIMEOUT_S,
                  warmup: Callable[[], Any] | None = None,
                  notify: Callable[[str], None] | None = None,
-                 tls: TLSFiles | None = None, insecure: bool = False):
+                 tls: TLSFiles | None = None, insecure: bool = False,
+                 progress: bool = False):
         if jobs is not None and jobs < 1:
             raise InputError(f"--jobs must be at least 1, got {jobs}")
         if scheduler is not None and jobs is not None:
@@ -187,6 +200,7 @@ class Engine:
         self._cluster = None
         self._pids: list[int] = []  # the local cluster's worker processes
         self._logs = None
+        self.progress = progress  # say the start-up (the workers, the warm-up) on stderr
 
     # -- lifecycle
     def __enter__(self) -> "Engine":
@@ -206,30 +220,34 @@ class Engine:
         self._logs = _quiet_logs()
         self._logs.__enter__()
         try:
-            if self.mode == "cluster":
-                self._start_cluster()
-            else:
-                self._connect()
-            self.client.register_plugin(_env_plugin(), name="planecal-env")
-            if self.mode == "scheduler":
-                configs = self.client.run(_worker_config).values()
-                self.untuned = sum(c != WORKER_CONFIG for c in configs)
-                if self.untuned and self.notify:
-                    self.notify(f"{self.untuned} of the scheduler's workers run without "
-                                "planecal's dask settings (dask's profiler on: ~10 % slower); "
-                                "start them after 'export $(planecal worker-env)'")
-            if self.warmup is not None:
-                self._warm()
+            what = (f"starting a local Dask cluster of {self.n_workers} worker processes"
+                    if self.mode == "cluster" else f"connecting to {self.scheduler}")
+            with stage("engine", what, quiet=not self.progress) as bar:
+                if self.mode == "cluster":
+                    self._start_cluster(bar)
+                else:
+                    self._connect()
+                self.client.register_plugin(_env_plugin(), name="planecal-env")
+                if self.mode == "scheduler":
+                    configs = self.client.run(_worker_config).values()
+                    self.untuned = sum(c != WORKER_CONFIG for c in configs)
+                    if self.untuned and self.notify:
+                        self.notify(f"{self.untuned} of the scheduler's workers run without "
+                                    "planecal's dask settings (dask's profiler on: ~10 % "
+                                    "slower); start them after 'export $(planecal worker-env)'")
+                if self.warmup is not None:
+                    self._warm(bar)
         except BaseException:
             self.close()
             raise
 
-    def _start_cluster(self) -> None:
+    def _start_cluster(self, bar: Progress) -> None:
+        """The local cluster, its workers started one by one as the bar counts them."""
         from distributed import Client, LocalCluster
         import dask
         with _spawn_env(WORKER_ENV), dask.config.set(WORKER_CONFIG):
             self._cluster = LocalCluster(
-                n_workers=self.n_workers, threads_per_worker=1, processes=True,
+                n_workers=0, threads_per_worker=1, processes=True,
                 host="127.0.0.1", scheduler_port=0, dashboard_address=None,
                 # no dashboard; the scheduler's plain HTTP routes (health, metrics) on a
                 # free loopback port instead of 8787 (which another cluster may hold)
@@ -239,8 +257,24 @@ class Engine:
                 # the teardown, not news; what fails in a run reaches the client as an
                 # exception (Engine.map), so only CRITICAL lines are shown
                 silence_logs=logging.CRITICAL)
-        self.client = Client(self._cluster, set_as_default=False)
+            self.client = Client(self._cluster, set_as_default=False)
+            self._cluster.scale(self.n_workers)
+            self._wait_workers(bar)
         self._pids = [int(v) for v in self.client.run(os.getpid).values()]
+
+    def _wait_workers(self, bar: Progress) -> None:
+        """Until every worker of the local cluster has joined, saying how many have."""
+        t0 = time.monotonic()
+        while True:
+            n = len(self.client.scheduler_info(n_workers=-1)["workers"])
+            bar.within(what=f"{n} of {self.n_workers} workers up after "
+                            f"{time.monotonic() - t0:.0f} s")
+            if n >= self.n_workers:
+                return
+            try:
+                self.client.wait_for_workers(n + 1, timeout=WAIT_STEP_S)
+            except TimeoutError:
+                pass
 
     def _connect(self) -> None:
         from distributed import Client
@@ -259,17 +293,32 @@ class Engine:
                              f"within {self.connect_timeout_s:g} s); start some with "
                              f"'dask worker {addr} --nthreads 1'") from None
 
-    def _warm(self) -> None:
+    def _warm(self, bar: Progress) -> None:
         """The warm-up on one worker first (it fills the on-disk caches), then on the
-        others at once (they load them)."""
+        others at once (they load them), the bar saying how many are done."""
         workers = sorted(self.client.scheduler_info(n_workers=-1)["workers"])
+        bar.update(0, "warming up the workers (the first compiles the kernels if not cached)")
         first = self.client.submit(self.warmup, workers=[workers[0]], pure=False,
                                    key=f"planecal-warmup-{uuid.uuid4().hex}")
-        first.result()
+        t0 = time.monotonic()
+        self._wait([first], len(workers), bar, t0)
         rest = [self.client.submit(self.warmup, workers=[w], pure=False,
                                    key=f"planecal-warmup-{uuid.uuid4().hex}")
                 for w in workers[1:]]
-        self.client.gather(rest)
+        self._wait(rest, len(workers), bar, t0, 1)
+
+    @staticmethod
+    def _wait(futures, total: int, bar: Progress, t0: float, before: int = 0) -> None:
+        """Until ``futures`` are done (their errors raised), saying how long since ``t0``."""
+        while True:
+            done = sum(f.done() for f in futures)
+            bar.within(what=f"{before + done} of {total} warmed up after "
+                            f"{time.monotonic() - t0:.0f} s")
+            if done == len(futures):
+                break
+            time.sleep(WAIT_STEP_S)
+        for f in futures:
+            f.result()
 
     def close(self) -> None:
         """Close the client and the local cluster, each within ``CLOSE_TIMEOUT_S``, so a
@@ -343,7 +392,7 @@ class Engine:
                     yield i, rf.done[c][1]
                 else:
                     todo.append(i)
-            for i, res in self._run(fn, items, todo):
+            for i, res in self._run(fn, items, todo, progress):
                 if rf is not None:
                     res = rf.append(keys[i], res)
                 if progress:
@@ -367,7 +416,10 @@ class Engine:
                 on_result(i, res)
         return out_list
 
-    def _run(self, fn, items, todo) -> Iterator[tuple[int, Any]]:
+    def _run(self, fn, items, todo, progress=None) -> Iterator[tuple[int, Any]]:
+        """The runs of ``todo``; what a run ``report``s goes to ``progress`` (``within``):
+        in this process the innermost open bar (``progress`` itself), from a worker through
+        dask's events (``PROGRESS_TOPIC``)."""
         if not todo:
             return
         if self.mode == "local":
@@ -379,9 +431,16 @@ class Engine:
         from distributed import as_completed
         tag = uuid.uuid4().hex[:12]
         name = getattr(fn, "__name__", "run")
+        topic = f"{PROGRESS_TOPIC}-{tag}"
+        call = fn
+        if progress is not None:
+            self.client.subscribe_topic(topic, functools.partial(forward, progress))
+            call = functools.partial(reported, fn, topic)
         futs = {}
         for i in todo:
-            f = self.client.submit(fn, items[i], key=f"{name}-{tag}-{i}", pure=False)
+            f = self.client.submit(call, items[i], i, key=f"{name}-{tag}-{i}", pure=False) \
+                if progress is not None else \
+                self.client.submit(fn, items[i], key=f"{name}-{tag}-{i}", pure=False)
             futs[f.key] = (i, f)
         try:
             for f, res in as_completed([f for _, f in futs.values()], loop=self.client.loop,
@@ -389,6 +448,8 @@ class Engine:
                 i, _ = futs.pop(f.key)
                 yield i, res
         finally:
+            if progress is not None:
+                self.client.unsubscribe_topic(topic)
             if futs:  # stopped early (an error, Ctrl-C, the caller stopped): cancel the rest
                 self.client.cancel([f for _, f in futs.values()])
 

@@ -61,6 +61,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.progress import report
 from planecal.formats.base import read_json, validate
 from planecal.formats.poses import POSES_FORMAT, PosesFile
 from planecal.model.encoder import counts_in_range, counts_to_joints, joints_to_counts
@@ -85,6 +86,7 @@ def candidates(scene, m: int, seed: int, checker=None, max_draws: int | None = N
     draws = 0
     max_draws = max_draws or 20 * m
     while len(qe) < m and draws < max_draws:
+        report(len(qe), m, "candidate poses")
         k = gen.plate_for(draws, rng)  # by draw: a draw gives up to two candidates
         pose = gen.draw(rng, k)
         draws += 1

@@ -171,7 +171,7 @@ def _collect(scene, planner, twin, rs, seed: int):
                                            RestAcquirer, Tally, collect)
     from planecal.sampling.driver import Driver
 
-    rec, tally = MemoryRecorder(), Tally()
+    rec, tally = MemoryRecorder(rs.samples), Tally()
     cursor = Cursor(counts_to_joints(scene.robot, twin.current_counts),
                     np.random.default_rng(seed).bit_generator.state)
     if path_dependent(twin.options):

@@ -320,7 +320,7 @@ def run_one(item: Item) -> dict:
             acq = RestAcquirer(twin, rs.laser)
         start = twin.current_counts.copy()
         clock = Clock(acq, start, rs.nominal_step_counts, rs.dwell_ticks)
-        rec, tally = MemoryRecorder(), Tally()
+        rec, tally = MemoryRecorder(rs.samples), Tally()
         collect(planner, clock, rec, rs.samples,
                 Cursor(counts_to_joints(robot, start),
                        np.random.default_rng(item.seed).bit_generator.state),
@@ -367,7 +367,8 @@ def run_sweep(spec: SweepSpec, out, engine, resume: bool = False, progress=None,
     ``distributed.Engine``) into the results file ``out``, and summarise. A planned run
 whose laser gives up on some poses of its list takes fewer samples (as the sampling run
 would); the table says how many were taken on average (``taken``).
-    ``plan_progress``: a ``planecal.base.progress.Progress`` over ``plans_needed``."""
+    ``plan_progress``: a ``planecal.base.progress.Progress`` over ``plans_needed``;
+    ``progress`` (over the runs) is released once they are planned."""
     plans = {}
     for scene, design, n in plans_needed(spec):
         if plan_progress:
@@ -375,6 +376,8 @@ would); the table says how many were taken on average (``taken``).
         plans[(scene, design, n)] = plan_poses(spec, scene, design, n)
     if plan_progress:
         plan_progress.close()
+    if progress is not None:
+        progress.release()  # made held, so that the plans' own progress went to their bar
     its = items(spec, plans)
     results = engine.map(run_one, its, key=Item.key, out=out, resume=resume,
                          header=spec.header(), progress=progress)

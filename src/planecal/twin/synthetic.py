@@ -41,7 +41,7 @@ def synthetic_samples(scene: Scene, truth: CellParams, n: int, rng: np.random.Ge
     """n samples (qe (n,6) int64, d (n,) m, plate (n,) int) on the scene's plates."""
     pose = settings or PoseSettings(cone_deg=scene.cone_deg, distance_mm=tuple(scene.distance_mm))
     planner = Planner(scene, pose, NoCollisionChecks())
-    rec, tally = MemoryRecorder(), Tally()
+    rec, tally = MemoryRecorder(n), Tally()
     q0 = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     collect(planner, ModelAcquirer(scene, truth), rec, n,
             Cursor(q0, np.random.default_rng(rng.integers(2 ** 63)).bit_generator.state),

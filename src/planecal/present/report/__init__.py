@@ -117,10 +117,12 @@ def write_report(result, out_dir, samples=None, scene: str | None = None) -> Pat
         stage = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name[:64]}.", suffix=".tmp"))
     except OSError as e:
         raise InputError(f"{out}: cannot create the report directory ({e.strerror})") from None
+    from planecal.base.progress import stage as progress_stage
     try:
         ctx = Context(doc=doc, out_dir=stage, source=source, samples=samples, scene=scene)
         try:
-            page = module.build(ctx)
+            with progress_stage(f"report ({kind})", "its inputs and figures"):
+                page = module.build(ctx)
         except (KeyError, TypeError, ValueError, IndexError) as e:
             raise InputError(f"{where}: not a complete {kind} result ({type(e).__name__}: "
                              f"{e})") from None

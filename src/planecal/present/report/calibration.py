@@ -8,11 +8,11 @@ the correlation matrix. Tables: the parameters with std and correction; the
 identifiability findings as text.
 
 The result file holds the parameters, not the samples: the per-sample figures recompute
-the model error with ``planecal.model.cell.predict`` from the initial and final parameters on
-the samples given (or recorded in the result's provenance), and show them only when
-the recomputed RMS reproduces the file's ``residual_rms_mm`` and
-``residual_rms_initial_mm`` (so a wrong sample file or wrong initial values are said,
-not drawn).
+the model error with ``planecal.model.measurement.predict`` from the initial and final
+parameters on the samples given (or recorded in the result's provenance), with their
+approach directions (level 3's backlash), and show them only when the recomputed RMS
+reproduces the file's ``residual_rms_mm`` and ``residual_rms_initial_mm`` (so a wrong
+sample file or wrong initial values are said, not drawn).
 """
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ from planecal.present.report.page import Page
 # the recomputed RMS must match the file's to this (relative; the fit's own last step
 # below the improvement limit is far smaller)
 RMS_MATCH = 1e-3
+ANNOTATE_ALL_MAX, STRONG = 20, 0.9  # all correlations shown up to 20 parameters, beyond |rho|>=0.9
 
 
 def _fmt(v: float | None, scale: float = 1.0, digits: int = 4) -> str:
@@ -289,6 +290,8 @@ def correlation(cov: dict) -> tuple[list[str], np.ndarray]:
 
 
 def fig_correlation(out, cov: dict):
+    """The correlation matrix; each cell's number up to ``ANNOTATE_ALL_MAX`` parameters,
+    the strong pairs' beyond (level 3's 60: 3,600 texts, seconds to draw, unreadable)."""
     from matplotlib.colors import TwoSlopeNorm
     names, R = correlation(cov)
     n = len(names)
@@ -299,17 +302,22 @@ def fig_correlation(out, cov: dict):
     im = ax.imshow(np.ma.masked_invalid(R), cmap=cmap, norm=TwoSlopeNorm(0.0, -1.0, 1.0))
     ax.set_xticks(range(n), [label(x) for x in names])
     ax.set_yticks(range(n), [label(x) for x in names])
+    every = n <= ANNOTATE_ALL_MAX
     for i in range(n):
         for j in range(n):
             v = R[i, j]
+            if not every and not (i != j and np.isfinite(v) and abs(v) >= STRONG):
+                continue
             text = "n/i" if not np.isfinite(v) else f"{v:.2f}".replace("-0.00", "0.00")
             ax.text(j, i, text, ha="center", va="center", fontsize=7 if n > 10 else 8,
                     color="white" if np.isfinite(v) and abs(v) > 0.6 else "black")
     fig.colorbar(im, ax=ax, shrink=0.8, label="correlation coefficient")
     ax.set_title("Correlation of the fitted parameters")
+    shown = ("" if every else f" The numbers are shown where |ρ| ≥ {STRONG:g} ({n} "
+             "parameters: the others' cells are too small to read); grey: not identifiable.")
     return save(fig, out, "correlation", "Correlation matrix",
                 "Correlation coefficients of the free parameters from the fit's covariance; "
-                "|ρ| near 1: the data moves the two together. n/i: not identifiable.")
+                "|ρ| near 1: the data moves the two together. n/i: not identifiable." + shown)
 
 
 # ----- the page ----------------------------------------------------------------------------------
@@ -373,7 +381,9 @@ def _model_errors(doc: dict, scene, samples, final, initial, initial_from,
     used = np.ones(len(samples), bool)
     outl = [int(i) for i in doc.get("outliers", []) if 0 <= int(i) < len(samples)]
     used[outl] = False
-    r1 = predict(scene.robot, samples.qe, final, samples.plate) - samples.d_mm * 1e-3
+    # the approach directions: level 3's backlash flanks (without: 0.034 mm for 0.010)
+    r1 = predict(scene.robot, samples.qe, final, samples.plate,
+                 samples.direction) - samples.d_mm * 1e-3
     rms1 = _rms_mm(r1, used)
     if not _matches(rms1, doc.get("residual_rms_mm")):
         notes.append(f"with these samples the calibrated model's RMS error is "
@@ -381,7 +391,8 @@ def _model_errors(doc: dict, scene, samples, final, initial, initial_from,
                      f"they are not the samples of this result; no model-error figures")
         r1 = None
     elif initial is not None:
-        r0 = predict(scene.robot, samples.qe, initial, samples.plate) - samples.d_mm * 1e-3
+        r0 = predict(scene.robot, samples.qe, initial, samples.plate,
+                     samples.direction) - samples.d_mm * 1e-3
         rms0 = _rms_mm(r0, used)
         if not _matches(rms0, doc.get("residual_rms_initial_mm")):
             notes.append(f"the initial parameters taken ({initial_from}) give an RMS "
@@ -472,7 +483,7 @@ def _identifiability_section(sec, ctx: Context) -> None:
         else:
             sec.text(text)
     if ident and not warned:
-        sec.finding("No unidentifiable, weak or strongly correlated parameters.", ok=True)
+        sec.finding("No unidentifiable or weakly identifiable parameters.", ok=True)
     sec.figure(fig_singular_values(out, ident))
     summary = [["samples used", doc.get("samples_used", "–")],
                ["outliers", ", ".join(str(i) for i in doc.get("outliers", [])) or "none"],

@@ -64,7 +64,9 @@ def new_figure(width_in: float, height_in: float, rows: int = 1, cols: int = 1, 
 
 
 def save(fig, out_dir: Path, name: str, title: str, caption: str) -> Plot:
+    from planecal.base.progress import report
     path = Path(out_dir) / f"{name}.png"
+    report(what=f"drawing {path.name}")
     fig.savefig(path, dpi=DPI, metadata={"Software": "planecal"})  # outputs.PNG_MARK
     return Plot(path.name, title, caption)
 

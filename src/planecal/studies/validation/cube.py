@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.progress import report
 from planecal.model.encoder import counts_to_joints
 from planecal.model.kinematics import fk
 from planecal.model.measurement import beam_point
@@ -117,6 +118,7 @@ def place_near(scene, commanders, samples, st, mover, region, checker):
     for k in ks[:1] if given else ks:  # the next centre where no cube fits
         center, R, q_ref = samples.tool[k], samples.flange[k, :3, :3], samples.q[k]
         for edge in edges:
+            report(what=f"placing the ISO cube ({edge * 1e3:.0f} mm)")
             try:
                 return plan_iso(scene, commanders, center, edge, R, q_ref, mover, region,
                                 checker, inside=not given), k
@@ -136,6 +138,7 @@ def place_standard(scene, commanders, samples, mover, region, checker):
     last = None
     for edge in top * SHRINK ** np.arange(SHRINKS + 1):
         for k in near:
+            report(what=f"placing the standard's cube ({edge * 1e3:.0f} mm)")
             R = samples.flange[k, :3, :3]
             try:  # the flange cube stays where the program put it, whatever R
                 return plan_iso(scene, commanders, centre_f + R @ t, float(edge), R,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.progress import report
 from planecal.estimation.noise import BUFFER_LEN
 from planecal.model.cell_params import CellParams
 from planecal.model.encoder import counts_to_joints, joints_to_counts
@@ -125,6 +126,7 @@ def gauge_block(twin, scene, truth, models: dict, st: ValidationSettings, checke
     plan = []
     for fi, face in enumerate(aimed):
         for u, v in offsets:
+            report(len(plan), 4 * len(faces), "gauge block: poses found")
             off = u * face[2][0] + v * face[2][1]
             q = _measure_pose(scene, face, za, off, st, checker, q_ref, aim)
             if q is None:
@@ -142,7 +144,8 @@ def gauge_block(twin, scene, truth, models: dict, st: ValidationSettings, checke
     lengths = {name: [] for name in models}
     worst_incidence = 0.0
     first = None
-    for _ in range(st.gauge_repeats):
+    for r in range(st.gauge_repeats):
+        report(r + 1, st.gauge_repeats, "gauge block: repeat")
         meas = []
         for fi, c in plan:
             mover.go(c, "gauge block pose")

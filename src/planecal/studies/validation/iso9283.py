@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planecal.base.errors import InputError
+from planecal.base.progress import report
 from planecal.model.encoder import counts_to_joints
 from planecal.studies.validation.settings import ValidationSettings
 
@@ -278,6 +279,7 @@ def iso9283(twin, plan: IsoPlan, st: ValidationSettings, mover: "Mover", standof
         mover.go(cs[-1], "ISO pose P5")  # the first P1 approached as every later one
         mover.go(cs[0], "ISO pose P1")
         for j in range(st.cycles):
+            report(j + 1, st.cycles, f"ISO 9283: the {name} model's cycle")
             for i in range(5):
                 mover.go(cs[i], f"ISO pose P{i + 1}")
                 Tf, Ts = twin.flange_pose(), twin.sensor_pose()
