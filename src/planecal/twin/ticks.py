@@ -236,16 +236,7 @@ def advance(D, i0, S, F, W, eps_block, u_block, cur_out, row_of, Q, k0, stop, ev
                 stop[2] = need
                 return k
         if moved and flags & BACKLASH:
-            for j in range(6):
-                dq = 0.0
-                for c in range(6):
-                    m = F[M + 6 * j + c]
-                    if m != 0.0:
-                        dq += m * np.float64(cnt[c] - S[CUR + c])
-                if dq > 0.0:
-                    S[DIR + j] = 1
-                elif dq < 0.0:
-                    S[DIR + j] = -1
+            follow_sides(S, F, cnt)
         for j in range(6):
             if not ideal:
                 F[Y + j] = y[j]
@@ -264,6 +255,22 @@ def advance(D, i0, S, F, W, eps_block, u_block, cur_out, row_of, Q, k0, stop, ev
     stop[0] = DONE
     stop[1] = n
     return k if every_row else flush_row(S, F, W, Q, k)
+
+
+@register_jitable
+def follow_sides(S, F, cnt):
+    """Each joint's backlash side follows the sign of its joint-side motion from the
+    current counts to ``cnt`` (unchanged where it does not move)."""
+    for j in range(6):
+        dq = 0.0
+        for c in range(6):
+            m = F[M + 6 * j + c]
+            if m != 0.0:
+                dq += m * np.float64(cnt[c] - S[CUR + c])
+        if dq > 0.0:
+            S[DIR + j] = 1
+        elif dq < 0.0:
+            S[DIR + j] = -1
 
 
 @register_jitable
