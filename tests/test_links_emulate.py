@@ -198,7 +198,8 @@ def test_a_controller_that_keeps_its_reference(tmp_path, capsys):
         released = emu.fd11.snapshot()
         # --rt-fresh: delta 0 first, a jump back to where the controller booted
         code, _, err = sample(port, tty, run, "--resume", "--rt-fresh",
-                              "--rt-boot-timeout-s", "0.5", capsys=capsys)
+                              "--rt-resend-s", "0.05", "--rt-boot-timeout-s", "0.5",
+                              capsys=capsys)
         assert code == 1
         err = err.strip().splitlines()[-1]  # after the note that --seed is the sidecar's
         assert "no reply to the first packet (delta [0, 0, 0, 0, 0, 0])" in err
@@ -229,8 +230,9 @@ def test_sample_rides_out_a_lossy_booting_cell(tmp_path, capsys):
     with Emulators(twin, rt_port=0, reply_port=None, fd11_faults=faults,
                    laser_faults=LaserFaults(silent_every=23)) as emu:
         code, s, err = sample(emu.fd11.rt_port, emu.laser.port, out, "--samples", "2",
-                              "--rt-resend-s", "0.05", "--rt-silence-s", "2.0",
-                              "--laser-timeout-s", "0.05", capsys=capsys)
+                              "--rt-resend-s", "0.05", "--rt-silence-s", "20",
+                              "--laser-timeout-s", "0.05", "--laser-wait-s", "0.005",
+                              capsys=capsys)
         # a resend of the last tick may still be queued: let the thread see every packet
         assert s is not None and emu.fd11.wait_until(
             lambda c: c.datagrams >= s["link"]["sent"], 5), err

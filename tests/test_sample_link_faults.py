@@ -116,7 +116,8 @@ def test_first_contact_waits_for_a_booting_rt_system(twin, tmp_path, capsys):
     assert s["link"]["lost_replies"] == 0  # the boot wait is not an outage
     with Emulators(twin, rt_port=0, reply_port=None, fd11_faults=FD11Faults(boot_s=5.0)) as emu:
         code, s, err = sample(emu, tmp_path / "NEW.tsv", "--samples", "1",
-                              "--rt-boot-timeout-s", "0.3", capsys=capsys)
+                              "--rt-resend-s", "0.05", "--rt-boot-timeout-s", "0.3",
+                              capsys=capsys)
     assert code == 1 and s is None
     lines = problem_lines(err)
     assert len(lines) == 1 and "within the boot timeout of 0.3 s" in lines[0], err
@@ -347,7 +348,7 @@ def test_a_failed_start_leaves_nothing(twin, tmp_path, capsys, case):
         if case == "laser port missing":
             extra = ["--laser", str(tmp_path / "no-such-tty")]
         elif case == "controller silent":
-            extra = ["--rt-boot-timeout-s", "0.3"]
+            extra = ["--rt-resend-s", "0.05", "--rt-boot-timeout-s", "0.3"]
         elif case == "not stated":
             st = StateFile(state)
             st.sending()
