@@ -116,7 +116,7 @@ def test_sample_live_against_emulate(tmp_path, capsys):
     the loop's thread is shown without a clock by the tests above; how many ticks come
     late at real-time pacing is the machine's, not the viewer's, and no test's.)"""
     from test_links_emulate import Emulate
-    from wire import LASER_TIMEOUT_S, RESEND_S, SILENCE_S
+    from wire import BOOT_S, LASER_TIMEOUT_S, RESEND_S, SILENCE_S
     from planecal.present.rerun import summarize
     emu = Emulate("--seed", "3", "--reference", "keep")
     grpc, web = _free_port(), _free_port()
@@ -132,7 +132,8 @@ def test_sample_live_against_emulate(tmp_path, capsys):
                 time.sleep(0.05)
 
     argv = ["sample", "--rt", "127.0.0.1", "--rt-port", str(emu.port), "--local-port", "0",
-            "--rt-tick-s", "0.003", "--rt-resend-s", str(RESEND_S), "--rt-silence-s", str(SILENCE_S),
+            "--rt-tick-s", "0.003", "--rt-resend-s", str(RESEND_S),
+            "--rt-silence-s", str(SILENCE_S), "--rt-boot-timeout-s", str(BOOT_S),
             "--laser", emu.tty, "--laser-timeout-s", str(LASER_TIMEOUT_S),
             "--rt-state", str(tmp_path / "fd11.state"), "--rt-fresh", "--seed", "2",
             "--samples", "1", "--out", str(tmp_path / "live.tsv"), "--live", "--live-port",
@@ -144,7 +145,9 @@ def test_sample_live_against_emulate(tmp_path, capsys):
         watcher.join(60)
     finally:
         emu.stop()
-    live = json.loads(capsys.readouterr().out)
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    live = json.loads(cap.out)
     assert code == 0 and live["samples"] == 1
     assert live["link"]["ticks"] > 500  # paced: a few seconds of the run for the viewer
     assert live["live"]["grpc_url"] == f"rerun+http://127.0.0.1:{grpc}/proxy"

@@ -8,15 +8,17 @@ far longer than that: the link then counts a lost reply and resends, the emulato
 the twin once more (an extra hold tick, one more laser-noise draw), a tick goes without
 its reading, a reply a tick old can even read as a released switch, and a silence ends
 the run. Tests that are not about timing therefore run with intervals no stall reaches:
-a resend after 1 s, silence 20 s, a laser request given a second and each tick waiting
-for its reading (``--laser-wait-s`` = the laser's timeout), so a run's samples are the
-same on any machine under any load. Tests of resending, silence or boot timeouts pass
+a resend after 1 s, silence 20 s, a first contact given a minute (an emulator in another
+process answers once its twin is built), a laser request given a second and each tick
+waiting for its reading (``--laser-wait-s`` = the laser's timeout), so a run's samples
+are the same on any machine under any load. Tests of resending, silence or boot timeouts pass
 their own flags after these (argparse keeps the last).
 """
 from __future__ import annotations
 
 RESEND_S = 1.0
 SILENCE_S = 20.0
+BOOT_S = 60.0  # a controller in another process answers once its twin is built and warm
 LASER_TIMEOUT_S = 1.0
 
 
@@ -25,6 +27,7 @@ def sample_argv(port, tty, out, *extra, seed: int = 2) -> list[str]:
     emulator on ``tty``, writing ``out``; ``extra`` flags come last."""
     return ["sample", "--rt", "127.0.0.1", "--rt-port", str(port), "--local-port", "0",
             "--rt-tick-s", "0", "--rt-resend-s", str(RESEND_S), "--rt-silence-s", str(SILENCE_S),
+            "--rt-boot-timeout-s", str(BOOT_S),
             "--laser", str(tty), "--laser-timeout-s", str(LASER_TIMEOUT_S),
             "--laser-wait-s", str(LASER_TIMEOUT_S),
             "--seed", str(seed), "--out", str(out), *extra]
