@@ -276,16 +276,29 @@ def _logging(args) -> None:
 
 
 def _check_files(module, args) -> None:
-    """The command's outputs against its inputs (``--config`` included), before it runs:
-    its ``files(args)`` declaration (``planecal.commands.io_options``) through the output
-    guard (``planecal.io.outputs.check_files``)."""
+    """The command's inputs and outputs (``--config`` included), before it runs: its
+    ``files(args)`` declaration (``planecal.commands.io_options``) through the output
+    guard (``planecal.io.outputs.check_files``): an input the command line names must
+    exist, an output may not overwrite an input. Declarations and the guard import nothing
+    heavy, so these are said before the command loads its libraries."""
     declare = getattr(module, "files", None)
     if declare is None:
         return
     from planecal.io.outputs import check_files
     files = declare(args)
     files.read(args.config, role="--config")
-    check_files(files, bool(getattr(args, "force", False)))
+    check_files(files, bool(getattr(args, "force", False)), _named(args))
+
+
+def _named(args) -> set[str]:
+    """Every value the command line (or its --config file) gave, as text: the files it
+    names among them."""
+    out = set()
+    for v in vars(args).values():
+        for x in v if isinstance(v, (list, tuple)) else (v,):
+            if isinstance(x, (str, os.PathLike)):
+                out.add(str(x))
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

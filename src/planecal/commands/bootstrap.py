@@ -22,7 +22,7 @@ FORMAT = "planecal-bootstrap/1"
 
 
 def add_arguments(p):
-    from planecal.model.scene import DEFAULT_SCENE
+    from planecal.base.paths import DEFAULT_SCENE
     p.add_argument("samples", nargs="+", help="sample file(s): the pool")
     p.add_argument("--sizes", default=None,
                    help="comma-separated subset sizes, each below the pool (default: those of "

@@ -36,9 +36,8 @@ from planecal.commands.calibration_options import (add_calibration_arguments,
 from planecal.commands.history_options import (add_history_arguments, new_entry, open_history,
                                                parameter_rows, record, sample_worlds)
 from planecal.commands.report_options import add_report_argument, write_command_report
+from planecal.base.paths import DEFAULT_SCENE
 from planecal.formats.params import RESULT_FORMAT, provenance, result_document
-from planecal.io.params import save_json
-from planecal.model.scene import DEFAULT_SCENE
 
 
 def add_arguments(p):
@@ -73,6 +72,7 @@ def files(args):
 def run(args) -> int:
     from planecal.estimation.accuracy import of_samples
     from planecal.estimation.calibrate import calibrate_samples
+    from planecal.io.params import save_json
     from planecal.present.calibration import document, text
 
     inputs = [("samples", p) for p in args.samples] + (

@@ -13,7 +13,7 @@ bootstrap, montecarlo, validate, plan, layouts; sweep's spec has the same keys):
 """
 from __future__ import annotations
 
-import numpy as np
+import math
 
 from planecal.base.errors import InputError
 from planecal.commands.value_options import MAX_ITERATIONS, count
@@ -78,7 +78,7 @@ def _prior(text: str | None):
     except ValueError:
         raise InputError(f"--geometry-prior: expected MM,MRAD (two numbers), got "
                          f"{text!r}") from None
-    if not (np.isfinite(mm) and np.isfinite(mrad) and mm > 0 and mrad > 0):
+    if not (math.isfinite(mm) and math.isfinite(mrad) and mm > 0 and mrad > 0):
         raise InputError(f"--geometry-prior: both stds must be > 0, got {text!r}")
     return mm * 1e-3, mrad * 1e-3
 
@@ -100,10 +100,10 @@ def fit_options(args, robot):
     repeatability noise model of ``robot`` (or of --repeatability-mm)."""
     from planecal.estimation.fit import FitOptions
 
-    if not (np.isfinite(args.improvement_limit) and args.improvement_limit >= 0):
+    if not (math.isfinite(args.improvement_limit) and args.improvement_limit >= 0):
         raise InputError(f"--improvement-limit must be a number >= 0, got "
                          f"{args.improvement_limit}")
-    if args.outlier_sigma is not None and not (np.isfinite(args.outlier_sigma)
+    if args.outlier_sigma is not None and not (math.isfinite(args.outlier_sigma)
                                                and args.outlier_sigma > 0):
         raise InputError(f"--outlier-sigma must be a number > 0, got {args.outlier_sigma}")
     return FitOptions(max_iter=args.max_iter, improvement_limit=args.improvement_limit,
@@ -127,10 +127,10 @@ def weighting(weighted: bool, robot, repeatability_mm: float | None = None,
         return {}
     from planecal.estimation.noise import repeatability_sigma
     rep = repeatability_mm
-    if rep is not None and not (np.isfinite(rep) and rep > 0):
+    if rep is not None and not (math.isfinite(rep) and rep > 0):
         raise InputError(f"--repeatability-mm must be > 0, got {rep:g}")
     sd_um = 1.0 if distance_sigma_um is None else distance_sigma_um
-    if not (np.isfinite(sd_um) and sd_um > 0):
+    if not (math.isfinite(sd_um) and sd_um > 0):
         raise InputError(f"--distance-sigma-um must be > 0, got {sd_um:g}")
     r_m = robot.repeatability_m if rep is None else rep * 1e-3
     if not r_m > 0:

@@ -25,7 +25,7 @@ import numpy as np
 
 from planecal.base.errors import RunFailed
 from planecal.commands.value_options import MAX_SAMPLES, count, seed
-from planecal.model.scene import DEFAULT_SCENE
+from planecal.base.paths import DEFAULT_SCENE
 
 DEMO_CYCLES = 10  # ISO cycles of the demo's position-error check (validate: 30)
 

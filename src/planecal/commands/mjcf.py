@@ -11,7 +11,7 @@ from planecal.commands.value_options import seed
 
 
 def add_arguments(p):
-    from planecal.model.scene import DEFAULT_SCENE
+    from planecal.base.paths import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE,
                    help="scene name (planecal scenes) or path (default %(default)s)")
     p.add_argument("--out", required=True, metavar="OUT.xml", help="MJCF file to write")

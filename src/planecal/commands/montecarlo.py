@@ -35,7 +35,7 @@ from planecal.commands.value_options import MAX_RUNS, MAX_SAMPLES, count, seed
 
 def add_arguments(p):
     from planecal.commands.calibration_options import add_calibration_arguments
-    from planecal.model.scene import DEFAULT_SCENE
+    from planecal.base.paths import DEFAULT_SCENE
     from planecal.sampling.poses import IK_CHOICES
     from planecal.studies.rehearsal import MODES
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")

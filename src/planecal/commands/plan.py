@@ -33,7 +33,7 @@ from planecal.commands.value_options import MAX_CANDIDATES, MAX_RUNS, MAX_SAMPLE
 
 
 def add_arguments(p):
-    from planecal.model.scene import DEFAULT_SCENE
+    from planecal.base.paths import DEFAULT_SCENE
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
     p.add_argument("--samples", type=count(MAX_SAMPLES), default=150,
                    help="poses to choose (default 150; with a target: the most it may choose)")

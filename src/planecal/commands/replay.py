@@ -23,7 +23,7 @@ REPLAY_FORMAT = "planecal-replay/1"
 
 
 def add_arguments(p):
-    from planecal.model.scene import DEFAULT_SCENE
+    from planecal.base.paths import DEFAULT_SCENE
     p.add_argument("samples", help="sample file, seed format (7.1.4)")
     p.add_argument("--params", required=True, help="parameter file: the twin's truth")
     p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")

@@ -21,7 +21,7 @@ from pathlib import Path
 
 
 def add_arguments(p):
-    from planecal.model.scene import DEFAULT_SCENE
+    from planecal.base.paths import DEFAULT_SCENE
     p.add_argument("--params", metavar="RESULT.json",
                    help="calibration result or parameter file (default: the nominal model)")
     p.add_argument("--scene", default=DEFAULT_SCENE,
