@@ -120,3 +120,11 @@ def _fd11_state_dir(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("PLANECAL_STATE_DIR", str(tmp_path_factory.mktemp("fd11-state")))
         yield
+
+
+@pytest.fixture(scope="session")
+def public_robots(tmp_path_factory):
+    """The public robots the tests ship, each imported once per session on first use
+    (tests/public_robots.py)."""
+    from public_robots import Imported
+    return Imported(tmp_path_factory.mktemp("public_robots"))

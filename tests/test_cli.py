@@ -18,7 +18,8 @@ TABLE10 = str(repo_path("examples", "table10_params.json"))
 
 def test_predict_prints_index_measured_predicted_error(capsys):
     assert main(["predict", SEED, "--params", TABLE10]) == 0
-    rows = [line.split("\t") for line in capsys.readouterr().out.splitlines()]
+    head, *rows = [line.split("\t") for line in capsys.readouterr().out.splitlines()]
+    assert head == ["index", "measured_mm", "predicted_mm", "error_mm"]  # issue 33
     assert len(rows) == 5 and all(len(r) == 4 for r in rows)
     pred = [float(r[2]) for r in rows]
     np.testing.assert_allclose(pred, [89.776, 85.318, 68.221, 68.017, 71.580], atol=0.01)

@@ -143,21 +143,21 @@ def test_a_truth_file_edited_in_place_is_not_the_world_of_its_runs(worlds, tmp_p
     that run into another world: its sidecar's hash refuses it, and a copy is the way."""
     import shutil
 
-    from planecal.model.scene import load_scene
-    from planecal.twin.world import recorded_world
+    from planecal.jobs.runs import read_run, run_world
     d = tmp_path
     for f in ("t0.json", "a.tsv", "a.tsv.json"):
         shutil.copy(worlds / f, d / f)
     side = json.loads((d / "a.tsv.json").read_text())
     side["twin"]["truth_file"] = str(d / "t0.json")
     (d / "a.tsv.json").write_text(json.dumps(side))
-    scene = load_scene("thesis_final")
-    ref = recorded_world(scene, d / "a.tsv", d / "t0.json")
+    run = read_run(d / "a.tsv")
+    scene = run.scene
+    ref = run_world(run, d / "t0.json")
     ref.build(scene)
     doc = json.loads((d / "t0.json").read_text())
     doc["joint_offsets_rad"][2] += 5e-4
     (d / "t0.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match="not the truth file the run .* was made in"):
-        recorded_world(scene, d / "a.tsv", d / "t0.json")
+        run_world(run, d / "t0.json")
     with pytest.raises(InputError, match="changed since the run was made"):
-        recorded_world(scene, d / "a.tsv").build(scene)
+        run_world(run).build(scene)

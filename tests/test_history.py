@@ -1,21 +1,20 @@
 """Issue 24: the cell's history (planecal.history) and the drift check's statistics.
 
-The store is checked by what it must never do (lose an entry of two processes writing at
-once, write NaN, take a file that is not a history), the exceedance test against an
+The store's own tests are test_history_store.py, test_history_content.py and
+test_history_place.py (issue 32; both backends); here: a file that is not a history, the
+exceedance test against an
 enumeration of every arrangement (its null distribution is combinatorics, not a formula
 of ours) and against heavy-tailed draws (its false-alarm rate holds whatever the errors'
 distribution), and the commands end to end on synthetic samples of the fit's own model:
 calibrate, check (in control, and delta3 moved by 0.5 mrad), export, history list, show,
-diff and rollback.
+diff and rollback, on SQLite and on PostgreSQL (tests/history_db.py) with the same
+assertions.
 """
 from __future__ import annotations
 
 import itertools
 import json
 import math
-import subprocess
-import sys
-import time
 from math import comb
 
 import numpy as np
@@ -24,35 +23,11 @@ from scipy import stats
 
 from conftest import INITIAL, perturbed, synthetic_counts
 from planecal.cli import main
+from history_db import db  # noqa: F401  (the fixture: SQLite and PostgreSQL)
 from planecal.estimation.drift import exceedance_test, parameter_changes
-from planecal.history import Entry, History, InputRow, ParameterRow
 from planecal.io.samples import write_samples
 
-PY = sys.executable
-
-
-def entry(kind="check", **kw) -> Entry:
-    return Entry(kind=kind, outcome="ok", exit_code=0, created_utc="2026-01-01T00:00:00+00:00",
-                 planecal_version="test", **kw)
-
-
 # ----- the store --------------------------------------------------------------------------
-
-def test_an_entry_comes_back_as_written_and_nan_is_null(tmp_path):
-    h = History.open(str(tmp_path / "h.db"))
-    n = h.add(entry("calibrate", cell="c1", summary={"rms": float("nan"), "x": np.float64(2.5)},
-                    document={"a": np.array([1.0, np.inf])}, result_sha256="ab" * 32,
-                    inputs=[InputRow("samples", "s.tsv", "cd" * 32, 12)],
-                    parameters=[ParameterRow("delta3", 1e-4, float("nan"), "rad", "fitted")]))
-    m = h.add(entry("export", against=n, cell="c2"))
-    e = h.get(n)
-    assert e.summary == {"rms": None, "x": 2.5} and e.document == {"a": [1.0, None]}
-    assert e.parameters == [ParameterRow("delta3", 1e-4, None, "rad", "fitted")]
-    assert e.inputs == [InputRow("samples", "s.tsv", "cd" * 32, 12)]
-    assert h.find_result("ab" * 32) == n and h.find_result("ef" * 32) is None
-    assert [x.id for x in h.entries()] == [n, m] and [x.id for x in h.entries("c2")] == [m]
-    assert h.get(m).against == n
-
 
 def test_a_file_that_is_not_a_history_is_refused_in_one_line(tmp_path, capsys):
     bad = tmp_path / "notes.db"
@@ -60,49 +35,12 @@ def test_a_file_that_is_not_a_history_is_refused_in_one_line(tmp_path, capsys):
     assert main(["history", "list", "--history", str(bad)]) == 2
     assert "not an SQLite database" in capsys.readouterr().err
     assert main(["history", "list", "--history", str(tmp_path / "none" / "h.db")]) == 2
-    assert "does not exist" in capsys.readouterr().err
+    assert "no history here yet" in capsys.readouterr().err
     assert main(["history", "list", "--history", str(tmp_path / "fresh.db")]) == 2
     assert "no history here yet" in capsys.readouterr().err
     assert not (tmp_path / "fresh.db").exists()  # nothing written on a refusal
-    h = History.open(str(tmp_path / "old.db"))
-    with h.engine.begin() as conn:
-        conn.exec_driver_sql("UPDATE meta SET value = '99' WHERE key = 'schema_version'")
-    assert main(["history", "list", "--history", str(tmp_path / "old.db")]) == 2
-    err = capsys.readouterr().err
-    assert "schema version 99" in err and err.count("\n") == 1
-
-
-WRITER = """
-import sys, time
-from pathlib import Path
-from planecal.history import Entry, History, InputRow
-path, tag, n, go = sys.argv[1], sys.argv[2], int(sys.argv[3]), Path(sys.argv[4])
-h = History.open(path)
-while not go.exists():
-    time.sleep(0.001)
-for i in range(n):
-    h.add(Entry(kind="check", outcome="ok", exit_code=0, created_utc="t", planecal_version="t",
-                note=f"{tag}-{i}", inputs=[InputRow("run", f"{tag}{i}.tsv", "0" * 64, i)]))
-"""
-
-
-def test_two_processes_writing_one_history_at_once_lose_nothing(tmp_path):
-    """Two real processes, started together, each add 40 entries (with their inputs) to one
-    SQLite history, the schema created by whichever comes first: all 80 are there, each
-    with its inputs, numbered without a gap or a repeat."""
-    db, go = tmp_path / "h.db", tmp_path / "go"
-    procs = [subprocess.Popen([PY, "-c", WRITER, str(db), tag, "40", str(go)])
-             for tag in ("a", "b")]
-    time.sleep(0.5)  # both opened (or waiting to), then released at once
-    go.touch()
-    assert [p.wait(timeout=120) for p in procs] == [0, 0]
-    h = History.open(str(db))
-    got = h.entries()
-    assert sorted(e.note for e in got) == sorted(f"{t}-{i}" for t in "ab" for i in range(40))
-    assert [e.id for e in got] == list(range(1, 81))
-    notes = {e.note for e in got if e.note.startswith("a-")}
-    assert len(notes) == 40
-    assert all(len(h.get(e.id).inputs) == 1 for e in got[::7])
+    assert main(["export", "x.json", "--history", str(tmp_path / "none" / "h.db")]) == 2
+    assert "does not exist" in capsys.readouterr().err
 
 
 # ----- the statistics --------------------------------------------------------------------
@@ -186,10 +124,11 @@ def cell(robot, tmp_path_factory):
             run("moved.tsv", 30, moved)[0], str(d / "recal.tsv"))
 
 
-def test_calibrate_check_export_and_the_history_of_a_week(cell, capsys, monkeypatch):
+def test_calibrate_check_export_and_the_history_of_a_week(cell, db, capsys, monkeypatch):
+    """The same outputs on SQLite and on PostgreSQL (issue 32)."""
     d, cal, ok1, ok2, moved, _ = cell
     monkeypatch.chdir(d)
-    db = str(d / "cell.db")
+    db = db.where
     h = ["--history", db]
     assert main(["calibrate", cal, "--out", "r.json", *h, "--note", "monday"]) == 0
     assert "history: entry 1 (calibrate: ok)" in capsys.readouterr().out
@@ -225,10 +164,10 @@ def test_calibrate_check_export_and_the_history_of_a_week(cell, capsys, monkeypa
     assert {i["role"] for i in e["inputs"]} == {"result", "scene", "robot"}
 
 
-def test_recalibration_diff_and_rollback(cell, capsys, monkeypatch):
+def test_recalibration_diff_and_rollback(cell, db, capsys, monkeypatch):
     d, cal, _, _, _, recal = cell
     monkeypatch.chdir(d)
-    db = str(d / "week2.db")
+    db = db.where
     h = ["--history", db]
     assert main(["calibrate", cal, "--out", "a.json", *h]) == 0
     assert main(["calibrate", recal, "--out", "b.json", *h, "--note", "after maintenance"]) == 0

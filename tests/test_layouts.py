@@ -221,3 +221,20 @@ def test_candidates_take_every_plate_in_turn(three, plates):
     _, _, plate = candidates(subscene(scene, plates), 60, 3, checker)
     counts = np.bincount(plate, minlength=len(plates))
     assert len(plate) == 60 and counts.min() >= 60 // len(plates) // 2, counts
+
+
+def test_the_table_fits_the_terminal(three, capsys, monkeypatch):
+    # issue 33: fourteen layouts made lines of up to 277 characters; now no line is longer
+    # than the terminal (COLUMNS, as shutil reads it) or 100 when it is not a terminal, and
+    # each table repeats the parameter and its unit
+    for columns, width in ((None, 100), ("72", 72)):
+        if columns:
+            monkeypatch.setenv("COLUMNS", columns)
+        else:
+            monkeypatch.delenv("COLUMNS", raising=False)
+        assert main(["layouts", "--samples", "20"]) == 0
+        lines = capsys.readouterr().out.splitlines()
+        assert max(map(len, lines)) <= width, max(lines, key=len)
+        heads = [ln for ln in lines if ln.startswith("parameter  unit")]
+        assert len(heads) >= 2 and sum(ln.count("plate_") for ln in heads) == 4 + 2 * 6 + 3 * 4
+        assert any(ln.startswith("delta2     urad ") for ln in lines)

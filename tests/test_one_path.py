@@ -158,7 +158,7 @@ def test_one_sign_for_the_model_error(cli_run, capsys):
     d = cli_run
     capsys.readouterr()
     assert main(["predict", str(d / "r.tsv"), "--params", str(d / "c.json")]) == 0
-    rows = [ln.split("\t") for ln in capsys.readouterr().out.strip().splitlines()]
+    rows = [ln.split("\t") for ln in capsys.readouterr().out.strip().splitlines()[1:]]
     meas, pred, err = (np.array([float(r[k]) for r in rows]) for k in (1, 2, 3))
     np.testing.assert_allclose(err, pred - meas, atol=2e-4)
     doc = json.loads((d / "c.json").read_text())

@@ -93,6 +93,10 @@ def test_an_installed_copy_finds_its_data_from_any_folder(dist, tmp_path):
     p = _planecal(["rehearse", "--samples", "3", "--out", "X.tsv", "-q"], env, elsewhere)
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["samples"] == 3 and (elsewhere / "X.tsv").exists()
+    # the history's schema and its Alembic migrations travel with the package (issue 32)
+    p = _planecal(["export", str(REPO / "tests" / "corpus" / "base" / "result.json"),
+                   "--history", "h.db"], env, elsewhere)
+    assert p.returncode == 0 and "history: entry 1 (export: ok)" in p.stdout, p.stderr
 
 
 def test_planecal_home_overrides_and_a_missing_or_empty_folder_is_one_line(tmp_path):

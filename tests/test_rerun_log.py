@@ -142,8 +142,7 @@ EXPECTED = (["/cell/plates/plate", "/cell/stands/plate_stand", "/cell/floor", "/
              "/samples/points", "/rejected/collision", "/rejected/laser", "/rejected/unreachable",
              "/series/laser_mm", "/series/model_error_mm", "/events", "/run/info"]
             + [f"/robot/link_{i}" for i in range(7)]
-            + [f"/series/steps/q{j}" for j in range(1, 7)]
-            + [f"/series/joint_deg/q{j}" for j in range(1, 7)])
+            + ["/series/steps", "/series/joint_deg"])
 
 
 def test_rehearsal_recording_has_the_documented_entity_tree(rehearsal):
@@ -202,13 +201,33 @@ def test_motion_is_downsampled_and_series_hold_the_steps(rehearsal):
     odd = [t for t in ticks if t % EVERY and t not in sample_ticks and t > 1]
     assert not odd
     assert len(ticks) <= rehearsal["n_ticks"] // EVERY + N_SAMPLES + 2
-    steps = np.array([r["Scalars:scalars"] for j in range(1, 7)
-                      for r in data[f"/series/steps/q{j}"]["rows"] if r["Scalars:scalars"]])
-    assert 0 < np.abs(steps).max() <= 51
+    steps = np.array([r["Scalars:scalars"] for r in data["/series/steps"]["rows"]
+                      if r.get("Scalars:scalars")])
+    assert steps.shape[1] == 6 and 0 < np.abs(steps).max() <= 51
     laser = [r for r in data["/series/laser_mm"]["rows"] if r["Scalars:scalars"]]
     assert all(65 <= r["Scalars:scalars"][0] <= 95 for r in laser)
     rt = data["/robot/link_1"]["rows"][-1]
     assert rt["robot_time"] == rt["tick"] * 10_000_000  # ns: 10 ms ticks
+
+
+def test_joint_series_are_one_row_of_six_named_scalars_a_tick(rehearsal):
+    # issue 33: a 150-sample --rrd was 37 MB, a third of it the twelve joint series, each
+    # row carrying its own row id and two time stamps; one entity per group (q1..q6 as the
+    # row's six scalars, named as the legend showed them) writes those once per tick
+    data = rehearsal["data"]
+    assert not [e for e in data if e.startswith(("/series/steps/", "/series/joint_deg/"))]
+    for path in ("/series/steps", "/series/joint_deg"):
+        rows = [r for r in data[path]["rows"] if r.get("Scalars:scalars")]
+        assert rows and all(len(r["Scalars:scalars"]) == 6 for r in rows)
+        assert last(data, path, "SeriesLines:names") == [f"q{j}" for j in range(1, 7)]
+    ticks = [r["tick"] for r in data["/series/joint_deg"]["rows"] if r.get("Scalars:scalars")]
+    link = [r["tick"] for r in data["/robot/link_1"]["rows"]]
+    assert len(ticks) == len(set(ticks)) and set(ticks) <= set(link) | {0}
+    size = sum(ch.to_record_batch().nbytes for ch in RrdReader(str(rehearsal["path"])).store()
+               .stream() if ch.entity_path.startswith("/series/") and not ch.is_static)
+    # 6 scalars (48 B), a row id (16 B) and two time stamps (16 B) a row; twelve entities
+    # of one scalar each took 12 * 40 B
+    assert size / len(ticks) < 2 * 110, size / len(ticks)
 
 
 def test_real_replay_has_the_same_entity_tree(rehearsal, replayed):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("rerun")
+rr = pytest.importorskip("rerun")
 twin_mod = pytest.importorskip("planecal.twin")
 
 from planecal.present.rerun.common import blueprint_views, plate_face_normal, summarize  # noqa: E402
@@ -224,8 +224,9 @@ def test_validate_blueprint(scene, truth, data, tmp_path):
     views = check_views(path, {"3D": 1, "TextDocument": 1, "BarChart": 3})
     check_space_view(views, scene, path)
     rec = read_rrd(path)
-    assert set(v["iso"]["models"]) == {"nominal", "offsets", "oracle"}
+    assert set(v["iso"]["models"]) == {"nominal", "offsets", "floor: offsets", "oracle"}
     for model, m in v["iso"]["models"].items():  # at the tool point
+        model = rr.escape_entity_path_part(model)  # "floor: offsets"
         np.testing.assert_allclose(tensor(rec[f"/ap/{model}"]["rows"][-1]["BarChart:values"]),
                                    m["tool"]["ap_mm"])
         arrows = np.array(rec[f"/iso/ap_x100/{model}"]["rows"][-1]["Arrows3D:vectors"])

@@ -39,6 +39,7 @@ def test_rehearse_writes_samples_sidecar_truth_and_summary(tmp_path, capsys):
     side = load_sidecar(out)
     assert side["samples"] == 6 and side["twin"] == {"seed": 4, "exact": False,
                                                         "errors": "realistic",
+                                                        "truth_seed": 4,
                                                         "truth_file": None,
                                                         "truth_sha256": None}
     assert side["settings"]["collision_checking"] is True

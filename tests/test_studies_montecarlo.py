@@ -183,3 +183,11 @@ def test_realistic_twin_runs_analyze_without_warnings():
     assert res["world"]["model_mismatch"]  # the realistic world: errors the model lacks
     # Table 9's class of model error, not the noise's 0.03 mm
     assert res["world"]["max_residual_mm"]["median"] > 0.08
+
+
+def test_progress_names_the_scene_not_its_path(capsys):
+    # issue 33: the progress line printed the whole site-packages path of the scene
+    assert main(["montecarlo", "--mode", "synthetic", "--runs", "2", "--samples", "30",
+                 "--jobs", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "montecarlo thesis_final N=30 2/2" in err and ".json" not in err, err

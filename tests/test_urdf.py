@@ -192,12 +192,17 @@ def test_calibrated_urdf_is_the_calibrated_model(ur5_results, tmp_path, capsys, 
     assert gap > 1e-4  # the calibrated model is not the nominal one
 
 
-def test_urdf_refuses_a_result_of_another_robot(ur5_results, tmp_path, capsys):
-    """A UR5 result with the default scene (the MC70's): one line, exit 2, no file
-    (before: an MC70 URDF with the UR5's offsets, exit 0)."""
+def test_urdf_takes_the_results_cell_and_refuses_another(ur5_results, tmp_path, capsys):
+    """A UR5 result is the UR5's URDF without --scene (the cell its provenance records;
+    before: the default scene's MC70, refused); with the MC70's scene: one line, exit 2,
+    no file (before that: an MC70 URDF with the UR5's offsets, exit 0)."""
     out = tmp_path / "x.urdf"
     capsys.readouterr()
-    assert main(["urdf", "--params", str(ur5_results["offsets"]), "--out", str(out)]) == 2
+    assert main(["urdf", "--params", str(ur5_results["offsets"]), "--out", str(out),
+                 "--scene", "thesis_final"]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "made for the robot" in err and "UR5" in err
+    assert len(err.splitlines()) == 1 and "--scene thesis_final" in err and "UR5" in err
     assert not out.exists()
+    assert main(["urdf", "--params", str(ur5_results["offsets"]), "--out", str(out),
+                 "--no-meshes"]) == 0
+    assert "UR5" in out.read_text() or "ur5" in out.read_text().lower()

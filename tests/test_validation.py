@@ -30,7 +30,7 @@ def runs(tmp_path_factory):
 @pytest.mark.parametrize("world", ["realistic", "ideal"])
 def test_truths_and_their_medians(runs, world):
     v = runs[world]
-    assert v["format"] == "planecal-validate/2"
+    assert v["format"] == "planecal-validate/3"
     assert v["errors"] == world and v["level"] == "offsets"
     t = v["truths"]
     assert [r["truth_seed"] for r in t] == [0, 1]
@@ -40,6 +40,7 @@ def test_truths_and_their_medians(runs, world):
     assert v["worst_truth_seed"] == int(np.argmax(after))
     for key in FIGURE_KEYS:  # every figure says where and whose, with its median
         vals = [r[key] for r in t]
+        assert all(x is not None for x in vals), key  # both cubes, every role measured
         assert v[key[:-3] + "_median_mm"] == pytest.approx(np.median(vals), rel=1e-12), key
     # the single-truth keys: the median truth's (the lower one of an even count)
     med = t[int(np.argmin(after))]
@@ -101,14 +102,25 @@ def test_breakdown_each_source_alone(tmp_path):
     assert rows["compliance alone"]["ap_after_tool_mm"] > 0.2
     assert rows["noise alone"]["ap_after_tool_mm"] < 0.08
     assert rows["all sources"]["ap_after_tool_mm"] > 0.3
-    # the twin's own true model leaves the backlash; without it only the whole counts
-    assert rows["backlash alone"]["ap_oracle_tool_mm"] > 2 * none["ap_oracle_tool_mm"]
+    # the twin's own true model knows the backlash (by each pose's approach direction):
+    # with it alone it leaves the whole counts, as in the cell-only world (measured 17 and
+    # 22 um); the offsets' floor leaves the backlash the offsets cannot model
+    assert rows["backlash alone"]["ap_oracle_tool_mm"] < 0.03
     assert none["ap_oracle_tool_mm"] < 0.03
-    # a share is that variant's AP after minus the cell-only world's, largest first
+    assert rows["backlash alone"]["ap_floor_tool_mm"] > 2 * none["ap_floor_tool_mm"]
+    # the noise apart: the same poses without it; its share is all minus all but it
+    quiet = rows["all but the noise"]
+    assert quiet["off"] == ["noise"] and quiet["ap_after_tool_mm"] > 0.3
+    # a share is that variant's AP after minus the cell-only world's, largest first; the
+    # noise's is not among them, and offsets model none of the sources
     cr = {c["source"]: c for c in bd["cannot_remove"]}
+    assert "noise" not in cr and bd["modelled"] == []
     for f_ in bd["sources"]:
-        assert cr[f_]["ap_after_tool_share_mm"] == pytest.approx(
-            rows[f"{f_} alone"]["ap_after_tool_mm"] - none["ap_after_tool_mm"], abs=1e-12)
+        if f_ != "noise":
+            assert cr[f_]["ap_after_tool_share_mm"] == pytest.approx(
+                rows[f"{f_} alone"]["ap_after_tool_mm"] - none["ap_after_tool_mm"],
+                abs=1e-12)
+            assert not cr[f_]["modelled"]
     shares = [c["ap_after_tool_share_mm"] for c in bd["cannot_remove"]]
     assert shares == sorted(shares, reverse=True)
     assert bd["cannot_remove"][0]["source"] in ("geometry", "compliance")
@@ -128,7 +140,8 @@ def test_report_over_truths(runs, tmp_path):
 
 def test_breakdown_variants_and_shares():
     v = breakdown_variants(["geometry", "gear", "noise"], "alone")
-    assert v == [("all sources", ()), ("geometry alone", ("gear", "noise")),
+    assert v == [("all sources", ()), ("all but the noise", ("noise",)),
+                 ("geometry alone", ("gear", "noise")),
                  ("gear alone", ("geometry", "noise")), ("noise alone", ("geometry", "gear")),
                  ("none (cell only)", ("geometry", "gear", "noise"))]
     off = breakdown_variants(["geometry", "gear"], "off")
@@ -138,7 +151,7 @@ def test_breakdown_variants_and_shares():
     bd = {"mode": "off", "sources": ["geometry", "gear"], "variants": [
         {"variant": "all sources", "ap_after_tool_mm": 1.0},
         {"variant": "without geometry", "ap_after_tool_mm": 0.25},
-        {"variant": "without gear", "ap_after_tool_mm": 0.875}]}
+        {"variant": "without gear", "ap_after_tool_mm": 0.875}]}  # a world without noise
     cr = cannot_remove(bd)
     assert [(c["source"], c["ap_after_tool_share_mm"]) for c in cr] == [("geometry", 0.75),
                                                                        ("gear", 0.125)]
@@ -195,7 +208,11 @@ def test_validate_level_full_commands_every_level_on_the_same_poses(tmp_path):
     off, full = v["levels"]
     assert off["level"] == "offsets" and full["level"] == "full + compliance"
     assert full["ap_after_tool_mm"] == v["ap_after_tool_mm"]
-    assert set(v["iso"]["models"]) == {"nominal", "offsets", "full + compliance", "oracle"}
+    assert set(v["iso"]["models"]) == {"nominal", "offsets", "full + compliance",
+                                       "floor: offsets", "floor: full + compliance", "oracle"}
+    # each level's floor lies below the level's calibration and above the oracle
+    for r in v["levels"]:
+        assert v["ap_oracle_tool_mm"] < r["ap_floor_tool_mm"] < r["ap_after_tool_mm"], r
     assert full["ap_after_tool_mm"] < v["ap_before_tool_mm"] / 3
     assert full["max_model_error_mm"] < off["max_model_error_mm"]
     assert v["ap_oracle_tool_mm"] < min(off["ap_after_tool_mm"], full["ap_after_tool_mm"])

@@ -6,8 +6,9 @@
     val = planecal.validate(cal, run)                    # ISO 9283 AP/RP at the tool point
     s = planecal.load_samples("RUN.tsv")                 # a sample file (mm on disk, m here)
 
-Each call wraps the code the commands use (``planecal.io.samples``, ``planecal.estimation.fit``,
-``planecal.studies``); nothing is computed twice. Lengths are metres, angles radians;
+Each call is the job the commands run (``planecal.jobs``: a run read in the cell its
+sidecar records, the one calibration pipeline and its result document, ``planecal.studies``
+for the twin); nothing is computed twice. Lengths are metres, angles radians;
 the results print a readable summary (``repr``). Imports are lazy: ``import planecal``
 loads none of this.
 """
@@ -40,13 +41,17 @@ def _mm(x_m: float) -> str:
 class SampleSet:
     """Samples in SI: encoder counts ``counts`` (N, 6) int64, measured distances
     ``distance_m`` (N,) [m], plate indices ``plate`` (N,) (0-based), where they came from,
-    and ``direction`` (N, 6) int8: per joint the sign of its last motion into the pose (0:
-    unknown; ``planecal.sampling.approach``), or None (a file without it)."""
+    ``direction`` (N, 6) int8: per joint the sign of its last motion into the pose (0:
+    unknown; ``planecal.sampling.approach``), or None (a file without it), the cell they
+    were taken in (``scene``: a run's, from its sidecar) and the sample file (``path``;
+    None: samples in memory)."""
     counts: np.ndarray
     distance_m: np.ndarray
     plate: np.ndarray
     source: str = ""
     direction: np.ndarray | None = None
+    scene: object = None  # planecal.model.scene.Scene
+    path: Path | None = None
 
     def __len__(self) -> int:
         return len(self.distance_m)
@@ -63,14 +68,17 @@ class SampleSet:
 
 
 def load_samples(path, scene=None) -> SampleSet:
-    """Read a sample file (the seed's format: six encoder counts, the distance in mm, an
-    optional plate number; ``planecal.io.samples.read_samples``). With ``scene`` the counts
-    are checked against its robot. Distances are returned in metres."""
-    from planecal.io.samples import read_samples
+    """Read a run (``planecal.jobs.runs.read_run``: the sample file, the seed's format: six
+    encoder counts, the distance in mm, an optional plate number; and its sidecar): its
+    samples in the cell they were taken in (its sidecar's; a ``scene`` that contradicts it
+    is refused; a file without a sidecar: ``scene``, else the default), checked against
+    it. Distances are returned in metres."""
+    from planecal.jobs.runs import read_run
 
-    s = read_samples(path, None if scene is None else _scene(scene))
+    run = read_run(path, scene)
+    s = run.samples
     return SampleSet(np.asarray(s.qe, np.int64), np.asarray(s.d_mm, float) * 1e-3,
-                     np.asarray(s.plate, int), str(path), s.direction)
+                     np.asarray(s.plate, int), str(path), s.direction, run.scene, Path(path))
 
 
 # ----- rehearsal on the twin -----------------------------------------------------------------
@@ -132,7 +140,7 @@ def rehearse(scene=None, samples: int = 30, seed: int = 0, *, truth_seed: int | 
     except RuntimeError as e:  # the run gave up
         raise InputError(f"rehearse: {e}") from None
     s = SampleSet(np.asarray(qe, np.int64), np.asarray(d_m, float), np.asarray(plate, int),
-                  f"a rehearsal on {sc.name} (seed {seed})", direction)
+                  f"a rehearsal on {sc.name} (seed {seed})", direction, sc)
     return Rehearsal(s, world, opts, sc, errors, int(seed), int(truth_seed), dict(rejected),
                      tick_by_tick)
 
@@ -179,44 +187,43 @@ def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
               compliance: bool = False, free=None, weighted: bool = False,
               max_iter: int = 30) -> CalibratedCell:
     """Identify the cell from ``samples`` (a ``SampleSet``, a ``Rehearsal`` or a sample
-    file path) with the one calibration (``planecal.estimation.calibrate``, as ``planecal
-    calibrate``), starting from ``initial`` (``CellParams``, a parameter file, or None: the
-    scene's nominal values). ``level``: one of ``planecal.model.levels.LEVELS`` (offsets,
-    full, ...; the seed's 1, 2);
+    file path) with the calibration ``planecal calibrate`` and ``planecal demo`` run
+    (``planecal.jobs.calibrate``: the same result document), starting from ``initial``
+    (``CellParams``, a parameter file, or None: the scene's nominal values). ``level``:
+    one of ``planecal.model.levels.LEVELS`` (offsets, full, ...; the seed's 1, 2);
     ``compliance``: J2 and J3's too; ``free``: parameter names (None: the level's default);
-    ``weighted``: the weighted fit with the robot's repeatability noise model. ``scene``
-    defaults to the rehearsal's or the default."""
-    from planecal.estimation.calibrate import CalibrationSettings
-    from planecal.estimation.calibrate import calibrate as calibrate_cell
-    from planecal.estimation.fit import FitOptions
-    from planecal.model.scene import nominal_params
-    from planecal.present.calibration import document
+    ``weighted``: the weighted fit with the robot's repeatability noise model. The cell is
+    the samples' (a run's sidecar, a rehearsal's scene; a ``scene`` that contradicts it is
+    refused), else ``scene``, else the default."""
+    from planecal.jobs.calibrate import Measured, calibrate_measured
+    from planecal.jobs.cell import same_cell
+    from planecal.jobs.settings import calibration_settings, fit_options
 
     if isinstance(samples, Rehearsal):
-        scene = samples.scene if scene is None else scene
         samples = samples.samples
-    sc = _scene(scene)
     if isinstance(samples, (str, Path)):
-        samples = load_samples(samples, sc)
+        samples = load_samples(samples, scene)
     if not isinstance(samples, SampleSet):
         raise InputError(f"calibrate: samples must be a SampleSet, a Rehearsal or a file, "
                          f"got {type(samples).__name__}")
+    sc = _scene(scene)
+    if samples.scene is not None:
+        if scene is not None and not same_cell(sc, samples.scene):
+            raise InputError(f"calibrate: scene {sc.name}: the samples were taken in scene "
+                             f"{samples.scene.name}")
+        sc = samples.scene
     if isinstance(initial, (str, Path)):
         from planecal.io.params import load_params
         initial = load_params(initial, sc.robot)
-    initial = nominal_params(sc) if initial is None else initial
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise InputError(f"calibrate: max_iter must be a positive integer, got {max_iter!r}")
-    opts = {"max_iter": int(max_iter)}
-    if weighted:
-        from planecal.estimation.noise import repeatability_sigma
-        opts["joint_sigma_rad"] = repeatability_sigma(sc.robot, sc.robot.repeatability_m)
-    settings = CalibrationSettings(level=level, compliance=compliance,
-                                   free=free if free is None or isinstance(free, str)
-                                   else tuple(free),
-                                   options=FitOptions(**opts))
-    cal = calibrate_cell(sc.robot, samples.counts, samples.distance_m, initial, samples.plate,
-                         settings, samples.direction, sc.references)
+    settings = calibration_settings(level=level, compliance=compliance, free=free,
+                                    options=fit_options(sc.robot, max_iter=int(max_iter),
+                                                        weighted=weighted))
+    done = calibrate_measured(sc, Measured(samples.counts, samples.distance_m, samples.plate,
+                                           samples.direction), settings, initial,
+                              [] if samples.path is None else [("samples", samples.path)])
+    cal = done.calibration
     res = cal.result
     layout = res.layout
     x, sd = res.params.to_vector(layout), res.std
@@ -225,8 +232,7 @@ def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
         std=dict(zip(layout.names, map(float, sd))), units=dict(zip(layout.names, layout.units)),
         rms_before_m=res.rms_mm(True) * 1e-3, rms_after_m=res.rms_mm() * 1e-3,
         max_error_m=float(np.max(np.abs(res.residuals_m[res.used]))),
-        converged=bool(res.converged), scene=sc, calibration=cal,
-        document=document(cal, sc.robot))
+        converged=bool(res.converged), scene=sc, calibration=cal, document=done.doc)
 
 
 # ----- validation ----------------------------------------------------------------------------
@@ -234,11 +240,13 @@ def calibrate(samples, scene=None, *, initial=None, level: str = "offsets",
 @dataclass(repr=False)
 class Validation:
     """ISO 9283 pose accuracy (AP) and repeatability (RP) [m], the worst of P1..P5 in the
-    robot's frame: at the tool point (the laser's beam point at its measuring centre) and
-    at the flange, each for the nominal model, the calibration (any level) and the twin's
-    own whole true model (the floor: what backlash, repeatability and whole counts leave);
-    the gauge-block length error; ``details`` is the dict of
-    ``planecal.studies.validation.validate`` (mm, as ``planecal validate`` writes)."""
+    robot's frame, in the near-sample cube: at the tool point (the laser's beam point at
+    its measuring centre) and at the flange, each for the nominal model, the calibration
+    (any level) and the twin's own whole true model (backlash by the approach direction:
+    what repeatability and whole counts leave); the gauge-block length error (None where
+    the block could not be measured: ``details["gauge_failed"]`` says why); ``details`` is
+    the dict of ``planecal.studies.validation.validate`` (mm, as ``planecal validate``
+    writes: the standard's cube, the level's floor, the cell frame)."""
     ap_tool_nominal_m: float
     ap_tool_calibrated_m: float
     ap_tool_oracle_m: float
@@ -246,8 +254,8 @@ class Validation:
     ap_flange_calibrated_m: float
     ap_flange_oracle_m: float
     rp_tool_calibrated_m: float
-    gauge_error_nominal_m: float
-    gauge_error_calibrated_m: float
+    gauge_error_nominal_m: float | None
+    gauge_error_calibrated_m: float | None
     details: dict
 
     def __repr__(self) -> str:
@@ -275,8 +283,8 @@ def validate(calibration: CalibratedCell, rehearsal: Rehearsal, *, cycles: int =
     checker = CollisionWorld(sc, clearance_m=st.clearance_m)
     model = CalibratedModel(sc.robot, calibration.params, calibration.level)
     v = run_validation(sc, rehearsal.world, model, rehearsal.samples.counts, st, checker,
-                       calibration.result, rehearsal.options)
-    return Validation(*(v[k] * 1e-3 for k in (
+                       calibration.result, rehearsal.options, rehearsal.samples.direction)
+    return Validation(*(None if v[k] is None else v[k] * 1e-3 for k in (
         "ap_before_tool_mm", "ap_after_tool_mm", "ap_oracle_tool_mm", "ap_before_flange_mm",
         "ap_after_flange_mm", "ap_oracle_flange_mm", "rp_after_tool_mm",
         "gauge_error_before_mm", "gauge_error_after_mm")), v)

@@ -46,7 +46,8 @@ COMMANDS = {
 }
 
 EPILOG = """exit codes: 0 success; 1 the run or fit failed (not converged, not identifiable,
-gave up, link lost), the reason in one line; 2 bad input or usage; 130 interrupted
+gave up, link lost), the reason in one line; 2 bad input or usage; 3 done, its files
+written, but the cell's history could not record it (one line says why); 130 interrupted
 (SIGINT, SIGHUP); 143 terminated (SIGTERM).
 Every command takes --config FILE.toml (a table per command, keys = long option names,
 e.g. [rehearse] samples = 20; flags given on the command line win), -v and -q."""
@@ -276,18 +277,24 @@ def _logging(args) -> None:
 
 
 def _check_files(module, args) -> None:
-    """The command's inputs and outputs (``--config`` included), before it runs: its
-    ``files(args)`` declaration (``planecal.commands.io_options``) through the output
-    guard (``planecal.io.outputs.check_files``): an input the command line names must
-    exist, an output may not overwrite an input. Declarations and the guard import nothing
-    heavy, so these are said before the command loads its libraries."""
+    """The command's inputs and outputs (``--config`` included, and the history of a
+    command that records: no output replaces it), before it runs: its ``files(args)``
+    declaration (``planecal.commands.io_options``) through the output guard
+    (``planecal.io.outputs.check_files``): an input the command line names must exist (a
+    history is made where there is none), an output may not overwrite an input. The
+    declarations and the guard import nothing heavy, so these are said before the command
+    loads its libraries."""
     declare = getattr(module, "files", None)
     if declare is None:
         return
+    from planecal.commands.history_options import history_files
     from planecal.io.outputs import check_files
     files = declare(args)
     files.read(args.config, role="--config")
-    check_files(files, bool(getattr(args, "force", False)), _named(args))
+    history = history_files(args)
+    files.read(*history, role="the history")
+    named = _named(args) - {str(p) for p in history}
+    check_files(files, bool(getattr(args, "force", False)), named)
 
 
 def _named(args) -> set[str]:

@@ -723,3 +723,45 @@ case("robot-import-bad-file-one-line", "robot import {d}/r.urdf --out {d}/rb",
 case("emulate-host-empty", ("emulate", "--host", ""), {}, 2, "0.0.0.0")
 case("validate-two-poses-quiet", "validate --poses {base}/poses.json -q --jobs 1", {}, 2,
      "poses.json")
+
+# ----- issue 32: a result read as a result, a run and a truth of another robot, ... -----------
+RES = "result.json"
+for name, raw, frag in (
+        ("export-encoder-offset-nan", (("encoder_offsets", "joint_offsets_rad", 2), "NaN"),
+         "encoder_offsets.joint_offsets_rad[2]"),
+        ("export-encoder-offset-huge", (("encoder_offsets", "joint_offsets_rad", 2), "1e300"),
+         "encoder_offsets.joint_offsets_rad[2]"),
+        ("export-encoder-offset-string", (("encoder_offsets", "joint_offsets_rad", 2),
+                                          '"-0.0019"'), "encoder_offsets.joint_offsets_rad[2]"),
+        ("export-encoder-calibrated-string", (("encoder_offsets", "calibrated"), '"delta3"'),
+         "encoder_offsets.calibrated")):
+    case(name, "export {d}/r.json --out {d}/fd11.json", {"r.json": Mut(RES, raw=(raw,))}, 2, frag)
+case("check-result-sigma-string", "check {base}/run.tsv --against {d}/r.json "
+     "--calibration-samples {base}/run.tsv",
+     {"r.json": Mut(RES, set=((("identifiability", "sigma_mm"), "0.05"),))}, 2,
+     "identifiability.sigma_mm")
+case("check-run-of-another-robot", "check {d}/r.tsv --against {base}/result.json",
+     {"r.tsv": Rows(head=30), "r.tsv.json": Mut("run.tsv.json", set=(
+         (("robot",), "Universal Robots UR5 (nominal DH)"), (("sample_file",), "r.tsv")))}, 2,
+     "Universal Robots UR5")
+case("check-run-too-short", "check {d}/r.tsv --against {base}/result.json",
+     {"r.tsv": Rows(head=5)}, 2, "cannot show a drift")
+case("rehearse-truth-of-another-robot", "rehearse --truth {d}/t.json --samples 5 --out {d}/o.tsv",
+     {"t.json": Mut("params.json", set=((("robot",), {"name": "Universal Robots UR5 (nominal "
+                                                               "DH)"}),))}, 2, "made for the robot")
+for v in ("inf", "nan", "-inf", "1e308"):
+    case(f"scene-new-floor-{v}", f"scene new --robot mc70 --out {{d}}/s.json --floor-z={v}", {}, 2,
+         "--floor-z")
+case("scene-new-floor-out-of-reach", "scene new --robot mc70 --out {d}/s.json --floor-z=5", {}, 2,
+     "the default cell (floor_z_m 5)")
+case("sweep-grid-of-1e9-runs", "sweep {d}/spec.toml --out {d}/sw",
+     {"spec.toml": Text("[grid]\nsamples = [" + ", ".join(str(20 + k) for k in range(10_000))
+                        + "]\n[sweep]\nruns = 100000\n")}, 2, "a sweep runs at most")
+case("history-rollback-of-nothing", "history rollback 1 --history {d}/h.db --out {d}/fd11.json",
+     {}, 2, "no history here yet")
+case("history-note-newline", ("export", "{base}/result.json", "--note", "two\nlines"), {}, 2,
+     "--note")
+case("history-cell-too-long", ("export", "{base}/result.json", "--cell", "c" * 201), {}, 2,
+     "--cell")
+case("history-is-the-rrd-force", f"calibrate {RUN} --rrd {{d}}/h.db --force --history {{d}}/h.db",
+     {}, 2, "the history")

@@ -17,12 +17,11 @@ B.runs.jsonl next to it); --resume fits only the subsets not in it yet.
 from __future__ import annotations
 
 from planecal.commands.value_options import MAX_RUNS, MAX_SAMPLES, count, seed
-
-FORMAT = "planecal-bootstrap/1"
+from planecal.jobs.bootstrap import FORMAT
 
 
 def add_arguments(p):
-    from planecal.base.paths import DEFAULT_SCENE
+    from planecal.commands.cell_options import add_scene_argument
     p.add_argument("samples", nargs="+", help="sample file(s): the pool")
     p.add_argument("--sizes", default=None,
                    help="comma-separated subset sizes, each below the pool (default: those of "
@@ -30,7 +29,7 @@ def add_arguments(p):
     p.add_argument("--repeats", type=count(MAX_RUNS), default=10, help="subsets per size (default 10)")
     p.add_argument("--seed", type=seed, default=0, help="random seed of the subsets")
     p.add_argument("--initial", help="initial parameter file (default: the scene's nominal values)")
-    p.add_argument("--scene", default=DEFAULT_SCENE, help="scene for the nominal values (default %(default)s)")
+    add_scene_argument(p, "the nominal values and robot", "the runs' sidecars")
     from planecal.commands.calibration_options import (add_calibration_arguments,
                                                        add_fit_arguments)
     add_calibration_arguments(p)
@@ -49,10 +48,12 @@ def add_arguments(p):
 
 def files(args):
     """What the output guard checks before the run (``commands.io_options``)."""
+    from planecal.commands.cell_options import run_scene_inputs
     from planecal.commands.engine_options import results_path
     from planecal.commands.io_options import (Files, report_output, results_output,
-                                              rrd_output, scene_inputs, with_sidecars)
-    f = Files().read(*with_sidecars(args.samples), args.initial, *scene_inputs(args.scene))
+                                              rrd_output, with_sidecars)
+    f = Files().read(*with_sidecars(args.samples), args.initial,
+                     *run_scene_inputs(args.samples, args.scene))
     f.write(args.out, "--out", FORMAT)
     results_output(f, results_path(args), args.resume)
     report_output(f, args.report, "--report")
@@ -61,36 +62,22 @@ def files(args):
 
 
 def run(args) -> int:
-    from planecal.commands.calibration_options import (calibration_settings, fit_options,
-                                                       load_inputs)
-    from planecal.io.params import save_json
-    from planecal.studies.bootstrap import BootstrapSettings, Pool, bootstrap, check_settings
-    from planecal.present.bootstrap import format_bootstrap
-    from planecal.studies.common import parse_int_list
-
+    from planecal.commands.calibration_options import calibration_settings, fit_options
     from planecal.commands.engine_options import (check_results_path, engine_from_args,
                                                   results_path)
+    from planecal.jobs.bootstrap import BootstrapRequest, bootstrap
+    from planecal.studies.common import parse_int_list
 
-    from planecal.commands.report_options import write_command_report
+    def engine():
+        made = engine_from_args(args)
+        results = results_path(args)
+        check_results_path(results, args)
+        return made, results
 
     sizes = None if args.sizes is None else tuple(parse_int_list(args.sizes, "--sizes", 1, MAX_SAMPLES))
-    samples, scene, initial = load_inputs(args.samples, args.scene, args.initial)
-    cal = calibration_settings(args, scene.robot, fit_options(args, scene.robot))
-    pool = Pool(scene.robot, samples.qe, samples.d_mm * 1e-3, samples.plate, initial, cal,
-                samples.direction, scene.references)
-    settings = check_settings(pool, BootstrapSettings(sizes, args.repeats, args.seed))
-    engine = engine_from_args(args)  # its options checked before any file
-    results = results_path(args)
-    check_results_path(results, args)
-    with engine:
-        res = bootstrap(pool, settings, engine, results=results, resume=args.resume)
-    print(format_bootstrap(res, pool.layout))
-    res = {"format": FORMAT, **res}
-    if args.out:
-        save_json(args.out, res)
-        print(f"result written to {args.out}")
-    write_command_report(args.report, res, scene=str(scene.path))
-    if args.rrd:
-        from planecal.present.rerun.studies import log_bootstrap
-        print(f"plots written to {log_bootstrap(args.rrd, res, scene, pool)}")
+    bootstrap(BootstrapRequest(
+        tuple(args.samples), lambda robot: calibration_settings(args, robot,
+                                                                fit_options(args, robot)),
+        engine, args.scene, args.initial, sizes, args.repeats, args.seed, args.out,
+        args.report, args.rrd, args.resume))
     return 0

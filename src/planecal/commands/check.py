@@ -22,22 +22,23 @@ others, e.g. o_x,n1_z) is fitted alone to the run with the rest held at the resu
 values: the amount (the run's value minus the result's) in robot terms (J3 (delta3),
 mrad) with its std, the significant ones named, the best explanation first.
 
+The run, the result and its calibration samples are read in their one cell (the runs'
+sidecars, the result's provenance; a --scene that names another is refused).
+
 Prints the verdict (--json: the JSON verdict instead), writes it to --out (format
 planecal-check/1), and records it in the cell's history, linked to the calibration entry
 that wrote RESULT.json. Exit 0: in control; 1: drifted; 2: bad input.
 """
 from __future__ import annotations
 
-from planecal.base.errors import InputError
 from planecal.commands.history_options import (add_history_arguments, command_provenance,
-                                               new_entry, open_history, record, result_link,
-                                               result_scene, sample_worlds)
+                                               new_entry, open_history, record, result_link)
 from planecal.commands.verdict_options import add_verdict_arguments, emit_verdict, verdict_out
-
-MIN_REFERENCE_RUNS = 2
+from planecal.jobs.verdicts import MIN_REFERENCE_RUNS
 
 
 def add_arguments(p):
+    from planecal.commands.cell_options import add_scene_argument
     p.add_argument("run", metavar="RUN.tsv", help="the short run's sample file")
     p.add_argument("--against", required=True, metavar="RESULT.json",
                    help="the calibration result (planecal calibrate --out)")
@@ -52,84 +53,43 @@ def add_arguments(p):
                         "in-control checks in the history, once there are at least "
                         f"{MIN_REFERENCE_RUNS}, here and unchanged; else the calibration's "
                         "residuals) or calibration (default %(default)s)")
-    p.add_argument("--scene", default=None,
-                   help="the scene (default: the one the result records)")
+    add_scene_argument(p, "the run and the result", reads="the runs' sidecars and the result's provenance")
     add_history_arguments(p)
 
 
 def files(args):
     """What the output guard checks before the run (``commands.io_options``)."""
-    from planecal.commands.io_options import Files, scene_inputs, with_sidecars
+    from planecal.commands.cell_options import result_scene_inputs
+    from planecal.commands.io_options import Files, with_sidecars
     from planecal.present.drift import CHECK_FORMAT
     f = Files().read(*with_sidecars([args.run]), args.against,
-                     *with_sidecars(args.calibration_samples or []), *scene_inputs(args.scene))
+                     *with_sidecars(args.calibration_samples or []),
+                     *result_scene_inputs(args.against, args.scene))
     return f.write(args.out, "--out", CHECK_FORMAT)
 
 
 def run(args) -> int:
-    from planecal.estimation.drift import FittedResult, check_run, parse_suspects
-    from planecal.formats.base import read_json
-    from planecal.io.params import check_robot, recorded_samples
-    from planecal.io.samples import read_many, read_samples
-    from planecal.present.drift import CHECK_FORMAT, check_document, check_text
+    from planecal.jobs.verdicts import CheckRequest, check
+    from planecal.present.drift import CHECK_FORMAT, check_text
 
     given = [args.run, args.against, *(args.calibration_samples or [])]
     out = verdict_out(args, given, CHECK_FORMAT)
     hist = open_history(args, given + [out])
-    doc = read_json(args.against, "calibration result")
-    scene = result_scene(doc, args.scene)
-    check_robot(doc, scene.robot, args.against)
-    cal_paths = args.calibration_samples or recorded_samples(doc, args.against,
-                                                            "--calibration-samples")
-    if not cal_paths:
-        raise InputError(f"{args.against}: records no calibration samples; give them with "
-                         "--calibration-samples")
-    fr = FittedResult.of(doc, scene.robot, args.against)
-    cal, run_s = read_many(cal_paths, scene), read_samples(args.run, scene)
-    if run_s.plate.max(initial=0) >= fr.params.n_planes:
-        raise InputError(f"{args.run}: samples on plate {run_s.plate.max() + 1}, the result "
-                         f"holds {fr.params.n_planes} plane(s)")
     sha, against = result_link(hist, args.against)
-    ref_paths = _reference_runs(args, hist, against)
-    refs = [read_samples(p, scene) for p in ref_paths]
-    chk = check_run(fr, (cal.qe, cal.d_mm * 1e-3, cal.plate),
-                    (run_s.qe, run_s.d_mm * 1e-3, run_s.plate), args.alpha,
-                    parse_suspects(args.suspects, fr.layout),
-                    [(r.qe, r.d_mm * 1e-3, r.plate) for r in refs])
-    verdict = check_document(chk, str(args.run), str(args.against), fr.noise is not None,
-                             against, ref_paths)
+    done = check(CheckRequest(args.run, args.against, args.calibration_samples, args.alpha,
+                              args.suspects, args.reference, args.scene), hist, against)
+    verdict = done.verdict
     emit_verdict(args, verdict, check_text, out)
-    prov = command_provenance(scene, [("run", args.run), ("result", args.against),
-                                      *(("calibration samples", p) for p in cal_paths),
-                                      *(("reference run", p) for p in ref_paths)])
+    prov = command_provenance(done.result.scene, [
+        ("run", args.run), ("result", args.against),
+        *(("calibration samples", p) for p in done.calibration_paths),
+        *(("reference run", p) for p in done.reference_paths)])
     record(hist, new_entry(args, "check", verdict["verdict"], verdict["exit_code"], prov,
-                           robot_sha256=scene.robot.digest, against=against,
-                           result_sha256=sha, world=sample_worlds([args.run]),
+                           robot_sha256=done.result.scene.robot.digest, against=against,
+                           result_sha256=sha, world=done.world,
                            summary=_summary(verdict), document=verdict,
                            output=str(out) if out else None), args.json)
     return verdict["exit_code"]
-
-
-def _reference_runs(args, hist, against) -> list[str]:
-    """The runs of the history's earlier in-control checks against the result's entry
-    (here, with the content recorded), when --reference auto finds at least
-    MIN_REFERENCE_RUNS of them; else none (the calibration's residuals)."""
-    from pathlib import Path
-
-    from planecal.base.paths import file_sha256
-    if args.reference != "auto" or hist is None or against is None:
-        return []
-    here = Path(args.run).resolve()
-    found: list[str] = []
-    for e in hist.entries(kind="check"):
-        if e.against != against or e.outcome != "in_control":
-            continue
-        for i in hist.get(e.id).inputs:
-            p = Path(i.path)
-            if (i.role == "run" and p.is_file() and p.resolve() != here
-                    and str(p) not in found and file_sha256(p) == i.sha256):
-                found.append(str(p))
-    return found if len(found) >= MIN_REFERENCE_RUNS else []
 
 
 def _summary(v: dict) -> dict:

@@ -8,7 +8,11 @@ the rounding residual and the change from the current values (robot.json's, or
 ``--current-qe0``); ``offsets`` (any robot) the joint offsets in radians with their sign;
 ``ur`` the UR ROS driver's kinematics file. Only encoder offsets reach ``fd11`` and
 ``offsets``; a result that fitted delta1 or delta6 freely is refused (exit 2), and one made
-for another robot than the scene's. A whole-model result's geometry, base frame and
+for another robot than the scene's. The scene is the one the result records (its
+provenance); a --scene that contradicts it is refused. A result that is not a calibration
+(the fit did not converge, or could not identify a free parameter: its status is not
+``converged``) is refused in one line with nothing written, in every format; --force
+writes it anyway and says so on stderr. A whole-model result's geometry, base frame and
 compliance: ``planecal compensate`` corrects a program's targets with them; the calibrated
 URDF: ``planecal urdf --params RESULT.json``. ``--out`` goes through the output guard
 (``--force`` to replace a file planecal did not write).
@@ -26,40 +30,35 @@ from planecal.commands.history_options import (add_history_arguments, command_pr
 
 
 def add_arguments(p):
+    from planecal.commands.cell_options import add_scene_argument
     p.add_argument("result", metavar="RESULT.json",
                    help="a calibration result (planecal calibrate --out) or parameter file")
     add_controller_arguments(p)
-    p.add_argument("--scene", default="thesis_final",
-                   help="scene: robot and calibration position (default %(default)s)")
+    add_scene_argument(p, "the robot and calibration position", reads="the result's provenance")
     add_history_arguments(p)
 
 
 def files(args):
     """What the output guard checks before the run (``commands.io_options``)."""
-    from planecal.commands.io_options import Files, scene_inputs
+    from planecal.commands.cell_options import result_scene_inputs
+    from planecal.commands.io_options import Files
     from planecal.io.outputs import YAML_MARK
     from planecal.present.controller import FORMAT, OFFSETS_FORMAT
-    f = Files().read(args.result, *scene_inputs(args.scene))
+    f = Files().read(args.result, *result_scene_inputs(args.result, args.scene))
     return f.write(args.out, "--out", (FORMAT, OFFSETS_FORMAT, YAML_MARK))
 
 
 def run(args) -> int:
-    from planecal.formats.base import read_json
-    from planecal.io.params import load_params
-    from planecal.model.scene import load_scene
-    from planecal.present.controller import ControllerFile, write_controller_file
+    from planecal.jobs.exports import ExportRequest, export
 
     out = args.out  # checked before the run (``files``)
     hist = open_history(args, [args.result, out])
     qe0 = current_qe0(args.current_qe0)
-    scene = load_scene(args.scene)
-    doc = read_json(args.result, "calibration result")
-    params = load_params(args.result, scene.robot)
     sha, against = result_link(hist, args.result)
-    req = ControllerFile(args.format, out, qe0, str(args.result), sha)
-    written = write_controller_file(doc, params, scene, req)
-    prov = command_provenance(scene, [("result", args.result)])
-    record(hist, new_entry(args, "export", "ok", 0, prov, robot_sha256=scene.robot.digest,
-                           against=against, result_sha256=sha, summary=written,
-                           output=str(out) if out else None))
-    return 0
+    written, result = export(ExportRequest(args.result, sha, args.format, out, qe0, args.scene,
+                                           args.force))
+    prov = command_provenance(result.scene, [("result", args.result)])
+    return record(hist, new_entry(args, "export", "ok", 0, prov,
+                                  robot_sha256=result.scene.robot.digest, against=against,
+                                  result_sha256=sha, summary=written,
+                                  output=str(out) if out else None))

@@ -62,6 +62,7 @@ def files(args):
 
 
 def run(args) -> int:
+    from planecal.commands.history_options import check_labels
     from planecal.history import History, location
 
     want = _COUNTS[args.action]
@@ -73,7 +74,10 @@ def run(args) -> int:
             if getattr(args, flag):
                 raise InputError(f"--{flag.replace('_', '-')}: only for history rollback")
     out = args.out if args.action == "rollback" else None  # checked before the run (files)
-    hist = History.open(location(args.history), [out], create=args.action == "rollback")
+    if args.action == "rollback":
+        check_labels(args)
+    hist = History.open(location(args.history), [out], create=args.action == "rollback",
+                        new=False)
     try:
         return {"list": _list, "show": _show, "diff": _diff,
                 "rollback": _rollback}[args.action](args, hist, out)
@@ -100,8 +104,12 @@ def _show(args, hist, _out) -> int:
 
 def _calibration(hist, n: int):
     e = hist.get(n)
-    if e.kind != "calibrate" or not isinstance(e.document, dict):
+    if e.kind != "calibrate" or not isinstance(e.document, dict) and not e.problems:
         raise InputError(f"history {hist.label}: entry {n} is a {e.kind}, not a calibration")
+    if e.problems:
+        raise InputError(f"history {hist.label}: entry {n} holds what planecal does not write "
+                         f"({'; '.join(e.problems[:2])}): it cannot be used (history show "
+                         f"{n} says what)")
     return e
 
 
@@ -123,21 +131,20 @@ def _diff(args, hist, _out) -> int:
 
 def _rollback(args, hist, out) -> int:
     """Calibration N's controller file, with export's writer; a rollback entry."""
-    from planecal.commands.history_options import (command_provenance, new_entry, record,
-                                                   result_scene)
-    from planecal.io.params import check_robot, params_from_dict
-    from planecal.present.controller import ControllerFile, write_controller_file
+    from planecal.commands.history_options import command_provenance, new_entry, record
+    from planecal.jobs.exports import write_controller
+    from planecal.jobs.results import CalibrationResult
+    from planecal.present.controller import ControllerFile
 
     e = _calibration(hist, args.entries[0])
-    doc = e.document
-    scene = result_scene(doc, args.scene)
     where = f"history entry {e.id}"
-    check_robot(doc, scene.robot, where)
+    result = CalibrationResult.from_document(e.document, where, args.scene)
     req = ControllerFile(args.format, out, current_qe0(args.current_qe0), where,
                          e.result_sha256 or "0" * 64)
-    written = write_controller_file(doc, params_from_dict(doc, where), scene, req)
+    written = write_controller(result, req, args.force)
+    scene = result.scene
     prov = command_provenance(scene, [])
-    record(hist, new_entry(args, "rollback", "ok", 0, prov, robot_sha256=scene.robot.digest,
-                           against=e.id, result_sha256=e.result_sha256, summary=written,
-                           output=str(out) if out else None, world=e.world))
-    return 0
+    return record(hist, new_entry(args, "rollback", "ok", 0, prov,
+                                  robot_sha256=scene.robot.digest, against=e.id,
+                                  result_sha256=e.result_sha256, summary=written,
+                                  output=str(out) if out else None, world=e.world))

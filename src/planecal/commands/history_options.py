@@ -9,10 +9,14 @@ docs/HISTORY.md):
     --cell NAME          the cell's name in a history several cells share (default: the
                          scene's name)
 
-The history is opened (and checked: not an input, a writable place, a planecal history)
-before the command's work; the entry is written after it, whatever the outcome (exit 0
-or 1), with the command's provenance: its inputs with their SHA-256, the scene, the robot
-and its description's hash, the world the data was made in, planecal's version, the date.
+The history is opened (and checked: not an input, a writable place, a planecal history of
+a version this planecal reads; an older one upgraded) before the command's work: what
+fails there is one line, exit 2, nothing done. The entry is written after the work,
+whatever its outcome (exit 0 or 1), with the command's provenance: its inputs with their
+SHA-256, the scene, the robot and its description's hash, the world the data was made in,
+planecal's version, the date. Where the history fails then (locked past the wait, a server
+lost), the command's outputs stand and one line says the entry was not written: exit 3
+(``NOT_RECORDED``), or a verdict's own exit code (check, compare).
 """
 from __future__ import annotations
 
@@ -36,7 +40,9 @@ def add_history_arguments(p) -> None:
 
 def open_history(args, inputs=(), create: bool = True):
     """The history the flags name, checked and opened before any work (None with
-    --no-history)."""
+    --no-history): a file or a database that is not a planecal history this planecal can
+    write, or that cannot be reached or written now, is refused here, in one line (exit 2),
+    before anything is done."""
     from planecal.history import History, location
 
     if args.no_history:
@@ -44,9 +50,36 @@ def open_history(args, inputs=(), create: bool = True):
             raise InputError("--no-history: nothing is recorded, so --history and --note "
                              "have nowhere to go")
         return None
-    if args.note is not None and ("\0" in args.note or len(args.note) > 2000):
-        raise InputError("--note: at most 2000 characters of text")
+    check_labels(args)
     return History.open(location(args.history), [i for i in inputs if i is not None], create)
+
+
+def check_labels(args) -> None:
+    """--cell and --note: one line each, within the history's limits (the same on every
+    backend), checked before any work."""
+    from planecal.history import check_label
+    from planecal.history.values import MAX_CELL, MAX_NOTE
+    try:
+        check_label(getattr(args, "cell", None), "--cell", MAX_CELL)
+        check_label(getattr(args, "note", None), "--note", MAX_NOTE)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+
+
+def history_files(args) -> list:
+    """The history's files, inputs of every command that records (``cli`` hands them to
+    the output guard: no output replaces them, --force or not): an SQLite history and the
+    files SQLite keeps beside it. None with --no-history or a database URL."""
+    from pathlib import Path
+
+    from planecal.history import location
+    from planecal.history.place import place_of
+    if not hasattr(args, "history") or getattr(args, "no_history", False):
+        return []
+    path = place_of(location(args.history)).path  # sqlite:///PATH too
+    if path is None:
+        return []
+    return [path] + [Path(f"{path}{s}") for s in ("-wal", "-shm", "-journal")]
 
 
 def new_entry(args, kind: str, outcome: str, exit_code: int, prov: dict, **fields):
@@ -72,45 +105,38 @@ def command_provenance(scene, inputs) -> dict:
     return provenance(files, scene.name, scene.robot.name)
 
 
-def result_scene(doc: dict, given: str | None):
-    """The scene of a command reading a result: ``given`` (--scene), else the scene file
-    the result's provenance records (if it is here), else its scene's name, else the
-    default scene."""
-    from pathlib import Path
-
-    from planecal.model.scene import DEFAULT_SCENE, load_scene
-    if given:
-        return load_scene(given)
-    prov = doc.get("provenance") if isinstance(doc, dict) else None
-    prov = prov if isinstance(prov, dict) else {}
-    for i in prov.get("inputs") or []:
-        if isinstance(i, dict) and i.get("role") == "scene" and i.get("path") \
-                and Path(str(i["path"])).is_file():
-            return load_scene(str(i["path"]))
-    name = prov.get("scene")
-    return load_scene(name if isinstance(name, str) and name else DEFAULT_SCENE)
+NOT_RECORDED = 3  # the exit code of a command whose work is done but not recorded
 
 
-def record(hist, entry, json_out: bool = False) -> int | None:
+def record(hist, entry, json_out: bool = False) -> int:
     """Write ``entry`` (nothing without a history); the line saying where goes to stdout
     beside the command's other "written to" lines (to stderr where stdout carries JSON,
-    ``json_out``)."""
+    ``json_out``). Returns 0, or ``NOT_RECORDED`` where the history failed: one line on
+    stderr says why; the command's own outputs are written already and stand (a command
+    with a verdict keeps its verdict's exit code)."""
+    from planecal.history import HistoryError
     if hist is None:
-        return None
+        return 0
     try:
         n = hist.add(entry)
+    except HistoryError as e:
+        print(f"planecal: history: not recorded: {e}", file=sys.stderr)
+        return NOT_RECORDED
     finally:
         hist.close()
     print(f"history: entry {n} ({entry.kind}: {entry.outcome}) in {hist.label}",
           file=sys.stderr if json_out else sys.stdout)
-    return n
+    if hist.unread is not None:  # recorded, but a lookup during the work had failed
+        print(f"planecal: history: not consulted: {hist.unread}", file=sys.stderr)
+    return 0
 
 
 def result_link(hist, path) -> tuple[str, int | None]:
     """(SHA-256 of a result file, the calibrate entry of ``hist`` that wrote it or None)."""
     from planecal.base.paths import file_sha256
+    from planecal.history import consult
     sha = file_sha256(path)
-    return sha, (hist.find_result(sha) if hist is not None else None)
+    return sha, consult(hist, lambda h: h.find_result(sha), None)
 
 
 def parameter_rows(doc: dict) -> list:
@@ -118,11 +144,3 @@ def parameter_rows(doc: dict) -> list:
     from planecal.history import ParameterRow
     from planecal.present.calibration import parameter_rows as rows
     return [ParameterRow(r.name, r.value, r.std, r.unit, r.status) for r in rows(doc)]
-
-
-def sample_worlds(paths) -> dict | list | None:
-    """The worlds the sample files were made in (their sidecars'): one, a list, or None."""
-    from planecal.sampling.runfiles import run_world
-    worlds = [w for w in (run_world(p) for p in paths) if w is not None]
-    unique = [w for k, w in enumerate(worlds) if w not in worlds[:k]]
-    return None if not unique else unique[0] if len(unique) == 1 else unique

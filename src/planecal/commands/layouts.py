@@ -37,6 +37,7 @@ def files(args):
 
 
 def run(args) -> int:
+    import shutil
     from dataclasses import replace
 
     from planecal.commands.calibration_options import calibration_settings
@@ -55,7 +56,7 @@ def run(args) -> int:
                        base_tolerance=args.tol)
     res = layout_study(scene, settings, args.samples, args.seed, CollisionWorld(scene))
     res["level"] = settings.label
-    print(format_layouts(res, display_of))
+    print(format_layouts(res, display_of, shutil.get_terminal_size((100, 24)).columns))
     if out:
         save_json(out, res)
         print(f"study written to {out}")

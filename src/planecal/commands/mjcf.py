@@ -11,9 +11,8 @@ from planecal.commands.value_options import seed
 
 
 def add_arguments(p):
-    from planecal.base.paths import DEFAULT_SCENE
-    p.add_argument("--scene", default=DEFAULT_SCENE,
-                   help="scene name (planecal scenes) or path (default %(default)s)")
+    from planecal.commands.cell_options import add_scene_argument
+    add_scene_argument(p, "the MuJoCo model (a name, planecal scenes, or a path)", reads=None)
     p.add_argument("--out", required=True, metavar="OUT.xml", help="MJCF file to write")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--truth-seed", type=seed, default=None,

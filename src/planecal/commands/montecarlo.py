@@ -35,10 +35,10 @@ from planecal.commands.value_options import MAX_RUNS, MAX_SAMPLES, count, seed
 
 def add_arguments(p):
     from planecal.commands.calibration_options import add_calibration_arguments
-    from planecal.base.paths import DEFAULT_SCENE
     from planecal.sampling.poses import IK_CHOICES
     from planecal.studies.rehearsal import MODES
-    p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
+    from planecal.commands.cell_options import add_scene_argument
+    add_scene_argument(p, "the runs", reads=None)
     p.add_argument("--runs", type=count(MAX_RUNS), default=50, help="Monte Carlo runs (default 50)")
     p.add_argument("--samples", type=count(MAX_SAMPLES), default=150, help="samples per run (default 150)")
     p.add_argument("--rrd", default=None, metavar="FILE",

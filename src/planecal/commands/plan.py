@@ -33,8 +33,8 @@ from planecal.commands.value_options import MAX_CANDIDATES, MAX_RUNS, MAX_SAMPLE
 
 
 def add_arguments(p):
-    from planecal.base.paths import DEFAULT_SCENE
-    p.add_argument("--scene", default=DEFAULT_SCENE, help="scene (default %(default)s)")
+    from planecal.commands.cell_options import add_scene_argument
+    add_scene_argument(p, "the planned poses", reads=None)
     p.add_argument("--samples", type=count(MAX_SAMPLES), default=150,
                    help="poses to choose (default 150; with a target: the most it may choose)")
     t = p.add_mutually_exclusive_group()
@@ -88,7 +88,7 @@ def run(args) -> int:
     from planecal.present.tables import table
     from planecal.studies.planning import plan, plan_target
 
-    from planecal.commands.report_options import write_command_report
+    from planecal.jobs.report import write_command_report
 
     target = plan_target(args.samples, args.candidates, args.target_std_urad, args.target_ap_mm)
     if args.measure and args.measure < 2:
@@ -145,7 +145,7 @@ def run(args) -> int:
         print(f"measured: {args.measure} twin runs each (std of the estimates over the runs)")
     save_json(args.out, res)
     print(f"pose list written to {args.out}")
-    write_command_report(args.report, args.out, scene=str(scene.path))
+    write_command_report(args.report, args.out, scene=scene)
     return 0
 
 
@@ -153,10 +153,11 @@ def aim(path, scene):
     """(``CommandModel``, ``Mismatch``) of --params' result, or (None, None)."""
     if not path:
         return None, None
-    from planecal.io.params import load_json, load_params
+    from planecal.io.params import load_json
+    from planecal.jobs.results import read_result
     from planecal.sampling.poses import CommandModel
     from planecal.studies.planning import Mismatch
-    params = load_params(path, scene.robot)
+    params = read_result(path, scene).params  # of this cell (its provenance's)
     if params.n_planes != len(scene.plates):
         raise InputError(f"{path}: {params.n_planes} plane(s), the scene {scene.name} has "
                          f"{len(scene.plates)}: a result of another cell")

@@ -21,9 +21,7 @@ Exit 0 when all samples were taken, 1 when the run stopped or gave up (files val
 from __future__ import annotations
 
 import argparse
-import os
 
-from planecal.base.errors import InputError
 from planecal.commands.value_options import seed
 
 
@@ -63,84 +61,9 @@ def files(args):
     return f.write(args.truth_out, "--truth-out", PARAMS_FORMAT)
 
 
-def world_ref(args, side, seed: int):
-    """The world the run is made in (``twin.world.WorldRef``): a resumed run's (its sidecar
-    names it; a flag that contradicts it is refused), or the truth file's (--truth), or the
-    error profile's draw for --twin-seed (default --seed)."""
-    from planecal.twin.profile import DEFAULT_PROFILE, truth_file_errors
-    from planecal.twin.world import WorldRef, file_sha256
-    if side is not None:
-        t = side.get("twin") or {}
-        ref = WorldRef(str(t.get("errors", "ideal")),  # runs before profiles: the ideal world
-                       None if t.get("truth_file") else int(t.get("seed", seed)),
-                       t.get("truth_file"), t.get("truth_sha256"), bool(t.get("exact", False)))
-        for flag, given, rec in (("--errors", args.errors, ref.errors),
-                                 ("--truth", args.truth_in, ref.truth_file)):
-            if given is not None and str(given) != str(rec):
-                raise InputError(f"{flag} {given}: the run in {args.out} was made in "
-                                 f"{ref.describe()}; --resume continues it there")
-        return ref, int(t.get("seed", seed))
-    twin_seed = seed if args.twin_seed is None else args.twin_seed
-    if args.truth_in is not None:
-        recorded = truth_file_errors(args.truth_in)
-        if args.errors is not None and recorded is not None and args.errors != recorded:
-            raise InputError(f"--errors {args.errors}: {args.truth_in} was drawn in the "
-                             f"{recorded} world")
-        return WorldRef(args.errors or recorded or DEFAULT_PROFILE, None, str(args.truth_in),
-                        file_sha256(args.truth_in), args.exact), twin_seed
-    return WorldRef(args.errors or DEFAULT_PROFILE, twin_seed, exact=args.exact), twin_seed
-
-
 def run(args) -> int:
-    from planecal.commands.sampling_options import (command_model, fixed_distance_summary,
-                                                    observer_summary, pose_list_planner,
-                                                    prepare, rerun_observer,
-                                                    session_from_args)
-    from planecal.links.base import AlwaysEnabled
-    from planecal.safety.collision import CollisionWorld
-    from planecal.sampling.session import print_summary, run_session
-    from planecal.twin.profile import save_truth
-    from planecal.twin.world import make_twin
+    from planecal.commands.sampling_options import sampling_request
+    from planecal.jobs.rehearse import RehearseRequest, rehearse
 
-    scene, settings, side = prepare(args)
-    ref, twin_seed = world_ref(args, side, settings.seed)
-    twin = make_twin(scene, ref, twin_seed)
-    checker = CollisionWorld(scene, clearance_m=settings.clearance_m)
-    errors = ref.errors
-    if args.truth_out:
-        try:
-            save_truth(args.truth_out, twin, errors, ref.truth_seed)
-        except OSError as e:
-            raise InputError(f"--truth-out {args.truth_out}: cannot write ({e.strerror})") from None
-    observer = rerun_observer(args, scene, twin)
-    model = command_model(args, scene, side)
-    session = session_from_args(args, pose_list_planner(args, scene, settings, checker, model[0]),
-                                observer, extra={"twin": {"seed": twin_seed, "exact": ref.exact,
-                                                          "errors": str(errors),
-                                                          "truth_file": ref.truth_file,
-                                                          "truth_sha256": ref.truth_sha256}},
-                                model=model)
-    try:
-        code, summary = run_session(session, scene, settings, twin, twin, AlwaysEnabled(),
-                                    checker)
-    finally:
-        if observer is not None:
-            observer.close()
-        twin.close()
-    wall = summary["session_wall_time_s"]
-    robot_s = summary["session_robot_time_s"]
-    summary["speedup"] = round(robot_s / wall, 1) if wall > 0 else None
-    summary["twin_seed"] = twin_seed
-    summary["errors"] = str(errors)
-    if args.foreground:
-        summary["collision"] = checker.summary()
-    summary["cpu_count"] = os.cpu_count()
-    if args.truth_out:
-        summary["truth"] = str(args.truth_out)
-    if args.truth_in:
-        summary["world"] = ref.describe()
-    if settings.pose.fixed_distance_mm is not None:
-        summary["fixed_distance"] = fixed_distance_summary(args.out, settings, model[1])
-    summary.update(observer_summary(observer))
-    print_summary(summary)
-    return code
+    return rehearse(RehearseRequest(sampling_request(args), args.errors, args.truth_in,
+                                    args.truth_out, args.twin_seed, args.exact))

@@ -4,7 +4,8 @@ A report a person reads: DIR/index.html with PNG figures beside it, for a calibr
 result (calibrate --out, demo's result.json), a Monte Carlo, bootstrap, validate or plan
 result. The kind comes from the file (its format field, else its content). A calibration
 report recomputes the model error per sample from the sample files (--samples, or the
-inputs the result records). See planecal.present.report.
+inputs the result records), in the cell the result and the runs record (a --scene that
+contradicts it is refused). See planecal.present.report and planecal.jobs.report.
 """
 from __future__ import annotations
 
@@ -17,9 +18,9 @@ def add_arguments(p):
     p.add_argument("--samples", nargs="+", metavar="RUN.tsv",
                    help="a calibration's sample file(s), in the order given to calibrate "
                         "(default: the inputs the result records)")
-    p.add_argument("--scene", default=None,
-                   help="scene for the robot, plate names and nominal values (default: the "
-                        "result's, else thesis_final)")
+    from planecal.commands.cell_options import add_scene_argument
+    add_scene_argument(p, "the robot, plate names and nominal values",
+                       "the result's provenance and its runs' sidecars")
     p.add_argument("--force", action="store_true",
                    help="write into DIR even if it holds files planecal did not write (never "
                         "over an input)")
@@ -37,8 +38,8 @@ def files(args):
 
 
 def run(args) -> int:
-    from planecal.present.report import write_report
-    path = write_report(args.result, args.out, samples=args.samples, scene=args.scene)
+    from planecal.jobs.report import report
+    path = report(args.result, args.out, samples=args.samples, scene=args.scene)
     n = path.read_text(encoding="utf-8").count("<img ")
     print(f"report written to {path} ({n} figures)")
     return 0

@@ -64,6 +64,10 @@ def add_arguments(p):
                         "scaled by its reach, and robot show says so)")
     p.add_argument("--payload-kg", type=float, metavar="KG",
                    help="import: the rated payload (the generic error profile scales by it)")
+    p.add_argument("--snap-rad", type=float, default=None, metavar="RAD",
+                   help="import: an rpy of the chain's joint origins this close to a multiple "
+                        "of 90 deg is taken as it, the URDF's rounding (default 1e-4; 0 keeps "
+                        "every angle as written)")
     p.add_argument("--controller", choices=("fd11", "ur"),
                    help="import: the controller family, for planecal export's formats")
     p.add_argument("--json", action="store_true", help="show: print as JSON")
@@ -106,7 +110,7 @@ def files(args):
 
 
 IMPORT_ONLY = ("out", "name", "tip", "package", "coupling", "max_step_counts",
-               "trip_step_counts", "payload_kg", "controller")
+               "trip_step_counts", "payload_kg", "controller", "snap_rad")
 
 
 def run(args) -> int:
@@ -122,6 +126,7 @@ def run(args) -> int:
 
 
 def _import(args) -> int:
+    from planecal.io import urdf_description as ud
     from planecal.io import urdf_import as ui
     from planecal.model.geometry import robot_link_meshes
     from planecal.model.robot import load_robot
@@ -129,48 +134,97 @@ def _import(args) -> int:
     if not args.out:
         raise InputError("robot import: give --out DIR, the new folder to write")
     out = Path(args.out)  # a new folder in one that exists (checked before the run: ``files``)
-    if not 0 < args.speed_fraction <= 1:
-        raise InputError(f"--speed-fraction {args.speed_fraction}: must be in (0, 1]")
-    if args.repeatability_mm is not None and not 0 <= args.repeatability_mm <= 5:
-        raise InputError(f"--repeatability-mm {args.repeatability_mm:g}: must be in [0, 5] mm")
+    _check_numbers(args)
     coupling = _coupling(args.coupling)
     path = Path(args.source)
-    imp, u = ui.import_chain(path, args.tip)
+    imp, u = ui.import_chain(path, args.tip, ui.SNAP_RAD if args.snap_rad is None
+                             else args.snap_rad)
     ui.shapes_and_masses(path, imp, u, _packages(args.package),
                          "collision" if args.visual == "collision" else "visual")
-    enc = ui.EncoderSettings(args.counts_per_rev, args.encoder_bits, args.tick_s,
+    enc = ud.EncoderSettings(args.counts_per_rev, args.encoder_bits, args.tick_s,
                              args.speed_fraction, args.max_step_counts, args.trip_step_counts,
                              args.repeatability_mm, args.payload_kg, args.controller)
-    doc = ui.description(path, imp, args.name or imp.name, enc)
+    doc = ud.description(path, imp, args.name or imp.name, enc)
     doc["encoder"]["coupling"] = coupling  # checked (non-singular C) with the rest on load
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:
         ui.write(tmp, doc, ui.shapes_document(path, imp), imp)
-        robot = load_robot(tmp)  # what the files say, validated
+        try:  # what the files say, validated; a problem named in the URDF's terms
+            robot = load_robot(tmp)
+            parts = {k: len(robot_link_meshes(robot, k)) for k in ("visual", "collision")}
+        except InputError as e:
+            raise InputError(str(e).replace(str(tmp), f"{path} (as {out})")) from None
         worst = ui.check_flange(path, imp, robot.kinematics)
-        parts = {k: len(robot_link_meshes(robot, k)) for k in ("visual", "collision")}
+        clear = _allow_touching(tmp, robot, parts, imp) if parts["collision"] else None
         os.replace(tmp, out)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     robot = load_robot(out)
-    _summary(robot, imp, worst, parts)
+    _summary(robot, imp, worst, parts, clear)
     print(f"written to {out}/ (robot.json, shapes.json, meshes/); next: planecal scene new "
           f"--robot {out} --out CELL.json")
     return 0
 
 
-def _summary(robot, imp, worst: float, parts: dict) -> None:
-    from planecal.model.ik import kinematic_family, solver_name
+def _check_numbers(args) -> None:
+    """The import's numeric options: finite and in range (one line each)."""
+    import math
+    checks = (("--speed-fraction", args.speed_fraction, 0, 1, False),
+              ("--tick-s", args.tick_s, 0, 1, False),
+              ("--repeatability-mm", args.repeatability_mm, 0, 5, True),
+              ("--payload-kg", args.payload_kg, 0, 10_000, True),
+              ("--snap-rad", args.snap_rad, 0, 0.01, True))
+    for flag, v, lo, hi, low_ok in checks:
+        if v is None:
+            continue
+        if not (math.isfinite(v) and (lo <= v if low_ok else lo < v) and v <= hi):
+            raise InputError(f"{flag} {v:g}: must be a number in {'[' if low_ok else '('}"
+                             f"{lo:g}, {hi:g}]")
+
+
+def _allow_touching(folder: Path, robot, parts: dict, imp) -> tuple:
+    """Allow, in the new shapes.json, the collision pieces that touch in every sampled
+    configuration (``safety.self_contact``), each with its reason printed and recorded:
+    (clear share before, after, pairs allowed)."""
+    import json
+
+    from planecal.formats.base import dumps
+    from planecal.safety.self_contact import SAMPLES, always_touching
+    pairs, before, after = always_touching(robot)
+    if pairs:
+        f = folder / "shapes.json"
+        doc = json.loads(f.read_text(encoding="utf-8"))
+        doc["allowed_pairs"] = doc.get("allowed_pairs", []) + pairs
+        f.write_text(dumps(doc), encoding="utf-8")
+        for p in pairs:
+            imp.warnings.append(f"collision pieces {p['pieces'][0]} and {p['pieces'][1]}: "
+                                f"allowed (not checked): {p['why']}")
+    return before, after, len(pairs), SAMPLES
+
+
+def _summary(robot, imp, worst: float, parts: dict, clear) -> None:
+    import sys
+
+    from planecal.model.ik import kinematic_family, numeric_reason, solver_name
     print(f"{robot.name}: six revolute joints {', '.join(robot.joint_names)}; base link "
           f"{imp.root!r}, flange link {imp.tip!r}")
     _chain_table(robot)
     print(f"flange against the URDF (yourdfpy) over 200 random poses: {worst:.2g} m at most")
-    print(f"inverse kinematics: {solver_name(robot)} ({kinematic_family(robot)})")
+    name = solver_name(robot)
+    print(f"inverse kinematics: {name} ({kinematic_family(robot)})"
+          + (f": {numeric_reason(robot)}" if name == "numeric" else ""))
     print(f"shapes: {parts['visual']} visual, {parts['collision']} collision pieces; "
           f"masses: {len(robot.masses)}")
+    if clear is not None:
+        before, after, n, samples = clear
+        print(f"self-collision: {before:.0%} of {samples} random configurations clear of the "
+              f"arm itself" + (f", {after:.0%} with the {n} pair(s) found allowed"
+                               if n else ""))
     print(repeatability_line(robot))
     for note in imp.notes:
         print(f"note: {note}")
+    for w in imp.warnings:
+        print(f"planecal robot: warning: {w}", file=sys.stderr)
 
 
 def repeatability_line(robot) -> str:
@@ -183,6 +237,25 @@ def repeatability_line(robot) -> str:
             f"{REFERENCE_REPEATABILITY_MM:g} mm scaled by the reach (the twin's noise, the "
             "generic error profile, plan and layouts use it; put the datasheet's in "
             "robot.json's repeatability_mm)")
+
+
+def collision_status(robot) -> str:
+    """What the collision checker checks of the arm, in one line (shapes.json)."""
+    import json
+
+    from planecal.model.geometry import robot_shapes, shapes_path
+    try:
+        shapes = robot_shapes(robot)
+    except InputError:
+        return "NOT CHECKED: no shapes.json (the twin and the checker need one)"
+    if shapes.unchecked:
+        return f"NOT CHECKED: {shapes.unchecked}"
+    doc = json.loads(shapes_path(robot).read_text(encoding="utf-8"))
+    hulls = [p["name"] for p in doc["pieces"] if "visual element" in (p.get("what") or "")]
+    return (f"checked: {sum(p.use in ('both', 'collision') for p in shapes.pieces)} pieces, "
+            f"{len(shapes.allowed_pairs)} pair(s) allowed (shapes.json says why)"
+            + (f"; {len(hulls)} envelope(s) are visual hulls (the URDF has no <collision> "
+               "there)" if hulls else ""))
 
 
 def _chain_table(robot) -> None:
@@ -204,7 +277,7 @@ def _show(args) -> int:
     import json
 
     from planecal.model.geometry import robot_link_meshes
-    from planecal.model.ik import kinematic_family, solver_name
+    from planecal.model.ik import kinematic_family, numeric_reason, solver_name
     from planecal.model.kinematics import reach_m
     from planecal.model.robot import load_robot
     from planecal.twin.profile import profile_source
@@ -219,16 +292,19 @@ def _show(args) -> int:
             "reach_m": reach_m(robot.kinematics), "masses": len(robot.masses),
             "shapes": parts, "errors": {p: profile_source(p, robot) for p in ("ideal", "realistic")},
             "repeatability_mm": robot.repeatability_m * 1e3,
-            "repeatability_source": "robot.json" if robot.repeatability_given else "default"}
+            "repeatability_source": "robot.json" if robot.repeatability_given else "default",
+            "collision": collision_status(robot)}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
     print(f"{robot.name} ({robot.source})")
     _chain_table(robot)
-    print(f"reach <= {info['reach_m']:.3f} m; inverse kinematics: {info['ik']} ({info['family']})")
+    print(f"reach <= {info['reach_m']:.3f} m; inverse kinematics: {info['ik']} ({info['family']})"
+          + (f": {numeric_reason(robot)}" if info["ik"] == "numeric" else ""))
     print("shapes: " + ("none (no shapes.json: the twin and the checker need them)" if parts is None
                         else f"{parts['visual']} visual, {parts['collision']} collision pieces")
           + f"; masses: {len(robot.masses)}")
+    print(f"collision: {info['collision']}")
     print(repeatability_line(robot))
     for p, src in info["errors"].items():
         print(f"error profile {p}: {src}")

@@ -62,13 +62,16 @@ def run(args) -> int:
     from planecal.studies.distributed import warm_twin
     from planecal.studies.sweep import load_spec, plans_needed, run_sweep
 
+    from planecal.studies.results import check_header
     spec = load_spec(args.spec)
-    engine = engine_from_args(args, warmup=lambda: warm_twin(spec.scene[0]))  # checked here
     out = Path(args.out)  # checked before the run (``files``)
     results = out / RESULTS
     if results.exists() and results.stat().st_size > 0 and not args.resume:
         raise InputError(f"--out {out}: holds a sweep's {RESULTS}; continue it with --resume "
                          "or give another folder")
+    if args.resume:  # before the engine starts and the plans are made: nothing said first
+        check_header(results, spec.header())
+    engine = engine_from_args(args, warmup=lambda: warm_twin(spec.scene[0]))  # checked here
     n_runs = len(spec.cells()) * spec.runs
     with engine as eng:  # the scheduler reached before anything is made
         make_folder(out, "--out")

@@ -27,7 +27,7 @@ from planecal.base.limits import (JOBS_PER_CORE, MAX_CANDIDATES, MAX_ITERATIONS,
 
 PORT_MAX = 65535
 __all__ = ["JOBS_PER_CORE", "MAX_CANDIDATES", "MAX_ITERATIONS", "MAX_RUNS", "MAX_SAMPLES",
-           "MAX_TRIES", "SEED_MAX", "count", "host", "jobs", "max_jobs", "port", "port_or_zero",
+           "MAX_TRIES", "SEED_MAX", "bounded", "count", "host", "jobs", "max_jobs", "port", "port_or_zero",
            "seed", "seed_list"]
 
 
@@ -83,6 +83,20 @@ def count(hi: int, lo: int = 1):
             raise argparse.ArgumentTypeError(f"{_shown(text)} is not {what}")
         return v
     return whole_count
+
+
+def bounded(lo: float, hi: float, unit: str):
+    """argparse type: a finite number in [lo, hi] (``nan``, ``inf``, 1e308 refused)."""
+    def number(text: str) -> float:
+        try:
+            v = float(str(text).strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{_shown(text)!r} is not a number") from None
+        if not lo <= v <= hi:  # NaN fails this too
+            raise argparse.ArgumentTypeError(f"{_shown(text)} is not a number in [{lo:g}, "
+                                             f"{hi:g}] {unit}")
+        return v
+    return number
 
 
 def max_jobs() -> int:

@@ -126,6 +126,15 @@ class Calibration:
     def excluded(self) -> list[Excluded]:
         return list(self.base_set.excluded)
 
+    @property
+    def status(self) -> str:
+        """What the result file says the fit is: "converged" only when it converged and
+        identified every free parameter; "not_identifiable", "max_iterations" otherwise."""
+        res = self.result
+        if res.converged and res.identifiability.not_identifiable:
+            return "not_identifiable"
+        return res.status.value
+
     def failure(self) -> str | None:
         """Why the fit did not do its job (not converged, a free parameter not
         identifiable), or None."""

@@ -46,6 +46,16 @@ a chi-square within that of the first are named as alternatives: on these poses 
 explain the run as well (on one plate, delta1, delta2 and delta3 can look alike to 30
 poses).
 
+Two things the median test cannot see are refused or flagged beside it: a run too short
+for the test to ever reject at alpha (even every value above the median would not:
+``InputError``, with the count that could), and gross errors (``gross``): a run value
+more than ``GROSS_FACTOR`` times the reference's largest studentized error. One such
+sample barely moves an exceedance count (one of 30), so a run with a reading 10 mm off
+would pass as in control; no drift of the model and no noise the reference showed makes
+an error ten times any the calibration had, so the run is not in control (a reading or a
+pose gone wrong: the laser on another surface, a plate knocked, or a drift far beyond the
+calibration's scale), and the check says which samples.
+
 ``parameter_changes`` (history diff): each parameter's change between two results against
 both results' std, z = (b - a) / sqrt(std_a^2 + std_b^2) (independent calibrations),
 significant where |z| exceeds the normal quantile at alpha / (2 K), K parameters compared.
@@ -63,6 +73,7 @@ from planecal.model.layout import ParamLayout
 from planecal.model.robot import Robot
 
 DEFAULT_ALPHA = 0.01
+GROSS_FACTOR = 10.0  # a run error this many times the reference's largest is gross
 JOINT_OFFSETS = tuple(f"delta{j}" for j in range(1, 7))
 
 
@@ -243,10 +254,12 @@ class DriftCheck:
     z_limit: float = math.inf
     chi2_limit: float = math.inf
     reference_runs: int = 0  # earlier in-control runs the test's reference is made of
+    gross: tuple = ()  # (run sample index, model error [m], studentized value) beyond the limit
+    gross_limit: float = math.inf  # studentized, in the test's units
 
     @property
     def drifted(self) -> bool:
-        return self.test.rejected
+        return self.test.rejected or bool(self.gross)
 
     @property
     def moved(self) -> list[str]:
@@ -359,7 +372,15 @@ def check_run(fr: FittedResult, calibration, run, alpha: float = DEFAULT_ALPHA,
     rows = fr.rows(*run)
     Si = np.linalg.inv(fr.s2 * np.eye(len(rows.r)) + rows.Jf @ fr.C @ rows.Jf.T)
     scale = np.sqrt(1.0 + rows.h)
-    test = exceedance_test(a, np.abs(rows.rw) / scale, alpha)
+    b = np.abs(rows.rw) / scale
+    test = exceedance_test(a, b, alpha)
+    if test.critical > test.m:
+        raise InputError(f"the run's {test.m} samples cannot show a drift against "
+                         f"{test.n} reference values at alpha {alpha:g} (even all above the "
+                         f"median is p = {all_above_p(test.n, test.m):.3g}); give at least "
+                         f"{_shortest_run(test.n, alpha)} samples")
+    limit = GROSS_FACTOR * float(np.max(a))
+    gross = tuple((int(i), float(rows.r[i]), float(b[i])) for i in np.flatnonzero(b > limit))
 
     def test_after(rw, _chi2, _k):  # the test on what a fit leaves
         t = exceedance_test(a, np.abs(rw) / scale, alpha)
@@ -373,7 +394,21 @@ def check_run(fr: FittedResult, calibration, run, alpha: float = DEFAULT_ALPHA,
             else None)
     return DriftCheck(test, float(np.sqrt(np.mean(rows.r ** 2))), float(np.mean(rows.r)),
                       float(np.sqrt(np.mean(cal.r[used] ** 2))), out, expl, no_effect,
-                      z_limit, chi2_limit, len(reference_runs))
+                      z_limit, chi2_limit, len(reference_runs), gross, limit)
+
+
+def all_above_p(n: int, m: int) -> float:
+    """P(X >= m): all m run values above the median of n reference values (H0)."""
+    from scipy.stats import nhypergeom
+    return float(nhypergeom(n + m, m, (n + 1) // 2).sf(m - 1))
+
+
+def _shortest_run(n: int, alpha: float) -> int:
+    """The fewest run samples whose exceedance test can reject at ``alpha``."""
+    m = 1
+    while all_above_p(n, m) > alpha and m < 10_000:
+        m += 1
+    return m
 
 
 # ----- history diff -----------------------------------------------------------------------

@@ -17,7 +17,7 @@ import math
 from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 from pydantic import AfterValidator, Field, Strict, ValidationError
 
@@ -206,9 +206,39 @@ class EncoderOffsetsBlock(Model):
     reason: Str | None = None
 
 
+class IdentifiabilityBlock(Record):
+    """The fit's identifiability report; the residual level a drift check reads is typed."""
+    sigma_mm: NonNeg | None = None
+    weighted: Bool = False
+    variance_factor: NonNeg | None = None
+
+
+class CalibrationBlock(Record):
+    """The calibration's settings; its noise model is typed (a weighted result's check)."""
+    joint_sigma_rad: NonNeg | None = None
+    distance_sigma_m: NonNeg | None = None
+
+
+STATUSES = ("converged", "not_identifiable", "max_iterations")
+
+
+def _status(v):
+    if v not in STATUSES:
+        raise problem(f"{v!r} is not a fit status ({', '.join(STATUSES)})")
+    return v
+
+
+FitStatus = Annotated[Str, AfterValidator(_status), Field(
+    description="converged: the fit converged and identified every free parameter; "
+                "not_identifiable: it converged, but the samples cannot identify a free "
+                "parameter; max_iterations: it did not converge",
+    json_schema_extra={"enum": list(STATUSES)})]
+
+
 class ResultFile(ParamsFile):
     """What ``planecal calibrate --out`` writes."""
     format: ResultTag = None
+    status: FitStatus | None = None
     std: StdBlock
     residual_rms_mm: NonNeg
     residual_rms_initial_mm: NonNeg
@@ -217,7 +247,8 @@ class ResultFile(ParamsFile):
     converged: Bool
     outliers: list[Count]
     samples_used: Count
-    identifiability: dict[str, Any]
+    identifiability: IdentifiabilityBlock
+    calibration: CalibrationBlock | None = None
     free: list[Str]
     provenance: Provenance | None = None
     model_error: Str | None = None

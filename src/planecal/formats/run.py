@@ -118,14 +118,16 @@ Rejections = Annotated[list[Rejection], Field(max_length=10_000)]
 
 
 class TwinInfo(Record):
-    """Added by ``planecal rehearse``: the twin's seed (its noise's, and its truth's unless
-    a truth file gave the world), its error profile (a name or a path; runs recorded
-    before profiles existed were the ideal world), ``exact`` (no random noise) and, for a
-    run made in a truth file's world (``rehearse --truth``), that file and its SHA-256:
-    the world travels with the run (``twin.world.recorded_world``)."""
+    """Added by ``planecal rehearse``: the twin's noise ``seed`` and its world, a
+    ``twin.world.WorldRef``'s record: the error profile (a name or a path; runs recorded
+    before profiles existed were the ideal world), the truth's seed (runs recorded before
+    it: ``seed``), ``exact`` (no random noise) and, for a run made in a truth file's world
+    (``rehearse --truth``), that file and its SHA-256: the world travels with the run
+    (``jobs.runs.Run.world``)."""
     seed: Count
     exact: Bool = False
     errors: Str = "ideal"
+    truth_seed: Count | None = None
     truth_file: Str | None = None
     truth_sha256: Annotated[str, Field(pattern=r"^[0-9a-f]{64}$")] | None = None
 

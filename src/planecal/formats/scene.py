@@ -20,6 +20,7 @@ from planecal.formats.base import (
     M_AS_MM, MM_AS_M, Angle, Bool, FormatTag, Int, Interval, Model, Num, Point,
     Positive, Ranged, Str, Vector, problem, short)
 from planecal.formats.robot import N_JOINTS
+from planecal.formats.shapes import AllowedPair
 
 SCENE_FORMAT = "planecal-scene/1"
 CELL_M = 20.0  # anything in a robot cell lies within 20 m of the base
@@ -207,6 +208,9 @@ class SceneFile(Model):
     positions: Positions = Positions()
     sampling: Sampling = Sampling()
     references: Annotated[list[Reference], Field(max_length=100)] = []
+    # pairs of the tool's and the arm's pieces the collision checker does not check, each
+    # with why (``scene new``: those its sampling finds touching whatever the joints do)
+    allowed_pairs: Annotated[list[AllowedPair], Field(max_length=1000)] = []
 
     @model_validator(mode="after")
     def physical(self, info: ValidationInfo):

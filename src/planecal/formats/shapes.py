@@ -18,6 +18,11 @@ frames for a DH table):
 apart at every angle though their hulls pass within the clearance (a UR's nested wrist
 joints).
 
+``unchecked``: why the arm has no collision pieces (a URDF without <collision> or
+<visual> elements, ``planecal robot import``): the checker then sees only the tool and the
+cell, never the arm's links; ``pieces`` may then be empty, and ``planecal robot show`` and
+``scene new`` say so.
+
 ``use``: ``both`` (default; the MC70's): the visual shape is the pieces' polygons and the
 collision shape the same grown by the margin; ``visual`` or ``collision``: that one only
 (a URDF's <visual> and <collision> elements). A visual piece of one mesh is drawn as the
@@ -126,11 +131,15 @@ class ShapesFile(Model):
     format: ShapesTag = None
     source: Str | None = None
     collision_margin_m: Margin | None = None
-    pieces: Annotated[list[Piece], Field(min_length=1, max_length=10_000)]
+    pieces: Annotated[list[Piece], Field(max_length=10_000)]
     allowed_pairs: list[AllowedPair] = []
+    unchecked: Str | None = None
 
     @model_validator(mode="after")
     def unique_names(self):
+        if not self.pieces and not self.unchecked:
+            raise problem("no pieces: give at least one, or say in 'unchecked' why the arm "
+                          "has none", "pieces")
         seen = set()
         for i, p in enumerate(self.pieces):
             if p.name in seen:

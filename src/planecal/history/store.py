@@ -1,60 +1,53 @@
-"""A cell's history in an embedded database (SQLAlchemy Core): SQLite by default, a server
-database (PostgreSQL, ...) by URL for a shop with many cells. docs/HISTORY.md describes the
-tables; in short::
-
-    meta        key, value                  the schema's format and version
-    entries     id, kind, created_utc, cell, scene, robot, robot_sha256, world (JSON),
-                planecal_version, note, outcome, exit_code, against_id (-> entries.id),
-                result_sha256, output, summary (JSON), document (JSON)
-    inputs      entry_id (-> entries.id), role, path, sha256, bytes
-    parameters  entry_id (-> entries.id), name, value, std, unit, status
+"""A cell's history (SQLAlchemy Core): an SQLite file by default, a PostgreSQL database by
+URL for a shop with many cells (``place``); the tables and their versions in ``schema``,
+how each backend is opened in ``backend`` and ``opening``. docs/HISTORY.md describes it.
 
 An entry is one command's record (``Entry``): calibrate, validate, export, check, compare,
-rollback. Its number (``id``) is the database's, unique in the history and never reused.
-``add`` writes an entry with its inputs and parameters in one transaction: a reader sees
-all of it or none. On SQLite every transaction begins ``IMMEDIATE`` (it takes the write
-lock first) and waits up to ``BUSY_TIMEOUT_S`` for another process's transaction to end,
-so two commands writing one history at once both land, one after the other; the schema is
-created the same way, so two first writers do not race to create it.
+rollback. Its number (``id``) is the database's, unique in the history and never reused
+(also after the last entry is deleted). ``add`` writes an entry with its inputs and
+parameters in one transaction: a reader sees all of it or none, a writer killed in it
+leaves nothing of it. Any number of processes add entries at once; readers never wait
+for them.
 
-JSON columns hold no NaN or infinity (null instead) and no numpy types (``to_json``).
+Values are checked on the way in and out (``values``): an entry read back carries the
+``problems`` of what was stored in it that planecal does not write (text where a number
+belongs, NaN, an infinity, JSON that is not JSON), with those values None. Every failure
+of the database is a ``HistoryError`` (an ``InputError``: one line naming the history,
+no password, and the cause).
 """
 from __future__ import annotations
 
-import json
-import math
-import os
+import sqlite3
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from pathlib import Path
 
-from planecal.base.errors import InputError, RunFailed
+from planecal.base.errors import InputError
+from planecal.history import backend, opening, schema
+from planecal.history.backend import HistoryError
+from planecal.history.place import DEFAULT_FILE, ENV, location, place_of  # noqa: F401
+from planecal.history.values import Reader, clean, number_in, text_in, to_json  # noqa: F401
 
-FORMAT = "planecal-history"
-SCHEMA_VERSION = 1
-DEFAULT_FILE = "planecal.db"
-ENV = "PLANECAL_HISTORY"
-BUSY_TIMEOUT_S = 60.0
 KINDS = ("calibrate", "validate", "export", "check", "compare", "rollback")
-SQLITE_MAGIC = b"SQLite format 3\0"
+OUTCOMES = ("ok", "failed", "in_control", "drifted", "agree", "differ")
 
 
 @dataclass(frozen=True)
 class ParameterRow:
-    """One parameter of a calibration entry, by name, in SI units (``std`` None: fixed or
-    not identifiable)."""
+    """One parameter of a calibration entry, by name, in SI units (``value`` or ``std``
+    None: not a number, fixed or not identifiable)."""
     name: str
-    value: float
+    value: float | None
     std: float | None
-    unit: str
-    status: str
+    unit: str | None
+    status: str | None
 
 
 @dataclass(frozen=True)
 class InputRow:
     role: str
-    path: str
-    sha256: str
-    bytes: int
+    path: str | None
+    sha256: str | None
+    bytes: int | None
 
 
 @dataclass
@@ -63,7 +56,8 @@ class Entry:
     ``against``: the entry it refers to (the calibration a check, an export or a rollback
     read); ``result_sha256``: the result file it wrote (calibrate) or read (the others);
     ``world``: where the data was made (a twin's world, the real cell); ``summary``: a few
-    figures; ``document``: the whole result (calibrate: the result file's JSON)."""
+    figures; ``document``: the whole result (calibrate: the result file's JSON).
+    ``problems``: read back, what was stored that planecal does not write."""
     kind: str
     outcome: str
     exit_code: int
@@ -83,186 +77,90 @@ class Entry:
     inputs: list[InputRow] = field(default_factory=list)
     parameters: list[ParameterRow] = field(default_factory=list)
     id: int | None = None
-
-
-def clean(v):
-    """``v`` with numpy scalars and arrays as Python values and NaN/inf as None (JSON)."""
-    if isinstance(v, dict):
-        return {str(k): clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [clean(x) for x in v]
-    if hasattr(v, "tolist") and not isinstance(v, (str, bytes)):  # numpy arrays, scalars
-        return clean(v.tolist())
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
-def to_json(v) -> str | None:
-    return None if v is None else json.dumps(clean(v), allow_nan=False, sort_keys=False)
-
-
-def from_json(text):
-    return None if text is None else json.loads(text)
-
-
-def _tables():
-    from sqlalchemy import (Column, Float, ForeignKey, Index, Integer, MetaData, String,
-                            Table, Text)
-    md = MetaData()
-    meta = Table("meta", md, Column("key", String(64), primary_key=True),
-                 Column("value", Text, nullable=False))
-    entries = Table(
-        "entries", md,
-        Column("id", Integer, primary_key=True, autoincrement=True),
-        Column("kind", String(16), nullable=False),
-        Column("created_utc", String(40), nullable=False),
-        Column("cell", String(200)), Column("scene", Text), Column("robot", String(200)),
-        Column("robot_sha256", String(64)), Column("world", Text),
-        Column("planecal_version", String(40)), Column("note", Text),
-        Column("outcome", String(32), nullable=False),
-        Column("exit_code", Integer, nullable=False),
-        Column("against_id", Integer, ForeignKey("entries.id")),
-        Column("result_sha256", String(64)), Column("output", Text),
-        Column("summary", Text), Column("document", Text),
-        Index("entries_cell", "cell"), Index("entries_result", "result_sha256"))
-    inputs = Table("inputs", md,
-                   Column("entry_id", Integer, ForeignKey("entries.id"), nullable=False),
-                   Column("role", String(40), nullable=False), Column("path", Text),
-                   Column("sha256", String(64)), Column("bytes", Integer),
-                   Index("inputs_entry", "entry_id"))
-    parameters = Table("parameters", md,
-                       Column("entry_id", Integer, ForeignKey("entries.id"), nullable=False),
-                       Column("name", String(40), nullable=False),
-                       Column("value", Float, nullable=False), Column("std", Float),
-                       Column("unit", String(20)), Column("status", String(60)),
-                       Index("parameters_entry", "entry_id"))
-    return md, meta, entries, inputs, parameters
-
-
-def location(arg: str | None) -> str:
-    """The history a command uses: ``--history``, else ``$PLANECAL_HISTORY``, else
-    ``planecal.db`` in the working folder."""
-    if arg:
-        return str(arg)
-    return os.environ.get(ENV) or DEFAULT_FILE
-
-
-def is_url(where: str) -> bool:
-    return "://" in where
-
-
-def check_file(where: str, inputs=()) -> Path:
-    """A history file checked before any work: the output guard's checks (not an input
-    of the command, not a directory, in a folder that exists and can be written;
-    ``io.outputs``) and, if it exists, an SQLite database (one-line InputError)."""
-    from planecal.io.outputs import check_output
-    p = check_output(where, inputs, force=True, what="--history")
-    if p.exists():
-        try:
-            with open(p, "rb") as f:
-                head = f.read(len(SQLITE_MAGIC))
-        except OSError as e:
-            raise InputError(f"--history {p}: cannot read ({e.strerror})") from None
-        if head and head != SQLITE_MAGIC:
-            raise InputError(f"--history {p}: not an SQLite database (a history is one)")
-    return p
+    problems: list[str] = field(default_factory=list)
 
 
 class History:
-    """An open history (module docstring). ``open`` checks the place and creates the schema
-    if it is new; ``label`` is how messages name it."""
+    """An open history (module docstring). ``open`` checks the place and the schema;
+    ``label`` is how messages name it (never a password)."""
 
-    def __init__(self, engine, label: str):
-        md, self._meta, self._entries, self._inputs, self._params = _tables()
-        self._md = md
+    def __init__(self, engine, place, version: int):
+        _, self._meta, self._entries, self._inputs, self._params = schema.tables()
         self.engine = engine
-        self.label = label
+        self.place = place
+        self.label = place.label
+        self.version = version
+        self.unread: HistoryError | None = None  # a lookup that failed (commands' ``consult``)
 
     @classmethod
-    def open(cls, where: str, inputs=(), create: bool = True) -> "History":
-        """The history at ``where`` (a file path or a database URL). ``create`` False: a
-        history that does not exist yet is an error (reading commands)."""
-        from sqlalchemy import create_engine, event
-        from sqlalchemy.exc import ArgumentError, SQLAlchemyError
-
-        if is_url(where):
-            url, label = where, _hide_password(where)
-            sqlite = where.startswith("sqlite")
-        else:
-            p = check_file(where, inputs)
-            if not create and not p.exists():
-                raise InputError(f"--history {p}: no history here yet (commands that "
-                                 "calibrate, validate, export, check or compare make one)")
-            url, label, sqlite = f"sqlite:///{p.resolve()}", str(p), True
-        try:
-            engine = create_engine(url, **({"connect_args": {"timeout": BUSY_TIMEOUT_S}}
-                                          if sqlite else {"pool_pre_ping": True}))
-        except (ArgumentError, SQLAlchemyError, ImportError) as e:
-            raise InputError(f"--history {label}: cannot open ({_first_line(e)})") from None
-        if sqlite:
-            _immediate_transactions(engine, event)
-        h = cls(engine, label)
-        h._schema(create)
-        return h
-
-    def _schema(self, create: bool) -> None:
-        from sqlalchemy import inspect, select
+    def open(cls, where: str, inputs=(), create: bool = True, new: bool = True) -> "History":
+        """The history at ``where`` (a file path or a database URL). ``create`` True: a
+        command that records (the history is made if new, upgraded if older, and must be
+        writable; with ``new`` False it must exist: a rollback); False: one that only reads
+        (it must exist; nothing is written)."""
         from sqlalchemy.exc import SQLAlchemyError
+        place = place_of(where)
+        if place.sqlite:
+            backend.check_file(place, inputs, create, new)
         try:
-            with self.engine.begin() as conn:
-                exists = inspect(conn).has_table("meta")
-                if not exists:
-                    if not create:
-                        raise InputError(f"--history {self.label}: not a planecal history "
-                                         "(no meta table)")
-                    self._md.create_all(conn)
-                    conn.execute(self._meta.insert(), [
-                        {"key": "format", "value": FORMAT},
-                        {"key": "schema_version", "value": str(SCHEMA_VERSION)}])
-                rows = dict(conn.execute(select(self._meta.c.key, self._meta.c.value)).all())
+            engine, version = cls._engine(place, create, new)
+        except HistoryError:
+            raise
+        except (SQLAlchemyError, sqlite3.Error, OSError) as e:  # sqlite3: its backup API
+            raise backend.failure(place, e, "cannot open it") from None
+        return cls(engine, place, version)
+
+    @staticmethod
+    def _engine(place, write: bool, new: bool):
+        from sqlalchemy.exc import SQLAlchemyError
+        if not place.sqlite:
+            engine = backend.postgres_engine(place)
+            return engine, opening.prepare(engine, place, write, new)
+        if write and not place.path.exists():
+            backend.create_file(place)
+        engine = backend.sqlite_engine(place.path, write)
+        try:
+            return engine, opening.prepare(engine, place, write, new)
         except SQLAlchemyError as e:
-            raise InputError(f"--history {self.label}: cannot use the database "
-                             f"({_first_line(e)})") from None
-        if rows.get("format") != FORMAT:
-            raise InputError(f"--history {self.label}: not a planecal history (meta format "
-                             f"{rows.get('format')!r})")
-        version = rows.get("schema_version", "?")
-        if version != str(SCHEMA_VERSION):
-            raise InputError(f"--history {self.label}: schema version {version}; this planecal "
-                             f"reads version {SCHEMA_VERSION}")
+            wal = place.path.with_name(place.path.name + "-wal")
+            why = str(e).lower()
+            if write or wal.exists() or not ("readonly" in why or "unable to open" in why):
+                raise
+        engine.dispose()  # read-only where no -wal waits: the file is the whole history
+        engine = backend.sqlite_engine(place.path, False, immutable=True)
+        return engine, opening.prepare(engine, place, False)
 
     def close(self) -> None:
         self.engine.dispose()
 
+    @contextmanager
+    def _transaction(self, doing: str, write: bool = False):
+        from sqlalchemy.exc import SQLAlchemyError
+        try:
+            with self.engine.connect().execution_options(planecal_write=write) as conn, \
+                    conn.begin():
+                yield conn
+        except HistoryError:
+            raise
+        except (SQLAlchemyError, sqlite3.Error, OSError) as e:
+            raise backend.failure(self.place, e, doing) from None
+
     # ----- writing -----
     def add(self, e: Entry) -> int:
-        """Write ``e`` with its inputs and parameters in one transaction; its number."""
-        from sqlalchemy.exc import SQLAlchemyError
+        """Write ``e`` with its inputs and parameters in one transaction; its number.
+        ``HistoryError`` where the entry was not written."""
         if e.kind not in KINDS:
             raise ValueError(f"history entry kind {e.kind!r}: one of {', '.join(KINDS)}")
-        row = {"kind": e.kind, "created_utc": e.created_utc, "cell": e.cell, "scene": e.scene,
-               "robot": e.robot, "robot_sha256": e.robot_sha256, "world": to_json(e.world),
-               "planecal_version": e.planecal_version, "note": e.note, "outcome": e.outcome,
-               "exit_code": int(e.exit_code), "against_id": e.against,
-               "result_sha256": e.result_sha256, "output": e.output,
-               "summary": to_json(e.summary or {}), "document": to_json(e.document)}
         try:
-            with self.engine.begin() as conn:
-                n = int(conn.execute(self._entries.insert().values(**row)).inserted_primary_key[0])
-                if e.inputs:
-                    conn.execute(self._inputs.insert(), [
-                        {"entry_id": n, "role": i.role, "path": i.path, "sha256": i.sha256,
-                         "bytes": int(i.bytes)} for i in e.inputs])
-                if e.parameters:
-                    conn.execute(self._params.insert(), [
-                        {"entry_id": n, "name": p.name, "value": float(p.value),
-                         "std": None if p.std is None or not math.isfinite(p.std)
-                         else float(p.std), "unit": p.unit, "status": p.status}
-                        for p in e.parameters])
-        except SQLAlchemyError as err:
-            raise RunFailed(f"history {self.label}: the entry was not written "
-                            f"({_first_line(err)})") from None
+            row, inputs, params = _rows(e)
+        except (ValueError, TypeError) as err:
+            raise HistoryError(self.place.error(f"the entry was not written ({err})")) from None
+        with self._transaction("the entry was not written", write=True) as conn:
+            n = int(conn.execute(self._entries.insert().values(**row)).inserted_primary_key[0])
+            if inputs:
+                conn.execute(self._inputs.insert(), [{"entry_id": n, **i} for i in inputs])
+            if params:
+                conn.execute(self._params.insert(), [{"entry_id": n, **p} for p in params])
         e.id = n
         return n
 
@@ -276,25 +174,34 @@ class History:
             q = q.where(t.c.cell == cell)
         if kind is not None:
             q = q.where(t.c.kind == kind)
-        with self.engine.connect() as conn:
-            return [self._entry(r._mapping) for r in conn.execute(q)]
+        with self._transaction("cannot read it") as conn:
+            return [_entry(r._mapping) for r in conn.execute(q)]
 
     def get(self, n: int) -> Entry:
         """Entry ``n`` with its document, inputs and parameters; InputError if none."""
         from sqlalchemy import select
-        t = self._entries
-        with self.engine.connect() as conn:
+        t, ti, tp = self._entries, self._inputs, self._params
+        with self._transaction("cannot read it") as conn:
             r = conn.execute(select(t).where(t.c.id == int(n))).first()
             if r is None:
                 raise InputError(f"history {self.label}: no entry {n}")
-            e = self._entry(r._mapping)
-            e.document = from_json(r._mapping["document"])
-            ti, tp = self._inputs, self._params
-            e.inputs = [InputRow(x.role, x.path, x.sha256, x.bytes) for x in conn.execute(
-                select(ti).where(ti.c.entry_id == e.id))]
-            e.parameters = [ParameterRow(x.name, x.value, x.std, x.unit, x.status)
-                            for x in conn.execute(select(tp).where(tp.c.entry_id == e.id))]
+            e = _entry(r._mapping)
+            rd = Reader()
+            e.document = rd.json(r._mapping["document"], "document", dict)
+            e.inputs = [_input(x._mapping, k, rd) for k, x in enumerate(conn.execute(
+                self._rows_of(ti, e.id)))]
+            e.parameters = [_parameter(x._mapping, k, rd) for k, x in enumerate(conn.execute(
+                self._rows_of(tp, e.id)))]
+            e.problems += rd.problems
         return e
+
+    def _rows_of(self, table, entry_id: int):
+        """A child table's rows of one entry, in the order written (version 1 kept none:
+        SQLite's row order)."""
+        from sqlalchemy import select
+        cols = [table.c[c] for c in schema.COLUMNS[self.version][table.name]]
+        q = select(*cols).where(table.c.entry_id == entry_id)
+        return q.order_by(table.c.id) if "id" in schema.COLUMNS[self.version][table.name] else q
 
     def find_result(self, sha256: str | None) -> int | None:
         """The newest calibrate entry that wrote a result file with this SHA-256."""
@@ -304,41 +211,79 @@ class History:
         t = self._entries
         q = (select(t.c.id).where(t.c.result_sha256 == sha256, t.c.kind == "calibrate")
              .order_by(t.c.id.desc()))
-        with self.engine.connect() as conn:
+        with self._transaction("cannot read it") as conn:
             r = conn.execute(q).first()
-        return None if r is None else int(r[0])
-
-    @staticmethod
-    def _entry(m) -> Entry:
-        return Entry(kind=m["kind"], outcome=m["outcome"], exit_code=m["exit_code"],
-                     created_utc=m["created_utc"], planecal_version=m["planecal_version"],
-                     cell=m["cell"], scene=m["scene"], robot=m["robot"],
-                     robot_sha256=m["robot_sha256"], world=from_json(m["world"]),
-                     note=m["note"], against=m["against_id"],
-                     result_sha256=m["result_sha256"], output=m["output"],
-                     summary=from_json(m["summary"]) or {}, id=int(m["id"]))
+        return None if r is None or isinstance(r[0], bool) or not isinstance(r[0], int) \
+            else int(r[0])
 
 
-def _immediate_transactions(engine, event) -> None:
-    """SQLite: planecal, not the driver, begins transactions, and begins them IMMEDIATE
-    (the write lock first, waiting up to the busy timeout)."""
-    @event.listens_for(engine, "connect")
-    def _connect(dbapi_connection, _record):
-        dbapi_connection.isolation_level = None  # the driver emits no BEGIN of its own
+def _rows(e: Entry) -> tuple[dict, list, list]:
+    """The entry's rows as the tables take them, every value checked (``values``)."""
+    t = text_in
+    row = {"kind": e.kind, "created_utc": t(e.created_utc, "created_utc"),
+           "cell": t(e.cell, "cell"), "scene": t(e.scene, "scene"), "robot": t(e.robot, "robot"),
+           "robot_sha256": t(e.robot_sha256, "robot_sha256"), "world": to_json(e.world),
+           "planecal_version": t(e.planecal_version, "planecal_version"),
+           "note": t(e.note, "note"), "outcome": t(e.outcome, "outcome"),
+           "exit_code": int(e.exit_code), "against_id": None if e.against is None
+           else int(e.against), "result_sha256": t(e.result_sha256, "result_sha256"),
+           "output": t(e.output, "output"), "summary": to_json(e.summary or {}),
+           "document": to_json(e.document)}
+    inputs = [{"role": t(i.role, "inputs.role"), "path": t(i.path, "inputs.path"),
+               "sha256": t(i.sha256, "inputs.sha256"),
+               "bytes": None if i.bytes is None else int(i.bytes)} for i in e.inputs]
+    params = [{"name": t(p.name, "parameters.name"), "value": number_in(p.value),
+               "std": number_in(p.std), "unit": t(p.unit, "parameters.unit"),
+               "status": t(p.status, "parameters.status")} for p in e.parameters]
+    return row, inputs, params
 
-    @event.listens_for(engine, "begin")
-    def _begin(conn):
-        conn.exec_driver_sql("BEGIN IMMEDIATE")
+
+def _entry(m) -> Entry:
+    """An entries row read back, every value checked."""
+    rd = Reader()
+    e = Entry(kind=rd.text(m["kind"], "kind", True, KINDS) or "?",
+              outcome=rd.text(m["outcome"], "outcome", True, OUTCOMES) or "?",
+              exit_code=rd.integer(m["exit_code"], "exit_code", True),
+              created_utc=rd.text(m["created_utc"], "created_utc", True) or "?",
+              planecal_version=rd.text(m["planecal_version"], "planecal_version"),
+              cell=rd.text(m["cell"], "cell"), scene=rd.text(m["scene"], "scene"),
+              robot=rd.text(m["robot"], "robot"),
+              robot_sha256=rd.text(m["robot_sha256"], "robot_sha256"),
+              world=rd.json(m["world"], "world"), note=rd.text(m["note"], "note"),
+              against=rd.integer(m["against_id"], "against_id"),
+              result_sha256=rd.text(m["result_sha256"], "result_sha256"),
+              output=rd.text(m["output"], "output"),
+              summary=rd.json(m["summary"], "summary", dict) or {},
+              id=rd.integer(m["id"], "id", True))
+    e.problems = rd.problems
+    return e
 
 
-def _hide_password(url: str) -> str:
-    from sqlalchemy.engine import make_url
+def _input(m, k: int, rd: Reader) -> InputRow:
+    where = f"inputs[{k}]"
+    n = rd.integer(m["bytes"], f"{where}.bytes")
+    return InputRow(rd.text(m["role"], f"{where}.role", True) or "?",
+                    rd.text(m["path"], f"{where}.path"), rd.text(m["sha256"], f"{where}.sha256"),
+                    None if n is None or n < 0 else n)
+
+
+def _parameter(m, k: int, rd: Reader) -> ParameterRow:
+    name = rd.text(m["name"], f"parameters[{k}].name", True) or f"?{k}"
+    where = f"parameters[{name}]"
+    return ParameterRow(name, rd.number(m["value"], f"{where}.value"),
+                        rd.number(m["std"], f"{where}.std"), rd.text(m["unit"], f"{where}.unit"),
+                        rd.text(m["status"], f"{where}.status"))
+
+
+def consult(hist, read, default):
+    """``read(hist)``, a lookup in the history during a command's work (None: no history);
+    where the history fails, ``default`` (the work goes on without it), the failure kept
+    for the one line ``commands.history_options.record`` prints."""
+    if hist is None:
+        return default
     try:
-        return make_url(url).render_as_string(hide_password=True)
-    except Exception:  # not a URL SQLAlchemy reads: opening it says why
-        return url
-
-
-def _first_line(e: Exception) -> str:
-    text = str(getattr(e, "orig", None) or e)
-    return (text.splitlines() or [type(e).__name__])[0]
+        return read(hist)
+    except HistoryError as e:
+        if hist.unread is None:
+            hist.unread = e
+        return default

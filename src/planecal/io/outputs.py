@@ -11,6 +11,9 @@ per file or folder it writes; ``planecal.commands.files`` builds them from the o
 * a file output that is a directory, in a missing directory, or where a file cannot be
   created (permission, a read-only mount, /proc, a name too long: a temporary file is
   made and removed beside it);
+* an existing SQLite database (a cell's history, or another application's) or a file
+  SQLite keeps beside one (``-wal``, ``-shm``, ``-journal``), unless the output is one
+  (the history itself), ``--force`` or not: nothing recorded is lost to an output;
 * an existing file that planecal did not write as this kind (``kinds``: the JSON
   ``format`` field it carries, a marker planecal writes near its start, or a test of the
   path), unless ``force``;
@@ -51,6 +54,7 @@ MJCF_MARK = b"written by planecal mjcf"
 YAML_MARK = b"calibrated by planecal"
 RRD_MAGIC = b"RRF"  # "RRF2" in rerun 0.41; older files start "RRF0"/"RRF1"
 COUNTS_TABLE_MARK = b"name\tq1\tq2\tq3\tq4\tq5\tq6\n"
+SQLITE_MAGIC = b"SQLite format 3\0"  # the first 16 bytes of every SQLite database
 
 Kind = Union[str, bytes, Callable[[Path], bool]]
 
@@ -211,6 +215,17 @@ def is_kind(path: Path, kinds: tuple) -> bool:
 
 # ----- the checks ---------------------------------------------------------------------------
 
+def _database(p: Path) -> str | None:
+    """What ``p`` is, if it is an SQLite database or a file SQLite keeps beside one."""
+    if _head(p)[:len(SQLITE_MAGIC)] == SQLITE_MAGIC:
+        return "an SQLite database (a cell's history, or another application's)"
+    for suffix in ("-wal", "-shm", "-journal"):
+        base = p.with_name(p.name[:-len(suffix)]) if p.name.endswith(suffix) else None
+        if base is not None and _head(base)[:len(SQLITE_MAGIC)] == SQLITE_MAGIC:
+            return f"a file SQLite keeps beside the database {_shown(base)}"
+    return None
+
+
 def _writable_dir(parent: Path, p: Path, what: str) -> None:
     """Create and remove a temporary file in ``parent``: the atomic write needs one there,
     and ``os.access`` says yes where the file system says no (root on /proc, a read-only
@@ -250,6 +265,9 @@ def _check_file(o: Output, inputs: _Inputs, force: bool) -> None:
         raise InputError(f"{what} {_shown(p)}: exists (nothing is overwritten); give a new name")
     if not os.access(p, os.W_OK):
         raise InputError(f"{what} {_shown(p)}: exists and cannot be written (permission denied)")
+    if SQLITE_MAGIC not in o.kinds and _database(p):
+        raise InputError(f"{what} {_shown(p)}: {_database(p)}; no output replaces it (--force "
+                         "or not): give another name")
     if not o.keep and not force and not is_kind(p, o.kinds):
         raise InputError(f"{what} {_shown(p)}: exists and is not a file planecal wrote there; "
                          f"{o.hint}")

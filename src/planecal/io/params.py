@@ -22,7 +22,7 @@ import numpy as np
 from planecal.base.errors import InputError
 from planecal.model.cell_params import CellParams
 from planecal.formats.base import json_values, read_json, validate
-from planecal.formats.params import PARAMS_FORMAT, ParamsFile
+from planecal.formats.params import PARAMS_FORMAT, RESULT_FORMAT, ParamsFile, ResultFile
 
 
 def params_to_dict(p: CellParams) -> dict:
@@ -73,8 +73,12 @@ def kinematics_to_dict(geometry, base, compliance) -> dict:
 
 def params_from_dict(d, path: str = "<params>") -> CellParams:
     """CellParams from a parsed parameter (or result) file, validated by
-    ``planecal.formats.params.ParamsFile``; one-line InputError otherwise."""
-    pf = validate(ParamsFile, d, path, "parameter file")
+    ``planecal.formats.params.ParamsFile`` (a result file, ``format`` planecal-result/1,
+    by ``ResultFile``: every field a command may read from it, its controller offsets
+    and its residual level included); one-line InputError otherwise."""
+    result = isinstance(d, dict) and d.get("format") == RESULT_FORMAT
+    pf = validate(ResultFile if result else ParamsFile, d, path,
+                  "result file" if result else "parameter file")
     s = pf.sensor
     k = pf.kinematics
     extra = {} if k is None else {
@@ -161,11 +165,12 @@ def _jsonable(v):
     raise TypeError(f"not JSON serializable: {type(v).__name__}")
 
 
-def recorded_samples(doc: dict, result_path, flag: str = "--samples") -> list[Path]:
+def recorded_samples(doc: dict, result_path, flag: str = "--samples",
+                     strict: bool = True) -> list[Path]:
     """The sample files a result's provenance records (role ``samples``), found here with
     the recorded content (relative paths: from the working directory, then beside the
     result). InputError for a recorded file that is missing or changed (naming ``flag``,
-    the option that gives them instead)."""
+    the option that gives them instead); not ``strict``: those left out."""
     prov = doc.get("provenance") if isinstance(doc, dict) else None
     entries = prov.get("inputs") if isinstance(prov, dict) else None
     found = []
@@ -175,12 +180,16 @@ def recorded_samples(doc: dict, result_path, flag: str = "--samples") -> list[Pa
         p = Path(str(e["path"]))
         cands = [p] if p.is_absolute() else [p, Path(result_path).parent / p]
         hit = next((c for c in cands if c.is_file()), None)
+        if hit is None and not strict:
+            continue
         if hit is None:
             raise InputError(f"{result_path}: its samples file {p} is not here; give the "
                              f"calibration's samples with {flag}")
         with open(hit, "rb") as f:
             digest = hashlib.file_digest(f, "sha256").hexdigest()
         if e.get("sha256") and digest != e["sha256"]:
+            if not strict:
+                continue
             raise InputError(f"{hit}: not the samples file {result_path} was made from (its "
                              f"SHA-256 differs); give the calibration's samples with {flag}")
         found.append(hit)

@@ -300,7 +300,11 @@ def read_many(paths, scene: SceneLike | None = None) -> Samples:
     """Read several sample files into one set (lines keep their per-file numbers); with
     ``scene`` each file is checked against it (``check_samples``). ``direction``: None
     when no file has the group; else each file's, 0 (unknown) for a file without it."""
-    sets = [read_samples(p, scene) for p in paths]
+    return join_samples([read_samples(p, scene) for p in paths])
+
+
+def join_samples(sets: list[Samples]) -> Samples:
+    """Several files' samples as one set, in order (``read_many``)."""
     direction = None
     if any(s.direction is not None for s in sets):
         direction = np.concatenate([np.zeros((len(s), N_JOINTS), np.int8)

@@ -30,16 +30,17 @@ to the base carry no gravity torque and are left out.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from planecal.base.errors import InputError, RunFailed
+from planecal.io.urdf_checks import SNAP_RAD, check_tree, inertia_problem, snap_right_angles
 from planecal.model.kinematics import Kinematics, fk, from_axes, link_frames, rpy_angles
 
 MATCH_M = 1e-9  # the imported flange's largest difference from the URDF's (m and rotation)
+SILENT_RAD = 1e-9  # snaps this small (pi/2 written to 11 digits) are not worth a warning
 N = 6
 REFUSED = {"prismatic": "a prismatic joint (planecal models revolute arms)",
            "continuous": "continuous (no limits): planecal needs lower and upper limits on "
@@ -55,6 +56,7 @@ class Piece:
     use: str  # 'visual' | 'collision'
     primitive: dict  # one shapes.json primitive
     mesh: tuple | None = None  # (vertices (n, 3), faces (m, 3)) for a mesh primitive
+    what: str | None = None
 
 
 @dataclass
@@ -71,6 +73,11 @@ class Imported:
     pieces: list[Piece] = field(default_factory=list)
     masses: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # repairs and what is not checked
+    model: object = None  # yourdfpy's Robot, right angles snapped: what the chain is of
+    snapped: list = field(default_factory=list)  # (joint, axis, written, snapped)
+    snap_rad: float = SNAP_RAD
+    unchecked: str | None = None  # why the arm has no collision pieces (shapes.json's)
 
 
 def _yourdfpy(path: Path, **kw):
@@ -194,8 +201,10 @@ def world_poses(robot, root: str) -> dict:
     return W
 
 
-def import_chain(path: Path, tip: str | None = None) -> tuple[Imported, object]:
-    """The URDF's chain (``Imported`` without shapes and masses) and yourdfpy's model."""
+def import_chain(path: Path, tip: str | None = None,
+                 snap_rad: float = SNAP_RAD) -> tuple[Imported, object]:
+    """The URDF's chain (``Imported`` without shapes and masses) and yourdfpy's model;
+    the chain's origins' near-right angles snapped (``urdf_checks.snap_right_angles``)."""
     u = load_urdf(path)
     robot = u.robot
     children = {j.child for j in robot.joints}
@@ -204,7 +213,16 @@ def import_chain(path: Path, tip: str | None = None) -> tuple[Imported, object]:
         raise InputError(f"{path}: {len(roots)} root links ({', '.join(roots) or 'none'}): a "
                          "robot is one tree from its base link")
     root = roots[0]
+    check_tree(path, robot, root)
+    if tip is not None and tip not in {link.name for link in robot.links}:
+        raise InputError(f"{path}: --tip {tip!r}: no link of that name (the flange link)")
     joints, tip = serial_chain(path, robot, root, tip)
+    parent_joint = {j.child: j for j in robot.joints}
+    on_chain, link = set(), tip
+    while link in parent_joint:
+        on_chain.add(parent_joint[link].name)
+        link = parent_joint[link].parent
+    snapped = snap_right_angles(path, robot, on_chain, snap_rad)
     W = world_poses(robot, root)
     points = np.array([(W[j.parent] @ _origin(j))[:3, 3] for j in joints])
     axes = np.array([(W[j.parent] @ _origin(j))[:3, :3] @ _axis(j) for j in joints])
@@ -212,7 +230,9 @@ def import_chain(path: Path, tip: str | None = None) -> tuple[Imported, object]:
     limits = np.array([[j.limit.lower, j.limit.upper] for j in joints], float)
     vel = np.array([float(j.limit.velocity or 0.0) for j in joints])
     body_of = _bodies(robot, root, joints)
-    return Imported(robot.name, kin, joints, limits, vel, tip, root, body_of), u
+    imp = Imported(robot.name, kin, joints, limits, vel, tip, root, body_of, model=robot,
+                   snapped=snapped, snap_rad=snap_rad)
+    return imp, u
 
 
 def _bodies(robot, root: str, joints) -> dict:
@@ -228,23 +248,48 @@ def _bodies(robot, root: str, joints) -> dict:
     return body
 
 
+def _flange_difference(u, imp: Imported, kin: Kinematics, n: int, seed: int) -> tuple:
+    """(largest entry difference, largest translation [m], largest rotation [rad]) of
+    ``kin``'s flange from yourdfpy's model ``u`` over n random poses within the limits."""
+    names = [j.name for j in imp.joints]
+    rng = np.random.default_rng(seed)
+    worst = move = turn = 0.0
+    for q in rng.uniform(imp.limits[:, 0], imp.limits[:, 1], (n, N)):
+        u.update_cfg(dict(zip(names, q)))
+        U, K = u.get_transform(imp.tip, imp.root), fk(kin, q)
+        worst = max(worst, float(np.abs(U - K).max()))
+        move = max(move, float(np.linalg.norm(U[:3, 3] - K[:3, 3])))
+        c = (np.trace(U[:3, :3].T @ K[:3, :3]) - 1) / 2
+        turn = max(turn, float(np.arccos(np.clip(c, -1.0, 1.0))))
+    return worst, move, turn
+
+
 def check_flange(path: Path, imp: Imported, kin: Kinematics | None = None, n: int = 200,
                  seed: int = 0) -> float:
     """Largest difference (m; rotation entries alike) of the flange of ``kin`` (default the
-    import's chain) from the URDF's (yourdfpy's forward kinematics) over n random poses
-    within the limits; RunFailed above MATCH_M."""
+    import's chain) from the URDF's (yourdfpy's forward kinematics, of the URDF with its
+    near-right angles snapped as the import did) over n random poses within the limits;
+    RunFailed above MATCH_M. Each snap is noted with how far the flange moves from the
+    URDF as written."""
+    import yourdfpy
     kin = imp.kin if kin is None else kin
-    u = _yourdfpy(path, build_scene_graph=True)
-    names = [j.name for j in imp.joints]
-    rng = np.random.default_rng(seed)
-    worst = 0.0
-    for q in rng.uniform(imp.limits[:, 0], imp.limits[:, 1], (n, N)):
-        u.update_cfg(dict(zip(names, q)))
-        T = u.get_transform(imp.tip, imp.root)
-        worst = max(worst, float(np.abs(T - fk(kin, q)).max()))
+    u = (_yourdfpy(path, build_scene_graph=True) if imp.model is None else
+         yourdfpy.URDF(robot=imp.model, build_scene_graph=True, load_meshes=False,
+                       load_collision_meshes=False))
+    worst = _flange_difference(u, imp, kin, n, seed)[0]
     if not worst <= MATCH_M:
         raise RunFailed(f"{path}: the imported chain's flange is {worst:.3g} m off the URDF's "
                         f"(at most {MATCH_M:g}): not imported")
+    if imp.snapped and max(abs(w - n) for _, _, w, n in imp.snapped) > SILENT_RAD:
+        _, move, turn = _flange_difference(_yourdfpy(path, build_scene_graph=True), imp, kin,
+                                           n, seed)
+        which = ", ".join(f"{joint} {axis} {was!r}" for joint, axis, was, _ in imp.snapped)
+        off = max(abs(was - now) for _, _, was, now in imp.snapped)
+        imp.warnings.append(
+            f"joint origins {which}: taken as multiples of 90 deg (at most {off:.2g} rad off, "
+            f"within {imp.snap_rad:g}: the URDF's rounding); the flange moves "
+            f"{move * 1e6:.3g} um and turns {turn * 1e6:.3g} urad at most from the URDF as "
+            "written (--snap-rad 0 keeps every angle)")
     return worst
 
 
@@ -254,29 +299,58 @@ def shapes_and_masses(path: Path, imp: Imported, u, packages: dict, visual_from:
     as the visuals too: for a URDF whose visual meshes are missing or unreadable)."""
     W = world_poses(u.robot, imp.root)
     G = link_frames(imp.kin, np.zeros(N))
+    from_visual = []
     for link in u.robot.links:
         body = imp.body_of.get(link.name)
         if body is None:
             continue
         to_link = np.linalg.inv(G[body]) @ W[link.name]  # URDF link -> planecal link frame
-        kinds = (("visual", link.collisions if visual_from == "collision" else link.visuals),
-                 ("collision", link.collisions))
+        collisions, what = link.collisions, None
+        if not collisions and link.visuals:  # the checker's envelope: the visual's hull
+            collisions, what = link.visuals, "the visual element's hull (no <collision>)"
+            from_visual.append(link.name)
+        kinds = (("visual", collisions if visual_from == "collision" else link.visuals),
+                 ("collision", collisions))
         for use, elements in kinds:
             for k, el in enumerate(elements):
                 M = to_link @ (np.eye(4) if el.origin is None else np.asarray(el.origin, float))
                 name = f"{link.name}_{use}{k}" if len(elements) > 1 else f"{link.name}_{use}"
                 imp.pieces.append(_piece(path, name, body, use, el.geometry, M, packages))
+                imp.pieces[-1].what = what if use == "collision" else None
         inert = link.inertial
         if body >= 1 and inert is not None and inert.mass and inert.mass > 0:
             O = to_link @ (np.eye(4) if inert.origin is None else np.asarray(inert.origin, float))
             R = O[:3, :3]
             J = R @ np.asarray(inert.inertia, float) @ R.T if inert.inertia is not None else None
+            why = None if J is None else inertia_problem(J)
+            if why:
+                imp.warnings.append(f"link {link.name!r}: <inertia> is no rigid body's: {why}; "
+                                    f"left out, the link is a point mass of {inert.mass:g} kg at "
+                                    "its centre of mass (the gravity torque is the same)")
+                J = None
             imp.masses.append({
                 "frame": body, "com_m": [float(v) for v in O[:3, 3]], "mass_kg": float(inert.mass),
                 **({} if J is None else {"inertia_kg_m2": [float(J[0, 0]), float(J[1, 1]),
                                                           float(J[2, 2]), float(J[0, 1]),
                                                           float(J[0, 2]), float(J[1, 2])]}),
                 "what": f"link {link.name}"})
+    if from_visual:
+        imp.warnings.append(
+            f"links {', '.join(from_visual)} have no <collision>: the collision checker takes "
+            "their visual elements' convex hulls (grown by its margin) as their envelopes; "
+            "check them against the real arm")
+    shaped = {p.link for p in imp.pieces if p.use == "collision"}
+    bare = [b for b in range(N + 1) if b not in shaped]
+    if not shaped:
+        imp.unchecked = (f"{path.name} has no <collision> or <visual> elements: the checker "
+                         "sees only the tool and the cell, never the arm's links")
+        imp.warnings.append(f"the robot is not checked for collisions: {imp.unchecked} "
+                            "(shapes.json says so; give it pieces, docs/ROBOTS.md)")
+    elif bare:
+        links = {b: [n for n, v in imp.body_of.items() if v == b] for b in bare}
+        imp.warnings.append(
+            "no shape on " + "; ".join(f"body {b} (links {', '.join(links[b])})" for b in bare)
+            + ": the collision checker cannot see those links")
 
 
 def _piece(path: Path, name: str, body: int, use: str, geom, M: np.ndarray,
@@ -347,106 +421,15 @@ def _list(v) -> list[float]:
     return [float(x) for x in np.asarray(v, float).ravel()]
 
 
-@dataclass(frozen=True)
-class EncoderSettings:
-    """The encoder and controller model an imported robot gets (the URDF has none)."""
-    counts_per_rev: int = 1 << 20
-    bits: int = 24
-    tick_s: float = 0.008
-    speed_fraction: float = 0.1  # of the slowest joint's URDF velocity, per tick
-    max_step_counts: int | None = None
-    trip_step_counts: int | None = None
-    repeatability_mm: float | None = None  # None: not written (model.robot's default)
-    payload_kg: float | None = None
-    controller: str | None = None
-
-
-def description(path: Path, imp: Imported, name: str, enc: EncoderSettings) -> dict:
-    """robot.json's document for an import (module docstring)."""
-    gain = enc.counts_per_rev / (2 * math.pi)
-    zero = 1 << (enc.bits - 1)
-    steps = _steps(path, imp, gain, enc)
-    home_q = np.where((imp.limits[:, 0] <= 0) & (imp.limits[:, 1] >= 0), 0.0,
-                      imp.limits.mean(axis=1))
-    kin = imp.kin
-    doc = {
-        "format": "planecal-robot/1", "name": name,
-        "source": (f"imported from {path.name} (URDF robot {imp.name!r}, base link "
-                   f"{imp.root!r}, flange link {imp.tip!r}) by planecal robot import"),
-        "chain": {
-            "convention": "modified DH with Hayati's beta: T = B prod_i Rx(alpha_i) Tx(a_i) "
-                          "Ry(beta_i) Rz(theta0_i + q_i) Tz(d_i) F (planecal.model.kinematics); "
-                          "q = the URDF's joint values",
-            "joints": [{"alpha_rad": _r(kin.alpha[i], True), "a_m": _r(kin.a[i]),
-                        "beta_rad": _r(kin.beta[i], True),
-                        "theta0_rad": _r(kin.theta[i], True), "d_m": _r(kin.d[i])}
-                       for i in range(N)],
-            "base": _frame(kin.base), "flange": _frame(kin.flange)},
-        "joint_names": [j.name for j in imp.joints],
-        "joint_limits_deg": [[round(float(np.rad2deg(lo)), 9), round(float(np.rad2deg(hi)), 9)]
-                             for lo, hi in imp.limits],
-        "encoder": {"gain_counts_per_rad": [gain] * N, "offset_counts": [zero] * N,
-                    "bits": enc.bits, "coupling": [],
-                    "coupling_note": f"not in the URDF: {enc.counts_per_rev} counts per "
-                                     "revolution of the joint, zero at mid-range, coupling "
-                                     "as given (planecal robot import's settings; "
-                                     "C = I but for the entries listed)"},
-        "inverse_kinematics": None,
-        "controller": {"kind": enc.controller, "tick_s": enc.tick_s,
-                       "max_step_counts": steps[0], "trip_step_counts": steps[1],
-                       "home_counts": [int(round(zero + gain * q)) for q in home_q]},
-        "masses_source": ("the URDF's <inertial> elements, in each link's frame (links fixed "
-                          "to the base carry no joint torque and are left out)"
-                          if imp.masses else "the URDF has no masses on its moving links"),
-        "masses": imp.masses,
-    }
-    if enc.payload_kg is not None:
-        doc["payload_kg"] = enc.payload_kg
-    if enc.repeatability_mm is not None:
-        doc["repeatability_mm"] = enc.repeatability_mm
-    return doc
-
-
-def _steps(path: Path, imp: Imported, gain: float, enc: EncoderSettings) -> tuple[int, int]:
-    """(max, trip) step counts per tick: given, or from the URDF's joint velocities."""
-    if enc.max_step_counts is not None and enc.trip_step_counts is not None:
-        return enc.max_step_counts, enc.trip_step_counts
-    slow = int(np.argmin(imp.velocities))
-    if not imp.velocities[slow] > 0:
-        raise InputError(f"{path}: joint {imp.joints[slow].name!r} has no velocity limit: "
-                         "give --max-step-counts and --trip-step-counts")
-    # a hair of rounding forgiven: planecal urdf writes trip / (gain tick) as the velocity
-    full = imp.velocities[slow] * gain * enc.tick_s * (1 + 1e-12)
-    trip = enc.trip_step_counts or max(2, int(full))
-    step = enc.max_step_counts or max(1, min(trip - 1, int(enc.speed_fraction * full)))
-    return step, trip
-
-
-def _frame(T: np.ndarray) -> dict:
-    return {"xyz_m": [_r(v) for v in T[:3, 3]],
-            "rpy_rad": [_r(v, True) for v in rpy_angles(T[:3, :3])]}
-
-
-def _r(v, angle: bool = False) -> float:
-    """A chain number as written: rounded to 1e-12 (m or rad; the flange moves < 1e-11 m),
-    so that 0.035 is not 0.03500000000000003 and no -6e-17 stands for 0; an angle within
-    1e-11 rad of a multiple of 90 deg is that multiple (the URDF's axes are mostly so; the
-    flange moves < 1e-10 m)."""
-    x = float(v)
-    if angle and abs(x - round(x / (np.pi / 2)) * (np.pi / 2)) < 1e-11:
-        x = round(x / (np.pi / 2)) * (np.pi / 2)
-        return 0.0 if x == 0 else x
-    x = round(x, 12)
-    return 0.0 if x == 0 else x
-
-
 def shapes_document(path: Path, imp: Imported) -> dict:
     """shapes.json's document (its meshes are written by ``write``)."""
     return {"format": "planecal-shapes/1",
             "source": f"the <visual> and <collision> elements of {path.name}, in planecal's "
                       "link frames (planecal robot import)",
             "pieces": [{"name": p.name, "link": p.link, "use": p.use,
-                        "primitives": [p.primitive]} for p in imp.pieces]}
+                        "primitives": [p.primitive], **({"what": p.what} if p.what else {})}
+                       for p in imp.pieces],
+            **({"unchecked": imp.unchecked} if imp.unchecked else {})}
 
 
 def write(out: Path, robot_doc: dict, shapes_doc: dict, imp: Imported) -> None:

@@ -171,6 +171,7 @@ class RobotShapes:
     pieces: tuple[ShapePiece, ...]
     margin_m: float | None
     allowed_pairs: tuple[tuple[str, str], ...] = ()  # not checked: the robot keeps them apart
+    unchecked: str | None = None  # why the arm has no collision pieces (formats.shapes)
 
 
 def shapes_path(robot) -> Path:
@@ -210,7 +211,7 @@ def load_shapes(path) -> RobotShapes:
             prims = tuple(_primitive(path, i, k, prim) for k, prim in enumerate(p.primitives))
             pieces.append(ShapePiece(p.name, p.link, p.use, prims))
         hit = RobotShapes(path, tuple(pieces), doc.collision_margin_m,
-                          tuple(tuple(p.pieces) for p in doc.allowed_pairs))
+                          tuple(tuple(p.pieces) for p in doc.allowed_pairs), doc.unchecked)
         if len(_SHAPES) > 16:
             _SHAPES.clear()
         _SHAPES[key] = hit

@@ -115,6 +115,30 @@ def kinematic_family(robot: Robot) -> str:
     return {"spherical_wrist": "MC70 spherical wrist", "numeric": "no known decomposition"}[name]
 
 
+def numeric_reason(robot: Robot) -> str:
+    """Why no closed form applies, in the two families most arms are of: how far the last
+    three axes miss a common point (a spherical wrist) and how far from parallel the most
+    nearly parallel three consecutive axes are (the UR family)."""
+    F = frames(robot.kinematics, np.zeros(robot.kinematics.n_joints))
+    H, pts = F[1:, :3, 2], F[1:, :3, 3]
+
+    def miss(idx) -> float:  # the point nearest the lines; its largest distance from them
+        A = sum(np.eye(3) - np.outer(H[i], H[i]) for i in idx)
+        b = sum((np.eye(3) - np.outer(H[i], H[i])) @ pts[i] for i in idx)
+        x = np.linalg.lstsq(A, b, rcond=None)[0]
+        return max(float(np.linalg.norm((np.eye(3) - np.outer(H[i], H[i])) @ (x - pts[i])))
+                   for i in idx)
+
+    def spread(i) -> float:  # largest angle between axes i, i+1, i+2 (as lines)
+        return max(float(np.arccos(np.clip(abs(H[a] @ H[b]), -1.0, 1.0)))
+                   for a in range(i, i + 3) for b in range(a + 1, i + 3))
+
+    best = min(range(len(H) - 2), key=spread)
+    return (f"axes 4-6 miss a common point by {miss((3, 4, 5)) * 1e3:.3g} mm (a spherical "
+            f"wrist), and the most nearly parallel three axes, {best + 1}-{best + 3}, are "
+            f"{np.rad2deg(spread(best)):.3g} deg apart")
+
+
 def ik_problem(kin: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The chain as joint axes and offsets at q = 0 (product of exponentials): H (6, 3)
     the axes, P (7, 3) base origin -> axis 1 point -> ... -> axis 6 point -> flange

@@ -105,6 +105,7 @@ class Scene:
     distance_mm: tuple[float, float] = (70.0, 90.0)
     references: tuple[LengthReference, ...] = ()
     tools: list[NamedTcp] = field(default_factory=list)
+    allowed_pairs: tuple[tuple[str, str], ...] = ()  # (tool piece, arm piece): not checked
 
     @property
     def standoff_m(self) -> float:
@@ -148,6 +149,7 @@ def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
         cone_deg=sf.sampling.cone_deg, distance_mm=tuple(sf.sampling.distance_mm),
         references=tuple(_reference(path, i, r, plates) for i, r in enumerate(sf.references)),
         tools=[NamedTcp(t.name, np.array(t.tcp_m, float)) for t in sf.tools],
+        allowed_pairs=tuple(tuple(p.pieces) for p in sf.allowed_pairs),
     )
 
 

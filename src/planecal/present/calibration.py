@@ -122,7 +122,7 @@ def document(cal: Calibration, robot=None, accuracy=None) -> dict:
     out["residual_max_mm"] = float(np.max(np.abs(res.residuals_m[res.used])) * 1e3)
     out["iterations"] = res.iterations
     out["converged"] = res.converged
-    out["status"] = res.status.value
+    out["status"] = cal.status
     out["outliers"] = [int(i) for i in res.outliers]
     out["samples_used"] = int(res.used.sum())
     out["identifiability"] = res.identifiability.to_dict()

@@ -74,6 +74,9 @@ def check_document(chk: DriftCheck, run: str, result: str, weighted: bool,
                      for s in chk.suspects],
         "z_limit": chk.z_limit, "chi2_limit": chk.chi2_limit, "no_effect": chk.no_effect,
         "moved": chk.moved,
+        "gross_errors": [{"sample": i + 1, "model_error_mm": r * 1e3, "studentized": v}
+                         for i, r, v in chk.gross],
+        "gross_error_limit": chk.gross_limit,
         "explanation": None if e is None else {
             "parameters": [{"name": n, "label": param_label(n), "amount": v, "std": sd}
                            for n, v, sd in zip(e.names, e.amounts, e.stds)],
@@ -104,6 +107,13 @@ def check_text(doc: dict) -> str:
         f"+- {t['expected_std']:.1f} with no drift); p = {t['p_value']:.3g}",
         f"alpha {t['alpha']:g}: false-alarm rate {t['attained_false_alarm_rate']:.4f} (the "
         f"test's attained size: drifted from {t['critical_exceedances']} exceedances on)"]
+    gross = doc.get("gross_errors") or []
+    if gross:
+        lines.append("gross errors (over 10x the reference's largest studentized error: a "
+                     "reading or a pose gone wrong, or a drift far beyond the calibration's "
+                     "scale): " + ", ".join(f"sample {g['sample']} {g['model_error_mm']:+.4f} mm"
+                                            for g in gross[:10])
+                     + (f" and {len(gross) - 10} more" if len(gross) > 10 else ""))
     if doc["verdict"] == "in_control":
         lines.append("IN CONTROL: the run errs as the reference did (exit 0)")
     else:

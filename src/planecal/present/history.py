@@ -3,9 +3,21 @@ one line per entry, and one entry in full (text or JSON)."""
 from __future__ import annotations
 
 import json
+import math
+import re
 from dataclasses import asdict
 
 from planecal.present.tables import table
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+def shown(v) -> str:
+    """A stored text as one line: control characters (a newline a hand put in a note)
+    escaped, so a list keeps one line per entry."""
+    if v is None:
+        return ""
+    return _CONTROL.sub(lambda m: m.group(0).encode("unicode_escape").decode(), str(v))
 
 
 def what(e) -> str:
@@ -38,19 +50,39 @@ def what(e) -> str:
     return ""
 
 
+def _number(v) -> float | None:
+    """A summary's figure if it is one (a finite number), else None: what a hand or another
+    tool put there is never printed as a number."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        return None
+    return float(v)
+
+
 def _mm(v) -> str:
+    v = _number(v)
     return "-" if v is None else f"{v:.4f} mm"
 
 
 def _g(v) -> str:
+    v = _number(v)
     return "-" if v is None else f"{v:.3g}"
+
+
+def damage(e) -> str:
+    """What an entry holds that planecal does not write, in a few words ('' for nothing)."""
+    if not e.problems:
+        return ""
+    fields = list(dict.fromkeys(p.split(":", 1)[0] for p in e.problems))
+    return "damaged: " + ", ".join(fields[:4]) + (", ..." if len(fields) > 4 else "")
 
 
 def list_text(entries, label: str) -> str:
     if not entries:
         return f"history {label}: no entries"
-    rows = [[str(e.id), e.created_utc.replace("+00:00", "Z"), e.kind, e.cell or "-",
-             e.outcome, str(e.against or ""), what(e), e.note or ""] for e in entries]
+    rows = [[str(e.id), shown(e.created_utc.replace("+00:00", "Z")), shown(e.kind),
+             shown(e.cell) or "-", shown(e.outcome), str(e.against or ""),
+             shown("; ".join(x for x in (what(e), damage(e)) if x)), shown(e.note)]
+            for e in entries]
     return (f"history {label}: {len(entries)} entries\n"
             + table(["#", "date (UTC)", "kind", "cell", "outcome", "against", "what", "note"],
                     rows, "rllllrll"))
@@ -65,27 +97,37 @@ def entry_document(e) -> dict:
 
 
 def show_text(e, label: str) -> str:
-    lines = [f"history {label}, entry {e.id}: {e.kind} ({e.outcome}, exit {e.exit_code})",
-             f"  date (UTC)        {e.created_utc}",
-             f"  cell / scene      {e.cell} / {e.scene}",
-             f"  robot             {e.robot} (description SHA-256 {e.robot_sha256 or '-'})",
-             f"  planecal          {e.planecal_version}",
-             f"  world             {json.dumps(e.world) if e.world else '- (not recorded)'}",
+    s = shown
+    lines = [f"history {label}, entry {e.id}: {s(e.kind)} ({s(e.outcome)}, exit {e.exit_code})",
+             f"  date (UTC)        {s(e.created_utc)}",
+             f"  cell / scene      {s(e.cell)} / {s(e.scene)}",
+             f"  robot             {s(e.robot)} (description SHA-256 "
+             f"{s(e.robot_sha256) or '-'})",
+             f"  planecal          {s(e.planecal_version)}",
+             f"  world             {s(json.dumps(e.world)) if e.world else '- (not recorded)'}",
              f"  against           {('entry ' + str(e.against)) if e.against else '-'}",
-             f"  result SHA-256    {e.result_sha256 or '-'}",
-             f"  output            {e.output or '-'}",
-             f"  note              {e.note or '-'}",
-             f"  what              {what(e)}"]
+             f"  result SHA-256    {s(e.result_sha256) or '-'}",
+             f"  output            {s(e.output) or '-'}",
+             f"  note              {s(e.note) or '-'}",
+             f"  what              {s(what(e))}"]
+    lines += [f"  DAMAGED           {s(p)}" for p in e.problems]
     if e.inputs:
         lines.append("  inputs:")
-        lines += [f"    {i.role:<20} {i.path}  ({i.bytes} bytes, SHA-256 {i.sha256[:16]}...)"
-                  for i in e.inputs]
+        lines += [f"    {s(i.role):<20} {s(i.path)}  ({i.bytes} bytes, SHA-256 "
+                  f"{s(i.sha256)[:16]}...)" for i in e.inputs]
     if e.parameters:
-        from planecal.present.drift import in_display, param_label
-        rows = []
-        for p in e.parameters:
-            v, unit = in_display(p.name, p.value)
-            sd, _ = in_display(p.name, p.std)
-            rows.append([param_label(p.name), v, sd.lstrip("+"), unit, p.status])
-        lines.append(table(["parameter", "value", "std", "unit", "status"], rows, "lrrll"))
+        lines.append(table(["parameter", "value", "std", "unit", "status"],
+                           [_parameter_row(p) for p in e.parameters], "lrrll"))
     return "\n".join(lines)
+
+
+def _parameter_row(p) -> list[str]:
+    from planecal.present.drift import in_display, param_label
+    try:
+        v, unit = in_display(p.name, p.value)
+        sd, _ = in_display(p.name, p.std)
+    except KeyError:  # a name no parameter group gives (a hand's): SI, as stored
+        v = "-" if p.value is None else f"{p.value:+.6g}"
+        sd = "-" if p.std is None else f"{p.std:.6g}"
+        unit = p.unit or ""
+    return [shown(param_label(p.name)), v, sd.lstrip("+"), shown(unit), shown(p.status)]

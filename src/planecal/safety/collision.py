@@ -30,8 +30,10 @@ Pairs checked (``collision_parts.checked_pairs``)
   base-link1, link1-link2, ..., link5-link6) and the tool against bodies 5 and 6.
 * Environment: every moving part against every static part, except the floor against the
   base (body 0) and link 1, which are bolted to it.
-``allowed_pairs`` adds further (name, name) pairs to skip, as does the robot's shapes.json
-(its ``allowed_pairs``: pieces its structure keeps apart, a UR's nested wrist joints).
+``allowed_pairs`` adds further (name, name) pairs to skip, as do the robot's shapes.json
+(its ``allowed_pairs``: pieces its structure keeps apart, a UR's nested wrist joints) and
+the scene (its ``allowed_pairs``: the tool's pieces against the arm's that ``scene new``
+found touching in every configuration).
 * One-joint pairs (``planecal.safety.collision_joint``): self pairs two bodies apart whose
   distance one joint decides once a part is replaced by its hull of revolution; their safe
   intervals of that joint are swept once per world (``safe_sets``), and a configuration or
@@ -209,6 +211,8 @@ class CollisionWorld:
         if links is None:
             links = geometry.robot_link_meshes(self.robot, "collision")
             allowed_pairs += geometry.robot_shapes(self.robot).allowed_pairs
+        if self.scene is not None:  # the scene's: tool pieces its sampling found always touching
+            allowed_pairs += self.scene.allowed_pairs
         tools = geometry.tool_meshes(self.scene, "collision") if tools is None else tools
         static = geometry.scene_meshes(self.scene) if static is None else static
         return links, tools, static, allowed_pairs

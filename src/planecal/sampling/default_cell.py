@@ -25,7 +25,10 @@ the laser's mount on its flange, no obstacles; docs/ROBOTS.md.
   position's counts are the scene's home.
 
 The search is deterministic (fixed seeds); ``RunFailed`` when no placement reaches
-``MIN_REACHABLE`` of its poses (place the plates by hand: docs/FORMATS.md).
+``MIN_REACHABLE`` of its poses (place the plates by hand: docs/FORMATS.md). With a judge
+(``scene new``: ``studies.cell_check``, does the cell identify the level asked on the
+poses its default run would use?) plates are added, the second and third as above, up to
+``MAX_PLATES``, until the judge is content, else RunFailed with its reason.
 """
 from __future__ import annotations
 
@@ -35,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planecal.base.errors import RunFailed
+from planecal.base.errors import InputError, RunFailed
 from planecal.model.encoder import counts_to_joints, joints_to_counts
 from planecal.model.kinematics import fk, frames
 from planecal.model.robot import Robot
@@ -49,6 +52,7 @@ DISTANCES = (0.45, 0.55, 0.65)  # share of the horizontal reach
 HEIGHTS = (0.15, 0.5, 0.9)  # share of the shoulder's height above the floor
 POSES = 40  # random sensor poses a placement is scored on
 MIN_REACHABLE = 0.3
+MAX_PLATES = 3
 THICKNESS_M = 0.012
 ABOVE_FLOOR_M = 0.02  # a plate's lowest edge above the floor (its stand or wedge)
 
@@ -94,8 +98,9 @@ def _r(v) -> list[float]:
 
 
 def document(robot_ref: str, name: str, plates: list[dict], floor_z: float,
-             description: str, positions: dict | None = None) -> dict:
+             description: str, positions: dict | None = None, allowed=()) -> dict:
     return {"format": "planecal-scene/1", "name": name, "description": description,
+            **({"allowed_pairs": list(allowed)} if allowed else {}),
             "robot": robot_ref,
             "sensor": {"origin_m": [0.0, 0.0, SENSOR_OUT_M], "phi_y_rad": SENSOR_PITCH,
                        "phi_z_rad": 0.0, "range_mm": [65.0, 95.0]},
@@ -110,6 +115,9 @@ def _load(doc: dict, folder: Path):
         json.dump(doc, f)
     try:
         return load_scene(f.name)
+    except InputError as e:  # named as the cell, not the temporary file it is read from
+        raise InputError(str(e).replace(f.name, f"the default cell (floor_z_m "
+                                                f"{doc['floor_z_m']:g})")) from None
     finally:
         Path(f.name).unlink(missing_ok=True)
 
@@ -158,9 +166,11 @@ def calibration_position(scene, world) -> np.ndarray | None:
 
 
 def default_cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder: Path,
-                 floor_z: float = 0.0, log=print) -> dict:
-    """The scene document of the default cell (module docstring)."""
-    from planecal.safety.collision import CollisionWorld
+                 floor_z: float = 0.0, log=print, judge=None) -> dict:
+    """The scene document of the default cell (module docstring). ``judge(scene) ->
+    (ok, why)``: whether a cell will do (``studies.cell_check`` via ``scene new``); with
+    one, plates are added from ``n_plates`` up to ``MAX_PLATES`` until it says yes, else
+    RunFailed with its last reason."""
     ws = workspace(robot)
     s = max(0.6, min(1.0, ws["reach"] / 2.0))
     size = (PLATE_M[0] * s, PLATE_M[1] * s)
@@ -168,11 +178,12 @@ def default_cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder:
     best = None
     middle = (DISTANCES[len(DISTANCES) // 2], HEIGHTS[len(HEIGHTS) // 2])
     az = ws["azimuth"]
+    ws["allowed"] = tool_contacts(robot, robot_ref, name, folder, floor_z, ws, size, log)
     for f, h in sorted(((f, h) for f in DISTANCES for h in HEIGHTS),  # ties: the middle
                        key=lambda fh: abs(fh[0] - middle[0]) + abs(fh[1] - middle[1])):
         c = [f * ws["reach"] * np.cos(az), f * ws["reach"] * np.sin(az), floor_z + h * above]
         doc = document(robot_ref, name, [plate("plate1", c, az, TILT_DEG, size, floor_z)],
-                       floor_z, "")
+                       floor_z, "", allowed=ws["allowed"])
         sc = score(_load(doc, folder))
         log(f"plate at {f:.2f} of the reach, {c[2] - floor_z:.2f} m up (at least): {sc:.0%} of "
             f"{POSES} poses reachable and clear")
@@ -182,18 +193,51 @@ def default_cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder:
     if sc < MIN_REACHABLE:
         raise RunFailed(f"no plate placement reaches {MIN_REACHABLE:.0%} of its poses (best "
                         f"{sc:.0%}): place the plates by hand (docs/FORMATS.md)")
+    why = ""
+    for k in range(n_plates, (MAX_PLATES if judge else n_plates) + 1):
+        doc, scene = _cell(robot, robot_ref, name, k, folder, floor_z, log, ws, size, f, c)
+        if judge is None:
+            return doc
+        ok, why = judge(scene)
+        if ok:
+            doc["description"] += f" Checked by planecal scene new: {why}"
+            return doc
+    raise RunFailed(f"no default cell of up to {MAX_PLATES} plates will do: {why}; place the "
+                    "plates by hand (docs/FORMATS.md) and check them with planecal layouts")
+
+
+def tool_contacts(robot: Robot, robot_ref: str, name: str, folder: Path, floor_z: float,
+                  ws: dict, size, log) -> list[dict]:
+    """The pairs of the tool's pieces with the arm's that touch whatever the joints do
+    (``safety.self_contact``: a wrist hull that swallows the flange swallows the adapter
+    on it too), each logged with its reason: the scene allows them."""
+    from planecal.safety.self_contact import always_touching
+    c = [0.5 * ws["reach"], 0.0, floor_z + 0.5]
+    doc = document(robot_ref, name, [plate("plate1", c, 0.0, TILT_DEG, size, floor_z)],
+                   floor_z, "")
+    found, _, _ = always_touching(robot, scene=_load(doc, folder))
+    for p in found:
+        log(f"the arm's {p['pieces'][0]} and the tool's {p['pieces'][1]}: allowed (not "
+            f"checked): {p['why']}")
+    return found
+
+
+def _cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder: Path,
+          floor_z: float, log, ws: dict, size, f: float, c) -> tuple[dict, object]:
+    """The default cell's document of ``n_plates`` plates, the first at ``c``, and its
+    scene."""
+    from planecal.safety.collision import CollisionWorld
     plates = [plate("plate1", c, ws["azimuth"], TILT_DEG, size, floor_z)]
-    if n_plates == 3:
-        for k, (side, tilt) in enumerate(((SIDE_DEG, 30.0), (-SIDE_DEG, 45.0))):
-            az = ws["azimuth"] + np.deg2rad(side)
-            cs = [f * ws["reach"] * np.cos(az), f * ws["reach"] * np.sin(az), c[2]]
-            plates.append(plate(f"plate{k + 2}", cs, az, tilt, size, floor_z))
+    for k, (side, tilt) in enumerate(((SIDE_DEG, 30.0), (-SIDE_DEG, 45.0))[:n_plates - 1]):
+        az = ws["azimuth"] + np.deg2rad(side)
+        cs = [f * ws["reach"] * np.cos(az), f * ws["reach"] * np.sin(az), c[2]]
+        plates.append(plate(f"plate{k + 2}", cs, az, tilt, size, floor_z))
     desc = (f"Default cell for {robot.name} (planecal scene new): {n_plates} plate(s) of "
             f"{size[0] * 1e3:.0f} x {size[1] * 1e3:.0f} mm on stands at {f:.2f} of the arm's "
             f"{ws['reach']:.2f} m horizontal reach, tilted {TILT_DEG:g} deg (the others more); "
             f"the sensor {SENSOR_OUT_M * 1e3:.0f} mm out on the flange axis, the beam "
             f"pitched {np.rad2deg(SENSOR_PITCH):.0f} deg off it; no obstacles.")
-    doc = document(robot_ref, name, plates, floor_z, desc)
+    doc = document(robot_ref, name, plates, floor_z, desc, allowed=ws["allowed"])
     scene = _load(doc, folder)
     for i in range(1, len(plates)):
         log(f"plate{i + 1}: {score(scene, i):.0%} of {POSES} poses reachable and clear")
@@ -208,5 +252,4 @@ def default_cell(robot: Robot, robot_ref: str, name: str, n_plates: int, folder:
         log("the robot's home is not clear of this cell: the scene's home is the calibration "
             "position")
     doc["positions"] = pos
-    _load(doc, folder)  # as planecal will load it
-    return doc
+    return doc, _load(doc, folder)  # as planecal will load it

@@ -232,7 +232,7 @@ class SamplingRun:
         side = {
             "format": SIDECAR_FORMAT, "status": st.status, "stop_reason": st.reason,
             "scene": self.scene.name,
-            "scene_path": str(self.scene.path) if self.scene.path else None,
+            "scene_path": str(Path(self.scene.path).resolve()) if self.scene.path else None,
             "robot": self.robot.name, "seed": self.settings.seed,
             "samples_target": self.settings.samples, "samples": st.samples,
             "cone_deg": pose.cone_deg,

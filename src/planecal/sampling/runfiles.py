@@ -111,25 +111,3 @@ def count_samples(path: Path) -> int:
     data = path.read_bytes()
     lines = data.split(b"\n")[:-1]  # the part after the last newline is incomplete
     return sum(1 for ln in lines if ln.strip() and not ln.lstrip().lower().startswith(b"q1"))
-
-
-def run_world(path: str | Path) -> dict | None:
-    """Where a run was made, as its sidecar records it: ``{"twin": {...}}`` (the twin's
-    error profile and truth seed, or the truth file and its SHA-256) or ``{"real_cell":
-    {"rt": host, "laser": port}}``; None for a file without a sidecar (or an unreadable
-    one: the history records what it can)."""
-    p = sidecar_path(path)
-    if not p.exists():
-        return None
-    try:
-        side = read_sidecar(p)
-    except InputError:
-        return None
-    if isinstance(side.get("twin"), dict):
-        t = side["twin"]
-        return {"twin": {k: t.get(k) for k in ("errors", "seed", "truth_file", "truth_sha256",
-                                              "exact")}}
-    real = side.get("real_cell")
-    if isinstance(real, dict):
-        return {"real_cell": {k: real.get(k) for k in ("rt", "rt_port", "laser")}}
-    return None

@@ -186,7 +186,9 @@ def run_many(st: MCSettings, engine=1, quiet: bool = False, label: str | None = 
     its seed ``st.seed + k``. ``results``: the JSON-lines file each run is written to as it
     completes (key k, header the settings); ``resume`` runs only the k not in it yet."""
     st.check()
-    prog = Progress(label or f"montecarlo {st.scene} N={st.samples}", st.runs, quiet=quiet)
+    # the scene's name, not the path a command resolved it to (issue 33)
+    prog = Progress(label or f"montecarlo {cached_scene(st.scene).name} N={st.samples}",
+                    st.runs, quiet=quiet)
     return parallel_map(run_one, [(st, k) for k in range(st.runs)], engine, prog,
                         key=_run_key, results=results, resume=resume,
                         header={"format": FORMAT, "settings": st.header()})

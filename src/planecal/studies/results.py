@@ -133,6 +133,37 @@ def _loads(text):
     return json.loads(text, parse_constant=_refuse_constant)
 
 
+def _check_head(path: Path, first: bytes, header) -> None:
+    """InputError unless ``first`` is a results file's first line with this ``header``."""
+    try:
+        head = json.loads(first) if first else None
+    except ValueError:
+        head = None
+    if not isinstance(head, dict) or head.get("format") != RESULTS_FORMAT:
+        raise InputError(f"{path}: not a planecal results file "
+                         f"(first line is not {{\"format\": \"{RESULTS_FORMAT}\", ...}})")
+    if head.get("header") != json.loads(json.dumps(header)):
+        field = _first_difference(head.get("header"), header)
+        raise InputError(f"{path}: written for other settings ({field}); use another "
+                         "file or start afresh")
+
+
+def check_header(path, header: dict | None) -> None:
+    """A results file a map is about to resume, checked before any work (a sweep plans for
+    minutes first): written by planecal for the same ``header``; InputError (one line)
+    naming the first setting that differs. Nothing to check where it is new or empty."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            first = f.readline(1 << 20)
+    except FileNotFoundError:
+        return
+    except OSError as e:
+        raise InputError(f"{p}: cannot read ({e.strerror})") from None
+    if first:
+        _check_head(p, first.rstrip(b"\n"), encode(header or {}))
+
+
 class ResultsFile:
     """The JSON-lines results of one map (module docstring), open for appending."""
 
@@ -160,17 +191,7 @@ class ResultsFile:
         data = self.path.read_bytes()
         end = data.rfind(b"\n") + 1  # a torn last line (power loss) is dropped
         lines = data[:end].split(b"\n")[:-1]
-        try:
-            head = json.loads(lines[0]) if lines else None
-        except ValueError:
-            head = None
-        if not isinstance(head, dict) or head.get("format") != RESULTS_FORMAT:
-            raise InputError(f"{self.path}: not a planecal results file "
-                             f"(first line is not {{\"format\": \"{RESULTS_FORMAT}\", ...}})")
-        if head.get("header") != json.loads(json.dumps(self.header)):
-            field = _first_difference(head.get("header"), self.header)
-            raise InputError(f"{self.path}: written for other settings ({field}); use another "
-                             "file or start afresh")
+        _check_head(self.path, lines[0] if lines else b"", self.header)
         for n, ln in enumerate(lines[1:], start=2):
             try:
                 rec = _loads(ln)

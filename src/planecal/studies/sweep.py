@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -159,6 +160,11 @@ def spec_from_dict(doc: dict, path: Path | None = None) -> SweepSpec:
                                  f"[{lo}, {hi}], got {str(sw[k])[:40]}")
             kw[k] = v
     spec = SweepSpec(**kw)
+    n_cells = math.prod(len(getattr(spec, a)) for a in AXES)
+    if n_cells * spec.runs > MAX_RUNS:
+        raise InputError(f"{where}: the grid makes {n_cells:,} cells x {spec.runs} runs = "
+                         f"{n_cells * spec.runs:,} runs; a sweep runs at most {MAX_RUNS:,}: "
+                         "fewer axis values or runs")
     planned = [n for n in spec.samples if any(x != "random" for x in spec.design)]
     if planned and max(planned) > spec.plan_candidates:
         raise InputError(f"{where}: sweep.plan_candidates ({spec.plan_candidates}) must be at "

@@ -410,17 +410,22 @@ class Twin:
         return self._site_pose(self.laser_site)
 
     # ----- the twin's own deterministic map (``twin.oracle``: the floor of validate) -----
-    def joint_map(self, counts) -> np.ndarray:
+    def joint_map(self, counts, direction=None) -> np.ndarray:
         """The joint row (qpos, rad) the tick computes at ``counts`` (6,) -- fractional
-        counts allowed -- without what depends on the path or the rest (backlash,
-        repeatability, the motors' sub-count draw): the true offsets, gear error and
-        compliance of this world, by the tick's own ``joint_row``."""
+        counts allowed -- without what depends on the rest (repeatability, the motors'
+        sub-count draw): the true offsets, gear error and compliance of this world, by the
+        tick's own ``joint_row``; with ``direction`` (6,) in -1, 0, +1 (each joint's last
+        motion into the pose) the backlash on the flank it leaves (a joint held by gravity
+        on the flank its torque pushes it to), without it no backlash."""
         c = np.asarray(counts, float)
         whole = np.floor(c)
         S, F = self._S.copy(), self._F.copy()
         S[T.CUR:T.CUR + 6] = whole.astype(np.int64)
         F[T.U:T.U + 6] = c - whole  # the sub-count position: fractional counts
-        S[T.FLAGS] = (S[T.FLAGS] | T.QUANT) & ~(T.REPEAT | T.BACKLASH | T.PRELOADED)
+        off = T.REPEAT if direction is not None else T.REPEAT | T.BACKLASH | T.PRELOADED
+        if direction is not None:
+            S[T.DIR:T.DIR + 6] = np.sign(np.asarray(direction)).astype(np.int64)
+        S[T.FLAGS] = (S[T.FLAGS] | T.QUANT) & ~off
         out = np.empty(6)
         self._t.refresh(S, F, self._W, out)
         return out

@@ -95,7 +95,7 @@ def load_profile(name_or_path: str | Path, robot: Robot) -> ErrorProfile:
 def draw_geometry(robot: Robot, profile: ErrorProfile, rng: np.random.Generator) -> Kinematics:
     """The robot's true geometry: robot.json's, every parameter moved by a normal draw of
     the profile's std (beta only where consecutive axes are parallel), the base and
-    flange frames by a translation and a small rotation."""
+    flange frames (robot.json's) moved by a translation and a small rotation."""
     nom = robot.kinematics
     g = profile.doc.geometry
     if g is None:
@@ -108,8 +108,10 @@ def draw_geometry(robot: Robot, profile: ErrorProfile, rng: np.random.Generator)
     d = nom.d + rng.normal(0.0, g.d_m)
     b = rng.normal(0.0, g.beta_rad)
     beta[par] = b[par]
+    # the base error composed with robot.json's base frame as the calibration's model does
+    # (measurement.kinematics_of: frame_error(base) @ nominal base), the flange's likewise
     base = frame_error(np.concatenate([rng.normal(0.0, g.base.translation_m, 3),
-                                       rng.normal(0.0, g.base.rotation_rad, 3)]))
+                                       rng.normal(0.0, g.base.rotation_rad, 3)])) @ nom.base
     flange = nom.flange @ frame_error(np.concatenate([rng.normal(0.0, g.flange.translation_m, 3),
                                                       rng.normal(0.0, g.flange.rotation_rad, 3)]))
     return Kinematics(alpha, a, beta, nom.theta, d, base, flange)
@@ -133,7 +135,8 @@ def save_truth(path, twin, errors: str | None = None, truth_seed: int | None = N
     drawn with, the robot's true geometry and the gear phases (``world``; extra keys a
     parameter-file reader keeps)."""
     from planecal.io.params import PARAMS_FORMAT, params_to_dict, save_json
-    doc = {"format": PARAMS_FORMAT, **params_to_dict(twin.truth)}
+    doc = {"format": PARAMS_FORMAT, **params_to_dict(twin.truth),
+           "robot": {"name": twin.robot.name, "sha256": twin.robot.digest}}
     kin = twin.true_kinematics
     world = {"errors": None if errors is None else str(errors), "truth_seed": truth_seed,
              "gear_phases_rad": list(twin.world.gear_phases),
@@ -199,8 +202,26 @@ def load_world(scene: Scene, path) -> Truth:
         kin = Kinematics(np.array(k.alpha_rad), np.array(k.a_m), np.array(k.beta_rad),
                          np.array(k.theta_rad), np.array(k.d_m), frames["base"],
                          frames["flange"])
+        _same_robot(kin, scene.robot, path)
     return Truth(params, kin, tuple(float(v) for v in w.gear_phases_rad),
                  tuple(float(v) for v in w.laser_linearity_phases_rad))
+
+
+def _same_robot(kin: Kinematics, robot: Robot, path) -> None:
+    """InputError where a truth file's true geometry is not a drawn error away from the
+    robot's nominal one (a truth file of another robot, written before truth files recorded
+    their robot): no error profile moves a length by 5 cm or a twist by 0.1 rad."""
+    nom = robot.kinematics
+    if len(kin.a) != len(nom.a):
+        raise InputError(f"{path}: world.kinematics holds {len(kin.a)} joints, the robot "
+                         f"{robot.name!r} {len(nom.a)}: a truth file of another robot")
+    for name, tol, unit in (("a", 0.05, "m"), ("d", 0.05, "m"), ("alpha", 0.1, "rad")):
+        dev = np.abs(getattr(kin, name) - getattr(nom, name))
+        j = int(np.argmax(dev))
+        if dev[j] > tol:
+            raise InputError(f"{path}: world.kinematics.{name}{'_rad' if unit == 'rad' else '_m'}"
+                             f"[{j}] is {getattr(kin, name)[j]:.4g} {unit}, robot {robot.name!r} "
+                             f"has {getattr(nom, name)[j]:.4g}: a truth file of another robot")
 
 
 def truth_file_errors(path) -> str | None:

@@ -108,8 +108,9 @@ def _step(rng, n_a: np.ndarray, ref) -> np.ndarray:
 
 
 def load_truth(scene: Scene, path) -> CellParams:
-    """A truth file (params.py format); it must hold one plane per plate."""
-    p = load_params(path)
+    """A truth file (params.py format); it must hold one plane per plate, and be of the
+    scene's robot where it records one (``save_truth``)."""
+    p = load_params(path, scene.robot)
     if p.n_planes != len(scene.plates):
         raise InputError(f"{path}: {p.n_planes} planes for a scene with {len(scene.plates)} plates")
     return p

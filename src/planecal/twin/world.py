@@ -53,7 +53,9 @@ def study_world(scene: Scene, profile: ErrorProfile, seed: int,
 @dataclass(frozen=True)
 class WorldRef:
     """Where a world comes from, as files record it: an error profile (name or path) and
-    the truth's seed, or a truth file (path and SHA-256)."""
+    the truth's seed, or a truth file (path and SHA-256); ``exact``: no random noise. The
+    one record of a world (``to_dict``, ``from_dict``): a run sidecar's ``twin`` block
+    (with the twin's noise ``seed`` beside it), a result's and a validation's ``world``."""
     errors: str
     truth_seed: int | None = None
     truth_file: str | None = None
@@ -66,12 +68,20 @@ class WorldRef:
                 "exact": self.exact}
 
     @classmethod
-    def from_dict(cls, d: dict, where: str) -> "WorldRef":
+    def from_dict(cls, d: dict, where: str, default: str = "ideal") -> "WorldRef":
+        """The world a record names. Records written before it took this shape: a sidecar
+        whose truth was drawn from its twin's ``seed`` (no ``truth_seed``), and one without
+        ``errors``: ``default`` (the ideal world: runs made before error profiles)."""
+        if not isinstance(d, dict):
+            raise InputError(f"{where}: world: not a world reference")
         try:
-            return cls(str(d["errors"]), None if d.get("truth_seed") is None
-                       else int(d["truth_seed"]), d.get("truth_file"), d.get("truth_sha256"),
+            truth_file = d.get("truth_file")
+            seed = d.get("truth_seed", None if truth_file else d.get("seed"))
+            return cls(str(d.get("errors") or default),
+                       None if truth_file is not None or seed is None else int(seed),
+                       None if truth_file is None else str(truth_file), d.get("truth_sha256"),
                        bool(d.get("exact", False)))
-        except (KeyError, TypeError, ValueError) as e:
+        except (TypeError, ValueError) as e:
             raise InputError(f"{where}: world: not a world reference ({e})") from None
 
     def build(self, scene: Scene) -> tuple[Truth, TwinOptions]:
@@ -115,49 +125,6 @@ def check_world(world: Truth, profile: ErrorProfile, where) -> None:
                          "or a truth file rehearse --truth-out wrote")
 
 
-def recorded_world(scene: Scene, sample_file=None, truth_file=None, errors: str | None = None,
-                   truth_seed: int | None = None, default: str = "realistic") -> WorldRef:
-    """The world a run was made in, from what travels with its files: the truth file
-    (``rehearse --truth-out``: its world and error profile), the sample file's sidecar
-    (the twin's error profile and seed, or the truth file it ran in). ``errors`` and
-    ``truth_seed`` given by hand must agree with them (InputError naming both); where
-    nothing is recorded they choose the world (``default`` profile, seed 0)."""
-    from planecal.sampling.runfiles import load_sidecar, sidecar_path
-    from planecal.twin.profile import truth_file_errors
-    rec = {}
-    if sample_file is not None and Path(sidecar_path(sample_file)).exists():
-        twin = load_sidecar(sample_file).get("twin") or {}
-        rec = {"errors": twin.get("errors"), "truth_seed": twin.get("seed"),
-               "truth_file": twin.get("truth_file"), "truth_sha256": twin.get("truth_sha256"),
-               "exact": bool(twin.get("exact", False)), "where": str(sidecar_path(sample_file))}
-    if truth_file is not None:
-        t_err = truth_file_errors(truth_file)
-        if t_err is not None and rec.get("errors") not in (None, t_err):
-            raise InputError(f"{truth_file}: drawn in the {t_err} world, but {rec['where']} "
-                             f"says the run was made in the {rec['errors']} world")
-        digest = file_sha256(truth_file)
-        if rec.get("truth_sha256") not in (None, digest):
-            # a truth file edited in place (say, a drift injected) is another world: the
-            # run was made in the one its sidecar hashed, not in this file's
-            raise InputError(f"{truth_file}: not the truth file the run {sample_file} was "
-                             f"made in (its SHA-256 differs from the recorded "
-                             f"{rec['truth_sha256'][:12]}...): edited since? Edit a copy "
-                             "to make a new world (rehearse --truth COPY.json)")
-        rec.update(errors=t_err or rec.get("errors"), truth_file=str(truth_file),
-                   truth_sha256=digest, where=str(truth_file))
-    for flag, key, given in (("--errors", "errors", errors), ("--truth-seed", "truth_seed",
-                                                              truth_seed)):
-        if given is None:
-            continue
-        if rec.get(key) is not None and str(rec[key]) != str(given):
-            raise InputError(f"{flag} {given}: {rec['where']} records "
-                             f"{key.replace('_', ' ')} {rec[key]}: the run was made there")
-        rec[key] = given
-    return WorldRef(str(rec.get("errors") or default),
-                    None if rec.get("truth_file") else int(rec.get("truth_seed") or 0),
-                    rec.get("truth_file"), rec.get("truth_sha256"), bool(rec.get("exact")))
-
-
 def make_twin(scene: Scene, ref: WorldRef, seed: int):
     """The twin of a world reference; ``seed`` its noise's."""
     from planecal.twin import Twin
@@ -173,12 +140,13 @@ SOURCES = {
     "compliance": "gravity compliance",
     "gear": "gear transmission error",
     "backlash": "backlash",
-    "noise": "repeatability and encoder quantisation",
+    "noise": "repeatability, encoder quantisation and the laser's noise",
     "laser_linearity": "laser linearity",
     "thermal": "thermal growth",
 }
 SHORT = {"geometry": "link lengths, twists and frames", "compliance": "joint compliance",
-         "gear": "gear error", "backlash": "backlash", "noise": "repeatability, quantisation",
+         "gear": "gear error", "backlash": "backlash",
+         "noise": "repeatability, quantisation, laser noise",
          "laser_linearity": "laser linearity", "thermal": "thermal growth"}
 MISMATCH = ("geometry", "compliance", "gear", "backlash", "laser_linearity", "thermal")
 
@@ -208,7 +176,7 @@ def sources_on(robot, world, options) -> list[str]:
           and any(k is not None for k in options.stiffness_nm_per_rad),
           "gear": any(a > 0 for _, a, _ in options.gear),
           "backlash": options.backlash_rad is not None and bool(np.any(options.backlash_rad)),
-          "noise": rep > 0 or options.quantization,
+          "noise": rep > 0 or options.quantization or options.laser_noise_mm > 0,
           "laser_linearity": options.laser_linearity_mm > 0,
           "thermal": options.thermal is not None}
     return [k for k in SOURCES if on[k]]
@@ -233,7 +201,7 @@ def without(world, options, off):
         elif f == "backlash":
             kw.update(backlash_rad=None, backlash_preload_nm=None)
         elif f == "noise":
-            kw.update(repeatability_mm=0.0, quantization=False)
+            kw.update(repeatability_mm=0.0, quantization=False, laser_noise_mm=0.0)
         elif f == "laser_linearity":
             kw["laser_linearity_mm"] = 0.0
         else:

@@ -38,7 +38,7 @@ FORMATS = {"planecal-result": "calibration", "planecal-montecarlo": "montecarlo"
            "planecal-bootstrap": "bootstrap", "planecal-validation": "validation",
            "planecal-validate": "validation", "planecal-poses": "plan", "planecal-plan": "plan",
            "planecal-sweep": "sweep", "planecal-compare": "compare"}
-READ_VERSIONS = {"planecal-validate": {2}}  # the versions reported (default: 1 only)
+READ_VERSIONS = {"planecal-validate": {2, 3}}  # the versions reported (default: 1 only)
 # why a version is no longer read, in one line
 _FLANGE_AP = ("written before AP was measured at the tool point (its ap_after_mm is the "
               "flange's): run planecal validate again")

@@ -1,7 +1,8 @@
 """Report of a validation on the twin (``validate --out``): ISO 9283 pose accuracy AP and
-repeatability RP at the tool point of the nominal model, each calibrated level and the
-twin's own true model (the oracle), with the flange's beside, the gauge block (seed 9.3)
-and the offset error left after calibration.
+repeatability RP at the tool point of the nominal model, each calibrated level, each
+level's floor and the twin's own true model (the oracle), in the near-sample cube and the
+standard's, with the flange's beside, the gauge block (seed 9.3) and the offset error left
+after calibration.
 
 Figures: AP over the truths, the AP vectors per pose (components), AP and RP per pose,
 the gauge-block length error per model, the joint offset error against the truth, and
@@ -15,9 +16,10 @@ from planecal.present.report.figures import (AFTER, BEFORE, display_scale, label
                                      new_figure, num, save)
 from planecal.present.report.inputs import Context
 from planecal.present.report.page import Page
-from planecal.present.validation import change
+from planecal.present.validation import CELL, FLOOR, ORACLE, ROBOT_FRAME, change
+from planecal.studies.validation.truths import noise_share
 
-ORACLE = "#2ca02c"  # the twin's own true model
+GREEN = "#2ca02c"  # the twin's own true model
 LEVEL_COLORS = ("#9ecae1", "#6baed6", AFTER)  # lower levels lighter, the validated one AFTER
 
 
@@ -29,7 +31,7 @@ def models_of(v: dict) -> list[tuple[str, str, str]]:
         [LEVEL_COLORS[0]] * (len(levels) - 1) + [AFTER]
     return ([("nominal", "nominal model", BEFORE)]
             + [(lv, f"calibrated ({lv})", c) for lv, c in zip(levels, colors)]
-            + [("oracle", "the twin's true model (oracle)", ORACLE)])
+            + [("oracle", "the twin's whole true model (oracle)", GREEN)])
 
 
 def fig_ap_vectors(out, v):
@@ -100,8 +102,9 @@ def fig_ap_rp(out, v):
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=8)
     return save(fig, out, "ap_rp", "AP and RP",
                 "Pose accuracy AP at the tool point per pose for every model on the same poses "
-                "(the oracle is the twin's own true model: what backlash, repeatability and "
-                "whole counts leave), the validated calibration's RP (l̄ + 3 S_l) and its AP "
+                "(the oracle is the twin's whole true model, backlash by the approach "
+                "direction: what repeatability and whole counts leave), the validated "
+                "calibration's RP (l̄ + 3 S_l) and its AP "
                 "at the flange (triangles), on a logarithmic axis.")
 
 
@@ -185,6 +188,13 @@ def fig_truths(out, v, world, level):
     flange = np.array([t["ap_after_flange_mm"] for t in truths], float)
     ax.plot(x, flange, "v", color="black", markersize=7,
             label=f"calibrated ({level}) at the flange")
+    for key, mark, what in (("ap_floor_tool_mm", "_", f"its level's floor ({level})"),
+                            ("ap_after_tool_standard_mm", "s",
+                             f"calibrated ({level}) in the standard's cube")):
+        y = np.array([np.nan if t.get(key) is None else t[key] for t in truths], float)
+        if np.isfinite(y).any():
+            ax.plot(x + (len(models) - 3) / 2 * w, y, mark, color=AFTER, markersize=12
+                    if mark == "_" else 5, markeredgewidth=2, fillstyle="none", label=what)
     pred = [(k, t["predicted_tool_mm"], t.get("predicted_band_mm")) for k, t in
             enumerate(truths) if t.get("predicted_tool_mm") is not None]
     if pred:  # what the calibration said of itself before the validation
@@ -210,8 +220,10 @@ def fig_truths(out, v, world, level):
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=8)
     return save(fig, out, "truths", "AP over truths",
                 f"Pose accuracy at the tool point of the nominal model, the calibration at "
-                f"level {level} and each level below it, and the twin's own true model (the "
-                "floor), on the same poses, one world per truth seed; triangles: the "
+                f"level {level} and each level below it, and the twin's own whole true model, "
+                "on the same poses of the near-sample cube, one world per truth seed; "
+                f"dashes: the validated level's floor ({FLOOR}); squares: the validated "
+                "calibration in the standard's cube; triangles: the "
                 "validated calibration's AP at the flange; grey points: what that "
                 "calibration predicted of its own tool-point error before the validation "
                 "(rms over its samples' poses), with the band one calibration's error falls "
@@ -227,8 +239,13 @@ def fig_breakdown(out, bd, level):
     fig, ax = new_figure(7.5, 0.5 * len(rows) + 1.5)
     ax = ax[0, 0]
     ax.barh(y, after, 0.6, color=AFTER, label=f"calibrated ({level})")
-    ax.plot(oracle, y, "|", color=ORACLE, markersize=14, markeredgewidth=3,
-            label="the twin's true model (oracle)")
+    ax.plot(oracle, y, "|", color=GREEN, markersize=14, markeredgewidth=3,
+            label="the twin's whole true model (oracle)")
+    floor = np.array([np.nan if r.get("ap_floor_tool_mm") is None else r["ap_floor_tool_mm"]
+                      for r in rows], float)
+    if np.isfinite(floor).any():
+        ax.plot(floor, y, "|", color="black", markersize=14, markeredgewidth=2,
+                label=f"the level's floor ({level})")
     for yi, a in zip(y, after):
         ax.text(a, yi, f" {a:.3f}", va="center", fontsize=8)
     ax.set_xscale("log")
@@ -243,9 +260,10 @@ def fig_breakdown(out, bd, level):
     ax.grid(True, axis="x", alpha=0.3)
     return save(fig, out, "breakdown", "Error sources",
                 f"AP at the tool point after a calibration at level {level} in the truth's "
-                "world with the error sources of the profile switched on one at a time (or "
-                "off in turn), and what the twin's own true model leaves there; 'none' is "
-                "the cell alone.")
+                "world without the noise (the same poses rehearsed noise-free) and with the "
+                "error sources of the profile switched on one at a time (or off in turn), "
+                "the level's floor and what the twin's whole true model leaves there; "
+                "'none' is the cell alone.")
 
 
 def build(ctx: Context) -> Page:
@@ -279,17 +297,11 @@ def build(ctx: Context) -> Page:
         _truths_section(page, out, v, world)
     bd = v.get("breakdown")
     if bd and bd.get("variants"):
-        sec = page.section("What each error source leaves")
-        sec.figure(fig_breakdown(out, bd, _level(v)))
-        cr = bd.get("cannot_remove") or []
-        if cr:
-            sec.table(["source", "what", "AP at the tool point with it [mm]", "its share [mm]"],
-                      [[c["source"], c["what"], num(c["ap_after_tool_variant_mm"]),
-                        num(c["ap_after_tool_share_mm"])] for c in cr], left=2)
-            sec.text(f"A calibration at level {_level(v)} cannot remove these: none is in the fit's "
-                     "model; the offsets absorb only the part that looks like a joint zero "
-                     "in the calibrated region. See docs/ERRORS.md.")
+        _breakdown_section(page, out, bd, _level(v))
     _iso_section(page, out, v)
+    if g is None and v.get("gauge_failed"):
+        page.section("Gauge block").text(f"Not measured: {v['gauge_failed']}. The ISO "
+                                         "figures above stand without it.")
     if g is not None:
         sec = page.section("Gauge block")
         sec.figure(fig_gauge(out, v))
@@ -313,32 +325,60 @@ def build(ctx: Context) -> Page:
     return page
 
 
+def _breakdown_section(page, out, bd, level) -> None:
+    sec = page.section("What each error source leaves")
+    sec.figure(fig_breakdown(out, bd, level))
+    ns = noise_share(bd)
+    if ns is not None:
+        sec.text(f"The noise ({ns['what']}): with every source AP after is "
+                 f"{ns['with_mm']:.4g} mm, on the same poses rehearsed without it "
+                 f"{ns['without_mm']:.4g} mm" + (": it is what limits this calibration; a "
+                                                  "richer model does not remove it, more "
+                                                  "samples do." if ns["dominates"] else "."))
+    cr = bd.get("cannot_remove") or []
+    if cr:
+        sec.table(["source", "what", "AP at the tool point with it [mm]", "its share [mm]",
+                   f"in level {level}'s model"],
+                  [[c["source"], c["what"], num(c["ap_after_tool_variant_mm"]),
+                    num(c["ap_after_tool_share_mm"]), "yes" if c.get("modelled") else "no"]
+                   for c in cr], left=2)
+        sec.text("Each source's share without the noise: alone, its world less the cell "
+                 "alone; switched off, all but the noise less all but the noise and it. A "
+                 "source outside the level's model is absorbed only where it looks like one "
+                 "of its parameters in the calibrated region. See docs/ERRORS.md.")
+
+
 def _truths_section(page, out, v, world) -> None:
     truths = v["truths"]
     sec = page.section("Over the truths")
     sec.figure(fig_truths(out, v, world, _level(v)))
     labels = [r["level"] for r in truths[0]["levels"]]
     sec.table(["truth", "AP nominal [mm]"] + [f"AP {lb} [mm]" for lb in labels]
-              + ["AP oracle [mm]", "flange, calibrated [mm]", "flange, oracle [mm]",
+              + ["floor [mm]", "AP oracle [mm]", "standard cube [mm]",
+                 "standard cube floor [mm]", "flange, calibrated [mm]",
                  "cell frame, calibrated [mm]", "RP after [mm]", "gauge after [mm]",
-                 "max model error [mm]", "farthest ISO point from a sample [mm]"],
+                 "max model error [mm]", "farthest ISO point from a sample, near / standard "
+                 "[mm]"],
               [[str(t["truth_seed"]), num(t["ap_before_tool_mm"])]
                + [num(r["ap_after_tool_mm"]) for r in t["levels"]]
-               + [num(t["ap_oracle_tool_mm"]), num(t["ap_after_flange_mm"]),
-                  num(t["ap_oracle_flange_mm"]), num(t.get("ap_after_tool_cell_mm")),
+               + [num(t.get("ap_floor_tool_mm")), num(t["ap_oracle_tool_mm"]),
+                  num(t.get("ap_after_tool_standard_mm")),
+                  num(t.get("ap_floor_tool_standard_mm")), num(t["ap_after_flange_mm"]),
+                  num(t.get("ap_after_tool_cell_mm")),
                   num(t.get("rp_after_tool_mm")), num(t.get("gauge_error_after_mm")),
                   num(t.get("max_model_error_mm")),
-                  num(None if t.get("nearest_sample_mm") is None
-                      else max(t["nearest_sample_mm"]), 3)]
+                  " / ".join("-" if t.get(k) is None else f"{max(t[k]):.0f}" for k in
+                             ("nearest_sample_mm", "standard_nearest_sample_mm"))]
                for t in truths], left=1)
-    sec.text("AP at the tool point in the robot's frame, worst of P1..P5, unless the column "
-             "says flange or cell frame; every model on the same poses of each truth.")
+    sec.text(f"AP at the tool point in the {ROBOT_FRAME}, worst of P1..P5, in the "
+             "near-sample cube unless the column says standard cube, flange or cell frame; "
+             f"every model on the same poses of each truth. {FLOOR}; {ORACLE}; {CELL}.")
 
 
 def _iso_section(page, out, v) -> None:
     iso, cube = v["iso"], v["cube"]
     sec = page.section("ISO 9283 pose accuracy and repeatability")
-    sec.text(f"Cube edge {cube['edge_m'] * 1e3:.0f} mm centred at "
+    sec.text(f"The near-sample cube: edge {cube['edge_m'] * 1e3:.0f} mm centred at "
              f"{', '.join(f'{c:.3f}' for c in cube['center_m'])} m (robot frame): "
              f"{cube['rule']}. {v['settings']['cycles']} cycles. Each model commands its own "
              "estimate of the tool point onto the ISO point; the twin's true tool point is "
@@ -356,6 +396,22 @@ def _iso_section(page, out, v) -> None:
     sec.table(["pose", "position [m]", "nearest sample [mm]"]
               + [f"AP {k} [mm]" for k, _, _ in models]
               + ["AP flange, calibrated [mm]", "RP calibrated [mm]"], rows, left=2)
+    std = v.get("standard_cube")
+    if std and std.get("failed"):
+        sec.text(f"The standard's cube: not measured: {std['failed']}")
+    elif std:
+        sec.text(f"The standard's cube: edge {std['edge_m'] * 1e3:.0f} mm centred at "
+                 f"{', '.join(f'{c:.3f}' for c in std['center_m'])} m: {std['rule']}; its "
+                 f"points {min(std['nearest_sample_mm']):.0f}-"
+                 f"{max(std['nearest_sample_mm']):.0f} mm from the nearest sample's tool "
+                 "point.")
+        siso = v["iso_standard"]
+        sec.table(["pose", "position [m]", "nearest sample [mm]"]
+                  + [f"AP {k} [mm]" for k, _, _ in models],
+                  [[f"P{i + 1}", " ".join(f"{c:.3f}" for c in p),
+                    num(std["nearest_sample_mm"][i], 3)]
+                   + [num(siso["models"][k]["tool"]["ap_mm"][i]) for k, _, _ in models]
+                   for i, p in enumerate(siso["points_m"])], left=2)
     if v.get("tcps"):
         sec.table(["TCP", "in the flange frame [mm]", "AP nominal [mm]", "AP calibrated [mm]",
                    "AP oracle [mm]", "RP calibrated [mm]"],

@@ -298,8 +298,9 @@ def log_validate(path_arg, v: dict, scene, calibrated, qe=None, d_m=None, plate=
                                           show_labels=True), static=True)
         x = np.arange(1, len(P) + 1, dtype=float)
         w = 0.8 / len(iso["models"])
-        for k, (name, m) in enumerate(iso["models"].items()):
-            col = MODEL_RGBA.get(name, CALIBRATED_RGBA)
+        for k, (model, m) in enumerate(iso["models"].items()):
+            col = MODEL_RGBA.get(model, CALIBRATED_RGBA)
+            name = rr.escape_entity_path_part(model)  # "full + compliance", "floor: offsets"
             tool = m["tool"]
             ap = np.asarray(tool["ap_xyz_mm"], float) * 1e-3
             rec.log(f"/iso/ap_x100/{name}", rr.Arrows3D(origins=P, vectors=AP_SCALE * ap,
@@ -330,7 +331,8 @@ def log_validate(path_arg, v: dict, scene, calibrated, qe=None, d_m=None, plate=
             f"calibrated sensor with nominal offsets {g[2]:+.4f} mm",
             "* 3D: white spheres P1..P5 = the ISO poses (tool points); arrows = AP vectors "
             f"(pose -> barycentre of the attained tool points) drawn {AP_SCALE:g}x: red "
-            "nominal model, blue calibrated (each level), green the twin's true model",
+            "nominal model, blue calibrated (each level, and each level's floor), green the "
+            "twin's whole true model",
             *([f"* {poses.legend}; robot and green beam at the first sample (calibrated "
                f"parameters)"] if poses is not None else []),
             "* bar charts: x = pose number 1..5 (AP, RP) or 1 nominal, 2 calibrated, "

@@ -1,8 +1,9 @@
-"""Validation on the twin (``settings``, ``cube``, ``commanders``, ``iso9283``, ``gauge``,
-``run``, ``truths``): ISO 9283 pose accuracy AP and repeatability RP (seed 3.2-3.3) where
-the tool is, and the gauge-block test of seed 9.3, in a world of the twin's error profile
-(``twin.profile``: the truth, the robot's true geometry, the joint errors, the laser's),
-over several truths, and with each error source switched off in turn (``breakdown``).
+"""Validation on the twin (``settings``, ``cube``, ``commanders``, ``floors``, ``iso9283``,
+``gauge``, ``run``, ``truths``): ISO 9283 pose accuracy AP and repeatability RP (seed
+3.2-3.3) where the tool is, in two cubes, and the gauge-block test of seed 9.3, in a world
+of the twin's error profile (``twin.profile``: the truth, the robot's true geometry, the
+joint errors, the laser's), over several truths, and with each error source switched off
+in turn or on alone, the noise apart (``breakdown``).
 
 Where AP is measured. The tool point is the laser's beam point at its measuring centre
 (``Scene.standoff_m``: the middle of its window, 80 mm for the ZS-LD80). ISO 9283's P1..P5
@@ -20,17 +21,30 @@ than the nominal one). Keys say where and whose: ``ap_{before,after,oracle}_{too
 Who commands (``commanders``), all on the same poses of a truth, one after the other:
 the nominal model; each calibration (``compensate.CalibratedModel``: a validation at a
 level also calibrates each level below it on the same samples, ``truths.levels_beside``);
-and the oracle, the twin's own whole true model (``twin.oracle.TrueModel``: true offsets,
-geometry with base and flange frames, compliance with the payload, gear error, the true
-sensor pose, solved for counts by the twin's own joint map and MuJoCo): the floor no
-calibration of this world can go below. What it leaves is backlash, repeatability and the
-rounding to whole counts. The calibrated models command through the closed-form IK with
-their offsets, then Newton on the whole model (``compensate.solve_poses``), registered on
-the robot's frame as ``compensate`` does. Each pose's approach direction per joint
-(``Mover.approach``, from the nominal model's cycle P1..P5, P1) is handed to the model
-(``CalibratedModel.flange(q, direction=...)``) for a model of backlash; none reads it yet.
+each level's floor (``floors``: the level's own model with the parameters that put the
+twin's true tool point best over the samples' poses, noise-free: the best any calibration
+of that level can do, what it leaves being what the level does not model, repeatability
+and whole counts); and the oracle, the twin's own whole true model
+(``twin.oracle.TrueModel``: true offsets, geometry with base and flange frames, compliance
+with the payload, gear error, backlash on the flank of each pose's approach direction, the
+true sensor pose, solved for counts by the twin's own joint map and MuJoCo): the floor of a
+model that knows every source, leaving repeatability and the rounding to whole counts. In
+the realistic world level 3's model holds every source, so its floor and the oracle agree
+(two codes: the calibration's model and the twin's). The calibrated models command through
+the closed-form IK with their offsets, then Newton on the whole model
+(``compensate.solve_poses``), registered on the robot's frame as ``compensate`` does. Each
+pose's approach direction per joint is what the robot's counts show in one unmeasured
+cycle P1..P5, P1 of that model's poses (``iso9283.observe_directions``: the straight
+path's sign is not always the step path's last motion); the models with backlash (level 3,
+its floor, the oracle) command again with it until it holds.
 
-The cube (``cube``, ``run.CUBE_RULE``): edges parallel to the robot's axes, centred on the
+Two cubes (``cube``). ISO 9283's own (``cube.STANDARD_RULE``, keys ``..._standard_...``):
+the largest cube with edges parallel to the robot's axes inside the region the cell's work
+uses, here the samples' flange hull (a linear program over its facets), at the flange
+orientation of one of the samples nearest its centre, shrunk by 0.75 where a pose is not
+reachable, collision-free or inside the samples' joint ranges + 2 deg; its size and its
+points' distances from the samples are reported. The near-sample cube (the keys without an
+infix; ``cube.NEAR_RULE``): edges parallel to the robot's axes, centred on the
 tool point of the samples' medoid (the sample whose tool point is nearest all the others
 in sum; among the 20 nearest the middle, the first the robot has a path to from where it
 starts), at that sample's flange orientation and IK branch; edge ``cube_edge`` (default:
@@ -63,8 +77,10 @@ centre, its two measuring faces perpendicular to the plate and to the plate's x 
 Four points on each face (a 20 x 20 mm square around the face centre, ``face_height``
 above the plate) are measured by the laser with the beam pointing into the face, tilted
 down towards the plate by ``tilt`` (sensor above the plate); the pose is chosen with the
-nominal model (IK within limits, collision-free target in ``CollisionWorld``, which does
-not know the block) and the twin measures: the true sensor pose (MuJoCo site, with the
+validated model (the block where its calibrated plate is, its sensor pose, IK with its
+offsets then Newton on its whole model; collision-free target in ``CollisionWorld``, which
+does not know the block), as a user aims the laser after calibrating, and the twin
+measures: the true sensor pose (MuJoCo site, with the
 repeatability draw of that pose) and a ray to the analytic face plane, plus the laser
 noise of a 100-reading mean and the laser's linearity error of the world (``twin.ticks``'s
 laser model). Each model turns (counts, distance) into a point
@@ -73,17 +89,21 @@ distance of each face's points from the other face's plane (both ways, averaged)
 error against L is reported for the nominal model (scene nominal sensor pose, zero
 offsets), the validated calibration, and its sensor pose with nominal offsets (to separate
 the offsets' share). ``gauge_repeats`` repetitions give mean and std. The block is
-modelled analytically, not as MuJoCo geometry.
+modelled analytically, not as MuJoCo geometry. Where the block cannot be measured (no
+pose reaches a face, no path, a reading out of the laser's range) the validation keeps its
+ISO figures and says why beside them (``gauge_failed``).
 
 Over truths (``validate_truth``, a pure function of a ``TruthJob``): draw the world
 (``TruthJob.rehearsal().world``), sample a calibration set on that world's twin
 (``twin_samples``: the sampling run's planner, collision checks and laser reads),
 calibrate it from the nominal values (``estimation.calibrate.calibrate``, at each level),
 validate on the same world. ``summarize`` gives median and worst per figure and per level;
-``breakdown`` repeats one truth with each error family of ``twin.world.SOURCES`` on alone
-(or switched off in turn) and reports the figures per variant: what each source leaves,
-and what the oracle leaves there. The truths and the variants run on
-``studies.distributed.Engine`` (``run_jobs``).
+``breakdown`` repeats one truth without the noise (the same poses rehearsed noise-free:
+``noise_share``, and whether it dominates) and with each error family of
+``twin.world.SOURCES`` on alone (or switched off in turn, the noise off too) and reports
+the figures per variant: what each source leaves without the noise (``cannot_remove``,
+with whether the level models it), the level's floor and what the oracle leaves there.
+The truths and the variants run on ``studies.distributed.Engine`` (``run_jobs``).
 """
 from planecal.studies.validation.cube import (SamplePoses, default_edge, medoid, medoid_order,
                                               nearest_sample_m)
@@ -97,7 +117,8 @@ from planecal.studies.validation.settings import (ANCHORS, FIGURE_KEYS, FORMAT, 
                                                   figure_keys)
 from planecal.studies.validation.truths import (BREAKDOWN_KEYS, LEVEL_KEYS, TRUTH_KEYS,
                                                 TruthJob, breakdown, breakdown_variants,
-                                                cannot_remove, levels_beside, run_jobs,
+                                                cannot_remove, levels_beside, noise_share,
+                                                run_jobs,
                                                 summarize, truth_row, truth_run,
                                                 validate_truth)
 
@@ -108,5 +129,5 @@ __all__ = ["ANCHORS", "BREAKDOWN_KEYS", "CUBE_RULE", "FIGURE_KEYS", "FORMAT", "I
            "gauge_block", "gauge_block_geometry", "gauge_length", "iso9283", "iso_points",
            "laser_reading_mm", "length_from", "levels_beside", "medoid", "medoid_order",
            "named_tcps",
-           "nearest_sample_m", "plan_iso", "predicted_spread", "robot_frame", "run_jobs",
+           "nearest_sample_m", "noise_share", "plan_iso", "predicted_spread", "robot_frame", "run_jobs",
            "summarize", "truth_row", "truth_run", "validate", "validate_truth"]

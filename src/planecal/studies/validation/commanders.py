@@ -6,8 +6,10 @@ of the tool point on the ISO point (the package docstring).
   the closed-form IK with its joint offsets, then Newton on the whole model
   (``compensate.solve_poses``), registered on the robot's frame as ``compensate`` does.
   Its tool point is the beam point of *its* sensor pose at the scene's measuring centre.
-* ``OracleCommander``: the twin's own whole true model (``twin.oracle.TrueModel``): the
-  floor, what a calibration that knew everything but backlash and noise would leave.
+* ``OracleCommander``: the twin's own whole true model (``twin.oracle.TrueModel``),
+  backlash included by each pose's approach direction: what a model that knew every error
+  source of the world would leave (repeatability, whole counts). Each level's own floor is
+  a ``ModelCommander`` of the level's best parameters (``floors``).
 """
 from __future__ import annotations
 
@@ -59,7 +61,8 @@ class ModelCommander:
 class OracleCommander:
     """The twin's whole true model commanding: its flange at the target's orientation and
     its true tool point on the target's, in the cell frame ``frame @ T`` (the true robot's
-    frame); started from the nominal IK."""
+    frame), each joint's backlash on the flank ``direction`` leaves it; started from the
+    nominal IK."""
 
     def __init__(self, true_model, frame: np.ndarray, robot, name: str = "oracle"):
         self.name, self.true_model, self.frame, self.robot = name, true_model, frame, robot
@@ -71,5 +74,6 @@ class OracleCommander:
             return None
         Tc = self.frame @ T
         c, _ = self.true_model.command(Tc[:3, :3], Tc[:3, :3] @ self.tool_in_flange
-                                       + Tc[:3, 3], joints_to_counts(self.robot, q0))
+                                       + Tc[:3, 3], joints_to_counts(self.robot, q0),
+                                       direction)
         return c

@@ -25,16 +25,19 @@ def gauge_block_geometry(scene, truth: CellParams, st: ValidationSettings, plate
     return faces, z
 
 
-def _measure_pose(scene, face, plate_normal, offset, st, checker, q_ref):
-    """Joint target (nominal model) putting the beam onto the face point ``face centre +
-    offset`` from ``st.distance_m`` away, tilted down by st.tilt_deg; tries rolls about the
-    beam and a few tilts; None if nothing reachable and collision-free."""
+def _measure_pose(scene, face, plate_normal, offset, st, checker, q_ref, aim):
+    """Joint target putting the beam onto the face point ``face centre + offset`` from
+    ``st.distance_m`` away, tilted down by st.tilt_deg, by the aiming model ``aim`` (a
+    ``compensate.CalibratedModel``: its sensor pose, the closed-form IK with its offsets
+    for the branch and the roll, then Newton on its whole model; the face in its base
+    frame); tries rolls about the beam and a few tilts; None if nothing reachable and
+    collision-free."""
     robot = scene.robot
     p0, n, _ = face
     p = p0 + offset
     T_fs = np.eye(4)
-    T_fs[:3, :3] = sensor_rotation(scene.phi_y, scene.phi_z)
-    T_fs[:3, 3] = scene.sensor_origin
+    T_fs[:3, :3] = sensor_rotation(aim.params.phi_y, aim.params.phi_z)
+    T_fs[:3, 3] = aim.params.sensor_origin
     T_sf = np.linalg.inv(T_fs)
     best = None
     for tilt in (st.tilt_deg, st.tilt_deg + 10, st.tilt_deg - 10, st.tilt_deg + 20):
@@ -50,18 +53,28 @@ def _measure_pose(scene, face, plate_normal, offset, st, checker, q_ref):
             Ts[:3, 1] = np.cross(beam, Ts[:3, 0])
             Ts[:3, 2] = beam
             Ts[:3, 3] = p - st.distance_m * beam
-            q = ik_nearest(robot, Ts @ T_sf, q_ref, weights=np.abs(robot.gains))
+            q = ik_nearest(robot, Ts @ T_sf, q_ref, delta=aim.params.joint_offsets,
+                           weights=np.abs(robot.gains))
             if q is None:
                 continue
             cost = np.max(np.abs(q - q_ref) * np.abs(robot.gains))
             if best is not None and cost >= best[0]:
                 continue
-            if checker is not None and not checker.check_config(q).ok:
+            q = _on_model(aim, Ts @ T_sf, q)
+            if q is None or (checker is not None and not checker.check_config(q).ok):
                 continue
             best = (cost, q)
         if best is not None:
             return best[1]
     return None
+
+
+def _on_model(aim, T, q0):
+    """The joints at which ``aim``'s whole model puts its flange at T (its base frame),
+    from q0 (``compensate.solve_poses``); None where Newton does not converge."""
+    from planecal.estimation.compensate import solve_poses
+    q, _, ok, _, _ = solve_poses(aim, T[None], q0[None])
+    return q[0] if ok[0] else None
 
 
 def _plane_fit(P):
@@ -92,21 +105,28 @@ def laser_reading_mm(d_m: float, window_mm, lin: np.ndarray) -> float:
 
 def gauge_block(twin, scene, truth, models: dict, st: ValidationSettings, checker=None,
                 rng=None, mover: Mover | None = None, laser_noise_mm: float = 0.001,
-                linearity: np.ndarray | None = None) -> dict:
+                linearity: np.ndarray | None = None, aim=None) -> dict:
     """The gauge-block test (module docstring); ``models``: name -> CellParams;
-    ``linearity``: the laser's linearity error (``LaserNoise.lin``; None: none)."""
+    ``linearity``: the laser's linearity error (``LaserNoise.lin``; None: none); ``aim``:
+    the model that aims the laser at the block (a ``compensate.CalibratedModel``: the block
+    where its plate is, the poses by its model; None: the nominal model and the scene's
+    nominal plate). The block stands on the true plate; the twin measures it there."""
+    from planecal.estimation.compensate import CalibratedModel
+    from planecal.model.scene import nominal_params
     rng = rng or np.random.default_rng(st.seed)
     lin = np.zeros(4) if linearity is None else np.asarray(linearity, float)
     robot = scene.robot
+    aim = aim or CalibratedModel(robot, nominal_params(scene), "nominal")
     faces, zp = gauge_block_geometry(scene, truth, st)
+    aimed, za = gauge_block_geometry(scene, aim.params, st)
     q_ref = scene.calibration_q if scene.calibration_q is not None else np.zeros(6)
     a = st.point_spacing_m / 2
     offsets = [(u, v) for u in (-a, a) for v in (-a, a)]
     plan = []
-    for fi, face in enumerate(faces):
+    for fi, face in enumerate(aimed):
         for u, v in offsets:
             off = u * face[2][0] + v * face[2][1]
-            q = _measure_pose(scene, face, zp, off, st, checker, q_ref)
+            q = _measure_pose(scene, face, za, off, st, checker, q_ref, aim)
             if q is None:
                 raise InputError(f"gauge block: no reachable, collision-free pose for a point on "
                                  f"face {'AB'[fi]}; change --block-mm or the tilt")
@@ -135,7 +155,7 @@ def gauge_block(twin, scene, truth, models: dict, st: ValidationSettings, checke
             mm = laser_reading_mm(d_true, scene.laser_range_mm, lin)
             if not np.isfinite(mm):
                 raise InputError(f"gauge block: reading {d_true * 1e3:.1f} mm out of the "
-                                 "laser range")
+                                 f"laser range (aimed with the {aim.level} model)")
             d = (mm * 1e-3 if lin.any() else d_true) + rng.normal(0.0, sig_l)
             meas.append((fi, c, d))
         first = first or meas

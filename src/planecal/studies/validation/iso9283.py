@@ -3,6 +3,7 @@ package docstring says where the cube goes, how each model commands it, and wher
 point, flange, named TCPs) and in which frame AP is measured)."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,10 +110,12 @@ class IsoPlan:
     """The ISO poses and what each model commands there: ``points_m`` P1..P5 (5, 3) (tool
     points, robot frame), the cube, the flange orientation ``R`` and the joints whose IK
     branch each pose takes (``q_ref``), per model (``counts``
-    name -> (5, 6) int64) and its tool point in its flange frame (``tool_in_flange``), and
-    how far each pose's commanded joints lie outside the calibrated region (the worst
-    model's: ``outside_mm`` beyond the flange hull's margin, ``outside_deg`` beyond a
-    joint's sampled range and margin; 0 inside)."""
+    name -> (5, 6) int64) and its tool point in its flange frame (``tool_in_flange``), each
+    pose's approach direction per joint (``direction``: name -> (5, 6), as the robot's
+    counts showed it in a cycle P1 .. P5, P1 of that model's, ``observe_directions``), and
+    how far each pose's commanded joints lie outside the
+    calibrated region (the worst model's: ``outside_mm`` beyond the flange hull's margin,
+    ``outside_deg`` beyond a joint's sampled range and margin; 0 inside)."""
     points_m: np.ndarray
     center_m: np.ndarray
     edge_m: float
@@ -122,12 +125,30 @@ class IsoPlan:
     tool_in_flange: dict
     outside_mm: np.ndarray
     outside_deg: np.ndarray
+    direction: dict | None = None
 
 
 def _pose(R, p) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, p
     return T
+
+
+def cycle_directions(mover: "Mover", cs: np.ndarray) -> np.ndarray:
+    """Each pose's approach direction (5, 6) in the cycle P1 .. P5, P1 (``Mover.approach``
+    from the pose before); a joint that does not move into a pose keeps the direction it
+    came into the pose before with (the twin's backlash keeps its flank)."""
+    n = len(cs)
+    d = np.array([mover.approach(cs[i - 1], cs[i]) for i in range(n)])
+    for _ in range(n):  # carry each joint's last motion forward round the cycle
+        for i in range(n):
+            d[i] = np.where(d[i] == 0, d[i - 1], d[i])
+    return d
+
+
+def _outside(robot, region, cs) -> tuple[np.ndarray, np.ndarray]:
+    q = counts_to_joints(robot, cs)
+    return region.distance_m(q, robot) * 1e3, np.degrees(region.outside(q).max(1))
 
 
 def plan_iso(scene, commanders: list, center, edge: float, R, q_ref, mover: "Mover",
@@ -141,6 +162,7 @@ def plan_iso(scene, commanders: list, center, edge: float, R, q_ref, mover: "Mov
     P = iso_points(center, edge)
     counts, tools = {}, {}
     direction = None
+    out_mm, out_deg = np.zeros(5), np.zeros(5)
     for cmd in commanders:
         t = np.asarray(cmd.tool_in_flange, float)
         cs = []
@@ -155,21 +177,28 @@ def plan_iso(scene, commanders: list, center, edge: float, R, q_ref, mover: "Mov
                 raise InputError(f"ISO pose P{i + 1} is not collision-free; give a smaller "
                                  "--cube-mm")
             cs.append(c)
+        cs = np.array(cs, np.int64)
         if direction is None:  # the cycle P1 .. P5, P1: each pose approached from the last
-            direction = [mover.approach(cs[i - 1], cs[i]) for i in range(5)]
-        counts[cmd.name], tools[cmd.name] = np.array(cs, np.int64), t
-    out_mm, out_deg = np.zeros(5), np.zeros(5)
-    if region is not None:
-        for cs in counts.values():
-            q = counts_to_joints(robot, cs)
-            out_mm = np.maximum(out_mm, region.distance_m(q, robot) * 1e3)
-            out_deg = np.maximum(out_deg, np.degrees(region.outside(q).max(1)))
-        far = int(np.argmax(np.maximum(out_mm, out_deg)))
-        if inside and (out_mm[far] > 0 or out_deg[far] > 0):
-            raise InputError(f"ISO pose P{far + 1} lies outside the calibrated region "
-                             f"({out_mm[far]:.0f} mm, {out_deg[far]:.1f} deg); give a "
-                             "smaller --cube-mm")
-    prev = mover.drv.commanded_counts  # every path of the cycles, before any is driven
+            direction = cycle_directions(mover, cs)
+        counts[cmd.name], tools[cmd.name] = cs, t
+        if region is not None:  # each model as it comes: a cube outside stops early
+            mm, deg = _outside(robot, region, cs)
+            out_mm, out_deg = np.maximum(out_mm, mm), np.maximum(out_deg, deg)
+            far = int(np.argmax(np.maximum(out_mm, out_deg)))
+            if inside and (out_mm[far] > 0 or out_deg[far] > 0):
+                raise InputError(f"ISO pose P{far + 1} lies outside the calibrated region "
+                                 f"({out_mm[far]:.0f} mm, {out_deg[far]:.1f} deg); give a "
+                                 "smaller --cube-mm")
+    _check_paths(mover, counts)
+    plan = IsoPlan(P, np.asarray(center, float), float(edge), np.asarray(R, float),
+                   np.asarray(q_ref, float), counts, tools, out_mm, out_deg)
+    return observe_directions(plan, commanders, mover, checker, robot, direction)
+
+
+def _check_paths(mover: "Mover", counts: dict) -> None:
+    """Every path of every model's cycles, from where the robot stands, before any is
+    driven: InputError naming the first blocked one."""
+    prev = mover.drv.commanded_counts
     for name, cs in counts.items():
         for i, c in enumerate([cs[0]] + list(cs[1:]) + [cs[0]]):
             if not mover.path_ok(prev, c):
@@ -177,8 +206,56 @@ def plan_iso(scene, commanders: list, center, edge: float, R, q_ref, mover: "Mov
                                  "not collision-free; give a smaller --cube-mm")
             prev = c
         prev = cs[-1]
-    return IsoPlan(P, np.asarray(center, float), float(edge), np.asarray(R, float),
-                   np.asarray(q_ref, float), counts, tools, out_mm, out_deg)
+
+
+def cycle_observed(mover: "Mover", cs: np.ndarray) -> np.ndarray:
+    """Drive one cycle P1 .. P5, P1 of counts ``cs`` (unmeasured) and return each pose's
+    approach direction (5, 6) as the robot's counts show it there (``Driver.direction``:
+    the sign of each joint's last joint-side motion, what its backlash follows)."""
+    out = np.zeros((len(cs), 6), np.int64)
+    mover.go(cs[0], "ISO pose P1")
+    for i in [*range(1, len(cs)), 0]:
+        mover.go(cs[i], f"ISO pose P{i + 1}")
+        out[i] = mover.drv.direction
+    return out
+
+
+ROUNDS = 3  # observe and command again at most this often (the direction settles in 1-2)
+
+
+def observe_directions(plan: IsoPlan, commanders: list, mover: "Mover", checker,
+                       robot, guess: np.ndarray) -> IsoPlan:
+    """Each model's counts commanded with the approach directions its own cycle shows
+    (``cycle_observed``): the straight paths' signs (``cycle_directions``) are not always
+    the last motion of the step path (a wrist joint moved by the coupling while one motor
+    still runs; the first visit of P1 comes from elsewhere). A model whose counts change
+    commands again (and is checked again: reachable, collision-free) until its directions
+    hold, at most ``ROUNDS`` times; ``guess``: the directions every model first commanded
+    with. What a real cell knows too: its encoders' counts."""
+    counts, direction = dict(plan.counts), {}
+    for cmd in commanders:
+        cs, d = counts[cmd.name], guess
+        for _ in range(ROUNDS):
+            seen = cycle_observed(mover, cs)
+            if np.array_equal(seen, d):
+                break
+            d = seen
+            t = plan.tool_in_flange[cmd.name]
+            new = [cmd.command(_pose(plan.R, p - plan.R @ t), plan.q_ref, d[i])
+                   for i, p in enumerate(plan.points_m)]
+            if any(c is None for c in new):
+                raise InputError(f"ISO poses: the {cmd.name} model cannot command them from "
+                                 "the directions its cycle shows; give a smaller --cube-mm")
+            new = np.array(new, np.int64)
+            if np.array_equal(new, cs):
+                break
+            if checker is not None and not all(
+                    checker.check_config(q).ok for q in counts_to_joints(robot, new)):
+                raise InputError("ISO poses: not collision-free once commanded from their "
+                                 "approach directions; give a smaller --cube-mm")
+            cs = new
+        counts[cmd.name], direction[cmd.name] = cs, d
+    return dataclasses.replace(plan, counts=counts, direction=direction)
 
 
 def iso9283(twin, plan: IsoPlan, st: ValidationSettings, mover: "Mover", standoff_m: float,
@@ -198,6 +275,8 @@ def iso9283(twin, plan: IsoPlan, st: ValidationSettings, mover: "Mover", standof
     for name, cs in plan.counts.items():
         n = 2 + len(tcps)  # tool point, flange, each named TCP
         att = np.zeros((st.cycles, 5, n, 3))
+        mover.go(cs[-1], "ISO pose P5")  # the first P1 approached as every later one
+        mover.go(cs[0], "ISO pose P1")
         for j in range(st.cycles):
             for i in range(5):
                 mover.go(cs[i], f"ISO pose P{i + 1}")
@@ -211,7 +290,9 @@ def iso9283(twin, plan: IsoPlan, st: ValidationSettings, mover: "Mover", standof
         at = [_figures(att[:, :, k], commanded[k], Finv) for k in range(n)]
         out["models"][name] = {"tool": at[0], "flange": at[1],
                                "tcps": dict(zip(tcps, at[2:])), "counts": cs,
-                               "tool_in_flange_m": t}
+                               "tool_in_flange_m": t,
+                               "direction": None if plan.direction is None
+                               else plan.direction[name]}
     return out
 
 

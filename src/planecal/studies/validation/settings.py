@@ -5,11 +5,17 @@ from dataclasses import dataclass
 
 from planecal.base.errors import InputError
 
-FORMAT = "planecal-validate/2"
-# /1 (before issue 22) measured AP at the flange under ``ap_after_mm``: refused, not misread
-OLD_FORMATS = ("planecal-validate/1",)
-ROLES = ("before", "after", "oracle")  # the nominal model, the validated one, the twin's own
+FORMAT = "planecal-validate/3"
+# /1 (before issue 22) measured AP at the flange under ``ap_after_mm``: refused, not misread;
+# /2 (before issue 31): one cube, no floors, an oracle without backlash (still reported)
+OLD_FORMATS = ("planecal-validate/1", "planecal-validate/2")
+# the nominal model, the validated one, its level's floor (``floors``: the best that
+# level's model does), the twin's own whole true model
+ROLES = ("before", "after", "floor", "oracle")
 WHERE = ("tool", "flange")  # the laser's beam point at its measuring centre, the flange
+# the near-sample cube (the keys without an infix, as before issue 31) and the standard's
+# cube (ISO 9283's largest cube in the region the work uses: ``_standard``)
+CUBES = ("", "_standard")
 # the published figures the twin's are read against (docs/STUDIES.md, ERROR-MODEL.md 2.9)
 ANCHORS = ("published after calibration: SCALAR 0.09 mm (simulation, three planes); KUKA "
            "Absolute Accuracy 1-3 mm -> 0.1-0.3 mm (vendor, secondary source); RoboDK "
@@ -31,6 +37,7 @@ class ValidationSettings:
     seed: int = 0
     clearance_m: float = 0.01
     gauge: bool = True  # the gauge-block test too (the demo and the breakdown skip it)
+    standard_cube: bool = True  # the standard's cube too (the demo and the breakdown skip it)
 
     def check(self):
         if self.cycles < 2:
@@ -43,12 +50,12 @@ class ValidationSettings:
             raise InputError("--gauge-repeats must be at least 1")
 
 
-def figure_keys(role: str) -> list[str]:
-    """The JSON keys of one model's figures (``role`` one of ``ROLES``), each saying where
-    (``WHERE``) and in which frame (none: the robot's; ``_cell``): AP and RP, worst of P1..P5,
-    mm."""
-    return [k for w in WHERE for k in (f"ap_{role}_{w}_mm", f"ap_{role}_{w}_cell_mm",
-                                       f"rp_{role}_{w}_mm")]
+def figure_keys(role: str, cube: str = "") -> list[str]:
+    """The JSON keys of one model's figures (``role`` one of ``ROLES``) in one cube
+    (``CUBES``), each saying where (``WHERE``) and in which frame (none: the robot's;
+    ``_cell``): AP and RP, worst of P1..P5, mm."""
+    return [k for w in WHERE for k in (f"ap_{role}_{w}{cube}_mm", f"ap_{role}_{w}{cube}_cell_mm",
+                                       f"rp_{role}_{w}{cube}_mm")]
 
 
-FIGURE_KEYS = tuple(k for r in ROLES for k in figure_keys(r))
+FIGURE_KEYS = tuple(k for c in CUBES for r in ROLES for k in figure_keys(r, c))

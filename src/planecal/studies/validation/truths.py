@@ -108,7 +108,8 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
     fit = fits[-1][1]
     v = validate(scene, world, [CalibratedModel(scene.robot, f.params, label)
                                 for label, f in fits], qe, st,
-                 cached_world(job.scene, st.clearance_m), fit, opts)
+                 cached_world(job.scene, st.clearance_m), [f for _, f in fits], opts,
+                 direction)
     for row, (_, f) in zip(v["levels"], fits):
         row["max_model_error_mm"] = float(np.abs(f.residuals_m).max() * 1e3)
         row["converged"] = bool(f.converged)
@@ -137,7 +138,8 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
 TRUTH_KEYS = ("truth_seed", *FIGURE_KEYS, "ap_tool_ratio", "gauge_error_before_mm",
               "gauge_error_after_mm", "predicted_tool_mm", "predicted_band_mm")
 LEVEL_KEYS = ("ap_after_tool_mm", "ap_after_flange_mm", "ap_after_tool_cell_mm",
-              "rp_after_tool_mm")
+              "rp_after_tool_mm", "ap_floor_tool_mm", "ap_after_tool_standard_mm",
+              "ap_floor_tool_standard_mm")
 
 
 def truth_row(v: dict) -> dict:
@@ -151,9 +153,13 @@ def truth_row(v: dict) -> dict:
     row["offset_error_rad"] = (v.get("residual_offset_error") or {}).get("offset_error_rad")
     row["levels"] = v.get("levels") or []
     row["tcps"] = v.get("tcps") or []
-    cube = v.get("cube") or {}
-    row["cube_edge_mm"] = None if "edge_m" not in cube else cube["edge_m"] * 1e3
-    row["nearest_sample_mm"] = cube.get("nearest_sample_mm")
+    for key, cube in (("", v.get("cube") or {}), ("standard_", v.get("standard_cube") or {})):
+        row[f"{key}cube_edge_mm"] = None if "edge_m" not in cube else cube["edge_m"] * 1e3
+        row[f"{key}nearest_sample_mm"] = cube.get("nearest_sample_mm")
+    row["standard_cube_failed"] = (v.get("standard_cube") or {}).get("failed")
+    row["gauge_failed"] = v.get("gauge_failed")
+    row["cell_frame_shift_mm"] = (None if not v.get("cell_frame")
+                                  else float(np.max(v["cell_frame"]["shift_mm"])))
     return row
 
 
@@ -199,13 +205,18 @@ def summarize(results: list[dict]) -> tuple[dict, dict, dict]:
 
 
 def breakdown_variants(sources: list[str], mode: str = "alone") -> list[tuple[str, tuple]]:
-    """(label, families switched off): 'off' each family switched off in turn, 'alone'
-    each family alone; both with all sources and none of them."""
+    """(label, families switched off). Both modes: all sources, all but the noise (the
+    same poses rehearsed without repeatability, quantisation and the laser's noise: what
+    the noise adds is the difference), ..., none of them. 'alone': each family alone
+    (the noise's too), the others off; 'off': each mismatch family switched off in turn,
+    the noise off as well (so its share is not the noise's draw through another fit)."""
     if mode not in ("off", "alone"):
         raise InputError(f"--breakdown: 'off', 'alone' or 'none', got {mode!r}")
-    rows = [("all sources", ())]
+    noisy = "noise" in sources
+    rows = [("all sources", ())] + ([("all but the noise", ("noise",))] if noisy else [])
     if mode == "off":
-        rows += [(f"without {f}", (f,)) for f in sources]
+        rows += [(f"all but the noise and {f}", ("noise", f)) if noisy else
+                 (f"without {f}", (f,)) for f in sources if f != "noise"]
     else:
         rows += [(f"{f} alone", tuple(g for g in sources if g != f)) for f in sources]
     rows.append(("none (cell only)", tuple(sources)))
@@ -213,21 +224,26 @@ def breakdown_variants(sources: list[str], mode: str = "alone") -> list[tuple[st
 
 
 BREAKDOWN_KEYS = ("ap_before_tool_mm", "ap_after_tool_mm", "ap_after_tool_cell_mm",
-                  "ap_after_flange_mm", "ap_oracle_tool_mm", "rp_after_tool_mm")
+                  "ap_after_flange_mm", "ap_floor_tool_mm", "ap_oracle_tool_mm",
+                  "rp_after_tool_mm")
 
 
 def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) -> dict:
     """``job``'s truth repeated with each error family switched off (``mode`` 'off') or on
-    alone ('alone'), the gauge block and the lower levels skipped: per variant the
-    figures of ``BREAKDOWN_KEYS`` (the same rehearsal seed: the same pose draws)."""
+    alone ('alone'), and without the noise, the gauge block, the standard's cube and the
+    lower levels skipped: per variant the figures of ``BREAKDOWN_KEYS`` (the same
+    rehearsal seed: the same pose draws), and which families the level models."""
     from dataclasses import replace
 
+    from planecal.model.levels import layout_for
     from planecal.studies.common import cached_scene
+    from planecal.studies.validation.floors import modelled_sources
     from planecal.twin.world import source_labels, sources_on
     world = job.rehearsal().world(0)
-    on = sources_on(cached_scene(job.scene).robot, *world)
+    scene = cached_scene(job.scene)
+    on = sources_on(scene.robot, *world)
     variants = breakdown_variants(on, mode)
-    st = replace(job.settings, gauge=False)
+    st = replace(job.settings, gauge=False, standard_cube=False)
     res = run_jobs(validate_truth, [replace(job, off=off, settings=st, beside=False)
                                     for _, off in variants], engine, "breakdown", quiet)
     rows = []
@@ -240,29 +256,55 @@ def breakdown(job: TruthJob, mode: str = "alone", engine=1, quiet: bool = True) 
             row["max_model_error_mm"] = v["calibration"]["max_model_error_mm"]
         rows.append(row)
     labels = source_labels(world[1])
+    cal = job.calibration
+    layout = layout_for(scene.robot, len(scene.plates), cal.level, cal.compliance)
     return {"truth_seed": job.truth_seed, "mode": mode, "sources": on, "variants": rows,
-            "what": {f: labels[f] for f in on}}
+            "what": {f: labels[f] for f in on},
+            "modelled": [f for f in modelled_sources(layout) if f in on]}
 
 
 def cannot_remove(bd: dict) -> list[dict]:
-    """From a breakdown: per error family, what it leaves in AP after calibration at the
-    tool point (with all on minus with it off; or, alone, with it alone minus with none),
-    largest first."""
+    """From a breakdown: per error family but the noise, what it leaves in AP after
+    calibration at the tool point, the noise kept out of it: alone, its variant minus the
+    cell alone; off, all but the noise minus all but the noise and it (a world without
+    noise: all sources minus without it). Largest first; ``modelled``: whether the level
+    has parameters for it."""
     rows = {r["variant"]: r for r in bd["variants"] if "failed" not in r}
-    allr, none = rows.get("all sources"), rows.get("none (cell only)")
+    noisy = "noise" in bd["sources"]
+    base = rows.get("all but the noise" if noisy else "all sources")
+    none = rows.get("none (cell only)")
     out = []
     for f in bd["sources"]:
+        if f == "noise":
+            continue
         if bd["mode"] == "off":
-            r = rows.get(f"without {f}")
-            if r is None or allr is None:
-                continue
-            share = allr["ap_after_tool_mm"] - r["ap_after_tool_mm"]
+            r = rows.get(f"all but the noise and {f}" if noisy else f"without {f}")
+            ref, share_of = base, lambda r_: base["ap_after_tool_mm"] - r_["ap_after_tool_mm"]
         else:
             r = rows.get(f"{f} alone")
-            if r is None or none is None:
-                continue
-            share = r["ap_after_tool_mm"] - none["ap_after_tool_mm"]
+            ref, share_of = none, lambda r_: r_["ap_after_tool_mm"] - none["ap_after_tool_mm"]
+        if r is None or ref is None:
+            continue
         out.append({"source": f, "what": bd.get("what", SOURCES).get(f, SOURCES[f]),
-                    "ap_after_tool_share_mm": float(share),
-                    "ap_after_tool_variant_mm": r["ap_after_tool_mm"]})
+                    "ap_after_tool_share_mm": float(share_of(r)),
+                    "ap_after_tool_variant_mm": r["ap_after_tool_mm"],
+                    "modelled": f in (bd.get("modelled") or [])})
     return sorted(out, key=lambda x: -x["ap_after_tool_share_mm"])
+
+
+def noise_share(bd: dict) -> dict | None:
+    """From a breakdown: what the noise does to AP after calibration at the tool point:
+    with every source (``with_mm``), without the noise (``without_mm``: the same poses
+    rehearsed noise-free), their difference (``share_mm``), the noise alone on the cell
+    (``alone_mm``, mode 'alone'), and whether it dominates (``dominates``: it adds more
+    than all the rest leaves). None where the world has no noise or a variant failed."""
+    rows = {r["variant"]: r for r in bd["variants"] if "failed" not in r}
+    a, w = rows.get("all sources"), rows.get("all but the noise")
+    if "noise" not in bd["sources"] or a is None or w is None:
+        return None
+    alone = rows.get("noise alone")
+    share = a["ap_after_tool_mm"] - w["ap_after_tool_mm"]
+    return {"what": bd.get("what", SOURCES).get("noise", SOURCES["noise"]),
+            "with_mm": a["ap_after_tool_mm"], "without_mm": w["ap_after_tool_mm"],
+            "share_mm": float(share), "alone_mm": None if alone is None
+            else alone["ap_after_tool_mm"], "dominates": bool(share > w["ap_after_tool_mm"])}
