@@ -21,10 +21,13 @@ the scene's known length: ``level3_10k_s: X`` (< 0.5).
 One pose's flange and geometric Jacobian (``model.kinematics.fk_jacobian``, what IK,
 planning and compensation's Newton steps pay per pose): ``fk_jacobian_one_pose_us: X``
 (target < 20). Times are CPU times (``best_of``); report them with ``uptime``.
+``--quick`` (CI): 150 and 1,000 samples, best of 2, the level 2 lines, and level 3 on
+2,000 samples (``level3_2k_s``: drawing 10,000 level-3 samples takes 10 s).
 """
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 # both solvers run under the same BLAS setting (planecal's default: one thread)
@@ -54,7 +57,16 @@ def best_of(fn, repeat):
     return min(times), out
 
 
+QUICK = "--quick" in sys.argv[1:]
+
+
+def reps(n: int) -> int:
+    """Best of n, or of 2 with --quick."""
+    return min(n, 2) if QUICK else n
+
+
 def main():
+    quick = QUICK
     scene = load_scene("thesis_final")
     robot = scene.robot
     nominal = nominal_params(scene)
@@ -63,7 +75,7 @@ def main():
     opts = FitOptions(improvement_limit=1e-13)
     ratios = {}
     print(f"{'samples':>8} {'planecal_s':>11} {'scipy_s':>9} {'iters':>6} {'max|dx|_rad':>12} {'ratio':>7}")
-    for n in (150, 1000, 10000):
+    for n in (150, 1000) if quick else (150, 1000, 10000):
         qe, d, _ = synthetic_samples(scene, truth, n, rng, noise_m=2e-6)
 
         settings = CalibrationSettings(options=opts)
@@ -84,7 +96,7 @@ def main():
             return least_squares(residual, x0[free], jac="2-point", method="trf",
                                  xtol=1e-15, ftol=1e-15, gtol=1e-15, x_scale="jac")
 
-        repeat = 5 if n <= 1000 else 2
+        repeat = reps(5 if n <= 1000 else 2)
         t_ours, res = best_of(ours, repeat)
         t_sp, sp = best_of(theirs, repeat)
         diff = dict(zip(layout.names_of(free), np.abs(res.params.to_vector(layout)[free] - sp.x)))
@@ -108,7 +120,7 @@ One pose's flange and geometric Jacobian, called one pose at a time."""
     kin = robot.kinematics
     fk_jacobian(kin, q)
     n = 20000
-    t, _ = best_of(lambda: [fk_jacobian(kin, q) for _ in range(n)], 3)
+    t, _ = best_of(lambda: [fk_jacobian(kin, q) for _ in range(n)], reps(3))
     print(f"fk_jacobian_one_pose_us: {t / n * 1e6:.2f}")
 
 
@@ -152,9 +164,9 @@ def level2():
         return least_squares(residual, x0[free], jac=j, method="trf", xtol=1e-15,
                              ftol=1e-15, gtol=1e-15, x_scale="jac")
 
-    t_ours, cal = best_of(ours, 5)
-    t_num, sp_num = best_of(lambda: scipy_run("2-point"), 3)
-    t_an, sp_an = best_of(lambda: scipy_run(jac), 5)
+    t_ours, cal = best_of(ours, reps(5))
+    t_num, sp_num = best_of(lambda: scipy_run("2-point"), reps(3))
+    t_an, sp_an = best_of(lambda: scipy_run(jac), reps(5))
     d_ours = predict(robot, qe, cal.params, plate)
     print(f"level 2, three_plates, 1000 samples, {int(free.sum())} base parameters of "
           f"{len(cal.base_set.free)} candidates ({cal.result.iterations} iterations)")
@@ -167,7 +179,7 @@ def level2():
         # the same minimum: predictions within 1 nm (the noise is 2 um)
         assert np.abs(dd - d_ours).max() < 1e-9, name
     qe10, d10, plate10 = synthetic_samples(scene, truth, 10000, rng, noise_m=2e-6)
-    t10, cal10 = best_of(lambda: calibrate(robot, qe10, d10, nominal, plate10, full), 3)
+    t10, cal10 = best_of(lambda: calibrate(robot, qe10, d10, nominal, plate10, full), reps(3))
     print(f"level 2, 10000 samples: {t10:.4f} s, {cal10.result.iterations} iterations, "
           f"rms {cal10.result.rms_mm() * 1e3:.3f} um")
     print(f"level2_speedup_vs_scipy_numeric: {t_num / t_ours:.1f}")
@@ -195,16 +207,17 @@ def level3():
             x[layout.slice(g.name)] += rng.normal(0.0, sd, len(g))
     x[layout.slice("compliance")] = [0, 2e-7, 3.3e-7, 0, 0, 0]
     truth = nominal.with_vector(x, layout)
-    qe, _, plate = synthetic_samples(scene, truth, 10000, rng)
+    n = 2000 if QUICK else 10000
+    qe, _, plate = synthetic_samples(scene, truth, n, rng)
     direction = rng.choice([-1, 1], size=qe.shape).astype(np.int8)
     d = predict(robot, qe, truth, plate, direction) + rng.normal(0.0, 2e-6, len(qe))
     st = CalibrationSettings(level="nonkinematic")
     t, cal = best_of(lambda: calibrate(robot, qe, d, nominal, plate, st, direction,
                                        scene.references), 2)
-    print(f"level 3, three_plates, 10000 samples: {t:.3f} s, {len(cal.base_set.base)} base "
+    print(f"level 3, three_plates, {n} samples: {t:.3f} s, {len(cal.base_set.base)} base "
           f"parameters, {cal.result.iterations} iterations, rms "
           f"{cal.result.rms_mm() * 1e3:.3f} um")
-    print(f"level3_10k_s: {t:.3f}")
+    print(f"level3_{n // 1000}k_s: {t:.3f}")
 
 
 if __name__ == "__main__":

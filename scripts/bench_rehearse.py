@@ -12,7 +12,8 @@ and sidecar written: robot time / wall time, from the command's JSON summary);
 model, numba's cached compile) included. One warm-up run first (not counted) fills
 numba's and the shape cache, as any user's first run does. With ``--repeat`` > 1 the runs use seeds
 seed, seed+1, ... and the figures are medians. The same runs are repeated with ``--rrd`` and
-reported on their own line.
+reported on their own line. ``--quick`` (CI, after the tests: the caches are warm): the
+warm-up of 20 samples and one run each way.
 
 Last lines, exactly: ``rehearse_command_s: X`` then ``rehearsal_speedup: X``.
 """
@@ -54,14 +55,19 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--foreground", action="store_true", help="no background pose planning")
+    ap.add_argument("--quick", action="store_true",
+                    help="a warm-up of 20 samples and one run each way (CI)")
     ap.add_argument("extra", nargs="*", help="more rehearse flags (after --)")
     args = ap.parse_args()
+    if args.quick:
+        args.repeat = 1
     print(f"cpus {os.cpu_count()}, load average {os.getloadavg()[0]:.1f}, "
           f"background planning {'off' if args.foreground else 'on'}")
     results = {False: [], True: []}
     command_s = []
     with tempfile.TemporaryDirectory() as tmp:
-        one(args.samples, args.seed, tmp, False, args.foreground, args.extra)  # warm-up
+        one(20 if args.quick else args.samples, args.seed, tmp, False, args.foreground,
+            args.extra)  # warm-up
         for rrd in (False, True):
             for k in range(args.repeat):
                 s = one(args.samples, args.seed + k, tmp, rrd, args.foreground, args.extra)

@@ -7,7 +7,9 @@ calibration + bounds, per second, on all cores).
 Each run samples (default: twin mode, the sampling run's planner with collision checks
 and the twin at rest per sample), calibrates from the nominal values and evaluates the
 Cramer-Rao bound at the truth. Also prints the calibration-only rate (the fits alone on
-the samples of one run) for scale. Last line, exactly: ``montecarlo_runs_per_s: X``.
+the samples of one run) for scale. ``--quick`` (CI): 4 runs in the command's own process
+(``--jobs 1``: no cluster to start), 5 fits. Last line, exactly:
+``montecarlo_runs_per_s: X``.
 """
 from __future__ import annotations
 
@@ -25,7 +27,10 @@ def main() -> int:
     ap.add_argument("--samples", type=int, default=150)
     ap.add_argument("--mode", default="twin", choices=("twin", "synthetic", "rehearse"))
     ap.add_argument("--jobs", type=int, default=None)
+    ap.add_argument("--quick", action="store_true", help="4 runs, --jobs 1, 5 fits (CI)")
     args = ap.parse_args()
+    if args.quick:
+        args.runs, args.jobs = 4, 1
     from planecal.estimation.calibrate import calibrate
     from planecal.model.scene import nominal_params
     from planecal.studies.common import cached_scene
@@ -42,8 +47,8 @@ def main() -> int:
     print(f"{len(runs)} {args.mode} runs of {args.samples} samples in {wall:.2f} s "
           f"({wall / len(runs) * jobs:.2f} s per run per process)")
     scene = cached_scene(st.scene)
-    qe, d, plate, _ = twin_samples(scene, truth_for(st, 0), MCSettings(samples=args.samples), 7)
-    n = 20
+    qe, d, plate, *_ = twin_samples(scene, truth_for(st, 0), MCSettings(samples=args.samples), 7)
+    n = 5 if args.quick else 20
     t0 = time.perf_counter()
     for _ in range(n):
         calibrate(scene.robot, qe, d, nominal_params(scene), plate)

@@ -14,7 +14,7 @@ Side by side: ``run`` (the compiled tick, what the sampling loop calls), ``per-t
 (``exchange`` + ``read`` per tick: what the FD11 emulator calls) and ``reference`` (the
 same tick run by the interpreter, ``Twin(..., reference_ticks=True)``, on a tenth of the
 workload), in wall and in this process's CPU seconds. ``--repeat N`` keeps the best of N
-(alternating). The last line, ``twin_realtime_factor: X``, is the sampling workload
+(alternating); ``--quick`` (CI) runs a fifth of each workload. The last line, ``twin_realtime_factor: X``, is the sampling workload
 through ``run``, wall clock.
 """
 from __future__ import annotations
@@ -97,15 +97,17 @@ def shrink(work, k):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=1, help="best of N (alternating)")
+    ap.add_argument("--quick", action="store_true", help="a fifth of each workload (CI)")
     args = ap.parse_args(argv)
+    q = 5 if args.quick else 1
     for _, fn, ref, _ in APIS:  # warm up (numba's compile or cache load)
         twin, base = fresh(ref)
         fn(twin, moving_traj(base, 200))
     workloads = {
-        "moving": lambda base: moving_traj(base, 40_000),
-        "holding": lambda base: np.repeat(base[None], 100_000, axis=0),
-        "sampling": lambda base: [(seg, i % 2 == 1) for i, seg in
-                                  enumerate(sampling_traj(base, 250, np.random.default_rng(1)))],
+        "moving": lambda base: moving_traj(base, 40_000 // q),
+        "holding": lambda base: np.repeat(base[None], 100_000 // q, axis=0),
+        "sampling": lambda base: [(seg, i % 2 == 1) for i, seg in enumerate(
+            sampling_traj(base, 250 // q, np.random.default_rng(1)))],
     }
     results = {}
     for _ in range(max(1, args.repeat)):

@@ -48,9 +48,13 @@ def session_history(tmp_path_factory):
 @pytest.fixture(scope="module")
 def rerun_home(tmp_path_factory):
     """HOME and the XDG directories in a fresh folder for one module, restored after: keeps
-    rerun (and anything it might start) off the real ~/.config and ~/.local."""
+    rerun (and anything it might start) off the real ~/.config and ~/.local. planecal's
+    cache folder stays the session's (its compiled kernels and hulls: a fresh one makes
+    every subprocess compile them again, a minute on a loaded machine)."""
+    from planecal.base.paths import cache_dir
     home = tmp_path_factory.mktemp("home")
     with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PLANECAL_CACHE_DIR", str(cache_dir()))
         for key, sub in (("HOME", ""), ("XDG_CONFIG_HOME", ".config"),
                          ("XDG_DATA_HOME", ".local/share"), ("XDG_CACHE_HOME", ".cache")):
             mp.setenv(key, str(home / sub))

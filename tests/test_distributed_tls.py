@@ -335,8 +335,7 @@ def _server(reply: bytes | None):
 def test_a_server_that_is_no_scheduler_is_one_bounded_line():
     silent, held = _server(None)
     talker, held2 = _server(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n" * 4)
-    web = http.server.ThreadingHTTPServer(("127.0.0.1", 0),
-                                          http.server.BaseHTTPRequestHandler)
+    web = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _QuietHandler)
     threading.Thread(target=web.serve_forever, daemon=True).start()
     try:
         for port, why in [(silent.getsockname()[1], "no Dask scheduler answered within 2 s"),
@@ -353,8 +352,17 @@ def test_a_server_that_is_no_scheduler_is_one_bounded_line():
         silent.close()
         talker.close()
         web.shutdown()
+        web.server_close()  # (waits for its handlers: none outlives the test)
         for c in held + held2:
             c.close()
+
+
+class _QuietHandler(http.server.BaseHTTPRequestHandler):
+    """A web server's handler that logs nothing: a request handled late (a loaded
+    machine) wrote its log line into the next test's captured stderr."""
+
+    def log_message(self, *args):
+        pass
 
 
 def test_study_commands_refuse_bad_schedulers_in_one_line(tmp_path, capsys):

@@ -39,7 +39,9 @@ def test_a_file_that_is_not_a_history_is_refused_in_one_line(tmp_path, capsys):
     assert main(["history", "list", "--history", str(tmp_path / "fresh.db")]) == 2
     assert "no history here yet" in capsys.readouterr().err
     assert not (tmp_path / "fresh.db").exists()  # nothing written on a refusal
-    assert main(["export", "x.json", "--history", str(tmp_path / "none" / "h.db")]) == 2
+    result = tmp_path / "x.json"  # (a result that exists: a missing one is said first)
+    result.write_text("{}")
+    assert main(["export", str(result), "--history", str(tmp_path / "none" / "h.db")]) == 2
     assert "does not exist" in capsys.readouterr().err
 
 

@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -157,13 +158,17 @@ def test_sample_sessions_one_after_the_other_against_one_emulate(tmp_path, capsy
         last = StateFile.read(default_state_path(("127.0.0.1", emu.port)))
         assert last is not None and last.delta.any()
         # the switch is held again; the resumed session waits out the silence, delta 0 first
+        # (what is left of it: a loaded machine can take the 2 s to start the command)
+        started = time.time()
         code, s2, err = sample(emu.port, emu.tty, run, "--resume", capsys=capsys)
         assert code == 0, err
-        assert "note: waiting" in err and "new reference after 2 s of silence" in err
         assert s2["status"] == "complete" and s2["samples"] == 3 and s2["sessions"] == 2
         side = load_sidecar(run)["real_cell"]
         assert side["first_delta"] == [0] * 6 and side["first_contact"]["kind"] == "fresh"
-        assert 0 < side["first_contact"]["waited_s"] <= 2.5
+        assert 0 <= side["first_contact"]["waited_s"] <= 2.5
+        if started - last.sent_at < 2.0:
+            assert side["first_contact"]["waited_s"] > 0
+            assert "note: waiting" in err and "new reference after 2 s of silence" in err
         # a new run, a third session: it reads the same controller's state, and waits too
         code, s3, err = sample(emu.port, emu.tty, tmp_path / "NEW.tsv", "--samples", "1",
                                "--scene", str(scene), capsys=capsys)
@@ -198,7 +203,8 @@ def test_a_controller_that_keeps_its_reference(tmp_path, capsys):
         released = emu.fd11.snapshot()
         # --rt-fresh: delta 0 first, a jump back to where the controller booted
         code, _, err = sample(port, tty, run, "--resume", "--rt-fresh",
-                              "--rt-boot-timeout-s", "0.5", capsys=capsys)
+                              "--rt-resend-s", "0.05", "--rt-boot-timeout-s", "0.5",
+                              capsys=capsys)
         assert code == 1
         err = err.strip().splitlines()[-1]  # after the note that --seed is the sidecar's
         assert "no reply to the first packet (delta [0, 0, 0, 0, 0, 0])" in err
@@ -229,8 +235,9 @@ def test_sample_rides_out_a_lossy_booting_cell(tmp_path, capsys):
     with Emulators(twin, rt_port=0, reply_port=None, fd11_faults=faults,
                    laser_faults=LaserFaults(silent_every=23)) as emu:
         code, s, err = sample(emu.fd11.rt_port, emu.laser.port, out, "--samples", "2",
-                              "--rt-resend-s", "0.05", "--rt-silence-s", "2.0",
-                              "--laser-timeout-s", "0.05", capsys=capsys)
+                              "--rt-resend-s", "0.05", "--rt-silence-s", "20",
+                              "--laser-timeout-s", "0.05", "--laser-wait-s", "0.005",
+                              capsys=capsys)
         # a resend of the last tick may still be queued: let the thread see every packet
         assert s is not None and emu.fd11.wait_until(
             lambda c: c.datagrams >= s["link"]["sent"], 5), err

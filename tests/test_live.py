@@ -5,9 +5,8 @@ that never waits for it.
 That the loop never waits is shown without a clock: a live observer whose sink stalls
 for good still takes every hook at once (the chunks it cannot send are dropped and
 counted), and after its construction no hook touches the recording from the loop's
-thread (only the sender does). Against ``planecal emulate`` at real-time pacing a one-
-sample run with --live has, within a margin a loaded machine cannot break, no more late
-ticks than the same run without it, while the web viewer answers and the stream (teed
+thread (only the sender does). Against ``planecal emulate``, paced, a one-
+sample run with --live completes while the web viewer answers, and the stream (teed
 into --rrd) holds the run.
 """
 from __future__ import annotations
@@ -108,17 +107,18 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_sample_live_against_emulate_at_real_time_pacing(tmp_path, capsys):
-    """One sample at the FD11's 10 ms pacing against ``planecal emulate``, without and with
-    --live (the stream teed into --rrd): both complete; the live run has no more late
-    ticks than the plain one, within 5 % of its ticks plus 30 (a machine's load, not the
-    viewer, decides the difference; the live view adds no wait on the loop's thread, as
-    the test above shows); the web viewer's page answered during the run; the stream
-    holds the run's samples and motion."""
+def test_sample_live_against_emulate(tmp_path, capsys):
+    """One sample, paced (3 ms ticks), against ``planecal emulate`` with --live (the
+    stream teed into --rrd): it completes; the web viewer's page answered during the run;
+    the stream holds the run's samples and motion. Nothing here depends on the machine's
+    load: the controller keeps its reference (a stalled process never starts a new
+    session) and the link waits seconds for a reply. (That the live view adds no wait on
+    the loop's thread is shown without a clock by the tests above; how many ticks come
+    late at real-time pacing is the machine's, not the viewer's, and no test's.)"""
     from test_links_emulate import Emulate
-    from wire import LASER_TIMEOUT_S, RESEND_S
+    from wire import BOOT_S, LASER_TIMEOUT_S, RESEND_S, SILENCE_S
     from planecal.present.rerun import summarize
-    emu = Emulate("--seed", "3", "--silence-s", "0.5")
+    emu = Emulate("--seed", "3", "--reference", "keep")
     grpc, web = _free_port(), _free_port()
     seen: dict = {}
 
@@ -131,30 +131,25 @@ def test_sample_live_against_emulate_at_real_time_pacing(tmp_path, capsys):
             except OSError:
                 time.sleep(0.05)
 
-    def run(out, *extra):
-        argv = ["sample", "--rt", "127.0.0.1", "--rt-port", str(emu.port), "--local-port",
-                "0", "--rt-resend-s", str(RESEND_S), "--laser", emu.tty,
-                "--laser-timeout-s", str(LASER_TIMEOUT_S), "--rt-state",
-                str(tmp_path / "fd11.state"), "--rt-fresh", "--seed", "2", "--samples", "1",
-                "--out", str(tmp_path / out), *extra]
-        time.sleep(0.6)  # the emulated controller's silence: a fresh reference
-        code = main(argv)
-        summary = json.loads(capsys.readouterr().out)
-        assert code == 0 and summary["samples"] == 1
-        return summary
-
+    argv = ["sample", "--rt", "127.0.0.1", "--rt-port", str(emu.port), "--local-port", "0",
+            "--rt-tick-s", "0.003", "--rt-resend-s", str(RESEND_S),
+            "--rt-silence-s", str(SILENCE_S), "--rt-boot-timeout-s", str(BOOT_S),
+            "--laser", emu.tty, "--laser-timeout-s", str(LASER_TIMEOUT_S),
+            "--rt-state", str(tmp_path / "fd11.state"), "--rt-fresh", "--seed", "2",
+            "--samples", "1", "--out", str(tmp_path / "live.tsv"), "--live", "--live-port",
+            str(grpc), "--live-web-port", str(web), "--rrd", str(tmp_path / "live.rrd")]
     try:
-        base = run("base.tsv")
         watcher = threading.Thread(target=watch)
         watcher.start()
-        live = run("live.tsv", "--live", "--live-port", str(grpc), "--live-web-port",
-                   str(web), "--rrd", str(tmp_path / "live.rrd"))
+        code = main(argv)
         watcher.join(60)
     finally:
         emu.stop()
-    assert base["link"]["ticks"] > 500
-    late_base, late_live = base["link"]["late_ticks"], live["link"]["late_ticks"]
-    assert late_live <= late_base + 0.05 * live["link"]["ticks"] + 30, (late_base, late_live)
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    live = json.loads(cap.out)
+    assert code == 0 and live["samples"] == 1
+    assert live["link"]["ticks"] > 500  # paced: a few seconds of the run for the viewer
     assert live["live"]["grpc_url"] == f"rerun+http://127.0.0.1:{grpc}/proxy"
     assert seen.get("status") == 200 and b"Rerun" in seen["body"]
     entities = {e[0] for e in summarize(tmp_path / "live.rrd")}

@@ -253,6 +253,68 @@ def test_background_planning_gives_the_same_run(scene, tmp_path, two_plates):
     assert results[0] == results[1]
 
 
+class Chain:
+    """A pure planner that counts its plans: the target is q_start + 1 on every joint,
+    the random state counts up; a budget below 2 rejects the draw (no target)."""
+    pure = True
+
+    def __init__(self, round_robin=False):
+        self.calls, self.round_robin = [], round_robin
+
+    def index_matters(self):
+        return self.round_robin
+
+    def plan(self, q_start, index, rng_state, budget, back=()):
+        from planecal.sampling.planner import Plan
+        self.calls.append(index)
+        out = Plan(index, q_start, [], {"n": rng_state["n"] + 1})
+        if budget < 2:
+            out.rejections.append(("collision", None, "budget"))
+            out.reason = "gave up"
+            return out
+        out.q = np.asarray(q_start, float) + 1.0
+        out.qe_goal = np.zeros(6, np.int64)
+        return out
+
+
+def test_the_background_planner_serves_plans_made_ahead_along_the_chain():
+    """While the run moves, the planner makes the plans its next requests will ask for
+    (``planner._Ahead``): each is served without planning again, and is the plan the
+    request gives; a request off the chain, or with a budget larger than the plan was
+    made with, is planned anew and the chain restarts from it."""
+    from planecal.sampling.planner import AHEAD, _Ahead, route_back
+
+    def request(plan, index, budget=5):  # what collect asks next (collect.collect)
+        return (plan.q, index, plan.rng_after, budget, route_back(plan))
+
+    for round_robin in (False, True):
+        chain = Chain(round_robin)
+        ahead = _Ahead(chain)
+        p = ahead.take((np.zeros(6), 0, {"n": 0}, 5, ()))
+        while ahead.wanted():
+            ahead.plan_next()
+        assert chain.calls == [0, 1, 2, 3, 4] and AHEAD == 4
+        for k in range(1, 4):  # served from the plans made ahead
+            p = ahead.take(request(p, k))
+            assert np.array_equal(p.q, np.full(6, k + 1.0)) and p.rng_after == {"n": k + 1}
+        assert len(chain.calls) == 5
+        # a laser rejection: the run asks again for index 3 from where plan 3 left it
+        p4 = ahead.take(request(p, 3))
+        assert len(chain.calls) == (6 if round_robin else 5)
+        assert np.array_equal(p4.q, np.full(6, 5.0)) and p4.index == (3 if round_robin else 4)
+    # made with a budget below the request's: planned again with the request's budget
+    chain = Chain()
+    ahead = _Ahead(chain)
+    p = ahead.take((np.zeros(6), 0, {"n": 0}, 3, ()))
+    ahead.plan_next()
+    assert chain.calls == [0, 1]
+    p = ahead.take(request(p, 1, budget=5))
+    assert chain.calls == [0, 1, 1] and ahead.next[3] == 5
+    # a plan with no target ends the chain: nothing follows it to plan ahead
+    p = ahead.take((np.zeros(6), 0, {"n": 0}, 1, ()))
+    assert p.q is None and not ahead.wanted()
+
+
 class Targets:
     """A given planner: sample i goes to ``targets[i]`` (counts), straight; it keeps the
     way back (``back``) each request handed it."""

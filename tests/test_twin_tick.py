@@ -237,6 +237,24 @@ def test_reads_skipped_leave_the_noise_stream_alone():
     assert np.array_equal(ma, np.array([np.nan if x is None else x for x in mb]), equal_nan=True)
 
 
+@pytest.mark.parametrize("opts", [TwinOptions(), with_all_errors(ERRORS)])
+def test_a_move_without_reads_ends_where_one_with_reads_does(opts):
+    # a move that reads no laser computes the joint row of its last state only: the state
+    # it leaves (counts, servo, rest draws, the joint row in qpos and in MuJoCo's data)
+    # and the beam's hit are those of the same move read tick by tick (the readings
+    # differ: each reading draws laser noise)
+    a, b = Twin("thesis_final", seed=3, options=opts), Twin("thesis_final", seed=3, options=opts)
+    rng = np.random.default_rng(3)
+    for seg in segments(a, rng, 5):
+        a.run(seg, read=False)
+        b.run(seg, read=True)
+        assert np.array_equal(a.qpos, b.qpos)
+        assert np.array_equal(a.data.site_xpos, b.data.site_xpos)
+        assert np.array_equal(a._S[:T.DIRTY], b._S[:T.DIRTY]) and np.array_equal(a._F, b._F)
+        assert a.hit() == b.hit()
+    assert a.ticks == b.ticks
+
+
 def test_beam_caster_sees_only_the_static_cell():
     for name in SCENES:
         twin = Twin(name, seed=1)

@@ -1,27 +1,35 @@
 """`planecal sample` against emulators, the command line every wire test runs.
 
-The link's defaults are the cell's: resend after 20 ms without a reply, give a laser
-request up after 0.1 s. Behind the emulators the replies come from threads of the test's
-own process, and on a loaded 2-core CI machine such a thread can wait longer than 20 ms
-for the CPU: the link then counts a lost reply and resends, the emulator ticks the twin
-once more (an extra hold tick, one more laser-noise draw), and a reply a tick old can even
-read as a released switch. Tests that are not about timing therefore run with the same
-generous intervals as the link tests (``T`` in test_links_fd11 and test_links_laser): a
-reply is lost only if a thread stalls for a quarter of a second. Tests of resending pass
-their own ``--rt-resend-s`` after these (argparse keeps the last).
+The link's defaults are the cell's: resend after 20 ms without a reply, give up after
+0.5 s of silence, give a laser request up after 0.1 s and let a tick wait 5 ms for the
+laser's reply. Behind the emulators the replies come from threads of the test's own
+process (or another process), and on a loaded machine such a thread can wait for the CPU
+far longer than that: the link then counts a lost reply and resends, the emulator ticks
+the twin once more (an extra hold tick, one more laser-noise draw), a tick goes without
+its reading, a reply a tick old can even read as a released switch, and a silence ends
+the run. Tests that are not about timing therefore run with intervals no stall reaches:
+a resend after 1 s, silence 20 s, a first contact given a minute (an emulator in another
+process answers once its twin is built), a laser request given a second and each tick
+waiting for its reading (``--laser-wait-s`` = the laser's timeout), so a run's samples
+are the same on any machine under any load. Tests of resending, silence or boot timeouts pass
+their own flags after these (argparse keeps the last).
 """
 from __future__ import annotations
 
-RESEND_S = 0.25
-LASER_TIMEOUT_S = 0.3
+RESEND_S = 1.0
+SILENCE_S = 20.0
+BOOT_S = 60.0  # a controller in another process answers once its twin is built and warm
+LASER_TIMEOUT_S = 1.0
 
 
 def sample_argv(port, tty, out, *extra, seed: int = 2) -> list[str]:
     """argv of `planecal sample` against the FD11 emulator on UDP ``port`` and the laser
     emulator on ``tty``, writing ``out``; ``extra`` flags come last."""
     return ["sample", "--rt", "127.0.0.1", "--rt-port", str(port), "--local-port", "0",
-            "--rt-tick-s", "0", "--rt-resend-s", str(RESEND_S),
+            "--rt-tick-s", "0", "--rt-resend-s", str(RESEND_S), "--rt-silence-s", str(SILENCE_S),
+            "--rt-boot-timeout-s", str(BOOT_S),
             "--laser", str(tty), "--laser-timeout-s", str(LASER_TIMEOUT_S),
+            "--laser-wait-s", str(LASER_TIMEOUT_S),
             "--seed", str(seed), "--out", str(out), *extra]
 
 

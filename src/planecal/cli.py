@@ -277,10 +277,13 @@ def _logging(args) -> None:
 
 
 def _check_files(module, args) -> None:
-    """The command's outputs against its inputs (``--config`` included, and the history of
-    a command that records: no output replaces it), before it runs: its ``files(args)``
+    """The command's inputs and outputs (``--config`` included, and the history of a
+    command that records: no output replaces it), before it runs: its ``files(args)``
     declaration (``planecal.commands.io_options``) through the output guard
-    (``planecal.io.outputs.check_files``)."""
+    (``planecal.io.outputs.check_files``): an input the command line names must exist (a
+    history is made where there is none), an output may not overwrite an input. The
+    declarations and the guard import nothing heavy, so these are said before the command
+    loads its libraries."""
     declare = getattr(module, "files", None)
     if declare is None:
         return
@@ -288,8 +291,21 @@ def _check_files(module, args) -> None:
     from planecal.io.outputs import check_files
     files = declare(args)
     files.read(args.config, role="--config")
-    files.read(*history_files(args), role="the history")
-    check_files(files, bool(getattr(args, "force", False)))
+    history = history_files(args)
+    files.read(*history, role="the history")
+    named = _named(args) - {str(p) for p in history}
+    check_files(files, bool(getattr(args, "force", False)), named)
+
+
+def _named(args) -> set[str]:
+    """Every value the command line (or its --config file) gave, as text: the files it
+    names among them."""
+    out = set()
+    for v in vars(args).values():
+        for x in v if isinstance(v, (list, tuple)) else (v,):
+            if isinstance(x, (str, os.PathLike)):
+                out.add(str(x))
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -9,8 +9,10 @@ profiles ``errors/<name>.json``) and the scenes (``scenes/<name>.json``), under 
 * else the checkout the package runs from (an editable install, ``pip install -e .``:
   the repository's own models/ and scenes/, as edited).
 
-A model or scene given by path is read from that path; only names are looked up here.
-A data folder that is missing or empty is a one-line ``InputError`` naming it.
+A model or scene given by path is read from that path; only names are looked up here
+(``robot_path``, ``scene_path``: light, so a command's files are known before anything
+heavy is imported). A data folder that is missing or empty is a one-line ``InputError``
+naming it.
 
 Caches, written at run time, never into the installed package: ``cache_dir()`` is
 ``$PLANECAL_CACHE_DIR``, else ``$XDG_CACHE_HOME/planecal``, else ``~/.cache/planecal``.
@@ -26,6 +28,8 @@ from pathlib import Path
 from planecal.base.errors import InputError
 
 DATA_FOLDERS = ("models", "scenes")
+DEFAULT_ROBOT = "mc70"
+DEFAULT_SCENE = "thesis_final"
 _PACKAGED = Path(__file__).resolve().parents[1] / "data"  # planecal/data in an install
 _CHECKOUT = Path(__file__).resolve().parents[3]  # src/planecal/base/paths.py -> the checkout
 
@@ -60,6 +64,30 @@ def data_folder(name: str) -> Path:
         raise InputError(f"{folder}: {problem} ({where}; set PLANECAL_HOME to a folder "
                          "holding models/ and scenes/, or reinstall planecal)")
     return folder
+
+
+def robot_path(name_or_path: str | Path, relative_to: Path | None = None) -> Path:
+    """robot.json of a robot given by name (models/<name>/), by its folder or by the file;
+    a relative path is taken from ``relative_to`` (a scene's folder) when given."""
+    p = Path(name_or_path)
+    if not p.suffix and len(p.parts) == 1 and not (relative_to or Path()).joinpath(p).is_dir():
+        return data_folder("models") / str(name_or_path) / "robot.json"
+    if relative_to is not None and not p.is_absolute():
+        p = relative_to / p
+    return p / "robot.json" if p.suffix != ".json" and p.is_dir() else p
+
+
+def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
+    """A scene's file: the path given (a .json, or any file that exists), else
+    scenes/<name>.json."""
+    p = Path(name_or_path)
+    try:
+        exists = p.exists()
+    except (OSError, ValueError):  # a NUL character, a name too long: reading will say so
+        exists = False
+    if p.suffix == ".json" or exists:
+        return p
+    return data_folder("scenes") / f"{name_or_path}.json"
 
 
 def cache_dir() -> Path:

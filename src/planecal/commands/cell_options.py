@@ -15,7 +15,7 @@ def add_scene_argument(p, what: str, reads: str | None = "the run's sidecar") ->
     """--scene for ``what`` (e.g. "the nominal values and robot"); ``reads``: the record
     the command takes its cell from (e.g. "the runs' sidecars"), None for a command that
     makes a new run or study."""
-    from planecal.model.scene import DEFAULT_SCENE
+    from planecal.base.paths import DEFAULT_SCENE
     where = (f"default: the one {reads} records (a --scene that contradicts it is "
              f"refused), else {DEFAULT_SCENE}") if reads else f"default {DEFAULT_SCENE}"
     p.add_argument("--scene", default=None if reads else DEFAULT_SCENE, metavar="NAME|FILE",
@@ -37,10 +37,14 @@ def _recorded(claims, flag) -> list:
 
 
 def run_scene_inputs(paths, flag) -> list:
-    """The scene (and robot) files of the runs' recorded cell and of --scene."""
-    from planecal.jobs.runs import read_sidecar, run_claim
+    """The scene (and robot) files of the runs' recorded cell and of --scene (the runs'
+    readers are imported only for a run that exists: a missing one is the guard's to say,
+    before anything heavy is loaded)."""
     claims = []
     for p in paths or ():
+        if not _exists(p):
+            continue
+        from planecal.jobs.runs import read_sidecar, run_claim
         try:
             claims.append(run_claim(p, read_sidecar(p)))
         except InputError:  # its reader says why, later
@@ -50,6 +54,8 @@ def run_scene_inputs(paths, flag) -> list:
 
 def result_scene_inputs(result, flag) -> list:
     """The scene (and robot) files of a result's recorded cell and of --scene."""
+    if not _exists(result):
+        return _recorded([], flag)
     from planecal.formats.base import read_json
     from planecal.jobs.results import result_claim
     try:
@@ -57,3 +63,11 @@ def result_scene_inputs(result, flag) -> list:
     except InputError:
         claim = None
     return _recorded([claim], flag)
+
+
+def _exists(path) -> bool:
+    from pathlib import Path
+    try:
+        return path is not None and Path(path).exists()
+    except (OSError, ValueError):  # a NUL character, a name too long: its reader says so
+        return False

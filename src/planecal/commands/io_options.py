@@ -43,9 +43,8 @@ def with_sidecars(paths) -> list:
 def scene_inputs(name) -> list:
     """A scene (name or path) and its robot's description, as far as they can be found
     (a scene that cannot be read is its loader's error, later)."""
+    from planecal.base.paths import DEFAULT_SCENE, robot_path, scene_path
     from planecal.formats.base import read_json
-    from planecal.model.robot import robot_path
-    from planecal.model.scene import DEFAULT_SCENE, scene_path
 
     try:
         path = scene_path(name or DEFAULT_SCENE)
@@ -65,12 +64,12 @@ def scene_inputs(name) -> list:
 
 def profile_inputs(errors, scene=None) -> list:
     """An error profile's file: the path given, or a named profile's files (the robot's
-    own and the generic one)."""
-    from planecal.twin.profile import PROFILES
+    own and the generic one). A name (``twin.profile.PROFILES``) has no suffix and no
+    folder; anything else is a path."""
     if errors is None:
         errors = "realistic"
     p = Path(str(errors))
-    if str(errors) not in PROFILES and (p.suffix or len(p.parts) > 1):
+    if p.suffix or len(p.parts) > 1:
         return [p]
     from planecal.base.paths import data_folder
     out = [robot.parent / "errors" / f"{errors}.json" for robot in scene_inputs(scene)[1:2]]

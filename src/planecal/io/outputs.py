@@ -22,6 +22,11 @@ per file or folder it writes; ``planecal.commands.files`` builds them from the o
   file is planecal's), unless ``force``; each file planecal writes into it (``members``:
   glob patterns) is checked as a file output.
 
+Then an input the command line names (``named``: the values the user gave, ``cli``
+passes them) that does not exist is refused, "PATH: file not found": the guard runs
+before a command imports its heavy libraries, so a mistyped file name is said at once
+(its reader would say the same, seconds later).
+
 ``check_output(path, inputs, fmt, force)`` is the same check for one file. Writes
 themselves stay atomic (``params.save_json``).
 """
@@ -129,6 +134,17 @@ def _resolved(p: Path) -> Path:
         return p.resolve()
     except (OSError, RuntimeError, ValueError):
         return p.absolute()
+
+
+def _check_named(inputs, named: set[str]) -> None:
+    """InputError for the first input given on the command line that does not exist (the
+    others, a sidecar or a profile beside a robot, may be absent: their readers decide)."""
+    for i in inputs:
+        p, role = i if isinstance(i, tuple) else (i, None)
+        if p is None or str(p) not in named:
+            continue
+        if _stat(Path(p), role or "input") is None:
+            raise InputError(f"{_shown(p)}: file not found" + (f" ({role})" if role else ""))
 
 
 class _Inputs:
@@ -320,9 +336,10 @@ def _check_distinct(files: list[Output]) -> None:
             seen[k] = o
 
 
-def check_files(files: Files, force: bool = False) -> None:
-    """Every output of ``files`` checked against its inputs and the others (module
-    docstring); InputError for the first that may not be written."""
+def check_files(files: Files, force: bool = False, named: Iterable[str] = ()) -> None:
+    """Every output of ``files`` checked against its inputs and the others, then every
+    input the command line names (``named``) exists (module docstring); InputError for
+    the first that may not be written or read."""
     inputs = _Inputs(files.inputs)
     written: list[Output] = []  # every file whose name is known now
     for o in files.outputs:
@@ -344,6 +361,7 @@ def check_files(files: Files, force: bool = False) -> None:
                     fnmatch.fnmatchcase(o.path.name, pat) for pat, _ in f.members):
                 raise InputError(f"{o.what} {_shown(o.path)}: {f.what} {_shown(f.path)} writes "
                                  "that file too; give each output its own name")
+    _check_named(files.inputs, set(named))
 
 
 def check_output(path, inputs=(), fmt: str | tuple | None = None, force: bool = False,

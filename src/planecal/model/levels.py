@@ -19,11 +19,13 @@ laser's gain).
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from planecal.base.errors import InputError
-from planecal.model.kinematics import parallel_pairs
-from planecal.model.layout import (ParamLayout, compliance_group, level1_layout,
-                                   level2_layout, level3_layout)
-from planecal.model.robot import Robot
+
+if TYPE_CHECKING:  # (the names a level means come first: every command's --level choices)
+    from planecal.model.layout import ParamLayout
+    from planecal.model.robot import Robot
 
 LEVELS = ("offsets", "full", "nonkinematic")
 ALIASES = {"1": "offsets", "2": "full", "3": "nonkinematic"}
@@ -58,6 +60,9 @@ def level_name(level: str) -> str:
 def layout_for(robot: Robot, n_planes: int, level: str = "offsets",
                compliance: bool = False) -> ParamLayout:
     """The parameter layout of a level (module docstring); level 3 always has compliance."""
+    from planecal.model.kinematics import parallel_pairs
+    from planecal.model.layout import (ParamLayout, compliance_group, level1_layout,
+                                       level2_layout, level3_layout)
     name = level_name(level)
     if name == "offsets":
         base = level1_layout(n_planes)

@@ -21,10 +21,9 @@ import numpy as np
 
 from planecal.formats.base import read_json, validate
 from planecal.formats.robot import RobotFile
-from planecal.base.paths import data_folder
+from planecal.base.paths import DEFAULT_ROBOT, robot_path  # noqa: F401 (also named here)
 from planecal.model.kinematics import Kinematics, from_standard_dh
 
-DEFAULT_ROBOT = "mc70"
 # the MC70's (seed H.1): the reference a robot without a stated repeatability is scaled from
 REFERENCE_REACH_M = 2.8334658438426485  # kinematics.reach_m of models/mc70/robot.json
 REFERENCE_REPEATABILITY_MM = 0.07  # its datasheet's, JIS B 8432
@@ -95,17 +94,6 @@ class Robot:
     def folder(self) -> Path | None:
         """The description's folder (models/<robot>/, or an imported robot's directory)."""
         return None if self.source is None else self.source.parent
-
-
-def robot_path(name_or_path: str | Path, relative_to: Path | None = None) -> Path:
-    """robot.json of a robot given by name (models/<name>/), by its folder or by the file;
-    a relative path is taken from ``relative_to`` (a scene's folder) when given."""
-    p = Path(name_or_path)
-    if not p.suffix and len(p.parts) == 1 and not (relative_to or Path()).joinpath(p).is_dir():
-        return data_folder("models") / str(name_or_path) / "robot.json"
-    if relative_to is not None and not p.is_absolute():
-        p = relative_to / p
-    return p / "robot.json" if p.suffix != ".json" and p.is_dir() else p
 
 
 def load_robot(name_or_path: str | Path = DEFAULT_ROBOT, relative_to: Path | None = None) -> Robot:

@@ -21,11 +21,9 @@ from planecal.model.planes import point_normal_from_n_tilde
 from planecal.base.errors import InputError
 from planecal.formats.base import read_json, validate
 from planecal.formats.scene import RobotBounds, SceneFile
-from planecal.base.paths import data_folder
+from planecal.base.paths import DEFAULT_SCENE, scene_path  # noqa: F401 (also named here)
 from planecal.model.kinematics import reach_m
 from planecal.model.robot import DEFAULT_ROBOT, Robot, load_robot
-
-DEFAULT_SCENE = "thesis_final"
 
 
 @dataclass
@@ -115,17 +113,6 @@ class Scene:
         80 mm for the ZS-LD80's 65-95 mm, the distance its serial field counts from). The
         tool point is the beam point there (``measurement.beam_point``)."""
         return 0.5e-3 * (self.laser_range_mm[0] + self.laser_range_mm[1])
-
-
-def scene_path(name_or_path: str | Path = DEFAULT_SCENE) -> Path:
-    p = Path(name_or_path)
-    try:
-        exists = p.exists()
-    except (OSError, ValueError):  # a NUL character, a name too long: reading will say so
-        exists = False
-    if p.suffix == ".json" or exists:
-        return p
-    return data_folder("scenes") / f"{name_or_path}.json"
 
 
 def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:

@@ -306,6 +306,9 @@ class ListPlanner:
         out.via = list(via)
 
 
+AHEAD = 4  # plans the background planner makes ahead along the chain of plans
+
+
 def _planner_worker(conn, parent_end, planner) -> None:
     import signal
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # the run's to handle: it
@@ -313,27 +316,82 @@ def _planner_worker(conn, parent_end, planner) -> None:
     # the fork gave us a copy of the run's end of the pipe too: close it, so that the
     # run's death (even SIGKILL) closes the pipe and ends this process (EOF, broken pipe)
     parent_end.close()
+    ahead = _Ahead(planner)
     while True:
+        while ahead.wanted() and not conn.poll():  # nothing asked: plan along the chain
+            ahead.plan_next()
         try:
             req = conn.recv()
         except (EOFError, OSError):  # the run is gone (closed, or reset with a plan unread)
             break
         if req is None:
             break
-        try:
-            plan = planner.plan(*req)
-        except Exception as e:  # report it in the run's process
-            plan = RuntimeError(f"planner: {type(e).__name__}: {e}")
+        plan = ahead.take(req)
         try:
             conn.send(plan)
         except OSError:  # the run is gone
             break
 
 
+def _plan_or_error(planner, req):
+    try:
+        return planner.plan(*req)
+    except Exception as e:  # report it in the run's process
+        return RuntimeError(f"planner: {type(e).__name__}: {e}")
+
+
+class _Ahead:
+    """The background planner's plans made ahead: a run's requests form a chain (the next
+    plan starts where this one's target is, with its random state after, the next
+    index and its way back: ``collect``), so while the run moves the robot the planner
+    makes the next ``AHEAD`` plans of the chain and serves a request that matches one
+    (``_same_request``; a plan made with a budget at least the request's: a run that
+    gives up early stops reading its rejections at the same one). A request off the
+    chain (a round-robin index after a laser rejection) drops them and starts the chain
+    again from itself. The planner is pure, so a plan made ahead is the plan."""
+
+    def __init__(self, planner):
+        self.planner = planner
+        self.made: list[tuple] = []  # (request, plan) along the chain, oldest first
+        self.next: tuple | None = None  # the chain's next request, None: no chain
+        self.budget = 0  # the largest asked for (the run's max_attempts): the chain's
+
+    def wanted(self) -> bool:
+        return self.next is not None and len(self.made) < AHEAD
+
+    def plan_next(self) -> None:
+        req = self.next
+        plan = _plan_or_error(self.planner, req)
+        self.made.append((req, plan))
+        self.next = _next_request(req, plan, self.budget)
+
+    def take(self, req):
+        matters = self.planner.index_matters()
+        while self.made:
+            made, plan = self.made.pop(0)
+            if made[3] >= req[3] and _same_request(made, req, matters):
+                return plan
+        # off the chain (or none yet): plan it, the chain goes on from it
+        plan = _plan_or_error(self.planner, req)
+        if len(req) == 5:
+            self.budget = max(self.budget, req[3])
+        self.next = _next_request(req, plan, self.budget)
+        return plan
+
+
+def _next_request(req, plan, budget: int) -> tuple | None:
+    """The request ``collect`` makes after ``plan`` succeeds (with ``budget``), or None
+    where none follows (no target: the run ends or gives up; not a sampling request)."""
+    if not isinstance(plan, Plan) or plan.q is None or len(req) != 5:
+        return None
+    return (plan.q, req[1] + 1, plan.rng_after, budget, route_back(plan))
+
+
 @dataclass
 class BackgroundPlanner:
     """Plans in a forked process. The run asks for the next sample's plan as soon as the
-    current target is known (the next path starts there) and the robot moves meanwhile.
+    current target is known (the next path starts there) and the robot moves meanwhile;
+    the process makes the plans after it meanwhile too (``_Ahead``).
     The request is speculative only in the sample index, which matters only for
     round-robin plate choice (after a laser rejection): then the plan made for the other
     index is dropped and the right one is planned. Results are identical to planning in

@@ -239,7 +239,7 @@ class Twin:
         i, k, stop = 0, k0, self._stop
         while True:
             k = t.advance(D, i, S, F, self._W, self._eps_block, self._u_block, cur,
-                          row_of, Q, k, stop)
+                          row_of, Q, k, stop, read)
             if stop[0] != T.NEED_BLOCK:
                 break
             self._refill(int(stop[2]))

@@ -23,7 +23,9 @@ One tick (``advance``), for the row ``D[i]`` of deltas:
    joint-side motion (unchanged for joints that did not move);
 5. whenever the state changed (counts moved, a settle, or stale at entry), the joint row
    ``qpos`` of that tick (``joint_row``, below) goes into ``Q``; ``row_of[i]`` is the row
-   tick i shows (-1: the state before the call).
+   tick i shows (-1: the state before the call). A call that reads no laser (a move)
+   computes the row of the state it ends in only: the row is a function of the state
+   (rest draws, counts, backlash sides), so it is the one the last tick's would be.
 
 The joint row, in this order (rad; ``joint_row``):
 
@@ -181,11 +183,14 @@ def settle(S, F, eps_block, u_block):
     return -1
 
 
-def advance(D, i0, S, F, W, eps_block, u_block, cur_out, row_of, Q, k0, stop):
+def advance(D, i0, S, F, W, eps_block, u_block, cur_out, row_of, Q, k0, stop, every_row):
     """Ticks ``i0..`` of ``D`` (n, 6) deltas (module docstring). Writes the counts
     ``cur_out[i]``, the recomputed joint rows ``Q[k0..]`` and ``row_of[i]``; returns the
     number of rows of Q now used; ``stop`` says why it returned (DONE, NEED_BLOCK,
-    TRIPPED) and at which tick."""
+    TRIPPED) and at which tick. ``every_row`` False (ticks that read no laser: a move):
+    only the row of the state it returns in (DONE, TRIPPED) is computed, once, into
+    ``Q[k0]``, and ``row_of`` is not written; the joint row is a function of the state
+    alone, so that row and ``F[QNOW:]`` are the ones every tick's would have ended with."""
     n = D.shape[0]
     k = k0
     trip = S[TRIP]
@@ -205,7 +210,7 @@ def advance(D, i0, S, F, W, eps_block, u_block, cur_out, row_of, Q, k0, stop):
             if trip >= 0 and abs(c - S[CMD + j]) > trip:
                 stop[0] = TRIPPED
                 stop[1] = i
-                return k
+                return k if every_row else flush_row(S, F, W, Q, k)
             cmd[j] = c
             if c != S[CMD + j]:
                 holding = False
@@ -231,16 +236,7 @@ def advance(D, i0, S, F, W, eps_block, u_block, cur_out, row_of, Q, k0, stop):
                 stop[2] = need
                 return k
         if moved and flags & BACKLASH:
-            for j in range(6):
-                dq = 0.0
-                for c in range(6):
-                    m = F[M + 6 * j + c]
-                    if m != 0.0:
-                        dq += m * np.float64(cnt[c] - S[CUR + c])
-                if dq > 0.0:
-                    S[DIR + j] = 1
-                elif dq < 0.0:
-                    S[DIR + j] = -1
+            follow_sides(S, F, cnt)
         for j in range(6):
             if not ideal:
                 F[Y + j] = y[j]
@@ -250,13 +246,41 @@ def advance(D, i0, S, F, W, eps_block, u_block, cur_out, row_of, Q, k0, stop):
         if moved:
             S[DIRTY] = 1
         S[AT_REST] = 1 if at_rest else 0
-        if S[DIRTY] == 1:
-            joint_row(S, F, W, Q[k])
-            k += 1
-            S[DIRTY] = 0
-        row_of[i] = k - 1
+        if every_row:
+            if S[DIRTY] == 1:
+                joint_row(S, F, W, Q[k])
+                k += 1
+                S[DIRTY] = 0
+            row_of[i] = k - 1
     stop[0] = DONE
     stop[1] = n
+    return k if every_row else flush_row(S, F, W, Q, k)
+
+
+@register_jitable
+def follow_sides(S, F, cnt):
+    """Each joint's backlash side follows the sign of its joint-side motion from the
+    current counts to ``cnt`` (unchanged where it does not move)."""
+    for j in range(6):
+        dq = 0.0
+        for c in range(6):
+            m = F[M + 6 * j + c]
+            if m != 0.0:
+                dq += m * np.float64(cnt[c] - S[CUR + c])
+        if dq > 0.0:
+            S[DIR + j] = 1
+        elif dq < 0.0:
+            S[DIR + j] = -1
+
+
+@register_jitable
+def flush_row(S, F, W, Q, k):
+    """The joint row of the current state into ``Q[k]`` where it is stale; returns the
+    number of rows of Q then used."""
+    if S[DIRTY] == 1:
+        joint_row(S, F, W, Q[k])
+        S[DIRTY] = 0
+        return k + 1
     return k
 
 
