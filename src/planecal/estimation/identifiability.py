@@ -304,7 +304,7 @@ DEFAULT_TOL = 1e-6  # |R_kk| / |R_00| below this: a combination of the columns b
 @dataclass(frozen=True)
 class Excluded:
     parameter: str
-    reason: str  # "no_effect" | "combination" | "scale"
+    reason: str  # "no_effect" | "combination" | "scale" | "held_out"
     combination: dict = field(default_factory=dict)  # base parameter -> coefficient (SI)
 
     def describe(self) -> str:
@@ -314,6 +314,9 @@ class Excluded:
             return (f"{self.parameter}: sets the arm's scale, which a distance sensor reads "
                     "only through its own gain: kept at robot.json's value (--free-scale "
                     "frees it where a length reference fixes the scale)")
+        if self.reason == "held_out":
+            return (f"{self.parameter}: its family predicts held-out samples worse than the "
+                    "model without it (estimation.selection)")
         mix = " ".join(f"{v:+.4g}*{k}" for k, v in self.combination.items())
         return f"{self.parameter}: a combination of others (acts as {mix})"
 
