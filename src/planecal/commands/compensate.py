@@ -10,7 +10,9 @@ the flange where the nominal model says the target is. CORRECTED: a tab-separate
 The calibrated region is where the calibration's samples are (--samples, or the sample
 files the result's provenance records): the convex hull of their flange positions grown by
 50 mm, and the range of each joint they visited grown by 2 deg. Targets outside it are
-refused (exit 2), with how far outside; --allow-outside writes them and says so. A target whose solve does
+refused (exit 2), with how far outside; --allow-outside writes them and says so. A result
+whose verdict found it no better than a simpler level (estimation.verdict) is refused
+without --force. A target whose solve does
 not converge fails the run (exit 1) and nothing is written.
 """
 from __future__ import annotations
@@ -40,7 +42,8 @@ def add_arguments(p):
                         "(J1's axis and zero, as the controller's programs; default) or the "
                         "calibration's cell frame (its planes')")
     p.add_argument("--force", action="store_true",
-                   help="replace --out even if it is not an earlier compensate output")
+                   help="replace --out even if it is not an earlier compensate output, and "
+                        "use a result whose verdict found it no better than a simpler level")
 
 
 def _region(args, doc, robot):
@@ -74,6 +77,7 @@ def files(args):
 def run(args) -> int:
     from pathlib import Path
 
+    from planecal.commands.controller_options import refuse_worse
     from planecal.estimation.compensate import compensate, load_calibrated
     from planecal.io.targets import read_targets, write_counts_table
     from planecal.present.compensation import compensated_document
@@ -83,6 +87,7 @@ def run(args) -> int:
     out = Path(args.out)  # checked before the run (``files``)
     robot = load_robot(args.robot)
     model, doc = load_calibrated(robot, args.params)
+    refuse_worse(doc, args.params, args.force)
     region, sample_paths = _region(args, doc, robot)
     targets = read_targets(args.targets, robot)
     comp = compensate(model, targets, region, frame=args.frame)

@@ -7,8 +7,9 @@ default, but for a UR) the new encoder offsets as the integer counts the FD11 ta
 the rounding residual and the change from the current values (robot.json's, or
 ``--current-qe0``); ``offsets`` (any robot) the joint offsets in radians with their sign;
 ``ur`` the UR ROS driver's kinematics file. Only encoder offsets reach ``fd11`` and
-``offsets``; a result that fitted delta1 or delta6 freely is refused (exit 2), and one made
-for another robot than the scene's. A whole-model result's geometry, base frame and
+``offsets``; a result that fitted delta1 or delta6 freely is refused (exit 2), one made
+for another robot than the scene's, and one whose verdict found it no better than a simpler
+level (``estimation.verdict``; ``--force`` writes it). A whole-model result's geometry, base frame and
 compliance: ``planecal compensate`` corrects a program's targets with them; the calibrated
 URDF: ``planecal urdf --params RESULT.json``. ``--out`` goes through the output guard
 (``--force`` to replace a file planecal did not write).
@@ -44,6 +45,7 @@ def files(args):
 
 
 def run(args) -> int:
+    from planecal.commands.controller_options import refuse_worse
     from planecal.formats.base import read_json
     from planecal.io.params import load_params
     from planecal.model.scene import load_scene
@@ -54,6 +56,7 @@ def run(args) -> int:
     qe0 = current_qe0(args.current_qe0)
     scene = load_scene(args.scene)
     doc = read_json(args.result, "calibration result")
+    refuse_worse(doc, args.result, args.force)
     params = load_params(args.result, scene.robot)
     sha, against = result_link(hist, args.result)
     req = ControllerFile(args.format, out, qe0, str(args.result), sha)

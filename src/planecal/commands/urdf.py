@@ -1,11 +1,12 @@
-"""planecal urdf [--params RESULT.json] [--scene S] --out FILE.urdf [--no-meshes]
+"""planecal urdf [--params RESULT.json] [--scene S] --out FILE.urdf [--no-meshes] [--force]
 [--mesh-prefix PREFIX]
 
 The robot as URDF: base link ``base``, six revolute joints whose values are planecal's
 joint angles q, ``flange`` and the sensor frame ``laser`` (fixed children), robot.json's
 masses as the links' inertials. Without --params: the nominal model (zero joint offsets,
 the scene's nominal sensor pose); with --params (a calibration result or parameter file
-made for the scene's robot, else refused): the calibrated model, its joint offsets,
+made for the scene's robot, else refused; one whose verdict found it no better than a
+simpler level is refused without --force): the calibrated model, its joint offsets,
 joint geometry and base frame in the joint origins, and its sensor pose. What a URDF
 cannot hold (joint compliance; level 3's gear harmonics, backlash and laser linearity)
 is left out, said in one line on stderr. Visual and collision meshes (planecal.model.geometry's, as
@@ -29,6 +30,10 @@ def add_arguments(p):
     p.add_argument("--out", required=True, metavar="FILE.urdf", help="URDF file to write")
     p.add_argument("--no-meshes", action="store_true",
                    help="write the kinematic tree only (no visual or collision shapes)")
+    p.add_argument("--force", action="store_true",
+                   help="write a result whose verdict found it no better than a simpler level "
+                        "(estimation.verdict), and replace --out even if planecal did not "
+                        "write it")
     p.add_argument("--mesh-prefix", default=None, metavar="PREFIX",
                    help="mesh file names in the URDF are PREFIX + name (default: the relative "
                         "path FILE_meshes/name)")
@@ -80,6 +85,9 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     out = Path(args.out)  # checked before the run (``files``)
     if args.params:
+        from planecal.commands.controller_options import refuse_worse
+        from planecal.formats.base import read_json
+        refuse_worse(read_json(args.params, "calibration result"), args.params, args.force)
         params = load_params(args.params, scene.robot)
         source = f"calibrated: {args.params}"
     else:

@@ -259,19 +259,27 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
         # first evaluation
         at_initial = predict_joints_with_jacobian(robot, probe.joints, initial, pidx, layout)
 
-        def fit(left_out=()):
-            _, bs = base_set(robot, probe.qe, initial, pidx, st, options, probe.joints,
+        def fit(left_out=(), opts=options):
+            _, bs = base_set(robot, probe.qe, initial, pidx, st, opts, probe.joints,
                              references=tuple(references), jacobian=at_initial[1],
                              left_out=left_out)
-            return Calibration(st, solve(replace(probe, free=bs.mask(layout),
+            return Calibration(st, solve(replace(probe, free=bs.mask(layout), options=opts,
                                                  at_initial=at_initial)), bs)
         cal = fit()
         if not (st.select and st.free is None and whole_model(st.level)):
             return cal
         sel = select(cal.result, st.label, st.geometry_prior is not None)
-        if sel.left_out:
-            gone = {f for f, _, _ in sel.left_out}
-            cal = fit(tuple(n for n in layout.names if family_of(layout, n) in gone))
+        gone = {f for f, _, _ in sel.left_out}
+        k = sel.chosen.widen
+        dropped = st.geometry_prior is not None and not sel.chosen.geometry_prior
+        if gone or k != 1.0 or dropped:
+            # the families left out; the geometry prior widened, or dropped where a simpler
+            # level's model (which has none) predicted the held-out samples better
+            geometry = {n for n, _ in geometry_prior(layout, 1.0, 1.0)}
+            opts = replace(options, prior=tuple(
+                (n, sd * k) if n in geometry else (n, sd) for n, sd in options.prior
+                if not (dropped and n in geometry)))
+            cal = fit(tuple(n for n in layout.names if family_of(layout, n) in gone), opts)
         return replace(cal, selection=sel)
     except ValueError as e:
         raise InputError(str(e)) from None

@@ -307,19 +307,6 @@ class Excluded:
     reason: str  # "no_effect" | "combination" | "scale" | "held_out"
     combination: dict = field(default_factory=dict)  # base parameter -> coefficient (SI)
 
-    def describe(self) -> str:
-        if self.reason == "no_effect":
-            return f"{self.parameter}: no effect on any distance of these samples"
-        if self.reason == "scale":
-            return (f"{self.parameter}: sets the arm's scale, which a distance sensor reads "
-                    "only through its own gain: kept at robot.json's value (--free-scale "
-                    "frees it where a length reference fixes the scale)")
-        if self.reason == "held_out":
-            return (f"{self.parameter}: its family predicts held-out samples worse than the "
-                    "model without it (estimation.selection)")
-        mix = " ".join(f"{v:+.4g}*{k}" for k, v in self.combination.items())
-        return f"{self.parameter}: a combination of others (acts as {mix})"
-
 
 @dataclass(frozen=True)
 class BaseSet:

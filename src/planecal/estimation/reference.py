@@ -35,11 +35,12 @@ twin's true model, rms over the samples' poses): thesis_final offsets 0.66-1.05 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import hashlib
+from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.linalg
 
+from planecal.estimation.evidence import evidence_step
 from planecal.estimation.fit import FitPrior
 from planecal.estimation.identifiability import DEFAULT_TOL, select_base
 from planecal.estimation.noise import repeatability_sigma, sample_sigma_m, sample_variance
@@ -53,7 +54,6 @@ MAX_POSES = 100  # the tool point is judged at up to this many of the samples' p
 EVIDENCE_PASSES = 60  # Gauss-Newton with MacKay's fixed point: each pass one Jacobian
 SETTLED = 1e-2  # both scales within 1 % and the step within 1 % of its std
 LASER_NOISE_MM = 0.001  # a reading's noise in the noise model (the ZS-LD80's resolution)
-SCALE_RANGE = (1e-2, 1e2)  # the class prior's scale is kept within these
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,9 +73,19 @@ class Reference:
     q: np.ndarray
     side: np.ndarray | None
     standoff_m: float
-    scale: float
+    scale: dict  # the class prior's scale per kind of term (geometry, gear, ...)
     noise_factor: float
     gamma: float  # how many of the class terms the samples determine (MacKay's gamma)
+    system: tuple = ()  # the whitened linear system at the mean (``widened``)
+
+    def widened(self, k: float) -> "Reference":
+        """The same reference with every class prior k times wider (to first order about
+        its mean): what its figures would be were the robot's errors larger than the
+        samples' evidence puts them. Where a conclusion holds in both, the samples carry
+        it, not the prior's scale."""
+        X, y, std, x, G, g, s2, f, groups = self.system
+        dx, cov, *_ = evidence_step(X, y, std, x, G, g, np.asarray(s2) * k * k, f, groups)
+        return replace(self, cov=cov, points=self.points + np.einsum("nik,k->ni", self.T, dx))
 
     def error(self, params) -> tuple[np.ndarray, np.ndarray]:
         """A model's (``params``) error at the tool: the mean (M, 3) [m], its tool points
@@ -105,7 +115,31 @@ def pose_subset(n: int, k: int = MAX_POSES) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(n, k)).round().astype(int))
 
 
+_BUILT: dict = {}  # the last few references, by their samples (every level of one run shares one)
+
+
+def _key(res, laser_noise_mm: float) -> str:
+    pb = res.problem
+    h = hashlib.sha256()
+    for a in (pb.qe, pb.d_m, pb.plate, res.used, res.initial.to_vector(res.layout),
+              np.zeros(0) if pb.direction is None else pb.direction):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(repr((pb.robot.digest, pb.references, laser_noise_mm)).encode())
+    return h.hexdigest()
+
+
 def build(res, laser_noise_mm: float = LASER_NOISE_MM) -> Reference:
+    """``reference`` of a fit's samples, kept for the next fit of the same samples (the
+    levels a validation or a verdict compares)."""
+    key = _key(res, laser_noise_mm)
+    if key not in _BUILT:
+        if len(_BUILT) >= 4:
+            _BUILT.pop(next(iter(_BUILT)))
+        _BUILT[key] = reference(res, laser_noise_mm)
+    return _BUILT[key]
+
+
+def reference(res, laser_noise_mm: float = LASER_NOISE_MM) -> Reference:
     """The reference (module docstring) on the samples of a fit ``res`` (``fit.Result``),
     found from the fit's initial values (the same reference for every level calibrated
     from them; from a level-2 fit's solution, whose weakly determined geometry can sit
@@ -120,7 +154,9 @@ def build(res, laser_noise_mm: float = LASER_NOISE_MM) -> Reference:
     joints = joints_of_counts(robot, qe, direction, True)
     params = res.initial
     _, J = predict_joints_with_jacobian(robot, joints, params, plate, W)
-    cols = select_base(J, W, W.free_mask(None), DEFAULT_TOL).mask(W)
+    # every joint's compliance, not only the level's J2 and J3 (a UR5's wrist yields too)
+    candidates = W.free_mask(None) | W.mask(W.group("compliance").names)
+    cols = select_base(J, W, candidates, DEFAULT_TOL).mask(W)
     names = W.names_of(cols)
     offsets = W.mask(W.group("joint_offsets").names)
     sd = np.sqrt(sample_variance(robot, J[:, offsets], repeatability_sigma(robot),
@@ -128,16 +164,18 @@ def build(res, laser_noise_mm: float = LASER_NOISE_MM) -> Reference:
     tau = np.abs(joint_torques(robot, joints.q)).max(0)
     std = np.array([class_std(W, n, tau) for n in names])
     x_all = params.to_vector(W)
-    s2, f = 1.0, 1.0
+    groups = _groups(W, names)
+    s2, f = np.ones(groups.max() + 1), 1.0
     for _ in range(EVIDENCE_PASSES):
         d, J = predict_joints_with_jacobian(robot, joints, params, plate, W, cols)
         G, g = (FitPrior.of(W, x_all, cols, pb.references, 1.0).rows(x_all[cols], len(names))
                 if pb.references else (np.zeros((0, len(names))), np.zeros(0)))
-        step, cov, s2_new, f_new, gamma = _evidence(J / sd[:, None], (d_m - d) / sd, std,
-                                                    x_all[cols], G, g, s2, f)
+        step, cov, s2_new, f_new, gamma = evidence_step(J / sd[:, None], (d_m - d) / sd, std,
+                                                        x_all[cols], G, g, s2, f, groups)
         x_all[cols] += step
         params = params.with_vector(x_all, W)
-        settled = (abs(np.log(s2_new / s2)) < SETTLED and abs(np.log(f_new / f)) < SETTLED
+        settled = (np.all(np.abs(np.log(s2_new / s2)) < SETTLED)
+                   and abs(np.log(f_new / f)) < SETTLED
                    and np.all(np.abs(step) <= SETTLED * np.sqrt(np.diag(cov))))
         s2, f = s2_new, f_new
         if settled:
@@ -145,38 +183,19 @@ def build(res, laser_noise_mm: float = LASER_NOISE_MM) -> Reference:
     poses = pose_subset(len(qe))
     q, side, h = joints.q[poses], joints.side[poses], standoff_m(params)
     T = tool_jacobian(robot, q, side, W, params, names, h)
+    kinds = [W.group(W.param(n).group).kind for n in names]
+    scales = {k: float(np.sqrt(s2[groups[kinds.index(k)]])) for k in dict.fromkeys(kinds)
+              if np.isfinite(std[kinds.index(k)])}
+    system = (J / sd[:, None], (d_m - d) / sd, std, x_all[cols], G, g, s2, f, groups)
     return Reference(robot, W, tuple(names), params, cov, T,
                      tool_point(robot, q, params, side, h), poses, q, side, h,
-                     float(np.sqrt(s2)), f, gamma)
+                     scales, f, gamma, system)
 
 
-def _evidence(X, y, std, x, G, g, s2: float, f: float):
-    """One step of the posterior of y = X dx + e (e ~ N(0, f), whitened rows), the known
-    lengths' rows G dx + g ~ N(0, 1) and a prior x_k + dx_k ~ N(0, s2 std_k^2) on every term
-    with a finite class ``std`` (the others free): (the posterior mean's dx, its
-    covariance, and s2, f updated towards the evidence's maximum (MacKay's fixed point),
-    gamma: how many class terms the samples determine)."""
-    pen = np.isfinite(std)
-    Pi = np.where(pen, 1.0 / np.where(pen, std, 1.0) ** 2, 0.0)
-    m = np.where(pen, -x, 0.0)
-    A = X.T @ X / f + G.T @ G + np.diag(Pi / s2)
-    C = _inverse(A)
-    dx = C @ (X.T @ y / f - G.T @ g + Pi / s2 * m)
-    gamma = float(np.sum(pen * (1.0 - np.diag(C) * Pi / s2)))
-    s2_new = float(np.sum(Pi * (dx - m) ** 2) / max(gamma, 1e-3))
-    s2_new = float(np.clip(s2_new, SCALE_RANGE[0] ** 2, SCALE_RANGE[1] ** 2))
-    e = y - X @ dx
-    f_new = max(float(e @ e) / max(len(y) - int((~pen).sum()) - gamma, 1.0), 1e-6)
-    return dx, C, s2_new, f_new, gamma
-
-
-def _inverse(A: np.ndarray) -> np.ndarray:
-    """The inverse of a symmetric positive definite A, column-scaled (its terms' units
-    differ by orders of magnitude); a pseudo-inverse where it is singular."""
-    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
-    As = A / np.outer(d, d)
-    try:
-        Ci = scipy.linalg.cho_solve(scipy.linalg.cho_factor(As), np.eye(len(A)))
-    except np.linalg.LinAlgError:
-        Ci = np.linalg.pinv(As, rcond=1e-12, hermitian=True)
-    return Ci / np.outer(d, d)
+def _groups(layout: ParamLayout, names) -> np.ndarray:
+    """Each name's prior group: its parameter group's kind (the joint geometry, the base
+    frame, the compliance, the gear harmonics, the backlash, the laser: each class has its
+    own scale)."""
+    kinds = [layout.group(layout.param(n).group).kind for n in names]
+    order = list(dict.fromkeys(kinds))
+    return np.array([order.index(k) for k in kinds], int)

@@ -37,9 +37,6 @@ FAMILIES = ("geometry", "compliance", "gear", "backlash", "laser")  # in the ord
 _FAMILY_OF_KIND = {"joint_geometry": "geometry", "base_frame": "geometry",
                    "compliance": "compliance", "gear": "gear", "backlash": "backlash",
                    "laser": "laser"}
-FAMILY_TEXT = {"geometry": "the joint geometry", "compliance": "the joint compliance",
-               "gear": "the gear harmonics", "backlash": "the backlash",
-               "laser": "the laser's linearity"}
 # the simpler levels a result is compared with: (label, families, geometry prior kept)
 SIMPLER = (("offsets", (), False), ("full", ("geometry",), False),
            ("full + compliance", ("geometry", "compliance"), False))
@@ -60,6 +57,7 @@ class Candidate:
     held_out_rms_mm: float
     fit_rms_mm: float
     geometry_prior: bool = False
+    widen: float = 1.0  # the geometry prior's width over the level's
 
 
 @dataclass(frozen=True)
@@ -104,15 +102,19 @@ class HeldOut:
         self.grams = [self.Xa[f].T @ self.Xa[f] for f in self.folds]
         self.gram = sum(self.grams)
 
-    def residuals(self, cols: np.ndarray, prior_rows: np.ndarray):
+    def residuals(self, cols: np.ndarray, prior_rows: np.ndarray, widen=None):
         """(held-out residuals (m,), in-sample residuals (m,) [m], the model's correction
         from the fit's solution over its free parameters) of the model freeing the columns
         ``cols`` (bool over the fit's free parameters; the others reset to their initial
-        values) with the prior rows ``prior_rows`` (bool), fitted to first order."""
+        values) with the prior rows ``prior_rows`` (bool), fitted to first order;
+        ``widen`` (one factor per prior row, or None) divides those rows' weights: their
+        priors that much wider."""
         lin, a = self.lin, self.a
         shift = np.where(cols, 0.0, lin.x0 - lin.x)
         r = lin.r + lin.X @ shift
-        P, rp = lin.P[prior_rows], lin.rp[prior_rows] + lin.P[prior_rows] @ shift
+        k = np.ones(len(lin.rp)) if widen is None else 1.0 / np.asarray(widen, float)
+        P = (lin.P * k[:, None])[prior_rows]
+        rp = (lin.rp * k)[prior_rows] + P @ shift
         idx = np.flatnonzero(cols)
         X, Xa, Pc = lin.X[:, idx], self.Xa[:, idx], P[:, idx]
         A = self.gram[np.ix_(idx, idx)] + Pc.T @ Pc
@@ -147,6 +149,19 @@ def _rms_mm(r: np.ndarray) -> float:
     return float(np.sqrt(np.mean(r ** 2)) * 1e3)
 
 
+SIGNIFICANCE = 1.0  # a model predicts better only by this many standard errors
+WIDEN = (3.0, 10.0)  # the geometry prior's widths tried beside the level's
+
+
+def better(held: np.ndarray, than: np.ndarray) -> bool:
+    """Whether held-out residuals ``held`` are significantly smaller than ``than`` (the
+    same samples): the mean of the paired differences of their squares below zero by
+    ``SIGNIFICANCE`` standard errors. A few samples far from the others (poses the rest
+    barely visit) dominate a held-out rms; a difference they alone make is noise."""
+    diff = than ** 2 - held ** 2
+    return bool(diff.mean() > SIGNIFICANCE * diff.std(ddof=1) / np.sqrt(len(diff)))
+
+
 def select(res, asked: str, geometry_prior: bool, folds: int = FOLDS) -> Selection:
     """The selection (module docstring) for a fit ``res`` (``fit.Result``) of the level
     labelled ``asked``, whose geometry prior (``geometry_prior``: level 3's, or
@@ -158,31 +173,44 @@ def select(res, asked: str, geometry_prior: bool, folds: int = FOLDS) -> Selecti
     present = [f for f in FAMILIES if (fam == f).any()]
     ho = HeldOut(lin, folds)
 
-    def evaluate(label, families, prior_geometry):
+    def evaluate(label, families, prior_geometry, widen=1.0):
         cols = np.isin(fam, ("",) + tuple(families))
         rows = np.isin(pfam, ("",) + tuple(families))
         if not prior_geometry:
             rows &= pfam != "geometry"
-        held, fit, _ = ho.residuals(cols, rows)
+        held, fit, _ = ho.residuals(cols, rows, np.where(pfam == "geometry", widen, 1.0))
         return Candidate(label, tuple(families), _rms_mm(held), _rms_mm(fit),
-                         prior_geometry and "geometry" in families)
+                         prior_geometry and "geometry" in families), held
 
-    out = [evaluate(label, fams, False) for label, fams, _ in SIMPLER
-           if set(fams) < set(present) or (set(fams) <= set(present) and geometry_prior)]
-    kept = list(present)
-    current = evaluate(asked, kept, geometry_prior)
-    out.append(current)
+    simpler = [evaluate(label, fams, False) for label, fams, _ in SIMPLER
+               if set(fams) < set(present) or (set(fams) <= set(present) and geometry_prior)]
+    current, held = evaluate(asked, present, geometry_prior)
+    out = [c for c, _ in simpler] + [current]
     left = []
     for f in reversed(FAMILIES):
-        if f not in kept:
+        if f not in current.families:
             continue
-        trial = [k for k in kept if k != f]
-        gone = [g for g in FAMILIES if g in present and g not in trial]
-        c = evaluate(f"{asked} without {', '.join(gone)}", trial, geometry_prior)
+        trial = [k for k in current.families if k != f]
+        gone = [g for g in present if g not in trial]
+        c, h = evaluate(f"{asked} without {', '.join(gone)}", trial, geometry_prior)
         out.append(c)
-        if c.held_out_rms_mm < current.held_out_rms_mm:
+        if better(h, held):
             left.append((f, current.held_out_rms_mm, c.held_out_rms_mm))
-            kept, current = trial, c
-    chosen = Candidate(asked, tuple(kept), current.held_out_rms_mm, current.fit_rms_mm,
-                       current.geometry_prior)
+            current, held = c, h
+    widen = 1.0
+    if geometry_prior and "geometry" in current.families:
+        for k in WIDEN:
+            c, h = evaluate(f"{current.label}, geometry prior x{k:g}", current.families, True, k)
+            out.append(c)
+            if better(h, held):
+                current, held, widen = c, h, k
+    # never worse than a simpler level: its model where that predicts significantly better
+    best = min(((c, h) for c, h in simpler if better(h, held)),
+               key=lambda ch: ch[0].held_out_rms_mm, default=None)
+    if best is not None:
+        left.extend((f, current.held_out_rms_mm, best[0].held_out_rms_mm)
+                    for f in current.families if f not in best[0].families)
+        current, widen = best[0], 1.0
+    chosen = Candidate(asked, current.families, current.held_out_rms_mm, current.fit_rms_mm,
+                       current.geometry_prior, widen)
     return Selection(asked, tuple(out), chosen, tuple(left), len(ho.folds))

@@ -31,11 +31,12 @@ import numpy as np
 from planecal.estimation.calibrate import CalibrationSettings, calibrate
 from planecal.estimation.fit import linearized
 from planecal.estimation.reference import Reference, build
-from planecal.estimation.selection import SIMPLER, HeldOut, family_of
+from planecal.estimation.selection import SIMPLER, HeldOut, better, family_of
 
 BAND = (0.1, 0.9)
 NEAR = 5  # the poses the AP figure is judged at: the 5 nearest the samples' medoid
 GOOD_NOISE = 2.0  # the reference's residuals within this x the noise model: the band holds
+P_WORSE = 0.1  # a calibration worse than a simpler level with this probability is refused
 WHERE = ("the laser's beam point at its nominal standoff, in the robot's frame: rms over the "
          "calibration samples' poses; the band: the worst of the 5 poses nearest their "
          "middle (validate's AP)")
@@ -44,10 +45,15 @@ WHERE = ("the laser's beam point at its nominal standoff, in the robot's frame: 
 @dataclass(frozen=True)
 class Comparison:
     """A simpler level on the same samples: its expected tool-point error and held-out
-    residual rms [mm]."""
+    residual rms [mm], the probability that the calibration's AP near the samples is above
+    this level's (joint draws of the reference) and whether this level predicts the
+    held-out samples significantly better (``selection.better``)."""
     level: str
     tool_mm: float
     held_out_mm: float
+    p_worse: float = 0.0
+    held_out_better: bool = False
+    p_worse_rms: float = 0.0  # the same of the rms over the samples' poses
 
 
 @dataclass(frozen=True)
@@ -61,15 +67,13 @@ class Verdict:
     comparisons: tuple[Comparison, ...]
     worse_than: tuple[str, ...]
     reasons: tuple[str, ...]
-    scale: float
+    scale: dict  # the reference's class scale per kind of term
     noise_factor: float
-    band_rms_mm: tuple[float, float] = (0.0, 0.0)
     where: str = WHERE
 
     def to_dict(self) -> dict:
         out = asdict(self)
         out["band_mm"] = list(self.band_mm)
-        out["band_rms_mm"] = list(self.band_rms_mm)
         out["comparisons"] = [asdict(c) for c in self.comparisons]
         out["worse_than"] = list(self.worse_than)
         out["reasons"] = list(self.reasons)
@@ -82,27 +86,35 @@ def _near(points: np.ndarray, k: int = NEAR) -> np.ndarray:
     return np.argsort(D[int(np.argmin(D.sum(1)))])[:k]
 
 
-def _band(ref: Reference, params) -> tuple[tuple, tuple]:
-    """(AP band near the samples' middle, band of the rms over the poses) [mm]."""
-    e = np.linalg.norm(ref.draws(params), axis=-1)  # (n, M)
-    ap = e[:, _near(ref.points)].max(1)
-    rms = np.sqrt(np.mean(e ** 2, 1))
-    q = lambda v: tuple(float(x) * 1e3 for x in np.quantile(v, BAND))  # noqa: E731
-    return q(ap), q(rms)
+def _draws(ref: Reference, params) -> tuple[np.ndarray, np.ndarray]:
+    """Draws of a model's error at the tool [m]: the AP figure near the samples (the worst
+    of the ``NEAR`` poses nearest their medoid) and the rms over the poses (the same draws
+    for every model: a fixed seed)."""
+    e = np.linalg.norm(ref.draws(params), axis=-1)
+    return e[:, _near(ref.points)].max(1), np.sqrt(np.mean(e ** 2, 1))
 
 
-def _held_out_mm(res) -> float:
+def _held_out(res) -> np.ndarray:
+    """A fit's held-out residuals (``selection.HeldOut``: the same folds for every fit of
+    these samples)."""
     lin = linearized(res)
-    held = HeldOut(lin).residuals(np.ones(len(lin.names), bool), np.ones(len(lin.rp), bool))[0]
-    return float(np.sqrt(np.mean(held ** 2)) * 1e3)
+    return HeldOut(lin).residuals(np.ones(len(lin.names), bool), np.ones(len(lin.rp), bool))[0]
+
+
+def _mm(r: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(r ** 2)) * 1e3)
 
 
 def simpler_levels(cal) -> list[CalibrationSettings]:
     """The simpler levels a calibration is judged against (``selection.SIMPLER``, as those
     levels calibrate: no geometry prior), with its fit options."""
     res, st = cal.result, cal.settings
-    present = {family_of(res.layout, n) for n in res.layout.names_of(res.free)} - {None}
-    prior = st.geometry_prior is not None
+    free = res.layout.names_of(res.free)
+    present = {family_of(res.layout, n) for n in free} - {None}
+    # the fit's geometry prior (level 3's, --geometry-prior; not where the selection chose
+    # a simpler level's model): the same families without it are a simpler level's model
+    prior = any(n in free and family_of(res.layout, n) == "geometry"
+                for n, _ in res.problem.options.prior)
     return [CalibrationSettings(level="offsets" if not fams else "full",
                                 compliance="compliance" in fams, options=st.options,
                                 base_tolerance=st.base_tolerance)
@@ -115,20 +127,28 @@ def assess(cal) -> Verdict:
     res, st = cal.result, cal.settings
     pb = res.problem
     ref = build(res)
-    tool, held = ref.rms_mm(res.params), _held_out_mm(res)
+    tool, held = ref.rms_mm(res.params), _held_out(res)
+    ap, rms = _draws(ref, res.params)
     comps = []
     for s in simpler_levels(cal):
         other = calibrate(pb.robot, pb.qe, pb.d_m, pb.initial, pb.plate, s, pb.direction,
                           pb.references).result
-        comps.append(Comparison(s.label, ref.rms_mm(other.params), _held_out_mm(other)))
-    worse = tuple(c.level for c in comps if tool >= c.tool_mm or held > c.held_out_mm)
-    band, band_rms = _band(ref, res.params)
+        h = _held_out(other)
+        ap_s, rms_s = _draws(ref, other.params)
+        comps.append(Comparison(s.label, ref.rms_mm(other.params), _mm(h),
+                                float(np.mean(ap > ap_s)), better(h, held),
+                                float(np.mean(rms > rms_s))))
+    worse = tuple(c.level for c in comps
+                  if c.p_worse > P_WORSE or c.held_out_better or tool >= c.tool_mm)
+    band = tuple(float(x) * 1e3 for x in np.quantile(ap, BAND))
     label = st.label
     reasons = []
     for c in comps:
         if c.level in worse:
-            what = (f"at the tool {tool:.3g} mm against {c.tool_mm:.3g}" if tool >= c.tool_mm
-                    else f"held-out residuals {held:.4f} mm against {c.held_out_mm:.4f}")
+            what = (f"held-out residuals {_mm(held):.4f} mm against {c.held_out_mm:.4f}"
+                    if c.held_out_better else
+                    f"at the tool {tool:.3g} mm against {c.tool_mm:.3g} expected, worse with "
+                    f"probability {c.p_worse:.2f}")
             reasons.append(f"{label} is no better than {c.level} ({what})")
     if worse:
         grade = "worse"
@@ -140,17 +160,21 @@ def assess(cal) -> Verdict:
                        f"level 3's whole model leaves residuals {np.sqrt(ref.noise_factor):.1f}x "
                        "the noise model's: errors it does not describe, which the band "
                        "does not hold")
-    return Verdict(label, grade, tool, band, held, res.rms_mm(), tuple(comps), worse,
-                   tuple(reasons), ref.scale, ref.noise_factor, band_rms)
+    return Verdict(label, grade, tool, band, _mm(held), res.rms_mm(), tuple(comps), worse,
+                   tuple(reasons), ref.scale, ref.noise_factor)
 
 
 def refusal(doc: dict) -> str | None:
     """Why a result document must not reach a controller file, or None: its verdict found
-    it worse than a simpler level (``assess``). The one check every writer of a controller
-    file (export, urdf, compensate) calls; --force overrides it."""
+    it no better than a simpler level (``assess``). The one check every writer of a
+    controller file (export, urdf, compensate) makes; --force overrides it."""
     v = doc.get("verdict") if isinstance(doc, dict) else None
     if not isinstance(v, dict) or v.get("grade") != "worse":
         return None
-    why = "; ".join(v.get("reasons") or []) or "worse than a simpler level"
-    return (f"its calibration is worse than a simpler level: {why}; recalibrate at that "
-            "level, or --force to write it anyway")
+    why = "; ".join(v.get("reasons") or []) or "no better than a simpler level"
+    comps = [c for c in v.get("comparisons") or [] if isinstance(c, dict) and "tool_mm" in c]
+    best = min(comps, key=lambda c: c["tool_mm"])["level"] if comps else None
+    flags = {"offsets": "--level offsets", "full": "--level full",
+             "full + compliance": "--level full --compliance"}.get(best, "a simpler level")
+    return (f"refused by its verdict: {why} (estimated from its samples); calibrate with "
+            f"{flags}, or --force writes it anyway")

@@ -141,7 +141,8 @@ def verdict_row(verdict) -> dict:
     """A level's verdict beside its validated figures: its estimate at the tool, the band of
     AP near the samples, its grade and the simpler levels it is no better than."""
     return {"predicted_tool_mm": verdict.tool_mm, "predicted_band_mm": list(verdict.band_mm),
-            "verdict": verdict.grade, "worse_than": list(verdict.worse_than)}
+            "verdict": verdict.grade, "worse_than": list(verdict.worse_than),
+            "comparisons": verdict.to_dict()["comparisons"]}
 
 
 TRUTH_KEYS = ("truth_seed", *FIGURE_KEYS, "ap_tool_ratio", "gauge_error_before_mm",
