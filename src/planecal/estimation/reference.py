@@ -115,7 +115,7 @@ def pose_subset(n: int, k: int = MAX_POSES) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(n, k)).round().astype(int))
 
 
-_BUILT: dict = {}  # the last few references, by their samples (every level of one run shares one)
+BUILT: dict = {}  # the last few references, by their samples (every level of one run shares one)
 
 
 def _key(res, laser_noise_mm: float) -> str:
@@ -132,11 +132,11 @@ def build(res, laser_noise_mm: float = LASER_NOISE_MM) -> Reference:
     """``reference`` of a fit's samples, kept for the next fit of the same samples (the
     levels a validation or a verdict compares)."""
     key = _key(res, laser_noise_mm)
-    if key not in _BUILT:
-        if len(_BUILT) >= 4:
-            _BUILT.pop(next(iter(_BUILT)))
-        _BUILT[key] = reference(res, laser_noise_mm)
-    return _BUILT[key]
+    if key not in BUILT:
+        if len(BUILT) >= 4:
+            BUILT.pop(next(iter(BUILT)))
+        BUILT[key] = reference(res, laser_noise_mm)
+    return BUILT[key]
 
 
 def reference(res, laser_noise_mm: float = LASER_NOISE_MM) -> Reference:

@@ -36,7 +36,14 @@ from planecal.estimation.selection import SIMPLER, HeldOut, better, family_of
 BAND = (0.1, 0.9)
 NEAR = 5  # the poses the AP figure is judged at: the 5 nearest the samples' medoid
 GOOD_NOISE = 2.0  # the reference's residuals within this x the noise model: the band holds
-P_WORSE = 0.1  # a calibration worse than a simpler level with this probability is refused
+# a calibration is refused where a simpler level predicts the held-out samples significantly
+# better, where its expected error at the tool is not below TOOL_MARGIN x the simpler
+# level's, or where its AP near the samples is larger with probability above P_WORSE.
+# Chosen on validate's truths 100-119 (thesis_final and ur5_table, levels full and
+# nonkinematic): the reference is not sharp enough to tell levels within 10 % apart, and
+# on the UR5's one small plate it is sometimes confidently wrong (docs/ERRORS.md)
+TOOL_MARGIN = 0.9
+P_WORSE = 0.3
 WHERE = ("the laser's beam point at its nominal standoff, in the robot's frame: rms over the "
          "calibration samples' poses; the band: the worst of the 5 poses nearest their "
          "middle (validate's AP)")
@@ -138,8 +145,8 @@ def assess(cal) -> Verdict:
         comps.append(Comparison(s.label, ref.rms_mm(other.params), _mm(h),
                                 float(np.mean(ap > ap_s)), better(h, held),
                                 float(np.mean(rms > rms_s))))
-    worse = tuple(c.level for c in comps
-                  if c.p_worse > P_WORSE or c.held_out_better or tool >= c.tool_mm)
+    worse = tuple(c.level for c in comps if c.held_out_better or tool >= TOOL_MARGIN * c.tool_mm
+                  or c.p_worse > P_WORSE)
     band = tuple(float(x) * 1e3 for x in np.quantile(ap, BAND))
     label = st.label
     reasons = []
@@ -147,8 +154,8 @@ def assess(cal) -> Verdict:
         if c.level in worse:
             what = (f"held-out residuals {_mm(held):.4f} mm against {c.held_out_mm:.4f}"
                     if c.held_out_better else
-                    f"at the tool {tool:.3g} mm against {c.tool_mm:.3g} expected, worse with "
-                    f"probability {c.p_worse:.2f}")
+                    f"at the tool {tool:.3g} mm against {c.tool_mm:.3g} expected; AP near the "
+                    f"samples larger with probability {c.p_worse:.2f}")
             reasons.append(f"{label} is no better than {c.level} ({what})")
     if worse:
         grade = "worse"
