@@ -180,18 +180,20 @@ def test_no_level_exports_a_result_validate_finds_worse_than_offsets(scene_name,
 def test_level3_without_directions_predicts_fresh_samples_no_worse_than_level2():
     """A world planecal's error model does not draw (``off_model``: UR5-class geometry,
     gear terms at orders robot.json does not name, a joint-coupled deformation; no
-    direction column): level 3 with every family (the selection off, as before issue 31)
-    predicts fresh samples of the world 1.3x worse than level 2; with the families and the
-    geometry prior's width chosen by held-out prediction, no worse."""
+    direction column): level 3 with every family and its geometry prior (the selection
+    off, as before issue 31) predicts fresh samples of the world 1.2x worse than level 2;
+    with the selection, which takes level 2's model where that predicts the held-out
+    samples significantly better and puts the tool no further off, no worse (the same
+    model, fitted in level 3's layout: to its rounding)."""
     scene = load_scene("three_plates")
-    world = OffModelWorld(scene, 4)
-    qe, d, plate = world.samples(4)
-    qf, df, pf = world.samples(1004)
+    world = OffModelWorld(scene, 6)
+    qe, d, plate = world.samples(6)
+    qf, df, pf = world.samples(1006)
 
     def predicts(st):
         cal = calibrate(scene.robot, qe, d, nominal_params(scene), plate, st, None,
                         scene.references)
         return float(np.sqrt(np.mean((predict(scene.robot, qf, cal.params, pf) - df) ** 2)))
     level2 = predicts(CalibrationSettings(level="full"))
-    assert predicts(CalibrationSettings(level="nonkinematic", select=False)) > 1.2 * level2
-    assert predicts(CalibrationSettings(level="nonkinematic")) <= level2
+    assert predicts(CalibrationSettings(level="nonkinematic", select=False)) > 1.15 * level2
+    assert predicts(CalibrationSettings(level="nonkinematic")) <= level2 * (1 + 1e-6)

@@ -279,7 +279,17 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
             opts = replace(options, prior=tuple(
                 (n, sd * k) if n in geometry else (n, sd) for n, sd in options.prior
                 if not (dropped and n in geometry)))
-            cal = fit(tuple(n for n in layout.names if family_of(layout, n) in gone), opts)
+            other = fit(tuple(n for n in layout.names if family_of(layout, n) in gone), opts)
+            # held-out distances do not see the tool: the change stands only where the
+            # reference model puts the tool no further off (``estimation.reference``)
+            from planecal.estimation.reference import build
+            ref = build(cal.result)
+            before, after = ref.rms_mm(cal.params), ref.rms_mm(other.params)
+            sel = replace(sel, at_tool=(before, after))
+            if after < before:
+                cal = other
+            else:
+                sel = sel.kept_as_asked()
         return replace(cal, selection=sel)
     except ValueError as e:
         raise InputError(str(e)) from None
