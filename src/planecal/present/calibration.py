@@ -322,8 +322,19 @@ def selection_lines(doc: dict) -> list[str]:
             f"frees {', '.join(FAMILY_TEXT[f] for f in sel['kept']) or 'no family'}")
     gone = [f"{FAMILY_TEXT[x['family']]} (held-out rms {x['held_out_with_mm']:.4f} mm with "
             f"it, {x['held_out_without_mm']:.4f} without)" for x in sel.get("left_out", [])]
-    return [head + ("; left out, predicting held-out samples worse: " + "; ".join(gone)
-                    if gone else "; every family of the level predicts them better")]
+    rej, tool = sel.get("rejected"), sel.get("at_tool_mm")
+    line = head + ("; left out, predicting held-out samples worse: " + "; ".join(gone)
+                   if gone else "" if rej else "; every family of the level predicts them "
+                   "better")
+    if rej and tool:
+        line += (f"; the held-out samples preferred freeing "
+                 f"{', '.join(FAMILY_TEXT[f] for f in rej['families']) or 'no family'}"
+                 + ("" if rej.get("geometry_prior") else " without the geometry prior")
+                 + f", which the reference model puts further off at the tool ({tool[1]:.3f} "
+                 f"mm against {tool[0]:.3f}): kept as asked")
+    elif tool:
+        line += f" (at the tool {tool[1]:.3f} mm against {tool[0]:.3f} as asked)"
+    return [line]
 
 
 SCALE_TEXT = {"joint_geometry": "geometry", "base_frame": "base", "compliance": "compliance",
