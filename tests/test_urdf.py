@@ -167,8 +167,10 @@ def test_calibrated_urdf_is_the_calibrated_model(ur5_results, tmp_path, capsys, 
     robot = load_robot("ur5")
     path, out = ur5_results[level], tmp_path / "ur5.urdf"
     capsys.readouterr()
+    # --force: in the ideal world the richer levels are no better than offsets at the tool,
+    # which their verdict says (estimation.verdict); the URDF writer is what is tested here
     assert main(["urdf", "--scene", "ur5_table", "--params", str(path), "--out", str(out),
-                 "--no-meshes"]) == 0
+                 "--no-meshes", "--force"]) == 0
     err = capsys.readouterr().err.strip()
     model, _ = load_calibrated(robot, path)
     params = model.params

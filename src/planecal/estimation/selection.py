@@ -226,9 +226,12 @@ def select(res, asked: str, geometry_prior: bool, folds: int = FOLDS) -> Selecti
             out.append(c)
             if better(h, held):
                 current, held, widen = c, h, k
-    # never worse than a simpler level: its model where that predicts significantly better
-    best = min(((c, h) for c, h in simpler if better(h, held)),
-               key=lambda ch: ch[0].held_out_rms_mm, default=None)
+    # level 3 never worse than a simpler level: its model where that predicts significantly
+    # better (levels 2's families and a --geometry-prior are the user's: the verdict judges
+    # them against the simpler levels)
+    best = None if not any(f in present for f in LEFT_OUT_BY_HELD_OUT) else min(
+        ((c, h) for c, h in simpler if better(h, held)),
+        key=lambda ch: ch[0].held_out_rms_mm, default=None)
     if best is not None:
         left.extend((f, current.held_out_rms_mm, best[0].held_out_rms_mm)
                     for f in current.families if f not in best[0].families)
