@@ -205,12 +205,14 @@ def test_a_level3_result_file_round_trips_and_the_cli_reports_its_accuracy(tmp_p
     L = layout_for(load_scene("three_plates").robot, 4, "nonkinematic")
     values = {r["name"]: r["value"] for r in doc["parameters"]}
     np.testing.assert_array_equal(p.to_vector(L), [values[n] for n in L.names])
-    a = doc["accuracy"]
+    a, v = doc["accuracy"], doc["verdict"]
     assert 0 < a["noise_only_mm"] and 0 < a["tool_point_mm"] < 1.0 and a["folds"] == 10
+    # the estimate and its band are the verdict's (estimation.verdict)
+    assert a["tool_point_mm"] == v["tool_mm"] and [a["one_calibration_p10_mm"],
+                                                   a["one_calibration_p90_mm"]] == v["band_mm"]
     assert f"predicted position error at the tool {a['tool_point_mm']:.3f} mm" in text
-    assert (a["one_calibration_p10_mm"] < a["tool_point_mm"] < a["one_calibration_p90_mm"]
-            and 1.0 <= a["error_directions"])
-    assert f"{a['one_calibration_p10_mm']:.3f}-{a['one_calibration_p90_mm']:.3f} mm" in text
+    assert 0 < v["band_mm"][0] < v["band_mm"][1] and 1.0 <= a["error_directions"]
+    assert f"AP near them {v['band_mm'][0]:.3f}-{v['band_mm'][1]:.3f} mm" in text
     # every reported std is the covariance's
     cov = doc["covariance"]
     sd = dict(zip(cov["names"], (np.sqrt(np.diag(np.array(cov["matrix"], float))))))

@@ -23,6 +23,7 @@ controller can take only where the calibration fixed it and a plane can see it; 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -31,6 +32,7 @@ from planecal.estimation.fit import (SIGMA_START_M, FitOptions, FitPrior, Proble
                                      solve)
 from planecal.estimation.identifiability import DEFAULT_TOL, BaseSet, Excluded, select_base
 from planecal.estimation.noise import repeatability_sigma, row_weights
+from planecal.estimation.selection import Selection, family_of, select
 from planecal.model.cell_params import CellParams
 from planecal.model.layout import ParamLayout
 from planecal.model.layout import layout_prior
@@ -47,7 +49,8 @@ class CalibrationSettings:
     """How to calibrate: the ``level`` (``levels.LEVELS`` or the seed's number), J2/J3
     ``compliance``, the candidates ``free`` (names, a comma string, "all"; None: the
     layout's default), a ``geometry_prior`` (m, rad), ``free_scale``, the fit's
-    ``options`` and the base set's tolerance."""
+    ``options``, the base set's tolerance and whether the level's families are chosen by
+    held-out prediction (``select``)."""
     level: str = "offsets"
     compliance: bool = False
     free: tuple | str | None = None
@@ -55,6 +58,9 @@ class CalibrationSettings:
     free_scale: bool = False
     options: FitOptions = field(default_factory=FitOptions)
     base_tolerance: float = DEFAULT_TOL
+    # the level's families enter by held-out prediction (``estimation.selection``); off:
+    # every family of the level (and with ``free`` given: the names given)
+    select: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "level", level_name(self.level))
@@ -89,6 +95,7 @@ class CalibrationSettings:
                 "geometry_prior_m_rad": None if self.geometry_prior is None
                 else list(self.geometry_prior),
                 "free_scale": self.free_scale, "base_set_tolerance": self.base_tolerance,
+                "select": self.select,
                 "weighted": self.options.joint_sigma_rad is not None,
                 # the weighted fit's noise model (what a drift check weighs a run with)
                 "joint_sigma_rad": self.options.joint_sigma_rad,
@@ -109,10 +116,18 @@ class Calibration:
     settings: CalibrationSettings
     result: Result
     base_set: BaseSet
+    selection: Selection | None = None  # the families chosen by held-out prediction
 
     @property
     def params(self) -> CellParams:
         return self.result.params
+
+    @cached_property
+    def verdict(self):
+        """``estimation.verdict.Verdict``: the calibration judged at the tool against the
+        reference model and the simpler levels (computed when first asked for)."""
+        from planecal.estimation.verdict import assess
+        return assess(self)
 
     @property
     def level(self) -> str:
@@ -181,17 +196,21 @@ def candidates(robot: Robot, layout: ParamLayout, settings: CalibrationSettings,
 def base_set(robot: Robot, qe, initial: CellParams, plate, settings: CalibrationSettings,
              options: FitOptions | None = None, joints: Joints | None = None,
              direction=None, references: tuple = (),
-             jacobian: np.ndarray | None = None) -> tuple[ParamLayout, BaseSet]:
+             jacobian: np.ndarray | None = None,
+             left_out: tuple = ()) -> tuple[ParamLayout, BaseSet]:
     """The layout of the settings' level and the base set of the parameters these poses
     (counts ``qe``, 0-based ``plate``, approach ``direction`` or None) and the scene's
     known lengths (``references``: their rows join the Jacobian) can identify, at
     ``initial`` (module docstring): what ``calibrate`` fits, and what ``planecal layouts``
     and ``plan`` predict. ``jacobian``: the distances' Jacobian at ``initial`` over the
-    level's whole layout, where the caller has it."""
+    level's whole layout, where the caller has it. ``left_out``: parameters the selection
+    left out (``estimation.selection``), excluded with reason "held_out"."""
     st = settings
     layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
     options = options or st.options
     mask, pinned = candidates(robot, layout, st, references)
+    held = [n for n in layout.names_of(mask) if n in set(left_out)]
+    mask &= ~layout.mask(held)
     if jacobian is None:
         if joints is None:
             joints = joints_of_counts(robot, np.asarray(qe, np.int64), direction,
@@ -207,9 +226,10 @@ def base_set(robot: Robot, qe, initial: CellParams, plate, settings: Calibration
         J = np.vstack([J, P])
         w = None if w is None else np.concatenate([w, np.ones(len(P))])
     bs = select_base(J, layout, mask, st.base_tolerance, w)
-    if pinned:
-        bs = replace(bs, excluded=sorted(
-            list(bs.excluded) + [Excluded(name, "scale") for name in pinned],
+    if pinned or held:
+        bs = replace(bs, free=sorted(list(bs.free) + held, key=layout.index), excluded=sorted(
+            list(bs.excluded) + [Excluded(name, "scale") for name in pinned]
+            + [Excluded(name, "held_out") for name in held],
             key=lambda e: layout.index(e.parameter)))
     return layout, bs
 
@@ -247,12 +267,41 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
         # the distances and Jacobian at the initial values: the base set's, and the fit's
         # first evaluation
         at_initial = predict_joints_with_jacobian(robot, probe.joints, initial, pidx, layout)
-        _, bs = base_set(robot, probe.qe, initial, pidx, st, options, probe.joints,
-                         references=tuple(references), jacobian=at_initial[1])
-        problem = replace(probe, free=bs.mask(layout), at_initial=at_initial)
+
+        def fit(left_out=(), opts=options):
+            _, bs = base_set(robot, probe.qe, initial, pidx, st, opts, probe.joints,
+                             references=tuple(references), jacobian=at_initial[1],
+                             left_out=left_out)
+            return Calibration(st, solve(replace(probe, free=bs.mask(layout), options=opts,
+                                                 at_initial=at_initial)), bs)
+        cal = fit()
+        if not (st.select and st.free is None and whole_model(st.level)):
+            return cal
+        sel = select(cal.result, st.label, st.geometry_prior is not None)
+        gone = {f for f, _, _ in sel.left_out}
+        k = sel.chosen.widen
+        dropped = st.geometry_prior is not None and not sel.chosen.geometry_prior
+        if gone or k != 1.0 or dropped:
+            # the families left out; the geometry prior widened, or dropped where a simpler
+            # level's model (which has none) predicted the held-out samples better
+            geometry = {n for n, _ in geometry_prior(layout, 1.0, 1.0)}
+            opts = replace(options, prior=tuple(
+                (n, sd * k) if n in geometry else (n, sd) for n, sd in options.prior
+                if not (dropped and n in geometry)))
+            other = fit(tuple(n for n in layout.names if family_of(layout, n) in gone), opts)
+            # held-out distances do not see the tool: the change stands only where the
+            # reference model puts the tool no further off (``estimation.reference``)
+            from planecal.estimation.reference import build
+            ref = build(cal.result)
+            before, after = ref.rms_mm(cal.params), ref.rms_mm(other.params)
+            sel = replace(sel, at_tool=(before, after))
+            if after < before:
+                cal = other
+            else:
+                sel = sel.kept_as_asked()
+        return replace(cal, selection=sel)
     except ValueError as e:
         raise InputError(str(e)) from None
-    return Calibration(st, solve(problem), bs)
 
 
 def calibrate_samples(robot: Robot, samples, initial: CellParams,

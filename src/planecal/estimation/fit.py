@@ -189,6 +189,10 @@ class Result:
     identifiability: Identifiability
     notes: list[str] = field(default_factory=list)
     status: Status = Status.CONVERGED
+    # the solver's last Jacobian over the free parameters (the used samples' rows) and its
+    # row weights (None: unweighted): the fit to first order at its solution (``linearized``)
+    jacobian: np.ndarray | None = None
+    weights: np.ndarray | None = None
 
     @property
     def layout(self) -> ParamLayout:
@@ -401,4 +405,49 @@ def _solve(pb: Problem, x0: np.ndarray | None = None) -> Result:
         ident, cov, sigma = uncertainty(J, r, layout, free, opt, weights=w, noise_var=v)
     return Result(pb, params, sol.converged, sol.iterations, sol.initial_cost,
                   sol.final_cost, sol.history, final_r, sol.initial_r, sol.used,
-                  sol.outliers, sigma, cov, ident, sol.notes, sol.status)
+                  sol.outliers, sigma, cov, ident, sol.notes, sol.status, J, w)
+
+
+@dataclass(frozen=True, eq=False)
+class Linearized:
+    """A fit's least squares at its solution to first order: the used samples' residuals
+    ``r`` [m], their Jacobian ``X`` over the free parameters, the row weights ``w`` (None:
+    unweighted) and the prior rows ``P``, ``rp`` weighed as the solver weighs them (so the
+    fit minimised |w (r + X dx)|^2 + |rp + P dx|^2); ``prior_cols``: the free parameter a
+    parameter-prior row holds (-1: a known length's row). What ``estimation.selection``
+    refits without a fold or a family, in closed form."""
+    X: np.ndarray
+    r: np.ndarray
+    w: np.ndarray | None
+    P: np.ndarray
+    rp: np.ndarray
+    prior_cols: np.ndarray
+    names: tuple[str, ...]
+    x: np.ndarray  # the free parameters' values at the solution
+    x0: np.ndarray  # and their initial values
+
+
+def linearized(res: Result) -> Linearized:
+    """``Linearized`` of a fit (its last Jacobian: within the last step below the
+    improvement limit of the solution)."""
+    pb = res.problem
+    layout, free = res.layout, res.free
+    x = res.params.to_vector(layout)[free]
+    X = res.jacobian
+    if X is None or len(X) != int(res.used.sum()):  # a Result built without the solver's
+        X = predict_joints_with_jacobian(pb.robot, pb.joints.rows(res.used), res.params,
+                                         pb.plate[res.used], layout, free)[1]
+    prior = _prior(pb)
+    p = int(free.sum())
+    if prior is None:
+        P, rp, cols = np.zeros((0, p)), np.zeros(0), np.zeros(0, int)
+    else:
+        P, rp = prior.rows(x, p)
+        n_param = 0 if prior.param is None else len(prior.param.index)
+        cols = np.full(len(rp), -1)
+        if n_param:
+            cols[:n_param] = prior.param.index
+        k = prior_weight(res.weights)
+        P, rp = k * P, k * rp
+    return Linearized(X, res.residuals_m[res.used], res.weights, P, rp, cols,
+                      tuple(layout.names_of(free)), x, res.initial.to_vector(layout)[free])

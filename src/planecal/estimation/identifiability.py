@@ -304,18 +304,8 @@ DEFAULT_TOL = 1e-6  # |R_kk| / |R_00| below this: a combination of the columns b
 @dataclass(frozen=True)
 class Excluded:
     parameter: str
-    reason: str  # "no_effect" | "combination" | "scale"
+    reason: str  # "no_effect" | "combination" | "scale" | "held_out"
     combination: dict = field(default_factory=dict)  # base parameter -> coefficient (SI)
-
-    def describe(self) -> str:
-        if self.reason == "no_effect":
-            return f"{self.parameter}: no effect on any distance of these samples"
-        if self.reason == "scale":
-            return (f"{self.parameter}: sets the arm's scale, which a distance sensor reads "
-                    "only through its own gain: kept at robot.json's value (--free-scale "
-                    "frees it where a length reference fixes the scale)")
-        mix = " ".join(f"{v:+.4g}*{k}" for k, v in self.combination.items())
-        return f"{self.parameter}: a combination of others (acts as {mix})"
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import math
 from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, Field, Strict, ValidationError
 
@@ -235,6 +235,37 @@ FitStatus = Annotated[Str, AfterValidator(_status), Field(
     json_schema_extra={"enum": list(STATUSES)})]
 
 
+Probability = Ranged(0.0, 1.0, "", "probability")
+
+
+class ComparisonBlock(Record):
+    """A simpler level judged beside the calibration (``estimation.verdict.Comparison``)."""
+    level: Str
+    tool_mm: NonNeg
+    held_out_mm: NonNeg
+    p_worse: Probability
+    held_out_better: Bool
+    p_worse_rms: Probability
+
+
+class VerdictBlock(Record):
+    """The calibration judged at the tool (``estimation.verdict``): its grade, its expected
+    error and the 10-90 % band of AP near the samples, the simpler levels beside it and
+    why it is worse than one (what export, urdf and compensate refuse)."""
+    level: Str
+    grade: Literal["good", "uncertain", "worse"]
+    tool_mm: NonNeg
+    band_mm: Annotated[list[NonNeg], Field(min_length=2, max_length=2)]
+    held_out_mm: NonNeg
+    fit_rms_mm: NonNeg
+    comparisons: list[ComparisonBlock]
+    worse_than: list[Str]
+    reasons: list[Str]
+    scale: dict[str, NonNeg]
+    noise_factor: NonNeg
+    where: Str
+
+
 class ResultFile(ParamsFile):
     """What ``planecal calibrate --out`` writes."""
     format: ResultTag = None
@@ -254,6 +285,8 @@ class ResultFile(ParamsFile):
     model_error: Str | None = None
     covariance: CovarianceBlock | None = None
     encoder_offsets: EncoderOffsetsBlock | None = None
+    verdict: VerdictBlock | None = None
+    selection: dict[str, Any] | None = None  # the families chosen (estimation.selection)
 
 
 def provenance(inputs: Iterable[tuple[str, str | Path]], scene: str | None = None,

@@ -185,9 +185,17 @@ def not_a_calibration(r: CalibrationResult) -> str | None:
     return None
 
 
+def worse_than_simpler(r: CalibrationResult) -> str | None:
+    """A calibration its verdict found no better at the tool than a simpler level's
+    (``estimation.verdict.refusal``)."""
+    from planecal.estimation.verdict import refusal
+    return refusal(r.doc) if r.is_result else None
+
+
 # Every reason a result may not reach a controller: each reads the result, returns a line
 # or None (``CalibrationResult.refusal`` asks them in order).
-REFUSALS: tuple[Callable[[CalibrationResult], str | None], ...] = (not_a_calibration,)
+REFUSALS: tuple[Callable[[CalibrationResult], str | None], ...] = (not_a_calibration,
+                                                                   worse_than_simpler)
 
 
 def cell_of(run_paths, result_path=None, scene=None):

@@ -88,3 +88,31 @@ def scale_lengths(robot: Robot, k: int = 2) -> list[str]:
 def pinned_scale(robot: Robot, layout: ParamLayout) -> list[str]:
     """The scale lengths a layout holds (fixed unless a length reference frees them)."""
     return [n for n in scale_lengths(robot) if n in layout.names]
+
+
+# The robot class's magnitudes of what the levels model beyond the cell's frames and the
+# joint offsets: the reference model of ``estimation.reference`` (what a calibration's
+# figures at the tool are judged against) puts a prior of these stds on each, scaled by one
+# factor the samples choose. Geometry: level 3's machining and assembly class (as
+# ``DEFAULT_GEOMETRY_PRIOR``); the base frame: a floor mounting's millimetre and milliradian;
+# compliance: a deflection of 0.5 mrad at the largest gravity torque the samples put on the
+# joint (the realistic MC70's J2 deflects 0.2-0.4 mrad, a UR5's shoulder ~1.8 mrad); level
+# 3's terms: their layout priors (``layout.prior_std``).
+CLASS_GEOMETRY = (2e-4, 2e-4)  # m, rad
+CLASS_BASE = (1e-3, 1e-3)  # m, rad
+CLASS_DEFLECTION_RAD = 5e-4
+
+
+def class_std(layout: ParamLayout, name: str, torque_max_nm) -> float:
+    """The class std (above) of parameter ``name`` of ``layout``, inf for the cell's frames
+    and the joint offsets (no class: the data alone); ``torque_max_nm`` (6,): each joint's
+    largest gravity torque over the samples (a compliance's)."""
+    p = layout.param(name)
+    kind = layout.group(p.group).kind
+    if kind == "joint_geometry":
+        return CLASS_GEOMETRY[0] if p.unit == "m" else CLASS_GEOMETRY[1]
+    if kind == "base_frame":
+        return CLASS_BASE[0] if p.unit == "m" else CLASS_BASE[1]
+    if kind == "compliance":
+        return CLASS_DEFLECTION_RAD / max(float(torque_max_nm[int(name[1:]) - 1]), 1.0)
+    return float("inf") if p.prior_std is None else float(p.prior_std)

@@ -32,6 +32,9 @@ def describe_excluded(e: Excluded | dict) -> str:
         return (f"{name}: sets the arm's scale, which a distance sensor reads only through "
                 "its own gain: kept at robot.json's value (--free-scale frees it where a "
                 "length reference fixes the scale)")
+    if reason == "held_out":
+        return (f"{name}: its family predicts held-out samples worse than the model without "
+                "it (the selection)")
     mix = " ".join(f"{v:+.4g}*{k}" for k, v in (e.get("combination") or {}).items())
     return f"{name}: a combination of others (acts as {mix})"
 
@@ -104,9 +107,11 @@ def document(cal: Calibration, robot=None, accuracy=None) -> dict:
     values), ``std`` in the same shape, ``parameters`` (every parameter by name, with its
     status), the fit's figures, ``identifiability``, ``free``, ``covariance``,
     ``history``, ``initial``, ``calibration`` (the settings: level, compliance, ...),
-    ``base_set`` and ``excluded``, ``encoder_offsets`` (what a controller can take) and,
-    with ``robot``, the robot's name and description hash; with ``accuracy``
-    (``estimation.accuracy.Accuracy``) its figures."""
+    ``base_set`` and ``excluded``, ``encoder_offsets`` (what a controller can take),
+    ``selection`` (the families chosen by held-out prediction, ``estimation.selection``),
+    ``verdict`` (the calibration judged at the tool, ``estimation.verdict``: what export,
+    urdf and compensate refuse) and, with ``robot``, the robot's name and description hash;
+    with ``accuracy`` (``estimation.accuracy.Accuracy``) its figures."""
     res = cal.result
     out = params_to_dict(res.params)
     out["std"] = _std_blocks(res)
@@ -139,6 +144,9 @@ def document(cal: Calibration, robot=None, accuracy=None) -> dict:
                 "base_set_tolerance": bs.tol,
                 "geometry_prior_m_rad": out["calibration"]["geometry_prior_m_rad"]})
     out["encoder_offsets"] = _controller_offsets(cal)
+    if cal.selection is not None:
+        out["selection"] = cal.selection.to_dict()
+    out["verdict"] = cal.verdict.to_dict()
     if robot is not None:
         out["robot"] = {"name": robot.name, "sha256": robot.digest}
     if accuracy is not None:
@@ -229,7 +237,8 @@ def findings(doc: dict) -> list[Finding]:
                            "candidate parameters identifiable from these samples (pivoted QR, "
                            f"|R_kk|/|R_00| >= {doc.get('base_set_tolerance', 0):g})", False))
     for e in doc.get("excluded") or []:
-        out.append(Finding("EXCLUDED " + describe_excluded(e), False))
+        if e.get("reason") != "held_out":  # a family at once: ``selection_lines``
+            out.append(Finding("EXCLUDED " + describe_excluded(e), False))
     for name in ident.get("no_effect", []):
         out.append(Finding(f"no effect: {name} does not change any distance in this data",
                            True))
@@ -294,24 +303,81 @@ def text(doc: dict, n_zero: int = 0) -> str:
     eo = doc.get("encoder_offsets")
     if isinstance(eo, dict) and eo.get("reason"):
         lines.append(f"NOTE no encoder offsets for a controller: {eo['reason']}")
+    lines.extend(selection_lines(doc))
     lines.extend(accuracy_lines(doc))
+    lines.extend(verdict_lines(doc))
     return "\n".join(lines)
 
 
+FAMILY_TEXT = {"geometry": "the joint geometry", "compliance": "the joint compliance",
+               "gear": "the gear harmonics", "backlash": "the backlash",
+               "laser": "the laser's linearity"}
+
+
+def selection_lines(doc: dict) -> list[str]:
+    """Which families the held-out samples chose (``estimation.selection``), in one line."""
+    sel = doc.get("selection")
+    if not isinstance(sel, dict):
+        return []
+    head = (f"selection ({sel['folds']}-fold held-out residuals): level {sel['asked']} "
+            f"frees {', '.join(FAMILY_TEXT[f] for f in sel['kept']) or 'no family'}")
+    gone = [f"{FAMILY_TEXT[x['family']]} (held-out rms {x['held_out_with_mm']:.4f} mm with "
+            f"it, {x['held_out_without_mm']:.4f} without)" for x in sel.get("left_out", [])]
+    rej, tool = sel.get("rejected"), sel.get("at_tool_mm")
+    line = head + ("; left out, predicting held-out samples worse: " + "; ".join(gone)
+                   if gone else "" if rej else "; every family of the level predicts them "
+                   "better")
+    if rej and tool:
+        line += (f"; the held-out samples preferred freeing "
+                 f"{', '.join(FAMILY_TEXT[f] for f in rej['families']) or 'no family'}"
+                 + ("" if rej.get("geometry_prior") else " without the geometry prior")
+                 + f", which the reference model puts further off at the tool ({tool[1]:.3f} "
+                 f"mm against {tool[0]:.3f}): kept as asked")
+    elif tool:
+        line += f" (at the tool {tool[1]:.3f} mm against {tool[0]:.3f} as asked)"
+    return [line]
+
+
+SCALE_TEXT = {"joint_geometry": "geometry", "base_frame": "base", "compliance": "compliance",
+              "gear": "gear", "backlash": "backlash", "laser": "laser"}
+
+
+def _scales(scale) -> str:
+    if not isinstance(scale, dict):
+        return "-"
+    return ", ".join(f"{SCALE_TEXT.get(k, k)} x{v:.2g}" for k, v in scale.items())
+
+
+def verdict_lines(doc: dict) -> list[str]:
+    """What the calibration says of itself at the tool (``estimation.verdict``): one line
+    for the figure, one (a WARNING) where a simpler level is better."""
+    v = doc.get("verdict")
+    if not isinstance(v, dict):
+        return []
+    beside = "; ".join(f"{c['level']} {c['tool_mm']:.3f}" for c in v.get("comparisons", []))
+    out = [f"verdict {v['grade']}: predicted position error at the tool {v['tool_mm']:.3f} mm "
+           f"rms over the samples' poses, AP near them {v['band_mm'][0]:.3f}-{v['band_mm'][1]:.3f} mm "
+           f"(10-90 %); judged against level 3's whole model with the robot class's errors, "
+           f"scaled by these samples ({_scales(v.get('scale'))})"
+           + (f"; the simpler levels on the same samples: {beside} mm" if beside else "")]
+    if v["grade"] == "worse":
+        out.append("WARNING " + "; ".join(v["reasons"]) + ": export, urdf and compensate "
+                   "refuse this result without --force")
+    elif v["grade"] == "uncertain":
+        out.append("WARNING verdict uncertain: " + "; ".join(v["reasons"]))
+    return out
+
+
 def accuracy_lines(doc: dict) -> list[str]:
-    """The result's accuracy estimate (``estimation.accuracy``), labelled: where, and what
-    it includes."""
+    """The result's accuracy figures beside the verdict's estimate (``estimation.accuracy``),
+    labelled: what each includes."""
     a = doc.get("accuracy")
     if not isinstance(a, dict):
         return []
-    return [f"predicted position error at the tool {a['tool_point_mm']:.3f} mm rms ({a['where']}; "
-            f"the fit's residual level {a['residual_sigma_mm']:.4f} mm, the model's mismatch in "
-            "it); from the noise model alone "
-            f"{a['noise_only_mm']:.3f} mm ({a['noise_sigma_mm']:.4f} mm a sample)",
-            *([f"one calibration's own error is one draw about that rms: "
-               f"{a['one_calibration_p10_mm']:.3f}-{a['one_calibration_p90_mm']:.3f} mm "
-               f"(10-90 %; {a['error_directions']:.1f} effective directions)"]
-              if a.get("one_calibration_p90_mm") else []),
+    return [f"at the tool from the noise model alone {a['noise_only_mm']:.3f} mm rms "
+            f"({a['noise_sigma_mm']:.4f} mm a sample); the fit's own covariance at its "
+            f"residual level {a['residual_sigma_mm']:.4f} mm: {a.get('covariance_mm', 0):.3f} mm "
+            f"({a['error_directions']:.1f} effective directions)",
             (f"held-out residuals ({a['folds']}-fold cross-validation, {a.get('held_out')} "
              f"samples) rms {a['cv_residual_rms_mm']:.4f} mm against "
              f"{a['in_sample_rms_mm']:.4f} mm in the fit"

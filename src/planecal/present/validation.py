@@ -170,11 +170,26 @@ def _gauge_lines(v: dict) -> list[str]:
 
 
 def _predicted(t: dict) -> str:
-    """The calibration's own estimate and the band of one calibration's error about it."""
+    """The calibration's own estimate, its band of AP near the samples and its verdict."""
     p, band = t.get("predicted_tool_mm"), t.get("predicted_band_mm")
     if p is None:
         return "-"
-    return f"{p:.3f}" + (f" [{band[0]:.3f}-{band[1]:.3f}]" if band else "")
+    return (f"{p:.3f}" + (f" [{band[0]:.3f}-{band[1]:.3f}]" if band else "")
+            + (f" {t['verdict']}" if t.get("verdict") else ""))
+
+
+def band_coverage(truths: list[dict]) -> str | None:
+    """How often the validated AP fell inside the calibration's stated 10-90 % band, and
+    how many calibrations graded good measured above 1.5x the band's top."""
+    rows = [t for t in truths if t.get("predicted_band_mm")]
+    if not rows:
+        return None
+    inside = sum(b[0] <= t["ap_after_tool_mm"] <= b[1]
+                 for t in rows for b in [t["predicted_band_mm"]])
+    good = [t for t in rows if t.get("verdict") == "good"]
+    over = sum(t["ap_after_tool_mm"] > 1.5 * t["predicted_band_mm"][1] for t in good)
+    return (f"the band held on {inside} of {len(rows)} truths (10-90 %: 80 % expected); "
+            f"{len(good)} graded good, {over} of them above 1.5x the band's top")
 
 
 def _with_floor(ap, floor) -> str:
@@ -188,7 +203,7 @@ def _truth_row(t: dict, level: str) -> list[str]:
            f"{'-' if snear is None else f'{max(snear):.0f}'}")
     return ([str(t["truth_seed"]), _mm(t["ap_before_tool_mm"], ".2f")]
             + [_with_floor(r["ap_after_tool_mm"], r.get("ap_floor_tool_mm"))
-               for r in t["levels"]]
+               + ("!" if r.get("verdict") == "worse" else "") for r in t["levels"]]
             + [_mm(t["ap_oracle_tool_mm"]),
                _with_floor(t.get("ap_after_tool_standard_mm"),
                            t.get("ap_floor_tool_standard_mm")),
@@ -221,10 +236,13 @@ def format_truths(summary: dict, world: str, level: str = "offsets") -> str:
            "cube centred on a calibration sample's tool point; edge and farthest: each "
            "cube's edge and its points' largest distance to a sample's tool point; "
            f"{CELL}; max model err: the validated fit's largest |residual|, seed Table 9's "
-           f"figure; predicted: what the {level} calibration says of its own tool-point "
-           "error, rms over its samples' poses, the fit's residual level in it, before any "
-           "validation (estimation.accuracy), with the 10-90 % band of one calibration's "
-           "own error about it)", ""]
+           f"figure; predicted: what the {level} calibration says of itself before any "
+           "validation (estimation.verdict): its expected tool-point error, rms over its "
+           "samples' poses, the 10-90 % band of AP near the samples and its grade; ! after "
+           "an AP: that level's verdict refuses it, no better than a simpler level)", ""]
+    cover = band_coverage(truths)
+    if cover:
+        out.insert(-1, cover)
     by_seed = {t["truth_seed"]: t for t in truths}
     for what, key in (("median", "median_truth_seed"), ("worst", "worst_truth_seed")):
         t = by_seed[summary[key]]

@@ -137,7 +137,7 @@ def tool_rows(scene, q: np.ndarray, params, layout, free) -> np.ndarray:
     """The tool point's sensitivity to each free parameter at the joint angles q: (k, 3,
     free) (``estimation.accuracy.tool_jacobian``: the beam point at the scene's standoff in
     the robot's frame; no approach direction known, backlash on gravity's side)."""
-    from planecal.estimation.accuracy import tool_jacobian
+    from planecal.estimation.tool import tool_jacobian
     from planecal.model.measurement import backlash_sides
     side = backlash_sides(scene.robot, q, None)
     return tool_jacobian(scene.robot, q, side, layout, params, layout.names_of(free),

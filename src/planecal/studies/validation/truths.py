@@ -110,9 +110,11 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
                                 for label, f in fits], qe, st,
                  cached_world(job.scene, st.clearance_m), [f for _, f in fits], opts,
                  direction)
-    for row, (_, f) in zip(v["levels"], fits):
+    for row, (_, f), (_, c) in zip(v["levels"], fits, cals):
         row["max_model_error_mm"] = float(np.abs(f.residuals_m).max() * 1e3)
         row["converged"] = bool(f.converged)
+        if not job.off:  # what each calibration says of itself (estimation.verdict)
+            row.update(verdict_row(c.verdict))
     v["truth_seed"] = job.truth_seed
     v["level"] = job.calibration.level
     v["compliance"] = job.calibration.compliance
@@ -132,11 +134,20 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
         v["accuracy"] = acc.to_dict()
         v["predicted_tool_mm"] = acc.tool_point_mm
         v["predicted_band_mm"] = [acc.one_calibration_p10_mm, acc.one_calibration_p90_mm]
+        v["verdict"] = cals[-1][1].verdict.grade
     return v, fit, (qe, d, plate)
 
 
+def verdict_row(verdict) -> dict:
+    """A level's verdict beside its validated figures: its estimate at the tool, the band of
+    AP near the samples, its grade and the simpler levels it is no better than."""
+    return {"predicted_tool_mm": verdict.tool_mm, "predicted_band_mm": list(verdict.band_mm),
+            "verdict": verdict.grade, "worse_than": list(verdict.worse_than),
+            "comparisons": verdict.to_dict()["comparisons"]}
+
+
 TRUTH_KEYS = ("truth_seed", *FIGURE_KEYS, "ap_tool_ratio", "gauge_error_before_mm",
-              "gauge_error_after_mm", "predicted_tool_mm", "predicted_band_mm")
+              "gauge_error_after_mm", "predicted_tool_mm", "predicted_band_mm", "verdict")
 LEVEL_KEYS = ("ap_after_tool_mm", "ap_after_flange_mm", "ap_after_tool_cell_mm",
               "rp_after_tool_mm", "ap_floor_tool_mm", "ap_after_tool_standard_mm",
               "ap_floor_tool_standard_mm")
