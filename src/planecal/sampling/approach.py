@@ -56,3 +56,19 @@ class ApproachTracker:
         joints = np.flatnonzero(moved.any(axis=0))
         last = len(dq) - 1 - np.argmax(moved[::-1, joints], axis=0)
         self._side[joints] = np.sign(dq[last, joints]).astype(np.int8)
+
+
+APPROACH_RAD = 2e-3  # how far a chosen approach starts from its pose, per joint (joint side):
+# ten times the reducers' lost motion (at most 1 arcmin = 291 urad, docs/ERRORS.md), so every
+# joint leaves the flank it was on whatever it did before; 1-3 ticks each way at the MC70's step
+
+
+def approach_point(robot, q: np.ndarray, side: int, qe0=None) -> tuple[np.ndarray, np.ndarray]:
+    """Where a move into joint angles ``q`` that ends with every joint moving towards
+    ``side`` (+1: each joint's last motion positive, -1: negative) starts its last leg:
+    (joint angles, counts) ``APPROACH_RAD`` short of q on every joint. The counts
+    interpolate linearly (``steps``), so every joint, the coupled wrist's too, moves
+    towards ``side`` on the last leg; ``ApproachTracker`` records what the robot did."""
+    from planecal.model.encoder import joints_to_counts
+    qa = np.asarray(q, float) - np.sign(side) * APPROACH_RAD
+    return qa, joints_to_counts(robot, qa, qe0)
