@@ -329,12 +329,13 @@ class ListPlanner:
         out.via = list(via)
         if self.approach[j]:
             from planecal.sampling.approach import approach_point
-            qa, ca = approach_point(self.robot, q, int(self.approach[j]), self.qe0)
+            at = approach_point(self.robot, q, int(self.approach[j]), self.qe0)
             last = out.via[-1][0] if out.via else out.q_start
             c = self.checker
-            if (counts_in_range(self.robot, ca) and c.check_config(qa).ok
-                    and c.check_path(last, qa).ok and c.check_path(qa, q).ok):
-                out.via.append((qa, ca))
+            if (at is not None and counts_in_range(self.robot, at[1])
+                    and c.check_config(at[0]).ok and c.check_path(last, at[0]).ok
+                    and c.check_path(at[0], q).ok):
+                out.via.append(at)
 
 
 def _planner_worker(conn, parent_end, planner) -> None:

@@ -284,6 +284,21 @@ def budget_greedy(A: np.ndarray, G: np.ndarray, H0: np.ndarray, pose_of: np.ndar
             HAG -= np.outer(Ah, G @ h)
 
 
+def _fall(U1: np.ndarray, U2: np.ndarray, Hmi: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """Per candidate (rows of U1, U2: its two readings' rows, each times the square root
+    of how often it is read): how much adding them lowers tr(G Hm^-1), Hm^-1 = ``Hmi``:
+    tr(K^-1 U^T Hm^-1 G Hm^-1 U), K = I + U^T Hm^-1 U (2 x 2, Woodbury)."""
+    B1, B2 = U1 @ Hmi, U2 @ Hmi
+    K11 = 1 + np.einsum("ij,ij->i", B1, U1)
+    K22 = 1 + np.einsum("ij,ij->i", B2, U2)
+    K12 = np.einsum("ij,ij->i", B1, U2)
+    BG1 = B1 @ G
+    Q11 = np.einsum("ij,ij->i", BG1, B1)
+    Q22 = np.einsum("ij,ij->i", B2 @ G, B2)
+    Q12 = np.einsum("ij,ij->i", BG1, B2)
+    return (K22 * Q11 - 2 * K12 * Q12 + K11 * Q22) / (K11 * K22 - K12 ** 2)
+
+
 def exchange_poses(A: np.ndarray, G: np.ndarray, H0: np.ndarray, pose_of: np.ndarray,
                    side_of: np.ndarray, units: np.ndarray, max_passes: int = 5,
                    tol: float = 1e-4) -> np.ndarray:
@@ -310,25 +325,21 @@ def exchange_poses(A: np.ndarray, G: np.ndarray, H0: np.ndarray, pose_of: np.nda
             k = int(reads[i])
             Ri = A[[u for u in units if pose_of[u] == i]]
             Hmi = np.linalg.inv(H - Ri.T @ Ri)
-            kp, km = (k + 1) // 2, k // 2
-            U1, U2 = A[plus] * np.sqrt(kp), A[minus] * np.sqrt(km)
-            B1, B2 = U1 @ Hmi, U2 @ Hmi
-            K11 = 1 + np.einsum("ij,ij->i", B1, U1)
-            K22 = 1 + np.einsum("ij,ij->i", B2, U2)
-            K12 = np.einsum("ij,ij->i", B1, U2)
-            BG1 = B1 @ G
-            Q11 = np.einsum("ij,ij->i", BG1, B1)
-            Q22 = np.einsum("ij,ij->i", B2 @ G, B2)
-            Q12 = np.einsum("ij,ij->i", BG1, B2)
-            # tr(G (Hm + U U^T)^-1) = tr(G Hm^-1) - tr(K^-1 U^T Hm^-1 G Hm^-1 U), K 2x2
-            fall = (K22 * Q11 - 2 * K12 * Q12 + K11 * Q22) / (K11 * K22 - K12 ** 2)
-            cand = float(np.trace(G @ Hmi)) - fall
-            cand[(reads > 0) | ~both] = np.inf
-            j = int(np.argmin(cand))
-            if cand[j] < f * (1 - tol):
+            splits = {((k + 1) // 2, k // 2), (k // 2, (k + 1) // 2)}  # an odd one: either side
+            best = None
+            for kp, km in splits:
+                cand = float(np.trace(G @ Hmi)) - _fall(A[plus] * np.sqrt(kp),
+                                                        A[minus] * np.sqrt(km), Hmi, G)
+                cand[((reads > 0) & (np.arange(n_pose) != i)) | ~both] = np.inf  # i: its sides
+                j = int(np.argmin(cand))
+                if best is None or cand[j] < best[0]:
+                    best = (cand[j], j, kp, km)
+            value, j, kp, km = best
+            if value < f * (1 - tol):
                 units = [u for u in units if pose_of[u] != i] + [int(plus[j])] * kp \
                     + [int(minus[j])] * km
-                reads[i], reads[j] = 0, k
+                reads[i] = 0
+                reads[j] = k
                 H = H0 + A[units].T @ A[units]
                 f = tool_criterion(G, H)
                 improved = True

@@ -8,8 +8,8 @@ robot time goes is travel: on three_plates 20 of its 22 s a sample are moves bet
 random poses, 1.5 s the laser's stable read. So the design buys readings where they are
 cheap:
 
-* **readings**: a pose read again after a short move away and back (``approach``: 2 mrad
-  on every joint, 1-3 ticks each way) costs the laser's read and the dwell, 1.6 s on the
+* **readings**: a pose read again after a short move away and back (``approach``: four
+  steps of every motor, 4-8 mrad a joint on the MC70, four ticks each way) costs the laser's read and the dwell, 1.6 s on the
   MC70, against a new pose's travel; each rest draws the robot's repeatability anew
   (``twin.ticks``: the twin's noise is independent between rests; on a real robot
   ``planecal sample --poses`` of a list that repeats a pose measures it). At most
@@ -127,13 +127,10 @@ def readings(scene, qe, q, plate, settings, params=None) -> Readings:
 def read_seconds(robot) -> float:
     """Robot time of one more reading at the pose the robot is at: the approach leg away
     and back (``approach.approach_point``), the dwell and a mean laser read."""
-    from planecal.model.encoder import joints_to_counts
-    from planecal.sampling.approach import APPROACH_RAD
-    from planecal.sampling.steps import DWELL_TICKS, n_steps
+    from planecal.sampling.approach import APPROACH_TICKS
+    from planecal.sampling.steps import DWELL_TICKS
     from planecal.sampling.tour import READ_TICKS_MEAN
-    leg = n_steps(joints_to_counts(robot, np.zeros(6)),
-                  joints_to_counts(robot, np.full(6, APPROACH_RAD)), robot.step_counts)
-    return (2 * leg + DWELL_TICKS + READ_TICKS_MEAN) * float(robot.tick_s)
+    return (2 * APPROACH_TICKS + DWELL_TICKS + READ_TICKS_MEAN) * float(robot.tick_s)
 
 
 def list_entries(units: np.ndarray, rd: Readings, order: np.ndarray):
