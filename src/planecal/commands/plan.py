@@ -1,7 +1,16 @@
 """planecal plan [--scene S] [--samples N] [--candidates M] [--seed K] --out POSES.json
 [--target-std-urad X | --target-ap-mm X] [--params R.json] [--no-order]
 [--measure R [--jobs J | --scheduler tcp://HOST:PORT]] [--level offsets|full|nonkinematic] [--compliance]
-[--free NAMES]
+[--free NAMES] [--design d-optimal|tool [--robot-minutes X] [--max-reads K]]
+
+``--design tool`` (issue 31; ``studies.tool_plan``): the whole model's design for the
+level's calibration, within --robot-minutes of robot time (default: what the sampling
+run's own random poses take for --samples): poses, several readings at a pose (up to
+--max-reads, each after a short move away and back, from alternating sides: the backlash
+measured from both flanks) and the tour, chosen for the predicted position error at the
+tool point per robot second; printed beside the random run of the same robot time. A list
+planned from the nominal cell is aimed at run time with a first calibration of the cell
+(``rehearse``/``sample --poses P.json --params FIRST.json``).
 
 D-optimal sample poses: N of M collision-free candidates (the sampling run's pose
 distribution) maximising det(J^T J) at the nominal parameters (greedy + Fedorov exchange),
@@ -49,6 +58,15 @@ def add_arguments(p):
                    help="an earlier calibration result of this cell: aim the poses with it "
                         "and add the model's mismatch it showed to the tool-point "
                         "prediction")
+    p.add_argument("--design", choices=["d-optimal", "tool"], default="d-optimal",
+                   help="d-optimal (default): N poses maximising det(J^T J); tool: the whole "
+                        "model's design, readings and approach sides chosen for the tool "
+                        "point's error per robot second (docs/STUDIES.md)")
+    p.add_argument("--robot-minutes", type=float, default=None, metavar="X",
+                   help="--design tool: the robot time the list may take (default: the "
+                        "random run of --samples)")
+    p.add_argument("--max-reads", type=count(100), default=4, metavar="K",
+                   help="--design tool: readings of one pose at most (default 4)")
     p.add_argument("--no-order", action="store_true",
                    help="keep the design's order (do not order the poses for robot time)")
     p.add_argument("--candidates", type=count(MAX_CANDIDATES), default=1500, help="candidate poses (default 1500)")
@@ -79,6 +97,7 @@ def files(args):
 
 def run(args) -> int:
     import contextlib
+    from pathlib import Path
 
     from planecal.safety.collision import CollisionWorld
     from planecal.io.params import save_json
@@ -90,6 +109,10 @@ def run(args) -> int:
 
     from planecal.jobs.report import write_command_report
 
+    if args.design == "tool":
+        return run_tool(args)
+    if args.robot_minutes is not None:
+        raise InputError("--robot-minutes is a budget of --design tool")
     target = plan_target(args.samples, args.candidates, args.target_std_urad, args.target_ap_mm)
     if args.measure and args.measure < 2:
         raise InputError(f"--measure needs at least 2 runs, got {args.measure}")
@@ -116,7 +139,7 @@ def run(args) -> int:
                        ordered=not args.no_order, progress=bar, model=model,
                        mismatch=mismatch)
             if args.params:
-                res["aimed_with"] = str(args.params)
+                res["aimed_with"] = str(Path(args.params).resolve())
         finally:
             bar.close()
         if engine is not None:
@@ -147,6 +170,66 @@ def run(args) -> int:
     print(f"pose list written to {args.out}")
     write_command_report(args.report, args.out, scene=scene)
     return 0
+
+
+def run_tool(args) -> int:
+    """``--design tool``: the whole model's design (``studies.tool_plan``)."""
+    from pathlib import Path
+
+    from planecal.base.progress import Progress
+    from planecal.commands.calibration_options import calibration_settings
+    from planecal.io.params import save_json
+    from planecal.jobs.report import write_command_report
+    from planecal.model.scene import load_scene
+    from planecal.studies.tool_plan import TOOL_STAGES, plan_tool, random_minutes
+    for flag, given in (("--target-std-urad", args.target_std_urad),
+                        ("--target-ap-mm", args.target_ap_mm), ("--measure", args.measure),
+                        ("--no-order", args.no_order)):
+        if given:
+            raise InputError(f"{flag} is an option of --design d-optimal")
+    scene = load_scene(args.scene)
+    settings = calibration_settings(args, scene.robot, scene=scene)
+    model, _ = aim(args.params, scene)
+    bar = Progress("plan", TOOL_STAGES, unit=" stages")
+    try:
+        minutes = args.robot_minutes
+        bar.update(done=0, note=f"the random run of {args.samples} samples: its robot time"
+                   if minutes is None else f"a budget of {minutes:g} robot minutes")
+        if minutes is None:
+            minutes = random_minutes(scene, args.samples, args.seed, model)
+        res = plan_tool(scene, minutes, args.candidates, args.seed, settings, model,
+                        args.max_reads, bar)
+        if args.params:
+            res["aimed_with"] = str(Path(args.params).resolve())
+    finally:
+        bar.close()
+    print(format_tool(res))
+    save_json(args.out, res)
+    print(f"pose list written to {args.out}")
+    write_command_report(args.report, args.out, scene=scene)
+    return 0
+
+
+def format_tool(res: dict) -> str:
+    """The tool design's lines: what it reads, its robot time and prediction beside the
+    random run of the same robot time."""
+    t, ap = res["robot_time_s"], res["predicted_tool_mm"]
+    reads = res["reads_per_pose"]
+    both = sum(1 for r in reads if r > 1)
+    out = [f"{res['samples']} readings at {res['poses']} of {res['candidates']} candidate poses "
+           f"on {res['scene']} (level {res['level']}: {len(res['free'])} free), at most "
+           f"{res['max_reads']} a pose, {both} poses read from both sides",
+           f"robot time {t['planned'] / 60:.1f} min (budget {t['budget'] / 60:.1f}; laser "
+           f"reads at {t['read_ticks_per_sample']} ticks); the random run of the same robot "
+           f"time: {res['random_samples']} samples",
+           f"predicted position error at the tool point ({ap['where']}): planned "
+           f"{ap['planned']:.4g} mm, random {ap['random']:.4g} mm"]
+    if res.get("dropped"):
+        out.append(str(res["dropped"]))
+    if res.get("aimed_with") is None:
+        out.append("planned from the nominal cell: aim it with a first calibration of the "
+                   "cell when it runs (rehearse/sample --poses ... --params FIRST.json)")
+    return "\n".join(out)
 
 
 def aim(path, scene):

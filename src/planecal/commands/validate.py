@@ -88,6 +88,11 @@ def add_arguments(p):
     p.add_argument("--gauge-repeats", type=count(MAX_ITERATIONS), default=10)
     p.add_argument("--poses", help="rehearse through this planned pose list (planecal plan) "
                                    "instead of random poses")
+    p.add_argument("--aim-samples", type=count(MAX_SAMPLES, 0), default=None, metavar="N",
+                   help="with --poses: a first random run of N samples, calibrated at level "
+                        "offsets, aims the list before it runs (default 30 for a list planned "
+                        "from the nominal cell, 0 for one planned with --params); its samples "
+                        "join the calibration")
     p.add_argument("--breakdown", default="alone", choices=("alone", "off", "none"),
                    help="repeat one truth with each error source of the profile on alone "
                         "(alone), or switched off in turn (off), or not (none) "
@@ -154,7 +159,7 @@ def run(args) -> int:
         lambda warmup: engine_from_args(args, warmup=warmup), args.scene, args.out, args.rrd,
         args.errors, None if seeds is None else tuple(seeds), args.samples, args.seed,
         args.offsets_all, args.poses, args.breakdown, args.breakdown_truth, args.calibrated,
-        args.truth, args.run, args.quiet))
+        args.truth, args.run, args.quiet, args.aim_samples))
     return _history(args, hist, scene, doc)
 
 

@@ -111,6 +111,13 @@ def geometry_prior(layout: ParamLayout, length_m: float, angle_rad: float) -> tu
                  for g in layout.groups_of("joint_geometry") for p in g.params)
 
 
+def calibration_prior(layout: ParamLayout, settings: CalibrationSettings) -> tuple:
+    """The parameter prior a calibration of ``layout`` with ``settings`` fits with
+    ((name, std), ...): the layout's own (level 3's terms) and the geometry prior."""
+    return layout_prior(layout) + (() if settings.geometry_prior is None
+                                   else geometry_prior(layout, *settings.geometry_prior))
+
+
 @dataclass(frozen=True, eq=False)
 class Calibration:
     settings: CalibrationSettings
@@ -249,8 +256,7 @@ def calibrate(robot: Robot, qe, d_m, initial: CellParams, plate=None,
         # "not identifiable in practice" judged at the robot's noise, not at the mismatch
         options = replace(options, noise_joint_sigma_rad=repeatability_sigma(robot))
     layout = layout_for(robot, initial.n_planes, st.level, st.compliance)
-    prior = layout_prior(layout) + (() if st.geometry_prior is None
-                                    else geometry_prior(layout, *st.geometry_prior))
+    prior = calibration_prior(layout, st)
     if prior:
         options = replace(options, prior=prior + tuple(options.prior))
     n = len(np.asarray(d_m))
@@ -314,4 +320,5 @@ def calibrate_samples(robot: Robot, samples, initial: CellParams,
 
 
 __all__ = ["LEVELS", "Calibration", "CalibrationSettings", "base_set", "calibrate", "candidates",
+           "calibration_prior",
            "calibrate_samples", "encoder_offsets", "geometry_prior"]

@@ -312,17 +312,26 @@ class FitPrior:
 
 def _prior(pb: Problem) -> FitPrior | None:
     """``FitOptions.prior`` and the problem's known lengths as the solver's prior rows."""
-    names = pb.layout.names_of(pb.free)
-    given = [(names.index(n), sd) for n, sd in pb.options.prior if n in names]
-    x_all = pb.initial.to_vector(pb.layout)
+    return fit_prior(pb.layout, pb.free, pb.initial, pb.options.prior, pb.references,
+                     pb.options.prior_sigma_m)
+
+
+def fit_prior(layout: ParamLayout, free: np.ndarray, initial: CellParams, prior: tuple,
+              references: tuple, sigma_m: float) -> FitPrior | None:
+    """The prior rows of a fit of the ``free`` parameters about ``initial``: ``prior``
+    ((name, std), ...) and the known lengths (``references``), every row weighed as a
+    distance of std ``sigma_m``; None without either. What the fit adds to its data's
+    rows, and what a design predicts with (``studies.design``)."""
+    names = layout.names_of(free)
+    given = [(names.index(n), sd) for n, sd in prior if n in names]
+    x_all = initial.to_vector(layout)
     param = None
     if given:
         idx = np.array([i for i, _ in given], int)
-        param = Prior(idx, np.array([pb.options.prior_sigma_m / sd for _, sd in given]),
-                      x_all[pb.free][idx])
-    if param is None and not pb.references:
+        param = Prior(idx, np.array([sigma_m / sd for _, sd in given]), x_all[free][idx])
+    if param is None and not references:
         return None
-    return FitPrior.of(pb.layout, x_all, pb.free, pb.references, pb.options.prior_sigma_m, param)
+    return FitPrior.of(layout, x_all, free, references, sigma_m, param)
 
 
 def reference_rows(layout: ParamLayout, ref, sigma_m: float) -> tuple:

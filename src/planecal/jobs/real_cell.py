@@ -291,7 +291,8 @@ def _run(req: SamplingRequest, scene, settings, checker, model, observer, link, 
     from planecal.sampling.run import count_samples, sidecar_path
     from planecal.sampling.session import run_session
 
-    session = session_for(req, pose_list_planner(req, scene, settings, checker, model[0]),
+    session = session_for(req, pose_list_planner(req, scene, settings, checker, model[0],
+                                                 (model[1] or {}).get("params")),
                           observer, {"real_cell": real_cell}, hold_while_planning=True,
                           model=model)
     observed = None

@@ -184,10 +184,13 @@ def observer_summary(obs) -> dict:
 
 
 def pose_list_planner(req: SamplingRequest, scene, settings: RunSettings, checker,
-                      model=None):
-    """With --poses: a planner serving the planned list (poses already in the sample file
-    of a resumed run are skipped); the run's target becomes the list's length unless
-    --samples asks for fewer. None without --poses."""
+                      model=None, params_path: str | None = None):
+    """With --poses: a planner serving the planned list, each entry approached from its
+    side, a list made from the nominal cell aimed with the result the run aims with
+    (``params_path``, --params or a resumed run's sidecar's: ``aim_list``;
+    entries already in the sample file of a resumed run are skipped, as often as they
+    are there); the run's target becomes the list's length unless --samples asks for
+    fewer. None without --poses."""
     path = req.poses
     if not path:
         return None
@@ -195,14 +198,16 @@ def pose_list_planner(req: SamplingRequest, scene, settings: RunSettings, checke
 
     from planecal.io.samples import read_samples
     from planecal.sampling.planner import ListPlanner
-    from planecal.studies.planning import load_poses
+    from planecal.studies.planning import approach_of, load_poses
 
-    counts, plates, _ = load_poses(path)
+    counts, plates, doc = load_poses(path)
     if len(counts) == 0:
         raise InputError(f"{path}: the pose list is empty")
     if plates.min() < 0 or plates.max() >= len(scene.plates):
         raise InputError(f"{path}: plate numbers must be 0..{len(scene.plates) - 1} for scene "
                          f"{scene.name}")
+    approach = approach_of(doc, len(counts))
+    counts = aim_list(path, doc, counts, plates, scene, model, params_path)
     n = len(counts)
     out = Path(req.out)
     if req.resume and out.exists() and out.stat().st_size > 0:
@@ -210,14 +215,34 @@ def pose_list_planner(req: SamplingRequest, scene, settings: RunSettings, checke
             done = read_samples(out).qe
         except InputError:  # no sample yet
             done = np.zeros((0, 6), np.int64)
-        keep = ~np.any(np.all(counts[:, None, :] == done[None, :, :], axis=2), axis=1) \
-            if len(done) else np.ones(n, bool)
-        counts, plates = counts[keep], plates[keep]
+        keep = np.ones(n, bool)
+        for c in done:  # each sample taken takes one entry of its counts
+            hit = np.flatnonzero(keep & np.all(counts == c, axis=1))
+            if len(hit):
+                keep[hit[0]] = False
+        counts, plates, approach = counts[keep], plates[keep], approach[keep]
     if req.samples is None:
         settings.samples = n
     elif settings.samples > n:
         raise InputError(f"--samples {settings.samples} is more than the {n} poses in {path}")
-    return ListPlanner(scene, counts, plates, checker, model)
+    return ListPlanner(scene, counts, plates, checker, model, approach)
+
+
+def aim_list(path, doc: dict, counts, plates, scene, model, params_path):
+    """A pose list's counts as the run takes them: a list made from the nominal cell
+    (its ``aimed_with`` null) aimed with the run's model (--params: ``poses.aim_counts``,
+    the same sensor pose on the same plate where the calibration puts the plate and the
+    sensor); a list aimed with a result as it is, with that result only."""
+    if model is None or not params_path:
+        return counts
+    made = doc.get("aimed_with")
+    if made is None:
+        from planecal.sampling.poses import aim_counts
+        return aim_counts(scene, counts, plates, None, model)[0]
+    if Path(str(made)).resolve() != Path(params_path).resolve():
+        raise InputError(f"{path}: aimed with {made}; run it with --params {made}, or plan "
+                         f"again with --params {params_path}")
+    return counts
 
 
 def session_for(req: SamplingRequest, planner=None, observer=None, extra=None,

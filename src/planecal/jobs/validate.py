@@ -40,6 +40,8 @@ class ValidateRequest:
     truth: str | None = None
     run: str | None = None
     quiet: bool = False
+    aim_samples: int | None = None  # --poses: the first random run that aims a list planned
+    # from the nominal cell (None: ``AIM_SAMPLES`` for such a list, 0 for an aimed one)
 
 
 CELL_FRAME_NOTE = (
@@ -77,15 +79,34 @@ def validate(req: ValidateRequest) -> tuple[dict, object]:
     return doc, scene
 
 
+AIM_SAMPLES = 30  # the first random run that aims a pose list planned from the nominal cell
+
+
 def _poses(path, least: int = 0):
-    """A planned pose list as the study's job takes it (None without one)."""
+    """A planned pose list as the study's job takes it (None without one): entries
+    (counts, plate, approach side), and whether it was planned from the nominal cell."""
     if not path:
-        return None
-    from planecal.studies.planning import load_poses
-    pq, pp, _ = load_poses(path)
+        return None, False
+    from planecal.studies.planning import approach_of, load_poses
+    pq, pp, doc = load_poses(path)
     if len(pq) < least:
         raise InputError(f"{path}: {len(pq)} poses; a calibration set needs at least {least}")
-    return tuple((tuple(int(v) for v in c), int(k)) for c, k in zip(pq, pp))
+    pa = approach_of(doc, len(pq))
+    return (tuple((tuple(int(v) for v in c), int(k), int(a)) for c, k, a in zip(pq, pp, pa)),
+            doc.get("aimed_with") is None)
+
+
+def aim_samples(req: ValidateRequest, nominal: bool) -> int:
+    """The first run's samples that aim --poses (``rehearsal.staged_samples``): as asked,
+    else ``AIM_SAMPLES`` for a list planned from the nominal cell (the true cell is
+    millimetres off: a nominal list loses poses to the laser's range), else 0."""
+    if not req.poses:
+        return 0
+    if req.aim_samples is None:
+        return AIM_SAMPLES if nominal else 0
+    if req.aim_samples and req.aim_samples < 20:
+        raise InputError(f"--aim-samples must be 0 or at least 20, got {req.aim_samples}")
+    return req.aim_samples
 
 
 def _study(req: ValidateRequest, scene, cal) -> dict:
@@ -98,11 +119,15 @@ def _study(req: ValidateRequest, scene, cal) -> dict:
         raise InputError(f"--samples must be at least 20, got {req.samples}")
     seeds = list(req.truth_seeds or [0, 1, 2, 3, 4])  # checked seeds (value_options)
     profile = load_profile(req.errors or DEFAULT_PROFILE, scene.robot)
+    poses, nominal = _poses(req.poses, 20)
+    aim = aim_samples(req, nominal)
     base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
                     samples=req.samples, seed=req.seed, offsets_all=req.offsets_all,
-                    poses=_poses(req.poses, 20), settings=req.settings, calibration=cal)
+                    poses=poses, settings=req.settings, calibration=cal, aim_samples=aim)
     engine = req.engine(warm_twin)  # its options checked here
     what = f"the poses of {req.poses}" if req.poses else f"{req.samples} samples"
+    if aim:
+        what = f"{aim} random samples, calibrated at level offsets to aim {what}"
     with engine:  # the scheduler reached before anything is said
         if not req.quiet:
             print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): "
@@ -157,8 +182,9 @@ def _record(req: ValidateRequest, scene, doc, cal) -> str:
     from planecal.studies.validation import TruthJob, truth_run
     job = TruthJob(scene=str(scene.path), errors=doc["profile"],
                    truth_seed=doc["detail_truth_seed"], samples=req.samples, seed=req.seed,
-                   offsets_all=req.offsets_all, poses=_poses(req.poses), settings=req.settings,
-                   calibration=cal)
+                   offsets_all=req.offsets_all, poses=_poses(req.poses)[0],
+                   settings=req.settings, calibration=cal,
+                   aim_samples=aim_samples(req, _poses(req.poses)[1]))
     v, fit, run = truth_run(job)
     if fit is None:
         raise InputError(f"--rrd: truth {job.truth_seed}'s run gave up: {v['failed']}")

@@ -258,6 +258,7 @@ def format_truths(summary: dict, world: str, level: str = "offsets") -> str:
                    f"gauge block {_mm(t['gauge_error_before_mm'], '+.3f')} -> "
                    f"{_mm(t['gauge_error_after_mm'], '+.3f')} mm")
     out += _over_truths(summary)
+    out += _robot_time(truths)
     for k, tcp in enumerate(truths[0]["tcps"] if truths else []):
         out.append(f"at the named TCP {tcp['name']} (the calibration has no better estimate "
                    "of it than the nominal one), AP before -> after (true model) per truth: "
@@ -274,6 +275,17 @@ def format_truths(summary: dict, world: str, level: str = "offsets") -> str:
     for f in summary["failed_truths"]:
         out.append(f"truth {f['truth_seed']} left out: {f['reason']}")
     return "\n".join(out)
+
+
+def _robot_time(truths: list[dict]) -> list[str]:
+    """The calibration runs' robot time and samples over the truths (one line)."""
+    t = [r["robot_time_s"] / 60 for r in truths if r.get("robot_time_s") is not None]
+    n = [r["samples"] for r in truths if r.get("samples") is not None]
+    if not t:
+        return []
+    return [f"the calibration runs: {min(n)}-{max(n)} samples in {min(t):.1f}-{max(t):.1f} "
+            f"robot minutes (median {float(np.median(t)):.1f}: travel, settling and the "
+            "laser's reads at the robot's step and tick)"]
 
 
 def _over_truths(summary: dict) -> list[str]:

@@ -56,3 +56,28 @@ class ApproachTracker:
         joints = np.flatnonzero(moved.any(axis=0))
         last = len(dq) - 1 - np.argmax(moved[::-1, joints], axis=0)
         self._side[joints] = np.sign(dq[last, joints]).astype(np.int8)
+
+
+APPROACH_TICKS = 4  # a chosen approach's last leg: every motor this many steps of the robot
+# (the MC70: 200 counts, 3.6-8.2 mrad a joint, far more than the reducers' lost motion, at
+# most 1 arcmin = 291 urad, docs/ERRORS.md), longer than a servo's lag behind a move at the
+# robot's step (the realistic twin's 30 ms: 3 ticks, 150 counts), so each motor's last
+# motion is the leg's whatever the move before it did
+
+
+def approach_point(robot, q: np.ndarray, side: int, qe0=None):
+    """Where a move into joint angles ``q`` that ends with every joint moving towards
+    ``side`` (+1: each joint's last motion positive, -1: negative) starts its last leg:
+    (joint angles, counts), every motor ``APPROACH_TICKS`` of the robot's step short of
+    q's counts, on the side that moves its joint towards ``side`` (the wrist's coupling
+    adds a percent of the other motors' motion). None where a joint would not move
+    towards ``side`` on the leg."""
+    from planecal.model.encoder import counts_to_joints, joints_to_counts
+    c = joints_to_counts(robot, q, qe0)
+    gains = np.asarray(robot.gains, float)
+    dc = (-np.sign(side) * np.sign(gains) * APPROACH_TICKS * robot.step_counts).astype(np.int64)
+    moved = (np.asarray(robot.coupling, float) / gains[None, :]) @ (-dc).astype(float)
+    if np.any(np.sign(moved) != np.sign(side)):
+        return None
+    ca = c + dc
+    return counts_to_joints(robot, ca, qe0), ca

@@ -248,11 +248,18 @@ class ListPlanner:
     is); a pose whose path is blocked from here is left for later. Stateful: plans in the
     run's own process. When no pose is left, or none of those left can be reached from
     here, the plan says so (``q`` None, ``reason``). ``taken``: the indices of the poses
-    served so far, in the order served."""
+    served so far, in the order served. ``approach`` (n,) in -1, 0, +1: the side each
+    pose is approached from (``approach.approach_point``: a last leg from just short of
+    it, which a pose read again after another reading at it needs to settle anew; 0:
+    straight in, the side its path leaves), where that leg is clear. A pose whose target
+    configuration collides can be reached from nowhere: the first plan reports each such
+    pose as a rejection and drops it (a list aimed anew with a calibration,
+    ``poses.aim_counts``, can move a pose near an obstacle), so it cannot hold up the end
+    of the list."""
     pure = False
 
     def __init__(self, scene: Scene, counts: np.ndarray, plates: np.ndarray, checker: Checker,
-                 model: CommandModel | None = None):
+                 model: CommandModel | None = None, approach: np.ndarray | None = None):
         self.robot = scene.robot
         self.checker = checker
         poses = PoseGenerator(scene, PoseSettings(cone_deg=scene.cone_deg,
@@ -261,11 +268,25 @@ class ListPlanner:
         self.detour = Detour(poses, checker)
         self.counts = np.asarray(counts, np.int64).reshape(-1, 6)
         self.plates = np.asarray(plates, int).reshape(-1)
+        self.approach = (np.zeros(len(self.counts), np.int8) if approach is None
+                         else np.asarray(approach, np.int8).reshape(-1))
         self.left = list(range(len(self.counts)))
         self.taken: list[int] = []
+        self._screened = False
 
     def index_matters(self) -> bool:
         return False
+
+    def _screen(self, out: Plan) -> None:
+        """The poses whose target collides, rejected into ``out`` and dropped (once)."""
+        self._screened = True
+        for j in list(self.left):
+            q = counts_to_joints(self.robot, self.counts[j], self.qe0)
+            res = self.checker.check_config(q)
+            if not res.ok:
+                self.left.remove(j)
+                out.rejections.append(("collision", q, _collision_reason("target", res)
+                                       + f" (planned pose {j + 1}: dropped)"))
 
     def plan(self, q_start, index, rng_state, budget, back=()):
         """The next pose of the list reachable on a straight path; else the next one
@@ -273,6 +294,8 @@ class ListPlanner:
         poses passed over stay for later."""
         t0 = time.perf_counter()
         out = Plan(index, q_start, [], rng_state)
+        if not self._screened:
+            self._screen(out)
         blocked = []
         for j in list(self.left)[:budget]:
             q = counts_to_joints(self.robot, self.counts[j], self.qe0)
@@ -304,6 +327,15 @@ class ListPlanner:
         self.taken.append(j)
         out.q, out.qe_goal, out.plate = q, self.counts[j].copy(), int(self.plates[j])
         out.via = list(via)
+        if self.approach[j]:
+            from planecal.sampling.approach import approach_point
+            at = approach_point(self.robot, q, int(self.approach[j]), self.qe0)
+            last = out.via[-1][0] if out.via else out.q_start
+            c = self.checker
+            if (at is not None and counts_in_range(self.robot, at[1])
+                    and c.check_config(at[0]).ok and c.check_path(last, at[0]).ok
+                    and c.check_path(at[0], q).ok):
+                out.via.append(at)
 
 
 AHEAD = 4  # plans the background planner makes ahead along the chain of plans

@@ -49,7 +49,7 @@ import numpy as np
 
 from planecal.model.cell_params import CellParams
 from planecal.model.measurement import sensor_rotation
-from planecal.model.encoder import joints_to_counts
+from planecal.model.encoder import counts_in_range, counts_to_joints, joints_to_counts
 from planecal.base.errors import InputError
 from planecal.formats.run import IK_CHOICES, PLATE_CHOICES  # the sidecar's allowed values
 from planecal.model.ik import ik_all
@@ -214,3 +214,36 @@ class PoseGenerator:
     def counts_target(self, q: np.ndarray) -> np.ndarray:
         """The encoder counts of joint angles q, with the model's encoder zeros."""
         return joints_to_counts(self.robot, q, self.model.qe0)
+
+
+def aim_counts(scene: Scene, counts: np.ndarray, plates: np.ndarray,
+               source: CommandModel | None, target: CommandModel):
+    """A pose list made with ``source``'s cell (None: the nominal one) aimed with
+    ``target``'s (an earlier calibration of the cell): each pose's sensor placed where
+    ``target`` puts the same sensor pose relative to the same plate (the spot on the
+    plate, the beam's incidence and the distance as the list was made), its joints the IK
+    solution nearest to the listed ones (their wrist branch), its counts with ``target``'s
+    encoder zeros. Returns (counts (n, 6) int64, aimed (n,) bool): a pose ``target``
+    cannot reach within the limits keeps its listed counts (aimed False)."""
+    from planecal.model.kinematics import fk
+    src = PoseGenerator(scene, model=source)
+    dst = PoseGenerator(scene, model=target)
+    counts = np.asarray(counts, np.int64).reshape(-1, 6)
+    plates = np.asarray(plates, int).reshape(-1)
+    out, ok = counts.copy(), np.zeros(len(counts), bool)
+    q_src = counts_to_joints(scene.robot, counts, src.model.qe0)
+    T_fs = np.linalg.inv(src.T_sf)  # flange <- sensor, as the list was made
+    kin = scene.robot.kinematics.with_offsets(src.delta)
+    for i, (q, k) in enumerate(zip(q_src, plates)):
+        T_s = fk(kin, q) @ T_fs
+        rel = np.linalg.inv(src.frames[k]) @ T_s  # the sensor in its plate's frame
+        T_f = dst.frames[k] @ rel @ dst.T_sf
+        Q = ik_all(scene.robot, T_f, dst.delta)
+        if len(Q) == 0:
+            continue
+        Q = Q[(Q[:, 4] >= 0) == (q[4] >= 0)] if np.any((Q[:, 4] >= 0) == (q[4] >= 0)) else Q
+        best = Q[np.argmin(np.max(np.abs(Q - q) * dst.weights, axis=1))]
+        c = dst.counts_target(best)
+        if counts_in_range(scene.robot, c):
+            out[i], ok[i] = c, True
+    return out, ok

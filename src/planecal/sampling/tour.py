@@ -51,6 +51,9 @@ from planecal.base.progress import report
 from planecal.sampling.steps import DWELL_TICKS, n_steps
 
 READ_TICKS = 102  # median ticks of one laser read on the twin (100 at least: the buffer)
+READ_TICKS_MEAN = 150  # mean ticks of one stable read on the twin (what a budget of robot
+# time spends: the buffer turns over when 100 readings of 1 um spread beyond 5 um; 40 reads
+# of one three_plates pose took 152 ticks each, a 150-sample run 141 a stable read)
 EXACT_MAX = 12  # poses up to which ``order`` solves exactly (Held-Karp: n^2 2^n)
 BLOCKED_MODES = ("avoid", "detour")
 
@@ -187,15 +190,16 @@ def visit(planner, start_q: np.ndarray, samples: int, seed: int = 0,
     return rec.visits
 
 
-def visit_list(scene, counts, plates, checker, start_q: np.ndarray):
-    """What the sampling run does with a pose list (its ``ListPlanner``) from joint angles
-    ``start_q`` if every laser read succeeds: (the moves, the indices of the poses it
-    takes in the order it takes them, why it stops short of the list or None). The list
-    without the poses it left out, ``counts[np.sort(taken)]``, is then visited whole by
-    the same moves: each pose the run took was the first of those left that it could
-    reach (straight, else by a detour), and still is without the others."""
+def visit_list(scene, counts, plates, checker, start_q: np.ndarray, approach=None):
+    """What the sampling run does with a pose list (its ``ListPlanner``, each pose
+    approached from its side of ``approach``) from joint angles ``start_q`` if every
+    laser read succeeds: (the moves, the indices of the poses it takes in the order it
+    takes them, why it stops short of the list or None). The list without the poses it
+    left out, ``counts[np.sort(taken)]``, is then visited whole by the same moves: each
+    pose the run took was the first of those left that it could reach (straight, else by
+    a detour), and still is without the others."""
     from planecal.sampling.planner import ListPlanner
-    lp = ListPlanner(scene, counts, plates, checker)
+    lp = ListPlanner(scene, counts, plates, checker, approach=approach)
     visits, why = visit(lp, start_q, len(lp.counts), short=True)
     return visits, np.array(lp.taken, int), why
 

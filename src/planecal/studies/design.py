@@ -225,3 +225,124 @@ def choose_count(A: np.ndarray, predictor: Predictor, target: str, value: float,
         else:
             lo = mid
     return hi, cache[hi][1]
+
+
+# ----- the whole model's design: the tool point's error per robot second (issue 31) --------
+
+def _scaled(A: np.ndarray, G: np.ndarray, H0: np.ndarray):
+    """A, G, H0 in columns scaled to unit RMS (the arithmetic's conditioning; the criterion
+    tr(G H^-1) is invariant) and the scales."""
+    S = 1.0 / np.sqrt(np.mean(A ** 2, axis=0) + np.diag(H0) / len(A))
+    return A * S, G * np.outer(S, S), H0 * np.outer(S, S), S
+
+
+def tool_criterion(G: np.ndarray, H: np.ndarray) -> float:
+    """tr(G H^-1): the mean square of the tool point's error over the poses G averages
+    (``G = mean_i T_i^T T_i``) under the information H."""
+    return float(np.trace(G @ np.linalg.inv(H)))
+
+
+def budget_greedy(A: np.ndarray, G: np.ndarray, H0: np.ndarray, pose_of: np.ndarray,
+                  new_s: float, read_s: float, budget_s: float, max_reads: int,
+                  refresh: int = 40) -> np.ndarray:
+    """Readings chosen one at a time for the largest fall of tr(G H^-1) per robot second:
+    ``A`` (U, p) the readings a candidate offers (rows scaled by 1 / the noise, one per
+    pose and approach side: ``pose_of`` (U,) its pose), ``H0`` the prior's information. A
+    reading at a pose not yet chosen costs ``new_s`` (the travel there and the reading), one
+    more at a chosen pose ``read_s``; at most ``max_reads`` at a pose, ``budget_s`` in all.
+    Returns the readings (indices into A, a pose's repeated) in the order chosen. Rank-one
+    updates of H^-1 (Sherman-Morrison), refreshed every ``refresh`` readings."""
+    A, G, H, _ = _scaled(A, G, H0)
+    n_pose = int(pose_of.max()) + 1
+    reads = np.zeros(n_pose, int)
+    spent, out = 0.0, []
+
+    def fresh():
+        Hi = np.linalg.inv(H)
+        HA = A @ (0.5 * (Hi + Hi.T))
+        return HA, HA @ G
+
+    HA, HAG = fresh()
+    while True:
+        d = np.einsum("ij,ij->i", HA, A)
+        gain = np.einsum("ij,ij->i", HAG, HA) / (1.0 + d)
+        cost = np.where(reads[pose_of] > 0, read_s, new_s)
+        ok = (spent + cost <= budget_s) & (reads[pose_of] < max_reads)
+        if not ok.any():
+            return np.array(out, int)
+        u = int(np.argmax(np.where(ok, gain / cost, -np.inf)))
+        H += np.outer(A[u], A[u])
+        spent += cost[u]
+        reads[pose_of[u]] += 1
+        out.append(u)
+        if len(out) % refresh == 0:
+            HA, HAG = fresh()
+        else:  # H^-1 - h h^T / (1 + d_u), h = H^-1 a_u
+            h = HA[u].copy()
+            Ah = (A @ h) / (1.0 + d[u])
+            HA -= np.outer(Ah, h)
+            HAG -= np.outer(Ah, G @ h)
+
+
+def _fall(U1: np.ndarray, U2: np.ndarray, Hmi: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """Per candidate (rows of U1, U2: its two readings' rows, each times the square root
+    of how often it is read): how much adding them lowers tr(G Hm^-1), Hm^-1 = ``Hmi``:
+    tr(K^-1 U^T Hm^-1 G Hm^-1 U), K = I + U^T Hm^-1 U (2 x 2, Woodbury)."""
+    B1, B2 = U1 @ Hmi, U2 @ Hmi
+    K11 = 1 + np.einsum("ij,ij->i", B1, U1)
+    K22 = 1 + np.einsum("ij,ij->i", B2, U2)
+    K12 = np.einsum("ij,ij->i", B1, U2)
+    BG1 = B1 @ G
+    Q11 = np.einsum("ij,ij->i", BG1, B1)
+    Q22 = np.einsum("ij,ij->i", B2 @ G, B2)
+    Q12 = np.einsum("ij,ij->i", BG1, B2)
+    return (K22 * Q11 - 2 * K12 * Q12 + K11 * Q22) / (K11 * K22 - K12 ** 2)
+
+
+def exchange_poses(A: np.ndarray, G: np.ndarray, H0: np.ndarray, pose_of: np.ndarray,
+                   side_of: np.ndarray, units: np.ndarray, max_passes: int = 5,
+                   tol: float = 1e-4) -> np.ndarray:
+    """Fedorov's exchange at the level of poses: a chosen pose with all its readings is
+    swapped for a pose not chosen, read as often (half from each side: ``side_of`` of each
+    row of A, the rows of a pose one per side), whenever that lowers tr(G H^-1) by more
+    than ``tol`` of it. A greedy choice is myopic where one reading tells little alone (a
+    plate's first pose mostly fixes that plate's plane): on three_plates it left two of
+    the four plates unvisited and twice the exchanged design's predicted error. Returns
+    the readings (indices into A)."""
+    A, G, H0, _ = _scaled(A, G, H0)
+    n_pose = int(pose_of.max()) + 1
+    row = {(int(p), int(s)): u for u, (p, s) in enumerate(zip(pose_of, side_of))}
+    plus = np.array([row.get((p, 1), -1) for p in range(n_pose)])
+    minus = np.array([row.get((p, -1), -1) for p in range(n_pose)])
+    units = [int(u) for u in units]
+    reads = np.bincount(pose_of[units], minlength=n_pose)
+    H = H0 + A[units].T @ A[units]
+    f = tool_criterion(G, H)
+    both = (plus >= 0) & (minus >= 0)
+    for _ in range(max_passes):
+        improved = False
+        for i in np.flatnonzero(reads):
+            k = int(reads[i])
+            Ri = A[[u for u in units if pose_of[u] == i]]
+            Hmi = np.linalg.inv(H - Ri.T @ Ri)
+            splits = {((k + 1) // 2, k // 2), (k // 2, (k + 1) // 2)}  # an odd one: either side
+            best = None
+            for kp, km in splits:
+                cand = float(np.trace(G @ Hmi)) - _fall(A[plus] * np.sqrt(kp),
+                                                        A[minus] * np.sqrt(km), Hmi, G)
+                cand[((reads > 0) & (np.arange(n_pose) != i)) | ~both] = np.inf  # i: its sides
+                j = int(np.argmin(cand))
+                if best is None or cand[j] < best[0]:
+                    best = (cand[j], j, kp, km)
+            value, j, kp, km = best
+            if value < f * (1 - tol):
+                units = [u for u in units if pose_of[u] != i] + [int(plus[j])] * kp \
+                    + [int(minus[j])] * km
+                reads[i] = 0
+                reads[j] = k
+                H = H0 + A[units].T @ A[units]
+                f = tool_criterion(G, H)
+                improved = True
+        if not improved:
+            break
+    return np.array(units, int)

@@ -385,6 +385,13 @@ def _result(scene, seed: int, d: _Design, r: _RandomRun, t: _Tour, ordered: bool
     return res
 
 
+def approach_of(doc: dict, n: int) -> np.ndarray:
+    """(n,) int8: the approach side of each entry of a pose list read by ``load_poses``
+    (0, straight in, where the plan chose none)."""
+    a = doc.get("approach")
+    return np.zeros(n, np.int8) if a is None else np.array(a, np.int8).reshape(n)
+
+
 def load_poses(path) -> tuple[np.ndarray, np.ndarray, dict]:
     """(counts (n, 6) int64, plates (n,), the whole document) of a pose list, validated by
     ``planecal.formats.poses.PosesFile``; one-line InputError otherwise."""

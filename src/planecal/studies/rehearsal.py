@@ -160,55 +160,84 @@ def _twin_and_settings(scene, world, st: RehearsalSettings, seed: int, options=N
     return twin, rs
 
 
-def _collect(scene, planner, twin, rs, seed: int):
-    """The collect core with the twin set at rest at each target (``RestAcquirer``), or,
-    where the twin's joint errors depend on the path, driven there tick by tick
-    (``DriveAcquirer``, as ``rehearse``): (qe, d_m, plate, direction, rejected dict);
-    RuntimeError when the run gives up."""
-    from planecal.model.encoder import counts_to_joints
+def _acquirer(scene, twin, rs):
+    """The twin set at rest at each target (``RestAcquirer``), or, where its joint errors
+    depend on the path, driven there tick by tick (``DriveAcquirer``, as ``rehearse``;
+    its driver started: one per twin, every stage of a session goes through it)."""
     from planecal.links.base import AlwaysEnabled
-    from planecal.sampling.collect import (Cursor, DriveAcquirer, MemoryRecorder,
-                                           RestAcquirer, Tally, collect)
+    from planecal.sampling.collect import DriveAcquirer, RestAcquirer
     from planecal.sampling.driver import Driver
+    if not path_dependent(twin.options):
+        return RestAcquirer(twin, rs.laser)
+    drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
+    drv.start()
+    return DriveAcquirer(drv, rs.laser, rs.nominal_step_counts, rs.dwell_ticks)
+
+
+def _collect(scene, planner, twin, rs, seed: int, timed: bool = False, acq=None):
+    """The collect core through ``acq`` (default: a new ``_acquirer``): (qe, d_m, plate,
+    direction, rejected dict), and with ``timed`` the robot time it took
+    (``robot_time``); RuntimeError when the run gives up."""
+    from planecal.model.encoder import counts_to_joints
+    from planecal.sampling.collect import Cursor, MemoryRecorder, Tally, collect
+    from planecal.sampling.tour import Clock
 
     rec, tally = MemoryRecorder(rs.samples), Tally()
     cursor = Cursor(counts_to_joints(scene.robot, twin.current_counts),
                     np.random.default_rng(seed).bit_generator.state)
-    if path_dependent(twin.options):
-        drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
-        drv.start()
-        acq = DriveAcquirer(drv, rs.laser, rs.nominal_step_counts, rs.dwell_ticks)
-    else:
-        acq = RestAcquirer(twin, rs.laser)
-    collect(planner, acq, rec, rs.samples, cursor, tally, rs.max_attempts)
+    acq = _acquirer(scene, twin, rs) if acq is None else acq
+    clock = Clock(acq, twin.current_counts, rs.nominal_step_counts, rs.dwell_ticks)
+    collect(planner, clock, rec, rs.samples, cursor, tally, rs.max_attempts)
     if tally.status != "complete":
         raise RuntimeError(f"run with seed {seed}: {tally.reason}")
-    return (*rec.arrays(), dict(tally.rejected))
+    out = (*rec.arrays(), dict(tally.rejected))
+    return (*out, robot_time(clock, scene.robot)) if timed else out
 
 
-def twin_samples(scene, world, st: RehearsalSettings, seed: int, options=None):
+def robot_time(clock, robot) -> dict:
+    """What a collection's ``tour.Clock`` counted, in seconds of robot time: the whole,
+    the travel (the moves' legs), the laser's reads and the moves (accepted samples and
+    laser rejections: the robot went there)."""
+    tick = float(robot.tick_s)
+    return {"robot_time_s": clock.ticks * tick, "travel_s": clock.travel_ticks * tick,
+            "read_s": clock.read_ticks * tick, "moves": clock.moves}
+
+
+def twin_samples(scene, world, st: RehearsalSettings, seed: int, options=None,
+                 timed: bool = False):
     """The ``twin`` mode (module docstring) in ``world`` (a ``Truth`` from ``world_for`` or
     ``twin.profile.draw_world``, or a ``CellParams``) with ``options`` (default: the
-    settings' profile and noise): (qe, d_m, plate, direction, rejected dict)."""
+    settings' profile and noise): (qe, d_m, plate, direction, rejected dict), with
+    ``timed`` its robot time too (``robot_time``)."""
     from planecal.sampling.planner import Planner
 
     twin, rs = _twin_and_settings(scene, world, st, seed, options)
     return _collect(scene, Planner(scene, rs.pose, cached_world(st.scene, st.clearance_m)), twin,
-                    rs, seed)
+                    rs, seed, timed)
 
 
-def pose_list_samples(scene, world, st: RehearsalSettings, seed: int, options=None):
+def pose_list(poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(counts (n, 6), plates (n,), approach (n,)) of a settings' ``poses``: entries
+    (counts, plate) or (counts, plate, approach side: -1, 0, +1)."""
+    counts = np.array([p[0] for p in poses], np.int64).reshape(-1, 6)
+    plates = np.array([p[1] for p in poses], int)
+    approach = np.array([p[2] if len(p) > 2 else 0 for p in poses], np.int8)
+    return counts, plates, approach
+
+
+def pose_list_samples(scene, world, st: RehearsalSettings, seed: int, options=None,
+                      timed: bool = False):
     """A planned pose list measured on the twin as ``rehearse --poses`` visits it (each
-    pose checked from the last; a blocked one later), set at rest at each pose (driven
-    there where the joint errors depend on the path)."""
+    pose checked from the last; a blocked one later; each approached from its side),
+    set at rest at each pose (driven there where the joint errors depend on the path)."""
     from planecal.sampling.planner import ListPlanner
 
     twin, rs = _twin_and_settings(scene, world, st, seed, options)
-    counts = np.array([c for c, _ in st.poses], np.int64)
-    plates = np.array([k for _, k in st.poses], int)
+    counts, plates, approach = pose_list(st.poses)
     rs.samples = len(counts)
-    planner = ListPlanner(scene, counts, plates, cached_world(st.scene, st.clearance_m))
-    return _collect(scene, planner, twin, rs, seed)
+    planner = ListPlanner(scene, counts, plates, cached_world(st.scene, st.clearance_m),
+                          approach=approach)
+    return _collect(scene, planner, twin, rs, seed, timed)
 
 
 def rehearse_samples(scene, world, st: RehearsalSettings, seed: int, options=None):
@@ -263,3 +292,41 @@ def rehearse_planned(scene, counts, plates, out, twin, checker, seed: int = 0):
     drv = Driver(twin, twin, AlwaysEnabled(), scene.robot)
     return SamplingRun(drv, scene, rs, out, checker,
                        planner=ListPlanner(scene, counts, plates, checker)).run()
+
+
+AIM_LEVEL = "offsets"  # what the first run's calibration aims a pose list with
+
+
+def staged_samples(scene, world, st: RehearsalSettings, seed: int, options=None,
+                   timed: bool = False, aim_samples: int = 30):
+    """A pose list made from the nominal cell as a user runs it on a new cell: a first
+    random run of ``aim_samples`` (``twin_samples``' planner), calibrated at level
+    ``AIM_LEVEL`` (the cell: sensor pose, plates, offsets), aims the list
+    (``poses.aim_counts``), which then runs (``pose_list_samples``' planner) from where
+    the first left the robot: one session on one twin. The samples of both (a calibration
+    takes them all), with ``timed`` the robot time of both; RuntimeError when either
+    gives up."""
+    from planecal.estimation.calibrate import CalibrationSettings, calibrate
+    from planecal.model.scene import nominal_params
+    from planecal.sampling.planner import ListPlanner, Planner
+    from planecal.sampling.poses import CommandModel, aim_counts
+
+    twin, rs = _twin_and_settings(scene, world, st, seed, options)
+    checker = cached_world(st.scene, st.clearance_m)
+    rs.samples = aim_samples
+    acq = _acquirer(scene, twin, rs)
+    first = _collect(scene, Planner(scene, rs.pose, checker), twin, rs, seed, True, acq)
+    qe, d, plate, direction = first[:4]
+    cal = calibrate(scene.robot, qe, d, nominal_params(scene), plate,
+                    CalibrationSettings(level=AIM_LEVEL), direction, scene.references)
+    counts, plates, approach = pose_list(st.poses)
+    aimed, _ = aim_counts(scene, counts, plates, None,
+                          CommandModel(cal.params, scene.robot.qe0.copy()))
+    rs.samples = len(aimed)
+    second = _collect(scene, ListPlanner(scene, aimed, plates, checker, approach=approach),
+                      twin, rs, seed + 1, True, acq)
+    out = tuple(np.concatenate([a, b]) for a, b in zip(first[:4], second[:4]))
+    rejected = {k: first[4].get(k, 0) + second[4].get(k, 0) for k in {*first[4], *second[4]}}
+    robot = {k: first[5][k] + second[5][k] for k in first[5]}
+    robot["aim_samples"] = int(len(qe))
+    return (*out, rejected, robot) if timed else (*out, rejected)

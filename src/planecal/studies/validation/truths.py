@@ -50,6 +50,8 @@ class TruthJob:
     off: tuple = ()
     calibration: CalibrationSettings = field(default_factory=CalibrationSettings)
     beside: bool = True
+    aim_samples: int = 0  # with ``poses``: a first random run that aims them
+    # (``rehearsal.staged_samples``); 0: the list as it is
 
     def rehearsal(self):
         """The calibration set's rehearsal (``studies.rehearsal``): run 0 of these settings
@@ -88,7 +90,9 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
     from planecal.estimation.compensate import CalibratedModel
     from planecal.model.scene import nominal_params
     from planecal.studies.common import cached_scene, cached_world
-    from planecal.studies.rehearsal import pose_list_samples, twin_samples
+    from functools import partial
+
+    from planecal.studies.rehearsal import pose_list_samples, staged_samples, twin_samples
     from planecal.twin.world import sources_on, without
 
     st = job.settings
@@ -96,9 +100,10 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
     scene = cached_scene(job.scene)
     world, opts = without(*reh.world(0), job.off)
     try:
-        sample = pose_list_samples if job.poses else twin_samples
-        qe, d, plate, direction, rejected = sample(scene, world, reh, job.sampling_seed,
-                                                      opts)
+        sample = (twin_samples if not job.poses else pose_list_samples if not job.aim_samples
+                  else partial(staged_samples, aim_samples=job.aim_samples))
+        qe, d, plate, direction, rejected, robot = sample(scene, world, reh,
+                                                             job.sampling_seed, opts, True)
     except RuntimeError as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
     cals = [(s.label, calibrate(scene.robot, qe, d, nominal_params(scene), plate, s,
@@ -121,7 +126,8 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
     v["calibration_settings"] = job.calibration.to_dict()
     v["off"] = list(job.off)
     v["sources"] = sources_on(scene.robot, world, opts)
-    v["calibration"] = {"samples": len(d), "rejected": rejected, "fit_rms_mm": fit.rms_mm(),
+    v["calibration"] = {"samples": len(d), "rejected": rejected, **robot,
+                        "fit_rms_mm": fit.rms_mm(),
                         "max_model_error_mm": float(np.abs(fit.residuals_m).max() * 1e3),
                         "converged": bool(fit.converged),
                         "offsets_std_rad": fit.std[fit.layout.slice("joint_offsets")]}
@@ -161,6 +167,7 @@ def truth_row(v: dict) -> dict:
     cal = v.get("calibration") or {}
     row["max_model_error_mm"] = cal.get("max_model_error_mm")
     row["samples"] = cal.get("samples")
+    row["robot_time_s"] = cal.get("robot_time_s")  # the calibration run's (both stages)
     row["offset_error_rad"] = (v.get("residual_offset_error") or {}).get("offset_error_rad")
     row["levels"] = v.get("levels") or []
     row["tcps"] = v.get("tcps") or []
