@@ -126,6 +126,9 @@ class Progress:
             self._held = self.off = False
             if self.tty:
                 self._open_bar()
+            elif not self.total:  # a stage is said when shown
+                with self._lock:
+                    self._print(self.line(), clock())
 
     def _postfix(self) -> str:
         return self.note + (f": {self.detail}" if self.note and self.detail else self.detail)
@@ -201,10 +204,12 @@ class Progress:
                 print(final, file=self.stream, flush=True)
 
 
-def stage(label: str, note: str | None = None, quiet: bool = False) -> Progress:
+def stage(label: str, note: str | None = None, quiet: bool = False,
+          hold: bool = False) -> Progress:
     """A step of no count, said at once (a plain line, or a bar with the elapsed time),
-    that ``report`` details: ``with stage("calibration"): ...``."""
-    p = Progress(label, 0, quiet=quiet)
+    that ``report`` details: ``with stage("calibration"): ...``. ``hold``: said only at
+    ``release()`` (a step that may still end in a one-line refusal)."""
+    p = Progress(label, 0, quiet=quiet, hold=hold)
     if note is not None:
         p.note = note
     with p._lock:

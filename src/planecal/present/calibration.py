@@ -350,7 +350,8 @@ def _scales(scale) -> str:
 
 def verdict_lines(doc: dict) -> list[str]:
     """What the calibration says of itself at the tool (``estimation.verdict``): one line
-    for the figure, one (a WARNING) where a simpler level is better."""
+    for the figure, one (a WARNING) where a simpler level is better, one saying why where
+    the verdict is uncertain."""
     v = doc.get("verdict")
     if not isinstance(v, dict):
         return []
@@ -364,7 +365,8 @@ def verdict_lines(doc: dict) -> list[str]:
         out.append("WARNING " + "; ".join(v["reasons"]) + ": export, urdf and compensate "
                    "refuse this result without --force")
     elif v["grade"] == "uncertain":
-        out.append("WARNING verdict uncertain: " + "; ".join(v["reasons"]))
+        # not an alarm: the figure stands, its band is what is in doubt
+        out.append("the verdict is uncertain because " + "; ".join(v["reasons"]))
     return out
 
 

@@ -222,11 +222,15 @@ class Engine:
         try:
             what = (f"starting a local Dask cluster of {self.n_workers} worker processes"
                     if self.mode == "cluster" else f"connecting to {self.scheduler}")
-            with stage("engine", what, quiet=not self.progress) as bar:
+            # a scheduler that does not answer is a one-line refusal: its stage is said
+            # once it has answered
+            with stage("engine", what, quiet=not self.progress,
+                       hold=self.mode == "scheduler") as bar:
                 if self.mode == "cluster":
                     self._start_cluster(bar)
                 else:
                     self._connect()
+                    bar.release()
                 self.client.register_plugin(_env_plugin(), name="planecal-env")
                 if self.mode == "scheduler":
                     configs = self.client.run(_worker_config).values()
