@@ -68,3 +68,24 @@ def test_an_input_that_exists_goes_on_to_load_them(folder):
     code, heavy, err = _run(["calibrate", "SEED.tsv"], folder)
     assert {"numba", "scipy"} <= set(heavy), (code, heavy, err)
     assert "not found" not in err and "5 samples cannot determine" in err
+
+
+@pytest.mark.parametrize("command", ["rehearse", "sample"])
+def test_a_bad_pose_list_is_one_line_before_any_kernel_compiles(tmp_path, command):
+    """A --poses list that is not one is refused in one line on a cold numba cache (a new
+    machine), before the scene's kernels compile or a link opens (before: CI's cold cache
+    said "compiling kernels" five times above the refusal, which came after the twin and,
+    for ``sample``, after the laser's port and the controller's lock)."""
+    import os
+    bad = tmp_path / "poses.json"
+    bad.write_text('{"format": "planecal-poses/1", "counts": "none", "plates": [0]}')
+    argv = [command, "--poses", str(bad), "--out", str(tmp_path / "r.tsv")]
+    if command == "sample":
+        argv += ["--rt", "127.0.0.1:1", "--laser", str(tmp_path / "no-such-port")]
+    env = {**os.environ, "PLANECAL_CACHE_DIR": str(tmp_path / "cold")}
+    env.pop("NUMBA_CACHE_DIR", None)
+    p = subprocess.run([sys.executable, "-c", CODE, *argv], capture_output=True, text=True,
+                       cwd=tmp_path, timeout=300, env=env)
+    code, _ = json.loads(p.stdout.strip().splitlines()[-1])
+    assert code == 2 and p.stderr.count("\n") == 1, p.stderr
+    assert f"{bad}: counts: Input should be a valid list" in p.stderr

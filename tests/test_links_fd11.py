@@ -892,7 +892,11 @@ def test_twin_over_udp_and_pty_matches_in_process_twin():
             assert mm_w == decode_reply(encode_reply(mm_l))  # identical at the wire's 1e-6 mm
         assert mm_w is not None
         assert link.counters.lost_replies == 0 and laser.counters.malformed == 0
-    assert remote.ticks == local.ticks == len(path)
+        resent = link.counters.resends + link.counters.boot_resends
+    # a datagram resent while the emulator's first tick warmed up (a loaded machine) is a
+    # tick of its own there, as on a controller: the remote twin ticks once more for each
+    # (same state: the answers above are identical), never fewer
+    assert local.ticks == len(path) <= remote.ticks <= len(path) + resent
 
 
 def test_emulate_twin_is_the_profiles_world():

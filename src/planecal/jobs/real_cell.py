@@ -257,8 +257,9 @@ def sample(sreq: SamplingRequest, req: LinkRequest) -> int:
         before = ((side or {}).get("real_cell") or {}).get("link_total")
         real_cell = {"rt": req.rt, "rt_port": req.rt_port, "laser": req.laser,
                      "follow_limit_counts": limit, **cell.record(waited), "link_total": before}
-        code, summary = _run(sreq, scene, settings, checker, model, observer, cell.link, laser,
-                             monitor, real_cell, before, cell.recorded_reference)
+        code, summary = _run(sreq, run.poses, scene, settings, checker, model, observer,
+                             cell.link, laser, monitor, real_cell, before,
+                             cell.recorded_reference)
     finally:
         if raw_laser is not None:
             raw_laser.close()
@@ -276,8 +277,8 @@ def sample(sreq: SamplingRequest, req: LinkRequest) -> int:
     return code
 
 
-def _run(req: SamplingRequest, scene, settings, checker, model, observer, link, laser, monitor, real_cell,
-         before, recorded) -> tuple[int, dict]:
+def _run(req: SamplingRequest, poses, scene, settings, checker, model, observer, link, laser,
+         monitor, real_cell, before, recorded) -> tuple[int, dict]:
     """The session (`sampling.session`); a link or laser failure is one line (exit 1); the
     link counters go to the sidecar however it ends, and what the controller's first reply
     showed of its reference (``observed_reference``: "kept" -- the one ``recorded`` in the
@@ -291,7 +292,7 @@ def _run(req: SamplingRequest, scene, settings, checker, model, observer, link, 
     from planecal.sampling.run import count_samples, sidecar_path
     from planecal.sampling.session import run_session
 
-    session = session_for(req, pose_list_planner(req, scene, settings, checker, model[0],
+    session = session_for(req, pose_list_planner(req, poses, scene, settings, checker, model[0],
                                                  (model[1] or {}).get("params")),
                           observer, {"real_cell": real_cell}, hold_while_planning=True,
                           model=model)

@@ -75,9 +75,10 @@ def rehearse(req: RehearseRequest) -> int:
             raise InputError(f"--truth-out {req.truth_out}: cannot write ({e.strerror})") from None
     observer = rerun_observer(sreq, scene, twin)
     model = command_model(sreq, scene, run.sidecar)
-    session = session_for(sreq, pose_list_planner(sreq, scene, settings, checker, model[0],
-                                                  (model[1] or {}).get("params")),
-                          observer, extra={"twin": twin_record(ref, twin_seed)}, model=model)
+    planner = pose_list_planner(sreq, run.poses, scene, settings, checker, model[0],
+                                (model[1] or {}).get("params"))
+    session = session_for(sreq, planner, observer, extra={"twin": twin_record(ref, twin_seed)},
+                          model=model)
     try:
         code, summary = run_session(session, scene, settings, twin, twin, AlwaysEnabled(),
                                     checker)

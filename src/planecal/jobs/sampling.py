@@ -113,6 +113,9 @@ class Prepared:
     scene: object  # planecal.model.scene.Scene
     settings: RunSettings
     sidecar: dict | None
+    # the --poses list, read and checked against the scene before anything heavy starts
+    # (counts (n, 6), plates (n,), its document); None without --poses
+    poses: tuple | None = None
 
 
 def prepare(req: SamplingRequest, default_samples: int = 150) -> Prepared:
@@ -141,14 +144,30 @@ def prepare(req: SamplingRequest, default_samples: int = 150) -> Prepared:
             st.samples = req.samples
         scene = load_scene(st.scene)
         st.pose.check(scene)
-        return Prepared(req, scene, st, side)
+        return Prepared(req, scene, st, side, read_pose_list(req.poses, scene))
     if out.exists() and out.stat().st_size > 0 and not req.force:
         raise InputError(f"{out}: exists; use --resume to continue that run or --force to overwrite it")
     scene = load_scene(req.scene or DEFAULT_SCENE)
+    poses = read_pose_list(req.poses, scene)
     st = settings_from(req, scene)
     if req.samples is None:
         st.samples = default_samples
-    return Prepared(req, scene, st, None)
+    return Prepared(req, scene, st, None, poses)
+
+
+def read_pose_list(path, scene) -> tuple | None:
+    """A --poses list (``studies.planning.load_poses``) checked against the scene's plates:
+    (counts, plates, document), None without one; a one-line InputError otherwise."""
+    if not path:
+        return None
+    from planecal.studies.planning import load_poses
+    counts, plates, doc = load_poses(path)
+    if len(counts) == 0:
+        raise InputError(f"{path}: the pose list is empty")
+    if plates.min() < 0 or plates.max() >= len(scene.plates):
+        raise InputError(f"{path}: plate numbers must be 0..{len(scene.plates) - 1} for scene "
+                         f"{scene.name}")
+    return counts, plates, doc
 
 
 def rerun_observer(req: SamplingRequest, scene, twin=None):
@@ -183,29 +202,24 @@ def observer_summary(obs) -> dict:
     return out
 
 
-def pose_list_planner(req: SamplingRequest, scene, settings: RunSettings, checker,
+def pose_list_planner(req: SamplingRequest, poses, scene, settings: RunSettings, checker,
                       model=None, params_path: str | None = None):
-    """With --poses: a planner serving the planned list, each entry approached from its
-    side, a list made from the nominal cell aimed with the result the run aims with
-    (``params_path``, --params or a resumed run's sidecar's: ``aim_list``;
-    entries already in the sample file of a resumed run are skipped, as often as they
+    """With --poses (``poses``: ``Prepared.poses``): a planner serving the planned list,
+    each entry approached from its side, a list made from the nominal cell aimed with the
+    result the run aims with (``params_path``, --params or a resumed run's sidecar's:
+    ``aim_list``; entries already in the sample file of a resumed run are skipped, as often as they
     are there); the run's target becomes the list's length unless --samples asks for
     fewer. None without --poses."""
-    path = req.poses
-    if not path:
+    if poses is None:
         return None
     import numpy as np
 
     from planecal.io.samples import read_samples
     from planecal.sampling.planner import ListPlanner
-    from planecal.studies.planning import approach_of, load_poses
+    from planecal.studies.planning import approach_of
 
-    counts, plates, doc = load_poses(path)
-    if len(counts) == 0:
-        raise InputError(f"{path}: the pose list is empty")
-    if plates.min() < 0 or plates.max() >= len(scene.plates):
-        raise InputError(f"{path}: plate numbers must be 0..{len(scene.plates) - 1} for scene "
-                         f"{scene.name}")
+    path = req.poses
+    counts, plates, doc = poses
     approach = approach_of(doc, len(counts))
     counts = aim_list(path, doc, counts, plates, scene, model, params_path)
     n = len(counts)
