@@ -317,8 +317,12 @@ def staged_samples(scene, world, st: RehearsalSettings, seed: int, options=None,
     acq = _acquirer(scene, twin, rs)
     first = _collect(scene, Planner(scene, rs.pose, checker), twin, rs, seed, True, acq)
     qe, d, plate, direction = first[:4]
-    cal = calibrate(scene.robot, qe, d, nominal_params(scene), plate,
-                    CalibrationSettings(level=AIM_LEVEL), direction, scene.references)
+    try:
+        cal = calibrate(scene.robot, qe, d, nominal_params(scene), plate,
+                        CalibrationSettings(level=AIM_LEVEL), direction, scene.references)
+    except InputError as e:  # too few to calibrate the cell: the option that set them
+        raise InputError(f"--aim-samples {aim_samples}: the first run's calibration at "
+                         f"level {AIM_LEVEL} on {scene.name}: {e}") from None
     counts, plates, approach = pose_list(st.poses)
     aimed, _ = aim_counts(scene, counts, plates, None,
                           CommandModel(cal.params, scene.robot.qe0.copy()))
