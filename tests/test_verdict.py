@@ -15,7 +15,7 @@ from planecal.estimation.calibrate import CalibrationSettings, calibrate
 from planecal.estimation.fit import linearized
 from planecal.estimation.selection import HeldOut
 from planecal.estimation.tool import tool_point
-from planecal.estimation.verdict import refusal
+from planecal.estimation.verdict import refusal, verdict_of
 from planecal.io.samples import write_samples
 from planecal.model.encoder import counts_to_joints
 from planecal.model.measurement import backlash_sides, predict
@@ -91,7 +91,7 @@ def test_the_estimate_is_within_2x_of_the_true_tool_error(scene_name, truth, lev
     cal = calibrate(scene.robot, qe, d, nominal_params(scene), plate,
                     CalibrationSettings(level=level), direction, scene.references)
     true = true_tool_error_mm(scene, cal, qe, direction, world, opts)
-    said = cal.verdict.tool_mm
+    said = verdict_of(cal).tool_mm
     assert 0.5 * true <= said <= 2.0 * true, (said, true)
     if scene_name == "ur5_table" and level == "offsets":
         from planecal.estimation.accuracy import accuracy

@@ -42,6 +42,7 @@ from planecal.estimation.noise import repeatability_sigma, sample_sigma_m, sampl
 from planecal.model.encoder import counts_to_joints
 from planecal.estimation.reference import pose_subset
 from planecal.estimation.tool import tool_jacobian, tool_point  # noqa: F401 (re-exported)
+from planecal.estimation.verdict import verdict_of
 from planecal.model.measurement import (Joints, backlash_sides, predict,
                                         predict_joints_with_jacobian)
 from planecal.model.robot import Robot
@@ -136,7 +137,7 @@ def accuracy(robot: Robot, cal: Calibration, qe, d_m, plate=None, direction=None
     """The accuracy figures of ``cal``, a calibration of these samples (module docstring).
     ``laser_noise_mm``: a reading's noise (the noise model's; the repeatability is
     robot.json's)."""
-    res, verdict = cal.result, cal.verdict
+    res, verdict = cal.result, verdict_of(cal)
     qe = np.asarray(qe)
     n = len(qe)
     plate = np.zeros(n, int) if plate is None else np.asarray(plate, int)

@@ -23,7 +23,6 @@ controller can take only where the calibration fixed it and a plane can see it; 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from functools import cached_property
 
 import numpy as np
 
@@ -128,13 +127,6 @@ class Calibration:
     @property
     def params(self) -> CellParams:
         return self.result.params
-
-    @cached_property
-    def verdict(self):
-        """``estimation.verdict.Verdict``: the calibration judged at the tool against the
-        reference model and the simpler levels (computed when first asked for)."""
-        from planecal.estimation.verdict import assess
-        return assess(self)
 
     @property
     def level(self) -> str:

@@ -24,6 +24,7 @@ a bias and a spread. From that:
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -175,6 +176,21 @@ def assess(cal) -> Verdict:
                        "does not hold")
     return Verdict(label, grade, tool, band, _mm(held), res.rms_mm(), tuple(comps), worse,
                    tuple(reasons), ref.scale, ref.noise_factor)
+
+
+# each calibration's verdict, computed once (it refits the simpler levels): held while the
+# calibration is (``Calibration`` compares and hashes by identity)
+_VERDICTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def verdict_of(cal) -> Verdict:
+    """The verdict of a ``calibrate.Calibration`` (``assess``), computed when first asked
+    for and then kept with it: the accuracy figures, the result document and validate's
+    rows read the same one."""
+    v = _VERDICTS.get(cal)
+    if v is None:
+        v = _VERDICTS[cal] = assess(cal)
+    return v
 
 
 def refusal(doc: dict) -> str | None:

@@ -16,6 +16,7 @@ import numpy as np
 
 from planecal.base.errors import InputError
 from planecal.estimation.calibrate import Calibration, encoder_offsets
+from planecal.estimation.verdict import verdict_of
 from planecal.estimation.identifiability import Excluded
 from planecal.io.params import kinematics_to_dict, nonkinematic_to_dict, params_to_dict
 
@@ -146,7 +147,7 @@ def document(cal: Calibration, robot=None, accuracy=None) -> dict:
     out["encoder_offsets"] = _controller_offsets(cal)
     if cal.selection is not None:
         out["selection"] = cal.selection.to_dict()
-    out["verdict"] = cal.verdict.to_dict()
+    out["verdict"] = verdict_of(cal).to_dict()
     if robot is not None:
         out["robot"] = {"name": robot.name, "sha256": robot.digest}
     if accuracy is not None:

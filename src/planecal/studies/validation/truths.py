@@ -7,6 +7,7 @@ import numpy as np
 
 from planecal.base.errors import InputError
 from planecal.estimation.calibrate import CalibrationSettings
+from planecal.estimation.verdict import verdict_of
 from planecal.studies.validation.run import validate
 from planecal.studies.validation.settings import FIGURE_KEYS, ValidationSettings
 from planecal.twin.world import SOURCES
@@ -119,7 +120,7 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
         row["max_model_error_mm"] = float(np.abs(f.residuals_m).max() * 1e3)
         row["converged"] = bool(f.converged)
         if not job.off:  # what each calibration says of itself (estimation.verdict)
-            row.update(verdict_row(c.verdict))
+            row.update(verdict_row(verdict_of(c)))
     v["truth_seed"] = job.truth_seed
     v["level"] = job.calibration.level
     v["compliance"] = job.calibration.compliance
@@ -140,7 +141,7 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
         v["accuracy"] = acc.to_dict()
         v["predicted_tool_mm"] = acc.tool_point_mm
         v["predicted_band_mm"] = [acc.one_calibration_p10_mm, acc.one_calibration_p90_mm]
-        v["verdict"] = cals[-1][1].verdict.grade
+        v["verdict"] = verdict_of(cals[-1][1]).grade
     return v, fit, (qe, d, plate)
 
 
