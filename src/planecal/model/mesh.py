@@ -98,10 +98,13 @@ class Mesh:
 
 
 class _HullCache:
-    """Hulls by key, loaded from and appended to one ``.npz`` file."""
+    """Hulls by key, read from one ``.npz`` file as they are asked for (the file holds every
+    shape this user's runs have met: a few hundred kB for a cell, megabytes after a test
+    suite; a run reads its thirty hulls, not the whole file) and appended to it."""
 
     def __init__(self):
-        self._hulls: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
+        self._hulls: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._file = None  # the open NpzFile (None: not opened yet; False: none readable)
         self._path: Path | None = None
 
     def path(self) -> Path:
@@ -113,27 +116,36 @@ class _HullCache:
             self._path = cache_dir() / f"hulls-trimesh{ver}.npz"
         return self._path
 
-    def _load(self) -> dict:
-        if self._hulls is None:
-            self._hulls = {}
+    def _stored(self):
+        if self._file is None:
             try:
-                with np.load(self.path()) as z:
-                    for name in z.files:
-                        if name.endswith("_V"):
-                            key = name[:-2]
-                            self._hulls[key] = (z[name], z[key + "_F"])
+                self._file = np.load(self.path())
+                self._names = set(self._file.files)
+            except (OSError, ValueError):
+                self._file = False  # no cache yet, or unreadable: computed again
+        return self._file
+
+    def _read(self, key: str):
+        z = self._stored()
+        if key not in self._hulls and z is not False and key + "_V" in self._names:
+            try:
+                self._hulls[key] = (z[key + "_V"], z[key + "_F"])
             except (OSError, ValueError, KeyError):
-                self._hulls = {}  # no cache yet, or unreadable: computed again
-        return self._hulls
+                pass  # a damaged entry: computed again
+        return self._hulls.get(key)
 
     def get(self, key: str):
-        return self._load().get(key)
+        return self._read(key)
 
     def put(self, key: str, V: np.ndarray, F: np.ndarray) -> None:
-        hulls = self._load()
-        hulls[key] = (V, F)
+        z = self._stored()
+        if z is not False:  # the file is rewritten whole: every stored hull read first
+            for name in self._names:
+                if name.endswith("_V"):
+                    self._read(name[:-2])
+        self._hulls[key] = (V, F)
         arrays = {}
-        for k, (v, f) in hulls.items():
+        for k, (v, f) in self._hulls.items():
             arrays[k + "_V"], arrays[k + "_F"] = v, f
         path = self.path()
         try:
