@@ -436,12 +436,23 @@ class BackgroundPlanner:
     _pending: tuple | None = field(default=None, init=False)
 
     def __post_init__(self):
+        import gc
         import multiprocessing as mp
         ctx = mp.get_context("fork")  # the planner (with its FCL model) is inherited
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_planner_worker, args=(child, self._conn, self.planner),
                                  daemon=True)
-        self._proc.start()
+        # the child inherits the caller's heap, garbage included: an SQLite connection the
+        # caller dropped but had not yet collected (a history's) would be closed by the
+        # child's collector, which checkpoints into the caller's database file while the
+        # caller writes it (SQLite: no connection across a fork). Frozen, the inherited
+        # objects are never collected in the child.
+        gc.collect()
+        gc.freeze()
+        try:
+            self._proc.start()
+        finally:
+            gc.unfreeze()
         child.close()
 
     def submit(self, *req) -> None:
