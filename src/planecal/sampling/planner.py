@@ -442,11 +442,8 @@ class BackgroundPlanner:
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_planner_worker, args=(child, self._conn, self.planner),
                                  daemon=True)
-        # the child inherits the caller's heap, garbage included: an SQLite connection the
-        # caller dropped but had not yet collected (a history's) would be closed by the
-        # child's collector, which checkpoints into the caller's database file while the
-        # caller writes it (SQLite: no connection across a fork). Frozen, the inherited
-        # objects are never collected in the child.
+        # the child inherits the caller's garbage: an SQLite connection closed by the child's
+        # collector checkpoints into the caller's file (no connection across a fork)
         gc.collect()
         gc.freeze()
         try:
