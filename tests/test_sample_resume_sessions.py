@@ -277,7 +277,6 @@ def test_rt_fresh_right_after_a_stop_waits_out_the_silence_and_a_complete_run_en
     with controller("fresh_after_silence") as (fd11, laser):
         stopped = start_and_stop(fd11, laser, out, signal.SIGINT, "--scene", str(scene))
         check_stopped(stopped, signal.SIGINT, out)
-        resumed_at = time.monotonic()
         code, s, err = resume(fd11, laser, out, capsys, "--rt-fresh")
         assert fd11.idle(5)
         got = steps(fd11.received, "fresh_after_silence")
@@ -293,10 +292,11 @@ def test_rt_fresh_right_after_a_stop_waits_out_the_silence_and_a_complete_run_en
     assert not fd11.tripped and got.max() <= STEP_LIMIT and got[stopped.datagrams] == 0
     gap = max(b[0] - a[0] for a, b in zip(fd11.received, fd11.received[1:]))
     assert gap >= SILENCE_S + 0.5 - 0.05
-    # the wait is the resume's only where the stop and the new start took less than the
-    # silence (on a loaded machine they can take longer: then nothing is left to wait)
-    if resumed_at - fd11.received[stopped.datagrams - 1][0] < SILENCE_S:
-        assert first["waited_s"] > 0 and "note: waiting" in err
+    # the resume decides the wait after its own start-up, which on a loaded machine can
+    # outlast the silence (then nothing is left to wait: the gap above holds either way);
+    # a wait is said, and no longer than the silence and its margin
+    assert (first["waited_s"] > 0) == ("note: waiting" in err)
+    assert first["waited_s"] <= SILENCE_S + 0.5
 
 
 def test_a_resume_whose_state_file_is_missing_asks_and_sends_nothing(tmp_path, capsys,
