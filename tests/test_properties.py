@@ -21,9 +21,11 @@ commands), 150 sample files, 60 round trips; the file runs in a few seconds.
 from __future__ import annotations
 
 import argparse
+import atexit
 import contextlib
 import io
 import re
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -39,7 +41,8 @@ SETTINGS = dict(derandomize=True, database=None, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow,
                                        HealthCheck.function_scoped_fixture])
 BASE = Path(__file__).parent / "corpus" / "base"
-DIR = Path(tempfile.mkdtemp(prefix="planecal-argv-"))
+DIR = Path(tempfile.mkdtemp(prefix="planecal-argv-"))  # in VALUES at collection: a fixture is late
+atexit.register(shutil.rmtree, DIR, ignore_errors=True)
 
 
 def options_of(command: str) -> list[str]:
