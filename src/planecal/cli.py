@@ -140,6 +140,8 @@ def build_parser(argv: list[str], full: bool = False) -> Parser:
         p = sub.add_parser(name, help=help_text, description=help_text, epilog=EPILOG,
                            formatter_class=DefaultsFormatter)
         parser.commands[name] = p
+        if name == "completion":  # the one command that reads every command's parser
+            p.set_defaults(full_parser=full_parser)
         if full or name == wanted:
             _module(name).add_arguments(p)
             _common(p)

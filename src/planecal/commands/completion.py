@@ -14,6 +14,6 @@ def add_arguments(p):
 def run(args) -> int:
     import shtab
 
-    from planecal.cli import full_parser
-    print(shtab.complete(full_parser(), shell=args.shell))
+    # cli.py hands its parser builder down (a command does not import the CLI above it)
+    print(shtab.complete(args.full_parser(), shell=args.shell))
     return 0
