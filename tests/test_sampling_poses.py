@@ -174,7 +174,8 @@ def test_a_detour_leaves_the_way_the_robot_came_in_where_nothing_else_is_clear(s
     the wrist folded, every path out (to the next target, backed out along the beam, to
     both hubs) was blocked, while the route the robot came in by was clear. The detour now
     takes it back (each leg checked again) and goes on from there."""
-    from planecal.sampling.planner import Detour, Plan, route_back
+    from planecal.sampling.detour import Detour
+    from planecal.sampling.planner import Plan, route_back
     gen = PoseGenerator(scene, PoseSettings())
     rng = np.random.default_rng(3)
     q = [gen.joint_target(gen.draw(rng, 0), scene.calibration_q, rng) for _ in range(4)]
@@ -190,6 +191,106 @@ def test_a_detour_leaves_the_way_the_robot_came_in_where_nothing_else_is_clear(s
     assert all(np.array_equal(c, gen.counts_target(v)) for v, c in legs)
     # a leg back that is no longer clear is not taken
     assert Detour(gen, _Segments((here, via), (prev, goal))).find(here, goal, back) is None
+
+
+class _Blocked:
+    """Clears every configuration and no straight path."""
+
+    def check_config(self, q):
+        return _Verdict(True)
+
+    def check_path(self, q0, q1):
+        return _Verdict(False)
+
+
+class _Detours:
+    """A detour finder: the near detour clears the draw numbered ``near_at`` (0-based,
+    counting the poses asked about), a far one clears every pose. Keeps what it was asked."""
+
+    def __init__(self, near_at=None):
+        self.near_at, self.asked = near_at, []
+
+    def find(self, q0, q1, back=(), far=True):
+        if not far:
+            self.asked.append(np.array(q1))
+            return [(q1, None)] if len(self.asked) - 1 == self.near_at else None
+        return [("hub", None)]
+
+
+@pytest.mark.parametrize("near_at", [None, 3])
+def test_a_random_pose_only_a_far_detour_reaches_waits_for_a_nearer_one(scene, near_at):
+    """A far detour (a hub, the way back) costs up to a minute of robot time: three_plates'
+    150-sample rehearsal took 62.5 robot minutes with them taken at once, 54.1 drawing
+    another pose first. The planner takes the first far-only pose only when none of the
+    next FAR_REDRAWS draws is reachable nearer, and the rejections say so."""
+    from planecal.sampling.planner import FAR_REDRAWS, Planner
+    planner = Planner(scene, PoseSettings(), _Blocked())
+    planner.detour = det = _Detours(near_at)
+    state = np.random.default_rng(11).bit_generator.state
+    plan = planner.plan(scene.calibration_q, 0, state, budget=100)
+    reasons = [r for _, _, r in plan.rejections]
+    first = det.asked[0]
+    if near_at is None:  # none nearer: the first, by its far detour, after FAR_REDRAWS more
+        assert len(det.asked) == FAR_REDRAWS + 1
+        assert np.array_equal(plan.q, first) and plan.via == [("hub", None)]
+        assert len(plan.rejections) == FAR_REDRAWS
+    else:  # the first reachable nearer; the far-only one rejected in its place
+        assert np.array_equal(plan.q, det.asked[near_at]) and len(det.asked) == near_at + 1
+        assert np.array_equal(plan.rejections[0][1], first)
+        assert reasons[0].endswith("(a far detour only: another pose drawn)")
+        assert len(plan.rejections) == near_at
+    # a budget that ends before the far detour's turn gives up, every draw a rejection:
+    # the run reading the larger budget's plan gives up at the same rejection
+    small = Planner(scene, PoseSettings(), _Blocked())
+    small.detour = _Detours()
+    gave_up = small.plan(scene.calibration_q, 0, state, budget=FAR_REDRAWS)
+    assert gave_up.q is None and len(gave_up.rejections) == FAR_REDRAWS
+    assert np.array_equal(gave_up.rejections[0][1], first)
+
+
+def test_a_pose_list_serves_a_pose_reachable_nearer_before_a_far_detour(scene):
+    """Where no pose left has a clear straight path, the list's first pose a near detour
+    reaches is served before an earlier one only a far detour reaches."""
+    from planecal.sampling.planner import ListPlanner
+    gen = PoseGenerator(scene, PoseSettings())
+    rng = np.random.default_rng(5)
+    q = [gen.joint_target(gen.draw(rng, 0), scene.calibration_q, rng) for _ in range(3)]
+    counts = np.array([gen.counts_target(v) for v in q])
+    lp = ListPlanner(scene, counts, np.zeros(3, int), _Blocked())
+    lp.detour = det = _Detours(near_at=1)  # the list's second pose
+    plan = lp.plan(scene.calibration_q, 0, {}, budget=10)
+    assert lp.taken == [1] and plan.via[0][1] is None and not plan.rejections
+    lp.detour = _Detours()  # none nearer: the first left, by a far detour
+    plan = lp.plan(q[1], 1, {}, budget=10)
+    assert lp.taken == [1, 0] and plan.via == [("hub", None)]
+    assert len(det.asked) == 2
+
+
+def test_a_list_pose_blocked_every_way_is_served_a_turn_away(scene):
+    """Truth 419's list run stood where its last pose (J4 5 rad away) swept the wrist
+    through a plate on every way. Where every pose left is blocked, the list serves one
+    with a joint turned by whole turns: the same flange pose, other counts."""
+    from planecal.model.ik import turns
+    from planecal.model.kinematics import fk
+    from planecal.sampling.planner import ListPlanner
+    gen = PoseGenerator(scene, PoseSettings())
+    rng = np.random.default_rng(5)
+    q = gen.joint_target(gen.draw(rng, 0), scene.calibration_q, rng)
+    Q = turns(scene.robot, q)
+    assert len(Q) >= 1 and not any(np.allclose(v, q) for v in Q)
+    lo, hi = scene.robot.limits.T
+    assert np.all((Q >= lo - 1e-12) & (Q <= hi + 1e-12))
+    kin = scene.robot.kinematics
+    assert all(np.allclose(fk(kin, v), fk(kin, q), atol=1e-9) for v in Q)
+    v = Q[0]  # only the straight path to this turn of the pose is open
+    lp = ListPlanner(scene, gen.counts_target(q)[None], np.zeros(1, int),
+                     _Segments((scene.calibration_q, v)))
+    plan = lp.plan(scene.calibration_q, 0, {}, budget=10)
+    assert plan.q is not None and np.allclose(plan.q, v) and lp.taken == [0]
+    assert np.array_equal(plan.qe_goal, gen.counts_target(v)) and plan.via == []
+    lp = ListPlanner(scene, gen.counts_target(q)[None], np.zeros(1, int), _Segments())
+    plan = lp.plan(scene.calibration_q, 0, {}, budget=10)
+    assert plan.q is None and "a turn away" in plan.reason
 
 
 def test_the_rehearsal_that_gave_up_at_sample_159_completes(tmp_path):

@@ -277,6 +277,14 @@ def ik_all(robot: Robot, T: np.ndarray, delta: np.ndarray | None = None,
     return _expand_turns(robot, Q) if within else Q
 
 
+def turns(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """The configurations (k, 6) that put the flange where ``q`` does, ``q`` itself
+    excluded: each joint turned by whole turns within its limits (J4, J6 of +-360 deg)."""
+    q = np.asarray(q, float)
+    Q = _expand_turns(robot, _wrap(q)[None])
+    return Q[np.abs(Q - q).max(axis=1) > 1e-9]
+
+
 def ik_nearest(robot: Robot, T: np.ndarray, q_near: np.ndarray,
                delta: np.ndarray | None = None, weights: np.ndarray | None = None):
     """The IK solution within limits nearest to q_near (weighted max-norm), or None."""

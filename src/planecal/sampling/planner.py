@@ -13,9 +13,12 @@ When the straight path is blocked -- typically the wrist turning over from one b
 the other next to the plate -- a detour is tried (``Detour``): back out along the beam,
 move there (the wrist turns over far from the plate), approach along the target's beam.
 Its two via-points and three straight legs are checked like any path; the plan then
-carries the via-points. Where no detour is clear from here, the robot leaves the way it
-came in (``back``: the previous plan's via-points reversed, then the pose it left) and goes
-on from there, straight or by a detour; every leg is checked again.
+carries the via-points. Where no such detour is clear, a far one (``detour``): through the
+scene's calibration or home position, or back the way the robot came in (``back``: the
+previous plan's via-points reversed, then the pose it left) and on from there; every leg
+is checked again. A far detour costs up to a minute of robot time, so a random planner
+first draws up to ``FAR_REDRAWS`` more poses and takes one reachable nearer; a pose list
+serves its next pose reachable nearer first.
 """
 from __future__ import annotations
 
@@ -26,27 +29,13 @@ from typing import Callable, Protocol
 import numpy as np
 
 from planecal.model.encoder import counts_in_range, counts_to_joints
-from planecal.model.kinematics import fk
-from planecal.model.ik import ik_all
+from planecal.model.ik import turns
+from planecal.sampling.detour import Checker, Detour, Verdict
 from planecal.sampling.poses import CommandModel, PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.steps import COUNT_LIMIT
 from planecal.model.scene import Scene
 
-RETRACT_M = (0.25, 0.45)  # how far a detour backs out along the beam (tried in turn)
-
-
-class Verdict(Protocol):
-    ok: bool
-    pair: tuple[str, str] | None
-
-
-class Checker(Protocol):
-    """A collision checker (``planecal.safety.collision.CollisionWorld``): stateless."""
-
-    def check_config(self, q: np.ndarray) -> Verdict: ...
-
-    def check_path(self, q0: np.ndarray, q1: np.ndarray) -> Verdict: ...
-
+FAR_REDRAWS = 8  # more poses drawn for one reachable nearer than a far detour's
 
 @dataclass
 class Plan:
@@ -113,74 +102,6 @@ def check_move(checker: Checker, q_start: np.ndarray, q: np.ndarray) -> str | No
     return None
 
 
-class Detour:
-    """Via-points around a blocked straight path (module docstring): the sensor backed out
-    by ``RETRACT_M`` along its beam at both ends, each by the IK solution nearest to its
-    end (same wrist branch), so the legs are: back out, move, approach. Aimed with the
-    pose generator's model. Where neither backs out clear (an arm reaching over one plate to
-    another behind it), through the scene's calibration position, a clear pose near the
-    plates, or else its home position: two legs, there and on."""
-
-    def __init__(self, poses: PoseGenerator, checker: Checker):
-        self.robot, self.poses, self.checker = poses.robot, poses, checker
-        self.T_sf = poses.T_sf
-        self.T_fs = np.linalg.inv(poses.T_sf)
-        scene = poses.scene  # the clear poses a detour may pass through, in turn
-        self.hubs = [q for q in (scene.calibration_q,
-                                 None if scene.home_counts is None
-                                 else counts_to_joints(self.robot, scene.home_counts))
-                     if q is not None]
-
-    def _retract(self, q: np.ndarray, d: float):
-        """(joint angles, counts) of the sensor backed out by d from where q puts it."""
-        T = fk(self.robot.kinematics.with_offsets(self.poses.delta), q) @ self.T_fs
-        T[:3, 3] -= d * T[:3, 2]
-        Q = ik_all(self.robot, T @ self.T_sf, self.poses.delta)
-        if len(Q) == 0:
-            return None
-        v = Q[np.argmin(np.max(np.abs(Q - q) * self.poses.weights, axis=1))]
-        c = self.poses.counts_target(v)
-        return (v, c) if counts_in_range(self.robot, c) else None
-
-    def find(self, q0: np.ndarray, q1: np.ndarray, back: tuple = ()) -> list | None:
-        """[(q, counts), ...] of a clear detour from q0 to q1, or None: backed out along
-        the beam at both ends, else through a hub, else (``back``: the configurations the
-        robot came in by, nearest first) the way it came, then on as from there."""
-        via = self._around(q0, q1)
-        if via is not None or not back:
-            return via
-        c, at, legs = self.checker, q0, []
-        for q in back:  # the legs it came by, each checked again
-            q = np.asarray(q, float)
-            ch = self.poses.counts_target(q)
-            if not (counts_in_range(self.robot, ch) and c.check_config(q).ok
-                    and c.check_path(at, q).ok):
-                return None
-            legs.append((q, ch))
-            at = q
-        if c.check_path(at, q1).ok:
-            return legs
-        on = self._around(at, q1)
-        return None if on is None else legs + on
-
-    def _around(self, q0: np.ndarray, q1: np.ndarray) -> list | None:
-        for d in RETRACT_M:
-            a, b = self._retract(q0, d), self._retract(q1, d)
-            if a is None or b is None:
-                continue
-            c, qa, qb = self.checker, a[0], b[0]
-            if (c.check_config(qa).ok and c.check_config(qb).ok and c.check_path(q0, qa).ok
-                    and c.check_path(qa, qb).ok and c.check_path(qb, q1).ok):
-                return [a, b]
-        c = self.checker
-        for hub in self.hubs:
-            ch = self.poses.counts_target(hub)
-            if (counts_in_range(self.robot, ch) and c.check_config(hub).ok
-                    and c.check_path(q0, hub).ok and c.check_path(hub, q1).ok):
-                return [(np.array(hub, float), ch)]
-        return None
-
-
 def route_back(plan: Plan) -> tuple:
     """The configurations a plan's robot came in by, nearest first: its via-points
     reversed, then the pose it left (``Detour.find``'s ``back``)."""
@@ -209,7 +130,16 @@ class Planner:
         rng.bit_generator.state = rng_state
         t0 = time.perf_counter()
         out = Plan(index, q_start, [], rng_state)
-        for _ in range(budget):
+        far = None  # the first draw only a far detour reaches: (draw, rejections before, ...)
+        for k in range(budget + 1):
+            if far is not None and k > far[0] + FAR_REDRAWS:  # none nearer: the far one
+                if self._far(out, far, q_start, back):
+                    break
+                far = None
+            if k == budget:  # before a far detour's turn: a smaller budget gives up too
+                if far is not None:
+                    out.rejections.insert(far[1], ("collision", far[2], far[5]))
+                break
             plate = self.poses.plate_for(index, rng)
             pose = self.poses.draw(rng, plate)
             q = self.poses.joint_target(pose, q_start, rng)
@@ -224,18 +154,34 @@ class Planner:
                 continue
             why = check_move(self.checker, q_start, q)
             if why is not None and self.detour and why.startswith("collision (path)"):
-                out.via = self.detour.find(q_start, q, back) or []
+                out.via = self.detour.find(q_start, q, back, far=False) or []
+                if not out.via and far is None:
+                    far = (k, len(out.rejections), q, qe, pose, why)
+                    continue
                 why = None if out.via else why
             if why is not None:
                 out.rejections.append(("collision", q, why))
                 continue
             out.q, out.qe_goal, out.pose, out.plate = q, qe, pose, pose.plate
+            if far is not None:
+                out.rejections.insert(far[1], ("collision", far[2], far[5]
+                                               + " (a far detour only: another pose drawn)"))
             break
-        else:
+        if out.q is None:
             out.reason = f"{budget} poses rejected in a row"
         out.rng_after = rng.bit_generator.state
         out.check_time_s = time.perf_counter() - t0
         return out
+
+    def _far(self, out: Plan, far: tuple, q_start: np.ndarray, back: tuple) -> bool:
+        """Takes ``far``'s pose by a far detour into ``out``, else rejects it in its place."""
+        k, at, q, qe, pose, why = far
+        out.via = self.detour.find(q_start, q, back) or []
+        if out.via:
+            out.q, out.qe_goal, out.pose, out.plate = q, qe, pose, pose.plate
+            return True
+        out.rejections.insert(at, ("collision", q, why))
+        return False
 
     def index_matters(self) -> bool:
         """Whether a plan depends on the sample index (round robin over several plates)."""
@@ -246,8 +192,10 @@ class ListPlanner:
     """A planned pose list (encoder counts, plate per pose) served in order, each checked
     like a random pose (target configuration and straight path from where the robot
     is); a pose whose path is blocked from here is left for later. Stateful: plans in the
-    run's own process. When no pose is left, or none of those left can be reached from
-    here, the plan says so (``q`` None, ``reason``). ``taken``: the indices of the poses
+    run's own process. A pose blocked straight is served by a near detour before any by
+    a far one; where every pose left is blocked every way, one is served with a joint
+    turned by whole turns (``_turned``). When no pose is left, or none of those left can
+    be reached from here, the plan says so (``q`` None, ``reason``). ``taken``: the indices of the poses
     served so far, in the order served. ``approach`` (n,) in -1, 0, +1: the side each
     pose is approached from (``approach.approach_point``: a last leg from just short of
     it, which a pose read again after another reading at it needs to settle anew; 0:
@@ -305,7 +253,10 @@ class ListPlanner:
                 break
             blocked.append((j, q, why))
         else:
-            for j, q, why in blocked:
+            near = next(((j, q, via) for j, q, why in blocked if why.startswith(
+                "collision (path)") for via in [self.detour.find(q_start, q, far=False)]
+                if via), None)  # the first reachable by a near detour, else a far one
+            for j, q, why in blocked if near is None else ():
                 via = (self.detour.find(q_start, q, back) if why.startswith("collision (path)")
                        else None)
                 if via:
@@ -313,19 +264,46 @@ class ListPlanner:
                     break
                 out.rejections.append(("collision", q, f"{why} (planned pose {j + 1})"))
             else:
-                if not self.left:
+                if near is not None:
+                    self._take(out, *near)
+                elif self.left and self._turned(out, q_start, blocked, back):
+                    pass
+                elif not self.left:
                     out.exhausted = True
                     out.reason = "every pose of the list was tried"
                 else:
                     out.reason = (f"none of the {len(self.left)} poses left can be reached "
-                                  "from here, straight or by a detour")
+                                  "from here, straight, by a detour or a turn away")
         out.check_time_s = time.perf_counter() - t0
         return out
 
-    def _take(self, out: Plan, j: int, q: np.ndarray, via=()) -> None:
+    def _turned(self, out: Plan, q_start: np.ndarray, blocked: list, back: tuple) -> bool:
+        """Where every pose left is blocked every way from here, one of them taken with a
+        joint turned by whole turns (the same sensor pose, ``ik.turns``): the nearest such
+        configuration reachable straight or by a detour. Truth 419's list run stood where
+        its last pose, J4 turned 5 rad from where the robot was, swept the wrist through
+        a plate on every way; the same pose a turn away was 1.3 rad off."""
+        det = self.detour
+        cands = [(float(np.max(np.abs(v - q_start) * det.poses.weights)), j, v)
+                 for j, _, _ in blocked
+                 for v in turns(self.robot, counts_to_joints(self.robot, self.counts[j],
+                                                             self.qe0))]
+        for _, j, v in sorted(cands, key=lambda c: c[0]):
+            qe = det.poses.counts_target(v)
+            if not (counts_in_range(self.robot, qe) and self.checker.check_config(v).ok):
+                continue
+            via = [] if check_move(self.checker, q_start, v) is None else det.find(
+                q_start, v, back)
+            if via is not None:
+                self._take(out, j, v, via, qe)
+                return True
+        return False
+
+    def _take(self, out: Plan, j: int, q: np.ndarray, via=(), counts=None) -> None:
         self.left.remove(j)
         self.taken.append(j)
-        out.q, out.qe_goal, out.plate = q, self.counts[j].copy(), int(self.plates[j])
+        out.q, out.plate = q, int(self.plates[j])
+        out.qe_goal = self.counts[j].copy() if counts is None else np.asarray(counts, np.int64)
         out.via = list(via)
         if self.approach[j]:
             from planecal.sampling.approach import approach_point

@@ -28,7 +28,7 @@ checks it on small instances.
 
 With a collision checker the straight path of each move in the tour is checked (lazily:
 only the moves a candidate tour uses, in both directions, then the tour is solved again
-until every move in it is checked). A blocked move costs its detour (``planner.Detour``:
+until every move in it is checked). A blocked move costs its detour (``detour.Detour``:
 back out along the beam, move, approach) or is excluded when there is none. With
 ``blocked="avoid"`` (the default) a tour with fewer blocked moves always wins, whatever its
 ticks: ``planner.ListPlanner`` serves the list in order only while each next pose is

@@ -36,7 +36,7 @@ class Mover:
     """Moves the twin to counts as the robot moves there: the sampling run's step path
     (``sampling.driver``), each path collision-checked once (``checker``; None: not
     checked) and, where the straight one is blocked, the sampling run's detour
-    (``detour``: a ``sampling.planner.Detour``, backing out along the beam), then held
+    (``detour``: a ``sampling.detour.Detour``, backing out along the beam), then held
     until the robot is at rest on the counts (it settles: a fresh repeatability draw). A
     joint's backlash follows the direction it came from."""
 

@@ -208,7 +208,7 @@ def _detour(scene, checker):
     """The sampling run's detour around a blocked path (None without a checker)."""
     if checker is None:
         return None
-    from planecal.sampling.planner import Detour
+    from planecal.sampling.detour import Detour
     from planecal.sampling.poses import PoseGenerator
     return Detour(PoseGenerator(scene), checker)
 
