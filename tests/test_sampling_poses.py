@@ -217,37 +217,6 @@ class _Detours:
         return [("hub", None)]
 
 
-@pytest.mark.parametrize("near_at", [None, 3])
-def test_a_random_pose_only_a_far_detour_reaches_waits_for_a_nearer_one(scene, near_at):
-    """A far detour (a hub, the way back) costs up to a minute of robot time: three_plates'
-    150-sample rehearsal took 62.5 robot minutes with them taken at once, 54.1 drawing
-    another pose first. The planner takes the first far-only pose only when none of the
-    next FAR_REDRAWS draws is reachable nearer, and the rejections say so."""
-    from planecal.sampling.planner import FAR_REDRAWS, Planner
-    planner = Planner(scene, PoseSettings(), _Blocked())
-    planner.detour = det = _Detours(near_at)
-    state = np.random.default_rng(11).bit_generator.state
-    plan = planner.plan(scene.calibration_q, 0, state, budget=100)
-    reasons = [r for _, _, r in plan.rejections]
-    first = det.asked[0]
-    if near_at is None:  # none nearer: the first, by its far detour, after FAR_REDRAWS more
-        assert len(det.asked) == FAR_REDRAWS + 1
-        assert np.array_equal(plan.q, first) and plan.via == [("hub", None)]
-        assert len(plan.rejections) == FAR_REDRAWS
-    else:  # the first reachable nearer; the far-only one rejected in its place
-        assert np.array_equal(plan.q, det.asked[near_at]) and len(det.asked) == near_at + 1
-        assert np.array_equal(plan.rejections[0][1], first)
-        assert reasons[0].endswith("(a far detour only: another pose drawn)")
-        assert len(plan.rejections) == near_at
-    # a budget that ends before the far detour's turn gives up, every draw a rejection:
-    # the run reading the larger budget's plan gives up at the same rejection
-    small = Planner(scene, PoseSettings(), _Blocked())
-    small.detour = _Detours()
-    gave_up = small.plan(scene.calibration_q, 0, state, budget=FAR_REDRAWS)
-    assert gave_up.q is None and len(gave_up.rejections) == FAR_REDRAWS
-    assert np.array_equal(gave_up.rejections[0][1], first)
-
-
 def test_a_pose_list_serves_a_pose_reachable_nearer_before_a_far_detour(scene):
     """Where no pose left has a clear straight path, the list's first pose a near detour
     reaches is served before an earlier one only a far detour reaches."""

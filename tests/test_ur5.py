@@ -253,7 +253,9 @@ def test_plans_robot_time_is_the_rehearsals_at_the_ur5s_step(ur5_cell, tmp_path)
 
 
 class _Unreachable:
-    """A collision checker that blocks every path to and from one configuration."""
+    """A collision checker that blocks every path to and from one configuration, and from
+    each configuration whole turns away from it (the same flange pose: a list serves a pose
+    blocked every way a turn away)."""
 
     def __init__(self, world, q_bad):
         self.world, self.q_bad = world, np.asarray(q_bad)
@@ -263,7 +265,8 @@ class _Unreachable:
 
     def check_path(self, q0, q1):
         from types import SimpleNamespace
-        if any(np.allclose(q, self.q_bad, atol=1e-9) for q in (q0, q1)):
+        if any(np.allclose(np.angle(np.exp(1j * (np.asarray(q) - self.q_bad))), 0, atol=1e-9)
+               for q in (q0, q1)):
             return SimpleNamespace(ok=False, pair=("wall", "q_bad"))
         return self.world.check_path(q0, q1)
 

@@ -4,8 +4,7 @@ Near: the sensor backed out along its beam at both ends and moved between there 
 turns over far from the plate): a few seconds of robot time. Far: through the scene's
 calibration position or home (an arm reaching over one plate to a block behind another),
 or back the way the robot came in, then on: up to a minute each on a large robot, so a
-random planner draws another pose first (``planner.FAR_REDRAWS``) and takes a far detour
-only where none of those is reachable nearer.
+pose list serves a pose a near detour reaches before one only a far detour reaches.
 """
 from __future__ import annotations
 
@@ -101,18 +100,10 @@ class Detour:
         return None
 
     def _hub(self, q0: np.ndarray, q1: np.ndarray) -> list | None:
-        """Through a hub: each leg straight, else backed out along the beam at its plate's
-        end (a robot that stands where its last poses are blocked every way starts anew
-        from the calibration position)."""
         c = self.checker
         for hub in self.hubs:
             ch = self.poses.counts_target(hub)
-            if not (counts_in_range(self.robot, ch) and c.check_config(hub).ok):
-                continue
-            there = [] if c.check_path(q0, hub).ok else self._backed_out(q0, hub)
-            if there is None:
-                continue
-            on = [] if c.check_path(hub, q1).ok else self._backed_out(hub, q1)
-            if on is not None:
-                return there + [(np.array(hub, float), ch)] + on
+            if (counts_in_range(self.robot, ch) and c.check_config(hub).ok
+                    and c.check_path(q0, hub).ok and c.check_path(hub, q1).ok):
+                return [(np.array(hub, float), ch)]
         return None

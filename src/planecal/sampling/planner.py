@@ -16,9 +16,8 @@ Its two via-points and three straight legs are checked like any path; the plan t
 carries the via-points. Where no such detour is clear, a far one (``detour``): through the
 scene's calibration or home position, or back the way the robot came in (``back``: the
 previous plan's via-points reversed, then the pose it left) and on from there; every leg
-is checked again. A far detour costs up to a minute of robot time, so a random planner
-first draws up to ``FAR_REDRAWS`` more poses and takes one reachable nearer; a pose list
-serves its next pose reachable nearer first.
+is checked again. A far detour costs up to a minute of robot time, so a pose list serves
+its next pose reachable nearer first.
 """
 from __future__ import annotations
 
@@ -35,7 +34,6 @@ from planecal.sampling.poses import CommandModel, PoseGenerator, PoseSettings, S
 from planecal.sampling.steps import COUNT_LIMIT
 from planecal.model.scene import Scene
 
-FAR_REDRAWS = 8  # more poses drawn for one reachable nearer than a far detour's
 
 @dataclass
 class Plan:
@@ -130,16 +128,7 @@ class Planner:
         rng.bit_generator.state = rng_state
         t0 = time.perf_counter()
         out = Plan(index, q_start, [], rng_state)
-        far = None  # the first draw only a far detour reaches: (draw, rejections before, ...)
-        for k in range(budget + 1):
-            if far is not None and k > far[0] + FAR_REDRAWS:  # none nearer: the far one
-                if self._far(out, far, q_start, back):
-                    break
-                far = None
-            if k == budget:  # before a far detour's turn: a smaller budget gives up too
-                if far is not None:
-                    out.rejections.insert(far[1], ("collision", far[2], far[5]))
-                break
+        for _ in range(budget):
             plate = self.poses.plate_for(index, rng)
             pose = self.poses.draw(rng, plate)
             q = self.poses.joint_target(pose, q_start, rng)
@@ -154,34 +143,18 @@ class Planner:
                 continue
             why = check_move(self.checker, q_start, q)
             if why is not None and self.detour and why.startswith("collision (path)"):
-                out.via = self.detour.find(q_start, q, back, far=False) or []
-                if not out.via and far is None:
-                    far = (k, len(out.rejections), q, qe, pose, why)
-                    continue
+                out.via = self.detour.find(q_start, q, back) or []
                 why = None if out.via else why
             if why is not None:
                 out.rejections.append(("collision", q, why))
                 continue
             out.q, out.qe_goal, out.pose, out.plate = q, qe, pose, pose.plate
-            if far is not None:
-                out.rejections.insert(far[1], ("collision", far[2], far[5]
-                                               + " (a far detour only: another pose drawn)"))
             break
         if out.q is None:
             out.reason = f"{budget} poses rejected in a row"
         out.rng_after = rng.bit_generator.state
         out.check_time_s = time.perf_counter() - t0
         return out
-
-    def _far(self, out: Plan, far: tuple, q_start: np.ndarray, back: tuple) -> bool:
-        """Takes ``far``'s pose by a far detour into ``out``, else rejects it in its place."""
-        k, at, q, qe, pose, why = far
-        out.via = self.detour.find(q_start, q, back) or []
-        if out.via:
-            out.q, out.qe_goal, out.pose, out.plate = q, qe, pose, pose.plate
-            return True
-        out.rejections.insert(at, ("collision", q, why))
-        return False
 
     def index_matters(self) -> bool:
         """Whether a plan depends on the sample index (round robin over several plates)."""
@@ -195,8 +168,8 @@ class ListPlanner:
     run's own process. A pose blocked straight is served by a near detour before any by
     a far one; where every pose left is blocked every way, one is served with a joint
     turned by whole turns (``_turned``). When no pose is left, or none of those left can
-    be reached from here, the plan says so (``q`` None, ``reason``). ``taken``: the indices of the poses
-    served so far, in the order served. ``approach`` (n,) in -1, 0, +1: the side each
+    be reached from here, the plan says so (``q`` None, ``reason``). ``taken``: the
+    indices of the poses served so far, in the order served. ``approach`` (n,) in -1, 0, +1: the side each
     pose is approached from (``approach.approach_point``: a last leg from just short of
     it, which a pose read again after another reading at it needs to settle anew; 0:
     straight in, the side its path leaves), where that leg is clear. A pose whose target
