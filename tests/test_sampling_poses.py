@@ -259,7 +259,55 @@ def test_a_list_pose_blocked_every_way_is_served_a_turn_away(scene):
     assert np.array_equal(plan.qe_goal, gen.counts_target(v)) and plan.via == []
     lp = ListPlanner(scene, gen.counts_target(q)[None], np.zeros(1, int), _Segments())
     plan = lp.plan(scene.calibration_q, 0, {}, budget=10)
-    assert plan.q is None and "a turn away" in plan.reason
+    # blocked every way: the list ends there, the pose rejected and dropped
+    assert plan.q is None and plan.exhausted and "a turn away" in plan.reason
+    assert lp.left == [] and len(plan.rejections) == 1
+
+
+class _NoWayTo:
+    """The scene's own checker, with every path to or from one flange pose (each of its
+    configurations whole turns apart) blocked."""
+
+    def __init__(self, world, q_bad):
+        self.world, self.q_bad = world, np.asarray(q_bad)
+
+    def check_config(self, q):
+        return self.world.check_config(q)
+
+    def check_path(self, q0, q1):
+        if any(np.allclose(np.angle(np.exp(1j * (np.asarray(q) - self.q_bad))), 0, atol=1e-9)
+               for q in (q0, q1)):
+            return _Verdict(False, ("wall", "q_bad"))
+        return self.world.check_path(q0, q1)
+
+
+def test_a_list_run_ends_complete_without_the_poses_it_cannot_reach(scene, tmp_path):
+    """Truths 408 and 419 (issue 31's unseen truths, a 481-reading tool list): the run
+    stood where the list's last pose could be reached no way, and validate failed the
+    truth. The list now ends there: the pose rejected and dropped, the run complete with
+    what it measured, and the reason says so; the tour a plan checks says it too."""
+    from planecal.safety.collision import CollisionWorld
+    from planecal.sampling import tour
+    from planecal.studies.rehearsal import rehearse_planned
+    from planecal.twin import Twin
+    gen = PoseGenerator(scene, PoseSettings())
+    world = CollisionWorld(scene)
+    rng = np.random.default_rng(8)
+    q = []
+    while len(q) < 3:
+        v = gen.joint_target(gen.draw(rng, 0), scene.calibration_q, rng)
+        if v is not None and world.check_config(v).ok:
+            q.append(v)
+    counts = np.array([gen.counts_target(v) for v in q])
+    from planecal.model.encoder import counts_to_joints
+    checker = _NoWayTo(world, counts_to_joints(scene.robot, counts[2]))  # as the list has it
+    _, taken, why = tour.visit_list(scene, counts, np.zeros(3, int), checker,
+                                    scene.calibration_q)
+    assert sorted(taken) == [0, 1] and "cannot be reached" in why and "(dropped)" in why
+    stats = rehearse_planned(scene, counts, np.zeros(3, int), tmp_path / "r.tsv",
+                             Twin(scene, seed=1), checker)
+    assert stats.status == "complete" and stats.samples <= 2
+    assert stats.rejected["collision"] >= 1 and "(dropped)" in stats.reason
 
 
 def test_the_rehearsal_that_gave_up_at_sample_159_completes(tmp_path):

@@ -161,8 +161,10 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
                cursor.back)
         plan = background.take(*req, idle=acquirer.idle) if background else planner.plan(*req)
         tally.planning_s += plan.check_time_s
-        if plan.exhausted and not plan.rejections:  # a pose list, done: what it could give
-            tally.status = "complete"
+        if plan.exhausted:  # a pose list, done: what it could give (its last rejections said)
+            for kind, q, reason in plan.rejections:
+                reject(kind, q, reason)
+            tally.status = "complete" if tally.samples or not plan.rejections else "gave_up"
             tally.reason = (f"{plan.reason}: {tally.samples} of the {target} samples asked "
                             "for; the rest were rejected (see the counts)")
             return tally

@@ -168,7 +168,8 @@ class ListPlanner:
     run's own process. A pose blocked straight is served by a near detour before any by
     a far one; where every pose left is blocked every way, one is served with a joint
     turned by whole turns (``_turned``). When no pose is left, or none of those left can
-    be reached from here, the plan says so (``q`` None, ``reason``). ``taken``: the
+    be reached from here (they are rejected and dropped), the list is done: the plan says
+    so (``q`` None, ``exhausted``, ``reason``). ``taken``: the
     indices of the poses served so far, in the order served. ``approach`` (n,) in -1, 0, +1: the side each
     pose is approached from (``approach.approach_point``: a last leg from just short of
     it, which a pose read again after another reading at it needs to settle anew; 0:
@@ -244,9 +245,11 @@ class ListPlanner:
                 elif not self.left:
                     out.exhausted = True
                     out.reason = "every pose of the list was tried"
-                else:
-                    out.reason = (f"none of the {len(self.left)} poses left can be reached "
-                                  "from here, straight, by a detour or a turn away")
+                else:  # the list ends here: what is left is rejected above, and dropped
+                    out.exhausted = True
+                    out.reason = (f"the {len(self.left)} poses left cannot be reached from "
+                                  "here, straight, by a detour or a turn away (dropped)")
+                    self.left.clear()
         out.check_time_s = time.perf_counter() - t0
         return out
 

@@ -182,7 +182,8 @@ def visit(planner, start_q: np.ndarray, samples: int, seed: int = 0,
     collect(planner, PlansOnly(), rec, samples,
             Cursor(np.asarray(start_q, float), np.random.default_rng(seed).bit_generator.state),
             tally, max_attempts)
-    why = None if tally.status == "complete" else tally.reason
+    # a pose list that ends short (poses it cannot reach dropped) is complete, not whole
+    why = None if tally.status == "complete" and tally.samples >= samples else tally.reason
     if short:
         return rec.visits, why
     if why is not None:
