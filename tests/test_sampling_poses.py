@@ -264,23 +264,6 @@ def test_a_list_pose_blocked_every_way_is_served_a_turn_away(scene):
     assert lp.left == [] and len(plan.rejections) == 1
 
 
-class _NoWayTo:
-    """The scene's own checker, with every path to or from one flange pose (each of its
-    configurations whole turns apart) blocked."""
-
-    def __init__(self, world, q_bad):
-        self.world, self.q_bad = world, np.asarray(q_bad)
-
-    def check_config(self, q):
-        return self.world.check_config(q)
-
-    def check_path(self, q0, q1):
-        if any(np.allclose(np.angle(np.exp(1j * (np.asarray(q) - self.q_bad))), 0, atol=1e-9)
-               for q in (q0, q1)):
-            return _Verdict(False, ("wall", "q_bad"))
-        return self.world.check_path(q0, q1)
-
-
 def test_a_list_run_ends_complete_without_the_poses_it_cannot_reach(scene, tmp_path):
     """Truths 408 and 419 (issue 31's unseen truths, a 481-reading tool list): the run
     stood where the list's last pose could be reached no way, and validate failed the
@@ -299,8 +282,9 @@ def test_a_list_run_ends_complete_without_the_poses_it_cannot_reach(scene, tmp_p
         if v is not None and world.check_config(v).ok:
             q.append(v)
     counts = np.array([gen.counts_target(v) for v in q])
+    from checkers import NoWayTo
     from planecal.model.encoder import counts_to_joints
-    checker = _NoWayTo(world, counts_to_joints(scene.robot, counts[2]))  # as the list has it
+    checker = NoWayTo(world, counts_to_joints(scene.robot, counts[2]))  # as the list has it
     _, taken, why = tour.visit_list(scene, counts, np.zeros(3, int), checker,
                                     scene.calibration_q)
     assert sorted(taken) == [0, 1] and "cannot be reached" in why and "(dropped)" in why

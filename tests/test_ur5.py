@@ -12,6 +12,7 @@ import re
 import numpy as np
 import pytest
 
+from checkers import NoWayTo
 from planecal.cli import main
 from planecal.model.cell_params import CellParams
 from planecal.model.kinematics import fk, frame_error, rot
@@ -252,25 +253,6 @@ def test_plans_robot_time_is_the_rehearsals_at_the_ur5s_step(ur5_cell, tmp_path)
         stats.robot_time_s / n, rel=0.02)
 
 
-class _Unreachable:
-    """A collision checker that blocks every path to and from one configuration, and from
-    each configuration whole turns away from it (the same flange pose: a list serves a pose
-    blocked every way a turn away)."""
-
-    def __init__(self, world, q_bad):
-        self.world, self.q_bad = world, np.asarray(q_bad)
-
-    def check_config(self, q):
-        return self.world.check_config(q)
-
-    def check_path(self, q0, q1):
-        from types import SimpleNamespace
-        if any(np.allclose(np.angle(np.exp(1j * (np.asarray(q) - self.q_bad))), 0, atol=1e-9)
-               for q in (q0, q1)):
-            return SimpleNamespace(ok=False, pair=("wall", "q_bad"))
-        return self.world.check_path(q0, q1)
-
-
 def test_a_plan_lists_only_poses_its_run_can_visit(ur5_cell, tmp_path):
     """A planned pose no path reaches (straight or by a detour) is dropped from the list,
     and the plan says so; the rehearsal of the list then completes (before: the pose stayed
@@ -286,7 +268,7 @@ def test_a_plan_lists_only_poses_its_run_can_visit(ur5_cell, tmp_path):
     # a chosen pose of the candidates' first half (theirs is the checker-free draw)
     first = {tuple(c) for c in candidates(scene, m - m // 2, seed, world)[0].tolist()}
     bad = next(c for c in clear["counts"] if tuple(c) in first)
-    checker = _Unreachable(world, counts_to_joints(scene.robot, np.array(bad)))
+    checker = NoWayTo(world, counts_to_joints(scene.robot, np.array(bad)))
     res = plan(scene, n, m, seed, None, checker)
     assert res["dropped"].startswith(f"1 of the {n} planned poses dropped (")
     assert res["samples"] == len(res["counts"]) == n - 1 and bad not in res["counts"]
