@@ -211,9 +211,12 @@ class _Detours:
         self.near_at, self.asked = near_at, []
 
     def find(self, q0, q1, back=(), far=True):
-        if not far:
-            self.asked.append(np.array(q1))
-            return [(q1, None)] if len(self.asked) - 1 == self.near_at else None
+        self.asked.append(np.array(q1))
+        if len(self.asked) - 1 == self.near_at:
+            return [(q1, None)]
+        return self.far(q0, q1, back) if far else None
+
+    def far(self, q0, q1, back=()):
         return [("hub", None)]
 
 

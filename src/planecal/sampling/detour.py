@@ -71,6 +71,11 @@ class Detour:
         via = self._backed_out(q0, q1)
         if via is not None or not far:
             return via
+        return self.far(q0, q1, back)
+
+    def far(self, q0: np.ndarray, q1: np.ndarray, back: tuple = ()) -> list | None:
+        """``find``'s far detours alone (a caller that knows no near one is clear): through
+        a hub, else the way the robot came in and on from there."""
         via = self._hub(q0, q1)
         if via is not None or not back:
             return via

@@ -169,8 +169,8 @@ class ListPlanner:
     a far one; where every pose left is blocked every way, one is served with a joint
     turned by whole turns (``_turned``). When no pose is left, or none of those left can
     be reached from here (they are rejected and dropped), the list is done: the plan says
-    so (``q`` None, ``exhausted``, ``reason``). ``taken``: the
-    indices of the poses served so far, in the order served. ``approach`` (n,) in -1, 0, +1: the side each
+    so (``q`` None, ``exhausted``, ``reason``). ``taken``: the indices of the poses
+    served so far, in the order served. ``approach`` (n,) in -1, 0, +1: the side each
     pose is approached from (``approach.approach_point``: a last leg from just short of
     it, which a pose read again after another reading at it needs to settle anew; 0:
     straight in, the side its path leaves), where that leg is clear. A pose whose target
@@ -227,12 +227,12 @@ class ListPlanner:
                 break
             blocked.append((j, q, why))
         else:
-            near = next(((j, q, via) for j, q, why in blocked if why.startswith(
-                "collision (path)") for via in [self.detour.find(q_start, q, far=False)]
-                if via), None)  # the first reachable by a near detour, else a far one
-            for j, q, why in blocked if near is None else ():
-                via = (self.detour.find(q_start, q, back) if why.startswith("collision (path)")
-                       else None)
+            # the first reachable by a near detour, else the first by a far one
+            path = [why.startswith("collision (path)") for _, _, why in blocked]
+            near = next(((j, q, via) for (j, q, _), p in zip(blocked, path)
+                         if p and (via := self.detour.find(q_start, q, far=False))), None)
+            for (j, q, why), p in zip(blocked, path) if near is None else ():
+                via = self.detour.far(q_start, q, back) if p else None
                 if via:
                     self._take(out, j, q, via)
                     break
