@@ -314,6 +314,12 @@ POSES_BAD = [
 for name, mut, frag in POSES_BAD:
     case(name, REH_POSES, {"poses.json": Mut("poses.json", **mut)}, 2, frag)
 case("poses-deep-100000", REH_POSES, {"poses.json": Nest(100_000)}, 2, "nested")
+# a plate the scene does not have: refused by every command that takes a pose list
+case("poses-plate-beyond-scene", REH_POSES,
+     {"poses.json": Mut("poses.json", set=((("plates", 0), 7),))}, 2, "plate numbers must be")
+case("validate-poses-plate-beyond-scene",
+     "validate --poses {d}/poses.json --truth-seeds 0 --out {d}/v.json --no-history",
+     {"poses.json": Mut("poses.json", set=((("plates", 0), 7),))}, 2, "plate numbers must be")
 case("poses-is-directory", REH_POSES, {"poses.json": Dir()}, 2, "directory")
 
 # ----- run sidecar (rehearse --resume) -----------------------------------------------------------

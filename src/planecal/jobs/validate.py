@@ -82,13 +82,15 @@ def validate(req: ValidateRequest) -> tuple[dict, object]:
 AIM_SAMPLES = 30  # the first random run that aims a pose list planned from the nominal cell
 
 
-def _poses(path, least: int = 0):
+def _poses(path, scene, least: int = 0):
     """A planned pose list as the study's job takes it (None without one): entries
-    (counts, plate, approach side), and whether it was planned from the nominal cell."""
+    (counts, plate, approach side), and whether it was planned from the nominal cell;
+    read as `sample --poses` reads it (its plates checked against ``scene``)."""
     if not path:
         return None, False
-    from planecal.studies.planning import approach_of, load_poses
-    pq, pp, doc = load_poses(path)
+    from planecal.jobs.sampling import read_pose_list
+    from planecal.studies.planning import approach_of
+    pq, pp, doc = read_pose_list(path, scene)
     if len(pq) < least:
         raise InputError(f"{path}: {len(pq)} poses; a calibration set needs at least {least}")
     pa = approach_of(doc, len(pq))
@@ -119,7 +121,7 @@ def _study(req: ValidateRequest, scene, cal) -> dict:
         raise InputError(f"--samples must be at least 20, got {req.samples}")
     seeds = list(req.truth_seeds or [0, 1, 2, 3, 4])  # checked seeds (value_options)
     profile = load_profile(req.errors or DEFAULT_PROFILE, scene.robot)
-    poses, nominal = _poses(req.poses, 20)
+    poses, nominal = _poses(req.poses, scene, 20)
     aim = aim_samples(req, nominal)
     base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
                     samples=req.samples, seed=req.seed, offsets_all=req.offsets_all,
@@ -180,11 +182,11 @@ def _record(req: ValidateRequest, scene, doc, cal) -> str:
         s = runs.samples
         return log_validate(req.rrd, doc, scene, result.params, s.qe, s.d_mm * 1e-3, s.plate)
     from planecal.studies.validation import TruthJob, truth_run
+    poses, nominal = _poses(req.poses, scene)
     job = TruthJob(scene=str(scene.path), errors=doc["profile"],
                    truth_seed=doc["detail_truth_seed"], samples=req.samples, seed=req.seed,
-                   offsets_all=req.offsets_all, poses=_poses(req.poses)[0],
-                   settings=req.settings, calibration=cal,
-                   aim_samples=aim_samples(req, _poses(req.poses)[1]))
+                   offsets_all=req.offsets_all, poses=poses, settings=req.settings,
+                   calibration=cal, aim_samples=aim_samples(req, nominal))
     v, fit, run = truth_run(job)
     if fit is None:
         raise InputError(f"--rrd: truth {job.truth_seed}'s run gave up: {v['failed']}")
