@@ -333,6 +333,8 @@ SIDE_BAD = [
     ("sidecar-rng-state-string", dict(set=((("rng_state",), "PCG64"),)), "rng_state"),
     ("sidecar-distance-nan", dict(raw=((("distance_mm", 0), "NaN"),)), "distance_mm[0]"),
     ("sidecar-status-unknown", dict(set=((("status",), "exploded"),)), "status"),
+    ("sidecar-budget-negative", dict(set=((("settings", "robot_minutes"), -5),)),
+     "settings.robot_minutes"),
     ("sidecar-format-wrong", dict(set=((("format",), "planecal-poses/1"),)), "format"),
     ("sidecar-rejected-list", dict(set=((("rejected",), [0, 0, 0]),)), "rejected"),
     ("sidecar-ticks-huge", dict(raw=((("ticks",), "1" * 400),)), "ticks"),

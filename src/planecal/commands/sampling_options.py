@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import (MAX_SAMPLES, MAX_TRIES, count, port,
+from planecal.commands.value_options import (MAX_SAMPLES, MAX_TRIES, MINUTES, count, port,
                                              port_or_zero, seed)
 from planecal.sampling.poses import IK_CHOICES, PLATE_CHOICES
 from planecal.sampling.runfiles import sidecar_path
@@ -56,6 +56,10 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
                         "(default 1000)")
     p.add_argument("--max-attempts", type=count(MAX_TRIES), default=None,
                    help="stop after this many poses rejected in a row (default 500)")
+    p.add_argument("--robot-minutes", type=MINUTES, default=None, metavar="MIN",
+                   help="end the run, complete, once its robot time reaches this (no new pose "
+                        "after it: the last one may overrun it; default: no budget; with "
+                        "--resume: a new budget, counting every session)")
     p.add_argument("--start", choices=("here", "calibration", "home"), default="here",
                    help="move there before sampling (default: sample from where the robot is)")
     p.add_argument("--end", choices=("stay", "calibration", "home"), default="stay",

@@ -51,7 +51,7 @@ from __future__ import annotations
 import numpy as np
 
 from planecal.base.errors import InputError
-from planecal.commands.value_options import (MAX_ITERATIONS, MAX_SAMPLES, count, seed,
+from planecal.commands.value_options import (MAX_ITERATIONS, MAX_SAMPLES, MINUTES, count, seed,
                                              seed_list)
 
 
@@ -93,6 +93,9 @@ def add_arguments(p):
                         "offsets, aims the list before it runs (default 30 for a list planned "
                         "from the nominal cell, 0 for one planned with --params); its samples "
                         "join the calibration")
+    p.add_argument("--robot-minutes", type=MINUTES, default=None, metavar="MIN",
+                   help="end each truth's calibration run once its robot time reaches this "
+                        "(both stages with --poses; default: no budget)")
     p.add_argument("--breakdown", default="alone", choices=("alone", "off", "none"),
                    help="repeat one truth with each error source of the profile on alone "
                         "(alone), or switched off in turn (off), or not (none) "
@@ -159,7 +162,7 @@ def run(args) -> int:
         lambda warmup: engine_from_args(args, warmup=warmup), args.scene, args.out, args.rrd,
         args.errors, None if seeds is None else tuple(seeds), args.samples, args.seed,
         args.offsets_all, args.poses, args.breakdown, args.breakdown_truth, args.calibrated,
-        args.truth, args.run, args.quiet, args.aim_samples))
+        args.truth, args.run, args.quiet, args.aim_samples, args.robot_minutes))
     return _history(args, hist, scene, doc)
 
 

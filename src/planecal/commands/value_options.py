@@ -99,6 +99,9 @@ def bounded(lo: float, hi: float, unit: str):
     return number
 
 
+MINUTES = bounded(0.01, 100_000.0, "min")  # --robot-minutes: a budget of robot time
+
+
 def max_jobs() -> int:
     import os
     return JOBS_PER_CORE * (os.cpu_count() or 1)

@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, Field
 
 from planecal.formats.base import (
-    M_AS_MM, Bool, Int, Interval, Model, Num, Ranged, Record, Str, problem, short)
+    M_AS_MM, Bool, Int, Interval, Model, Num, Positive, Ranged, Record, Str, problem, short)
 from planecal.formats.poses import Counts
 
 SIDECAR_FORMAT = "planecal-run/1"
@@ -62,6 +62,7 @@ Target = Ranged(1, 10_000_000, "samples", "sample target", base=Int)
 Seconds = Ranged(0.0, None, "s", "time")
 Sessions = Ranged(1, None, "", "session count", base=Int)
 PlateCount = Ranged(1, 100, "", "plate count", base=Int)
+Minutes = Positive("min", "robot-time budget", 100_000.0)
 
 
 class PoseSettings(Model):
@@ -93,6 +94,7 @@ class RunSettings(Model):
     clearance_m: Clearance
     collision_checking: Bool
     decimal_comma: Bool = False
+    robot_minutes: Minutes | None = None  # runs recorded before budgets had none
 
 
 class PCG64Words(Model):

@@ -49,6 +49,7 @@ class SamplingRequest:
     encoder_offsets: str | None = None
     poses: str | None = None
     foreground: bool = False
+    robot_minutes: float | None = None
 
     @classmethod
     def of(cls, values: dict) -> "SamplingRequest":
@@ -102,7 +103,15 @@ def settings_from(req: SamplingRequest, scene) -> RunSettings:
     if req.max_attempts is not None:  # 1 .. MAX_TRIES (its argparse type)
         st.max_attempts = req.max_attempts
     st.decimal_comma = bool(req.decimal_comma)
+    st.robot_minutes = None if req.robot_minutes is None else robot_minutes(req.robot_minutes)
     return st
+
+
+def robot_minutes(v: float) -> float:
+    """--robot-minutes checked: a positive number of minutes."""
+    if not v > 0:
+        raise InputError(f"--robot-minutes must be > 0, got {v:g}")
+    return float(v)
 
 
 @dataclass(frozen=True)
@@ -142,6 +151,8 @@ def prepare(req: SamplingRequest, default_samples: int = 150) -> Prepared:
             req = replace(req, poses=side["poses"])
         if req.samples is not None:  # 1 .. MAX_SAMPLES (its argparse type)
             st.samples = req.samples
+        if req.robot_minutes is not None:  # a new budget, as --samples is a new target
+            st.robot_minutes = robot_minutes(req.robot_minutes)
         scene = load_scene(st.scene)
         st.pose.check(scene)
         return Prepared(req, scene, st, side, read_pose_list(req.poses, scene))

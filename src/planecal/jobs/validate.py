@@ -42,6 +42,7 @@ class ValidateRequest:
     quiet: bool = False
     aim_samples: int | None = None  # --poses: the first random run that aims a list planned
     # from the nominal cell (None: ``AIM_SAMPLES`` for such a list, 0 for an aimed one)
+    robot_minutes: float | None = None  # each truth's calibration run ends once it took this
 
 
 CELL_FRAME_NOTE = (
@@ -64,6 +65,9 @@ def validate(req: ValidateRequest) -> tuple[dict, object]:
     from planecal.io.params import save_json
     from planecal.model.scene import DEFAULT_SCENE, load_scene
 
+    if req.calibrated and req.robot_minutes is not None:
+        raise InputError("--robot-minutes budgets the rehearsed calibration runs; with "
+                         "--calibrated there are none")
     if req.calibrated:
         doc, scene = _validate_given(req)
         cal = None
@@ -113,6 +117,7 @@ def aim_samples(req: ValidateRequest, nominal: bool) -> int:
 
 def _study(req: ValidateRequest, scene, cal) -> dict:
     """Validation over truths, each rehearsed and calibrated on its own twin."""
+    from planecal.jobs.sampling import robot_minutes
     from planecal.studies.distributed import warm_twin
     from planecal.studies.validation import TruthJob
     from planecal.twin.profile import DEFAULT_PROFILE, load_profile
@@ -125,11 +130,15 @@ def _study(req: ValidateRequest, scene, cal) -> dict:
     aim = aim_samples(req, nominal)
     base = TruthJob(scene=str(scene.path), errors=str(profile.path), truth_seed=seeds[0],
                     samples=req.samples, seed=req.seed, offsets_all=req.offsets_all,
-                    poses=poses, settings=req.settings, calibration=cal, aim_samples=aim)
+                    poses=poses, settings=req.settings, calibration=cal, aim_samples=aim,
+                    robot_minutes=None if req.robot_minutes is None
+                    else robot_minutes(req.robot_minutes))
     engine = req.engine(warm_twin)  # its options checked here
     what = f"the poses of {req.poses}" if req.poses else f"{req.samples} samples"
     if aim:
         what = f"{aim} random samples, calibrated at level offsets to aim {what}"
+    if base.robot_minutes is not None:
+        what += f" within {base.robot_minutes:g} robot minutes"
     with engine:  # the scheduler reached before anything is said
         if not req.quiet:
             print(f"{len(seeds)} truth(s) of the {profile.name} world ({scene.name}): "
@@ -186,7 +195,8 @@ def _record(req: ValidateRequest, scene, doc, cal) -> str:
     job = TruthJob(scene=str(scene.path), errors=doc["profile"],
                    truth_seed=doc["detail_truth_seed"], samples=req.samples, seed=req.seed,
                    offsets_all=req.offsets_all, poses=poses, settings=req.settings,
-                   calibration=cal, aim_samples=aim_samples(req, nominal))
+                   calibration=cal, aim_samples=aim_samples(req, nominal),
+                   robot_minutes=req.robot_minutes)
     v, fit, run = truth_run(job)
     if fit is None:
         raise InputError(f"--rrd: truth {job.truth_seed}'s run gave up: {v['failed']}")

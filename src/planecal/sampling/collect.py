@@ -22,6 +22,10 @@ Account: each plan's rejected draws are reported in order (``collision``,
 ``unreachable``), then a laser that gives up is a ``laser`` rejection (the robot stays
 where it moved to); ``max_attempts`` rejections in a row give up the run. With
 ``BackgroundPlanner`` the next plan is made in a forked process while the robot moves.
+
+A ``Budget`` of robot time ends the run complete where the next pose would not fit in it
+(its move, detours included, and the laser's shortest read: a read that needs more than
+its buffer can overrun the budget by those reads).
 """
 from __future__ import annotations
 
@@ -37,6 +41,19 @@ from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource, route
 from planecal.sampling.steps import DWELL_TICKS
 
 REJECT_KINDS = ("collision", "laser", "unreachable")
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Robot time a collection may take [s], how much it has taken (``spent``: the run's
+    robot time so far, earlier sessions included) and what a plan would take from where
+    the robot is (``cost`` [s]: ``tour.Clock.ticks_for``)."""
+    seconds: float
+    spent: Callable[[], float]
+    cost: Callable[[Plan], float]
+
+    def fits(self, plan: Plan) -> bool:
+        return self.spent() + self.cost(plan) <= self.seconds
 
 
 @dataclass
@@ -118,7 +135,8 @@ class Recorder(Protocol):
 @dataclass
 class Tally:
     """What a collection counted; ``status`` 'complete' or 'gave_up' (then ``reason``;
-    a pose list that ran out is 'complete' with the reason and the count)."""
+    a pose list that ran out or a spent budget is 'complete' with the reason and the
+    count)."""
     samples: int = 0
     rejected: dict = field(default_factory=lambda: {k: 0 for k in REJECT_KINDS})
     laser_give_ups: dict = field(default_factory=lambda: {"out_of_range": 0, "not_stable": 0})
@@ -142,9 +160,11 @@ class Cursor:
 def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target: int,
             cursor: Cursor, tally: Tally, max_attempts: int,
             background: BackgroundPlanner | None = None,
-            on_progress: Callable[[Tally], None] | None = None) -> Tally:
-    """Sample until ``tally.samples`` reaches ``target`` or ``max_attempts`` poses are
-    rejected in a row (module docstring). ``cursor`` and ``tally`` are updated in place
+            on_progress: Callable[[Tally], None] | None = None,
+            budget: Budget | None = None) -> Tally:
+    """Sample until ``tally.samples`` reaches ``target``, ``max_attempts`` poses are
+    rejected in a row or the ``budget`` is spent (module docstring). ``cursor`` and
+    ``tally`` are updated in place
     (a stopped collection resumes from them). Exceptions (a dropped enable signal, a link
     failure) propagate with cursor and tally current."""
 
@@ -172,6 +192,12 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
             tally.status = "gave_up"
             tally.reason = (f"{max_attempts} poses rejected in a row"
                             if tally.in_a_row >= max_attempts else plan.reason)
+            return tally
+        if budget is not None and not budget.fits(plan):
+            tally.status = "complete"
+            tally.reason = (f"the robot-time budget of {budget.seconds / 60:g} min is spent "
+                            f"(the next pose does not fit): {tally.samples} of the {target} "
+                            "samples asked for")
             return tally
         cursor.rng_state = plan.rng_after
         back = route_back(plan)

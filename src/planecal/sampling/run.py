@@ -54,7 +54,7 @@ from planecal.base.errors import InputError
 from planecal.base.interrupts import stop_reason
 from planecal.formats.run import SIDECAR_FORMAT
 from planecal.io.params import save_json
-from planecal.sampling.collect import Cursor, DriveAcquirer, Tally, collect
+from planecal.sampling.collect import Budget, Cursor, DriveAcquirer, Tally, collect
 from planecal.sampling.driver import Driver, EnableDropped
 from planecal.sampling.laserread import LaserSettings
 from planecal.sampling.planner import (BackgroundPlanner, Checker, Plan, PlanSource, Planner,
@@ -82,6 +82,7 @@ class RunSettings:
     clearance_m: float = 0.01
     collision_checking: bool = True
     decimal_comma: bool = False  # sample file distances as 92,52 (the seed's tools)
+    robot_minutes: float | None = None  # the run ends complete once its robot time is this
 
     @classmethod
     def for_scene(cls, scene: Scene, samples: int = 150, seed: int = 0) -> "RunSettings":
@@ -114,7 +115,8 @@ class RunSettings:
                        laser=LaserSettings(**s["laser"]),
                        **{k: s[k] for k in ("dwell_ticks", "nominal_step_counts", "max_attempts",
                                             "clearance_m", "collision_checking")},
-                       decimal_comma=bool(s.get("decimal_comma", False)))
+                       decimal_comma=bool(s.get("decimal_comma", False)),
+                       robot_minutes=s.get("robot_minutes"))
         except (KeyError, TypeError, ValueError) as e:
             raise InputError(f"{where}: not a planecal run sidecar ({type(e).__name__}: {e})") from None
 
@@ -274,6 +276,15 @@ class SamplingRun:
         st.travel_ticks = self._travel0 + self._clock.travel_ticks
         st.read_ticks = self._read0 + self._clock.read_ticks
 
+    def _spent_s(self) -> float:
+        """The run's robot time so far [s], every session's (``RunSettings.robot_minutes``)."""
+        self._account()
+        return self.stats.robot_time_s
+
+    def _cost_s(self, plan: Plan) -> float:
+        """What ``plan`` would take [s]: its moves and the laser's shortest read."""
+        return self._clock.ticks_for(plan, self.settings.laser.buffer_len) * self.robot.tick_s
+
     # -- Recorder (the collect core's)
     def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan,
                direction: np.ndarray) -> None:
@@ -335,7 +346,9 @@ class SamplingRun:
                     bg = BackgroundPlanner(self.planner)
             self._clock.counts = np.asarray(drv.commanded_counts, np.int64).copy()
             collect(self.planner, self._clock, self, s.samples, self._cursor, st,
-                    s.max_attempts, background=bg, on_progress=self.progress)
+                    s.max_attempts, background=bg, on_progress=self.progress,
+                    budget=None if s.robot_minutes is None
+                    else Budget(60.0 * s.robot_minutes, self._spent_s, self._cost_s))
         except EnableDropped:
             st.status = "stopped"
             st.reason = getattr(drv.enable, "reason", None) or "enable signal dropped"

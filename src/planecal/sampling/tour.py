@@ -133,6 +133,15 @@ class Clock:
         self.read_ticks = 0
         self.moves = 0
 
+    def ticks_for(self, plan, reads: int) -> int:
+        """The ticks ``plan`` would take from where the robot is: its legs, the dwell and
+        ``reads`` laser reads (``collect.Budget``: whether the next pose fits)."""
+        counts, ticks = self.counts, self.dwell + reads
+        for c in [c for _, c in plan.via] + [plan.qe_goal]:
+            ticks += move_ticks(counts, c, self.nominal, 0)
+            counts = np.asarray(c, np.int64)
+        return ticks
+
     def acquire(self, plan):
         got = self.inner.acquire(plan)
         for _, c in plan.via:

@@ -66,6 +66,7 @@ class RehearsalSettings:
     poses: tuple | None = None  # fixed encoder counts (planning study): replayed in order
     roll_deg: float | None = None  # the pose draw's roll about the beam; None: the default
     ik_choice: str | None = None  # the pose draw's IK branch choice; None: the default
+    robot_minutes: float | None = None  # the run's robot-time budget (``collect.Budget``)
 
     def check(self) -> None:
         if self.mode not in MODES:
@@ -157,6 +158,7 @@ def _twin_and_settings(scene, world, st: RehearsalSettings, seed: int, options=N
         rs.pose.roll_deg = st.roll_deg
     if st.ik_choice is not None:
         rs.pose.ik_choice = st.ik_choice
+    rs.robot_minutes = st.robot_minutes
     return twin, rs
 
 
@@ -174,12 +176,14 @@ def _acquirer(scene, twin, rs):
     return DriveAcquirer(drv, rs.laser, rs.nominal_step_counts, rs.dwell_ticks)
 
 
-def _collect(scene, planner, twin, rs, seed: int, timed: bool = False, acq=None):
+def _collect(scene, planner, twin, rs, seed: int, timed: bool = False, acq=None,
+             spent_s: float = 0.0):
     """The collect core through ``acq`` (default: a new ``_acquirer``): (qe, d_m, plate,
     direction, rejected dict), and with ``timed`` the robot time it took
-    (``robot_time``); RuntimeError when the run gives up."""
+    (``robot_time``); RuntimeError when the run gives up. ``rs.robot_minutes``: the
+    session's budget, of which earlier stages spent ``spent_s``."""
     from planecal.model.encoder import counts_to_joints
-    from planecal.sampling.collect import Cursor, MemoryRecorder, Tally, collect
+    from planecal.sampling.collect import Budget, Cursor, MemoryRecorder, Tally, collect
     from planecal.sampling.tour import Clock
 
     rec, tally = MemoryRecorder(rs.samples), Tally()
@@ -187,7 +191,11 @@ def _collect(scene, planner, twin, rs, seed: int, timed: bool = False, acq=None)
                     np.random.default_rng(seed).bit_generator.state)
     acq = _acquirer(scene, twin, rs) if acq is None else acq
     clock = Clock(acq, twin.current_counts, rs.nominal_step_counts, rs.dwell_ticks)
-    collect(planner, clock, rec, rs.samples, cursor, tally, rs.max_attempts)
+    tick = float(scene.robot.tick_s)
+    budget = (None if rs.robot_minutes is None else
+              Budget(60.0 * rs.robot_minutes, lambda: spent_s + clock.ticks * tick,
+                     lambda plan: clock.ticks_for(plan, rs.laser.buffer_len) * tick))
+    collect(planner, clock, rec, rs.samples, cursor, tally, rs.max_attempts, budget=budget)
     if tally.status != "complete":
         raise RuntimeError(f"run with seed {seed}: {tally.reason}")
     out = (*rec.arrays(), dict(tally.rejected))
@@ -328,7 +336,7 @@ def staged_samples(scene, world, st: RehearsalSettings, seed: int, options=None,
                           CommandModel(cal.params, scene.robot.qe0.copy()))
     rs.samples = len(aimed)
     second = _collect(scene, ListPlanner(scene, aimed, plates, checker, approach=approach),
-                      twin, rs, seed + 1, True, acq)
+                      twin, rs, seed + 1, True, acq, first[5]["robot_time_s"])
     out = tuple(np.concatenate([a, b]) for a, b in zip(first[:4], second[:4]))
     rejected = {k: first[4].get(k, 0) + second[4].get(k, 0) for k in {*first[4], *second[4]}}
     robot = {k: first[5][k] + second[5][k] for k in first[5]}

@@ -53,6 +53,7 @@ class TruthJob:
     beside: bool = True
     aim_samples: int = 0  # with ``poses``: a first random run that aims them
     # (``rehearsal.staged_samples``); 0: the list as it is
+    robot_minutes: float | None = None  # the calibration run's robot-time budget
 
     def rehearsal(self):
         """The calibration set's rehearsal (``studies.rehearsal``): run 0 of these settings
@@ -61,7 +62,8 @@ class TruthJob:
         return RehearsalSettings(scene=self.scene, seed=self.sampling_seed, errors=self.errors,
                                  samples=len(self.poses) if self.poses else self.samples,
                                  truth_seed=self.truth_seed, offsets_all=self.offsets_all,
-                                 poses=self.poses, clearance_m=self.settings.clearance_m)
+                                 poses=self.poses, clearance_m=self.settings.clearance_m,
+                                 robot_minutes=self.robot_minutes)
 
 
 def levels_beside(cal: CalibrationSettings) -> list[CalibrationSettings]:
