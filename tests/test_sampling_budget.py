@@ -88,3 +88,18 @@ def test_a_budget_is_a_positive_number_of_minutes(tmp_path, capsys):
                  str(given[2]), "--robot-minutes", "5", "--no-history"])
     err = capsys.readouterr().err
     assert code == 2 and "--robot-minutes budgets the rehearsed calibration runs" in err
+
+
+def test_a_truth_whose_budget_leaves_too_few_samples_fails_alone():
+    """validate's truth: a run its budget cut short of a calibration is that truth's
+    failure, with the reason (the other truths stand), not the validation's end."""
+    from planecal.studies.common import cached_scene
+    from planecal.studies.validation import TruthJob, validate_truth
+    from planecal.twin.profile import DEFAULT_PROFILE, load_profile
+
+    scene = cached_scene("thesis_final")
+    errors = str(load_profile(DEFAULT_PROFILE, scene.robot).path)
+    v = validate_truth(TruthJob(scene=str(scene.path), errors=errors, truth_seed=3,
+                                robot_minutes=1.0))
+    assert v["truth_seed"] == 3
+    assert "samples cannot determine" in v["failed"], v

@@ -107,11 +107,13 @@ def truth_run(job: TruthJob) -> tuple[dict, object, tuple | None]:
                   else partial(staged_samples, aim_samples=job.aim_samples))
         qe, d, plate, direction, rejected, robot = sample(scene, world, reh,
                                                              job.sampling_seed, opts, True)
-    except RuntimeError as e:
+        # too few samples for a calibration (a run its robot-time budget cut short): this
+        # truth fails with the reason, the others stand
+        cals = [(s.label, calibrate(scene.robot, qe, d, nominal_params(scene), plate, s,
+                                    direction, scene.references))
+                for s in (levels_beside(job.calibration) if job.beside else [job.calibration])]
+    except (RuntimeError, InputError) as e:
         return {"truth_seed": job.truth_seed, "off": list(job.off), "failed": str(e)}, None, None
-    cals = [(s.label, calibrate(scene.robot, qe, d, nominal_params(scene), plate, s,
-                                direction, scene.references))
-            for s in (levels_beside(job.calibration) if job.beside else [job.calibration])]
     fits = [(label, c.result) for label, c in cals]
     fit = fits[-1][1]
     v = validate(scene, world, [CalibratedModel(scene.robot, f.params, label)
