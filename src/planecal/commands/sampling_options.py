@@ -57,9 +57,10 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
     p.add_argument("--max-attempts", type=count(MAX_TRIES), default=None,
                    help="stop after this many poses rejected in a row (default 500)")
     p.add_argument("--robot-minutes", type=MINUTES, default=None, metavar="MIN",
-                   help="end the run, complete, once its robot time reaches this (no new pose "
-                        "after it: the last one may overrun it; default: no budget; with "
-                        "--resume: a new budget, counting every session)")
+                   help="end the run, complete, where its next pose might not fit in this much "
+                        "robot time (its moves and the laser's longest read: the run never "
+                        "overruns it); default: no budget; with --resume: a new budget, "
+                        "counting every session")
     p.add_argument("--start", choices=("here", "calibration", "home"), default="here",
                    help="move there before sampling (default: sample from where the robot is)")
     p.add_argument("--end", choices=("stay", "calibration", "home"), default="stay",

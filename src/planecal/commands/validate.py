@@ -94,8 +94,8 @@ def add_arguments(p):
                         "from the nominal cell, 0 for one planned with --params); its samples "
                         "join the calibration")
     p.add_argument("--robot-minutes", type=MINUTES, default=None, metavar="MIN",
-                   help="end each truth's calibration run once its robot time reaches this "
-                        "(both stages with --poses; default: no budget)")
+                   help="end each truth's calibration run where its next pose might not fit in "
+                        "this much robot time (both stages with --poses; default: no budget)")
     p.add_argument("--breakdown", default="alone", choices=("alone", "off", "none"),
                    help="repeat one truth with each error source of the profile on alone "
                         "(alone), or switched off in turn (off), or not (none) "

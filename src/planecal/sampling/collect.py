@@ -23,9 +23,9 @@ Account: each plan's rejected draws are reported in order (``collision``,
 where it moved to); ``max_attempts`` rejections in a row give up the run. With
 ``BackgroundPlanner`` the next plan is made in a forked process while the robot moves.
 
-A ``Budget`` of robot time ends the run complete where the next pose would not fit in it
-(its move, detours included, and the laser's shortest read: a read that needs more than
-its buffer can overrun the budget by those reads).
+A ``Budget`` of robot time ends the run complete where the next pose might not fit in it:
+its moves, detours included, and the laser's longest read (``LaserSettings.max_reads``:
+a read never takes more), so a run never overruns its budget.
 """
 from __future__ import annotations
 
@@ -46,8 +46,8 @@ REJECT_KINDS = ("collision", "laser", "unreachable")
 @dataclass(frozen=True)
 class Budget:
     """Robot time a collection may take [s], how much it has taken (``spent``: the run's
-    robot time so far, earlier sessions included) and what a plan would take from where
-    the robot is (``cost`` [s]: ``tour.Clock.ticks_for``)."""
+    robot time so far, earlier sessions included) and the most a plan can take from
+    where the robot is (``cost`` [s]: ``tour.Clock.ticks_for`` with the longest read)."""
     seconds: float
     spent: Callable[[], float]
     cost: Callable[[Plan], float]
@@ -196,7 +196,7 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
         if budget is not None and not budget.fits(plan):
             tally.status = "complete"
             tally.reason = (f"the robot-time budget of {budget.seconds / 60:g} min is spent "
-                            f"(the next pose does not fit): {tally.samples} of the {target} "
+                            f"(the next pose might not fit): {tally.samples} of the {target} "
                             "samples asked for")
             return tally
         cursor.rng_state = plan.rng_after

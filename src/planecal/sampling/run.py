@@ -282,8 +282,8 @@ class SamplingRun:
         return self.stats.robot_time_s
 
     def _cost_s(self, plan: Plan) -> float:
-        """What ``plan`` would take [s]: its moves and the laser's shortest read."""
-        return self._clock.ticks_for(plan, self.settings.laser.buffer_len) * self.robot.tick_s
+        """What ``plan`` may take at most [s]: its moves and the laser's longest read."""
+        return self._clock.ticks_for(plan, self.settings.laser.max_reads) * self.robot.tick_s
 
     # -- Recorder (the collect core's)
     def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan,

@@ -194,7 +194,7 @@ def _collect(scene, planner, twin, rs, seed: int, timed: bool = False, acq=None,
     tick = float(scene.robot.tick_s)
     budget = (None if rs.robot_minutes is None else
               Budget(60.0 * rs.robot_minutes, lambda: spent_s + clock.ticks * tick,
-                     lambda plan: clock.ticks_for(plan, rs.laser.buffer_len) * tick))
+                     lambda plan: clock.ticks_for(plan, rs.laser.max_reads) * tick))
     collect(planner, clock, rec, rs.samples, cursor, tally, rs.max_attempts, budget=budget)
     if tally.status != "complete":
         raise RuntimeError(f"run with seed {seed}: {tally.reason}")
