@@ -195,3 +195,19 @@ def test_a_scheduler_that_does_not_answer_is_one_line_and_makes_no_folder(tmp_pa
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no Dask scheduler answered" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["spec.toml"]
+
+
+def test_a_planecal_document_longer_than_the_probe_is_still_planecals(tmp_path):
+    """A validation of 20 truths (330 kB) is replaced by the next one without --force: its
+    format, written first, is found though the probe does not hold the whole document;
+    another file that size is not, nor a document whose format comes later."""
+    ours = tmp_path / "v.json"
+    ours.write_text(json.dumps({"format": "planecal-validate/3", "truths": ["x" * 100] * 4000},
+                               indent=2))
+    assert ours.stat().st_size > 1 << 16
+    assert check_output(ours, fmt="planecal-validate/3") == ours
+    for name, doc in (("late.json", {"truths": ["x" * 100] * 4000, "format": "planecal-validate/3"}),
+                      ("other.json", {"format": "other/1", "truths": ["x" * 100] * 4000})):
+        (tmp_path / name).write_text(json.dumps(doc))
+        with pytest.raises(InputError, match="exists and is not a file planecal wrote there"):
+            check_output(tmp_path / name, fmt="planecal-validate/3")

@@ -36,6 +36,7 @@ import errno
 import fnmatch
 import json
 import os
+import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +45,7 @@ from typing import Callable, Iterable, Union
 from planecal.base.errors import InputError
 
 _PROBE_BYTES = 1 << 16  # how much of an existing file is read to find its format
+_FORMAT_FIRST = re.compile(rb'\s*\{\s*"format"\s*:\s*"(planecal-[a-z0-9-]+/[0-9]+)"')
 
 # markers planecal writes near the start of its non-JSON files (the writers use these)
 HTML_MARK = b'<meta name="generator" content="planecal">'
@@ -190,7 +192,10 @@ def file_format(path: Path) -> str | None:
         except ValueError:
             continue
         return doc.get("format") if isinstance(doc, dict) else None
-    return None
+    # a document longer than the probe (a validation of 20 truths: 330 kB): planecal writes
+    # its "format" first
+    m = _FORMAT_FIRST.match(head)
+    return m.group(1).decode() if m else None
 
 
 def _head(path: Path) -> bytes:
