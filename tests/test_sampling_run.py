@@ -264,7 +264,7 @@ class Chain:
     def index_matters(self):
         return self.round_robin
 
-    def plan(self, q_start, index, rng_state, budget, back=()):
+    def plan(self, q_start, index, rng_state, budget, back=(), aim=None):
         from planecal.sampling.planner import Plan
         self.calls.append(index)
         out = Plan(index, q_start, [], {"n": rng_state["n"] + 1})
@@ -280,17 +280,19 @@ class Chain:
 def test_the_background_planner_serves_plans_made_ahead_along_the_chain():
     """While the run moves, the planner makes the plans its next requests will ask for
     (``planner._Ahead``): each is served without planning again, and is the plan the
-    request gives; a request off the chain, or with a budget larger than the plan was
-    made with, is planned anew and the chain restarts from it."""
+    request gives; a request off the chain (another index, new aiming shifts), or with a
+    budget larger than the plan was made with, is planned anew and the chain restarts
+    from it."""
+    from planecal.sampling.aim import Shifts
     from planecal.sampling.planner import AHEAD, _Ahead, route_back
 
-    def request(plan, index, budget=5):  # what collect asks next (collect.collect)
-        return (plan.q, index, plan.rng_after, budget, route_back(plan))
+    def request(plan, index, budget=5, aim=None):  # what collect asks next (collect.collect)
+        return (plan.q, index, plan.rng_after, budget, route_back(plan), aim)
 
     for round_robin in (False, True):
         chain = Chain(round_robin)
         ahead = _Ahead(chain)
-        p = ahead.take((np.zeros(6), 0, {"n": 0}, 5, ()))
+        p = ahead.take((np.zeros(6), 0, {"n": 0}, 5, (), None))
         while ahead.wanted():
             ahead.plan_next()
         assert chain.calls == [0, 1, 2, 3, 4] and AHEAD == 4
@@ -305,13 +307,18 @@ def test_the_background_planner_serves_plans_made_ahead_along_the_chain():
     # made with a budget below the request's: planned again with the request's budget
     chain = Chain()
     ahead = _Ahead(chain)
-    p = ahead.take((np.zeros(6), 0, {"n": 0}, 3, ()))
+    p = ahead.take((np.zeros(6), 0, {"n": 0}, 3, (), None))
     ahead.plan_next()
     assert chain.calls == [0, 1]
     p = ahead.take(request(p, 1, budget=5))
     assert chain.calls == [0, 1, 1] and ahead.next[3] == 5
+    # new aiming shifts after a reading (sampling.aim): off the chain, planned anew
+    ahead.plan_next()
+    shifts = Shifts(-0.01, (-0.01,))
+    p = ahead.take(request(p, 2, aim=shifts))
+    assert chain.calls == [0, 1, 1, 2, 2] and ahead.next[5] == shifts
     # a plan with no target ends the chain: nothing follows it to plan ahead
-    p = ahead.take((np.zeros(6), 0, {"n": 0}, 1, ()))
+    p = ahead.take((np.zeros(6), 0, {"n": 0}, 1, (), None))
     assert p.q is None and not ahead.wanted()
 
 
@@ -327,7 +334,7 @@ class Targets:
     def index_matters(self):
         return False
 
-    def plan(self, q_start, index, rng_state, budget, back=()):
+    def plan(self, q_start, index, rng_state, budget, back=(), aim=None):
         from planecal.model.encoder import counts_to_joints
         from planecal.sampling.planner import Plan
         self.backs.append(back)

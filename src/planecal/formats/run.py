@@ -163,6 +163,26 @@ class RouteBack(Record):
     counts: Annotated[list[Counts], Field(min_length=1, max_length=64)]
 
 
+Excess = Ranged(-1.0, 1.0, "m", "laser reading beyond the commanding model")
+
+
+class AimNext(Record):
+    """The aiming shifts the next plan takes (``sampling.aim.Shifts``)."""
+    pooled_m: Excess
+    plates_m: Annotated[list[Excess | None], Field(max_length=100)]
+
+
+class AimState(Record):
+    """``sampling.aim.Aim``: whether the laser has read out of range on enough poses in a
+    row (and how many so far), the last readings' excess over the commanding model per
+    plate, the next plan's shifts."""
+    engaged: Bool
+    streak: Count = 0
+    excess_m: Annotated[list[Annotated[list[Excess], Field(max_length=64)]],
+                        Field(max_length=100)]
+    next: AimNext | None = None
+
+
 class SidecarFile(Record):
     """``RUN.tsv.json``; keys added by later versions are kept."""
     format: SidecarTag
@@ -187,6 +207,7 @@ class SidecarFile(Record):
     sessions: Sessions = 1
     rng_state: RngState | None = None
     route_back: RouteBack | None = None
+    aim: AimState | None = None  # runs recorded before aiming have none
     sample_file: Str | None = None
     plates: PlateCount | None = None
     updated_utc: Str | None = None

@@ -35,6 +35,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from planecal.base.progress import report
+from planecal.sampling.aim import Aim
 from planecal.sampling.driver import Driver, plan_move
 from planecal.sampling.laserread import LaserResult, LaserSettings, read_stable
 from planecal.sampling.planner import BackgroundPlanner, Plan, PlanSource, route_back
@@ -151,10 +152,11 @@ class Cursor:
     """Where a collection stands between samples: the configuration the robot was last
     sent to (the next path starts there), the random state of the next plan and the way
     the robot came in (``planner.route_back``; empty where not known: a first sample, a
-    robot moved since)."""
+    robot moved since) and what the laser has read that aims the next draws."""
     q: np.ndarray
     rng_state: dict
     back: tuple = ()
+    aim: Aim = field(default_factory=Aim)  # the random draws' distances (``sampling.aim``)
 
 
 def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target: int,
@@ -178,7 +180,7 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
 
     while tally.samples < target:
         req = (cursor.q, tally.samples, cursor.rng_state, max_attempts - tally.in_a_row,
-               cursor.back)
+               cursor.back, cursor.aim.next)
         plan = background.take(*req, idle=acquirer.idle) if background else planner.plan(*req)
         tally.planning_s += plan.check_time_s
         if plan.exhausted:  # a pose list, done: what it could give (its last rejections said)
@@ -201,11 +203,17 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
             return tally
         cursor.rng_state = plan.rng_after
         back = route_back(plan)
+        # the next plan is aimed with what is known before this pose is read: planned
+        # ahead or in turn, the same plan
+        cursor.aim.next = cursor.aim.shifts()
         if background:  # plan the next pose while the robot moves (assuming this one succeeds)
-            background.submit(plan.q, tally.samples + 1, cursor.rng_state, max_attempts, back)
+            background.submit(plan.q, tally.samples + 1, cursor.rng_state, max_attempts, back,
+                              cursor.aim.next)
         got = acquirer.acquire(plan)
         cursor.q, cursor.back = plan.q, back
         if not got.laser.ok:
+            if got.laser.reason == "out_of_range":
+                cursor.aim.missed()
             tally.laser_give_ups[got.laser.reason] += 1
             if reject("laser", plan.q, f"laser: {got.laser.describe()}"):
                 tally.status = "gave_up"
@@ -214,6 +222,8 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
             continue
         tally.samples += 1
         tally.in_a_row = 0
+        if plan.pose is not None:  # a random draw (a pose list's are aimed before it runs)
+            cursor.aim.read(plan.plate, plan.pose.distance_m, got.laser.value_mm)
         direction = (np.zeros(len(got.counts), np.int8) if got.direction is None
                      else got.direction)
         recorder.sample(tally.samples - 1, got.counts, got.laser.value_mm, plan, direction)

@@ -29,6 +29,7 @@ import numpy as np
 
 from planecal.model.encoder import counts_in_range, counts_to_joints
 from planecal.model.ik import turns
+from planecal.sampling.aim import Shifts
 from planecal.sampling.detour import Checker, Detour, Verdict
 from planecal.sampling.poses import CommandModel, PoseGenerator, PoseSettings, SensorPose
 from planecal.sampling.steps import COUNT_LIMIT
@@ -62,7 +63,7 @@ class PlanSource(Protocol):
     pure: bool
 
     def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int,
-             back: tuple = ()) -> Plan: ...
+             back: tuple = (), aim: Shifts | None = None) -> Plan: ...
 
     def index_matters(self) -> bool: ...
 
@@ -123,14 +124,14 @@ class Planner:
         self.detour = Detour(self.poses, checker) if pose.ik_choice == "wrist" else None
 
     def plan(self, q_start: np.ndarray, index: int, rng_state: dict, budget: int,
-             back: tuple = ()) -> Plan:
+             back: tuple = (), aim: Shifts | None = None) -> Plan:
         rng = np.random.default_rng()
         rng.bit_generator.state = rng_state
         t0 = time.perf_counter()
         out = Plan(index, q_start, [], rng_state)
         for _ in range(budget):
             plate = self.poses.plate_for(index, rng)
-            pose = self.poses.draw(rng, plate)
+            pose = self.poses.draw(rng, plate, 0.0 if aim is None else aim.of(plate))
             q = self.poses.joint_target(pose, q_start, rng)
             if q is None:
                 out.rejections.append(("unreachable", None,
@@ -210,10 +211,11 @@ class ListPlanner:
                 out.rejections.append(("collision", q, _collision_reason("target", res)
                                        + f" (planned pose {j + 1}: dropped)"))
 
-    def plan(self, q_start, index, rng_state, budget, back=()):
+    def plan(self, q_start, index, rng_state, budget, back=(), aim=None):
         """The next pose of the list reachable on a straight path; else the next one
         reachable by a detour (``Detour.find``, ``back`` the way the robot came in); the
-        poses passed over stay for later."""
+        poses passed over stay for later (``aim``: unused, a list is aimed before it
+        runs)."""
         t0 = time.perf_counter()
         out = Plan(index, q_start, [], rng_state)
         if not self._screened:
@@ -333,7 +335,8 @@ class _Ahead:
     makes the next ``AHEAD`` plans of the chain and serves a request that matches one
     (``_same_request``; a plan made with a budget at least the request's: a run that
     gives up early stops reading its rejections at the same one). A request off the
-    chain (a round-robin index after a laser rejection) drops them and starts the chain
+    chain (a round-robin index after a laser rejection, new aiming shifts after a reading:
+    ``sampling.aim``) drops them and starts the chain
     again from itself. The planner is pure, so a plan made ahead is the plan."""
 
     def __init__(self, planner):
@@ -359,7 +362,7 @@ class _Ahead:
                 return plan
         # off the chain (or none yet): plan it, the chain goes on from it
         plan = _plan_or_error(self.planner, req)
-        if len(req) == 5:
+        if len(req) == 6:
             self.budget = max(self.budget, req[3])
         self.next = _next_request(req, plan, self.budget)
         return plan
@@ -368,9 +371,9 @@ class _Ahead:
 def _next_request(req, plan, budget: int) -> tuple | None:
     """The request ``collect`` makes after ``plan`` succeeds (with ``budget``), or None
     where none follows (no target: the run ends or gives up; not a sampling request)."""
-    if not isinstance(plan, Plan) or plan.q is None or len(req) != 5:
+    if not isinstance(plan, Plan) or plan.q is None or len(req) != 6:
         return None
-    return (plan.q, req[1] + 1, plan.rng_after, budget, route_back(plan))
+    return (plan.q, req[1] + 1, plan.rng_after, budget, route_back(plan), req[5])
 
 
 @dataclass
@@ -451,4 +454,4 @@ def _same_request(a, b, index_matters: bool) -> bool:
     # the budget (a[3]) may differ: giving up early is decided while consuming the plan
     return (np.array_equal(a[0], b[0]) and a[2] == b[2]
             and (a[1] == b[1] or not index_matters) and len(a[4]) == len(b[4])
-            and all(np.array_equal(u, v) for u, v in zip(a[4], b[4])))
+            and all(np.array_equal(u, v) for u, v in zip(a[4], b[4])) and a[5] == b[5])

@@ -157,7 +157,10 @@ class PoseGenerator:
             return int(rng.integers(self.n_plates))
         return index % self.n_plates
 
-    def draw(self, rng: np.random.Generator, plate: int = 0) -> SensorPose:
+    def draw(self, rng: np.random.Generator, plate: int = 0, shift_m: float = 0.0) -> SensorPose:
+        """A random pose on ``plate`` (module docstring), placed ``shift_m`` nearer the
+        plate than the drawn distance: where the laser reads that much beyond the
+        commanding model there, it reads the drawn distance (``sampling.aim``)."""
         s = self.settings
         F = self.frames[plate]
         size = self.scene.plates[plate].size
@@ -170,6 +173,7 @@ class PoseGenerator:
             d = s.fixed_distance_mm * 1e-3
         else:
             d = rng.uniform(*s.distance_mm) * 1e-3
+        d -= shift_m
         x_p, y_p, z_p, c = F[:3, 0], F[:3, 1], F[:3, 2], F[:3, 3]
         sin_t = np.sqrt(max(0.0, 1.0 - cos_t * cos_t))
         beam = -cos_t * z_p + sin_t * (np.cos(az) * x_p + np.sin(az) * y_p)

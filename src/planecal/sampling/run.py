@@ -54,6 +54,7 @@ from planecal.base.errors import InputError
 from planecal.base.interrupts import stop_reason
 from planecal.formats.run import SIDECAR_FORMAT
 from planecal.io.params import save_json
+from planecal.sampling.aim import Aim
 from planecal.sampling.collect import Budget, Cursor, DriveAcquirer, Tally, collect
 from planecal.sampling.driver import Driver, EnableDropped
 from planecal.sampling.laserread import LaserSettings
@@ -226,6 +227,7 @@ class SamplingRun:
         if side.get("rng_state"):
             self._cursor.rng_state = side["rng_state"]
         self._route_back = side.get("route_back")
+        self._cursor.aim = Aim.from_dict(side.get("aim"))
         st.robot_time_s = st.ticks * self.robot.tick_s
 
     # -- sidecar
@@ -246,7 +248,7 @@ class SamplingRun:
             "ticks": st.ticks, "robot_time_s": round(st.robot_time_s, 3), **st.per_sample(),
             "wall_time_s": round(st.wall_time_s, 3), "max_step_counts": st.max_step_counts,
             "sessions": st.sessions, "rng_state": self._cursor.rng_state,
-            "route_back": self._route_back_counts(),
+            "route_back": self._route_back_counts(), "aim": self._cursor.aim.to_dict(),
             "sample_file": self.out.name, "plates": len(self.scene.plates),
             "updated_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         }
