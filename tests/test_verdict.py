@@ -200,15 +200,21 @@ def test_level3_without_directions_predicts_fresh_samples_no_worse_than_level2()
     assert predicts(CalibrationSettings(level="nonkinematic")) <= level2 * (1 + 1e-6)
 
 
-def test_the_band_stated_is_the_draws_band_widened_where_validate_found_ap():
+def test_the_band_stated_is_the_draws_band_placed_where_validate_found_ap():
     """``verdict._band``: the draws' 10-90 % band (log-normal draws: exp(mu +- 1.2816
-    sigma)), its lower end 1.5 and its upper 1.0 half-widths from its geometric middle (the
-    percentiles of where validate's AP fell: ``CALIBRATED``), in mm from draws in m."""
-    from planecal.estimation.verdict import CALIBRATED, _band
+    sigma)), its ends at ``CALIBRATED``'s half-widths from its geometric middle (the
+    percentiles of where validate's AP fell), in mm from draws in m; a run that reads its
+    poses again (a planned list) gets its own (``readings``)."""
+    from planecal.estimation.verdict import CALIBRATED, _band, readings
     mu, sigma = np.log(1e-4), 0.4
     ap = np.exp(mu + sigma * np.random.default_rng(3).standard_normal(200_000))
-    lo, hi = _band(ap)
     half = 1.2816 * sigma
-    assert CALIBRATED == (-1.5, 1.0)
-    assert lo == pytest.approx(0.1 * np.exp(-1.5 * half), rel=0.01)
-    assert hi == pytest.approx(0.1 * np.exp(half), rel=0.01)
+    assert CALIBRATED == {"single": (-1.45, 1.1), "repeated": (-1.4, 0.7)}
+    for read, (a, b) in CALIBRATED.items():
+        lo, hi = _band(ap, read)
+        assert lo == pytest.approx(0.1 * np.exp(a * half), rel=0.01)
+        assert hi == pytest.approx(0.1 * np.exp(b * half), rel=0.01)
+    qe = np.arange(60).reshape(10, 6)
+    assert readings(qe) == "single"
+    assert readings(np.concatenate([qe[:4], qe[:4], qe[4:6]])) == "repeated"  # 8 of 10
+    assert readings(np.concatenate([qe, qe[:2]])) == "single"  # 4 of 12
