@@ -86,7 +86,8 @@ def test_a_run_whose_laser_never_misses_is_not_aimed(tmp_path, capsys):
 
 def test_an_aimed_draw_is_the_same_draw_placed_that_much_further_out():
     """``PoseGenerator.draw``'s shift: the same spot, beam and roll from the same random
-    state, the sensor placed the shift further back along the beam."""
+    state, the sensor placed the shift further back along the beam; not at a fixed
+    distance (``--fixed-distance-mm``, the live validation's)."""
     from planecal.model.scene import load_scene
     from planecal.sampling.poses import PoseGenerator
     gen = PoseGenerator(load_scene("three_plates"))
@@ -96,3 +97,8 @@ def test_an_aimed_draw_is_the_same_draw_placed_that_much_further_out():
     assert np.array_equal(b.point, a.point) and np.array_equal(b.beam, a.beam)
     assert np.allclose(b.T_sensor[:3, 3], a.T_sensor[:3, 3] - 0.02 * a.beam, atol=1e-12)
     assert np.allclose(b.T_sensor[:3, :3], a.T_sensor[:3, :3], atol=1e-15)
+    # a fixed distance is what the run measures the cell at: not shifted
+    from planecal.sampling.poses import PoseSettings
+    fixed = PoseGenerator(load_scene("three_plates"),
+                          PoseSettings(cone_deg=15.0, fixed_distance_mm=80.0))
+    assert fixed.draw(np.random.default_rng(1), 3, -0.02).distance_m == 0.080

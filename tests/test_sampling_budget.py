@@ -103,3 +103,30 @@ def test_a_truth_whose_budget_leaves_too_few_samples_fails_alone():
                                 robot_minutes=1.0))
     assert v["truth_seed"] == 3
     assert "samples cannot determine" in v["failed"], v
+
+
+def test_a_plan_the_budget_cannot_fit_is_dropped_whole():
+    """``collect``: the plan that does not fit is not taken, nor are its rejected draws
+    counted; the random state stays before it, so a resume with more budget draws it
+    again and counts them once."""
+    from planecal.sampling.collect import Budget, Cursor, MemoryRecorder, Tally, collect
+    from planecal.sampling.planner import Plan
+
+    class OnePlan:
+        pure = False
+
+        def index_matters(self):
+            return False
+
+        def plan(self, q_start, index, rng_state, budget, back=(), aim=None):
+            out = Plan(index, q_start, [("collision", None, "collision (target)")],
+                       {"n": rng_state["n"] + 1})
+            out.q, out.qe_goal = np.ones(6), np.zeros(6, np.int64)
+            return out
+
+    cursor, tally, rec = Cursor(np.zeros(6), {"n": 0}), Tally(), MemoryRecorder()
+    collect(OnePlan(), None, rec, 5, cursor, tally, 500,
+            budget=Budget(60.0, lambda: 55.0, lambda plan: 6.0))
+    assert tally.status == "complete" and "budget of 1 min is spent" in tally.reason
+    assert tally.samples == 0 and tally.rejected["collision"] == 0
+    assert cursor.rng_state == {"n": 0}

@@ -214,7 +214,10 @@ def test_the_band_stated_is_the_draws_band_placed_where_validate_found_ap():
         lo, hi = _band(ap, read)
         assert lo == pytest.approx(0.1 * np.exp(a * half), rel=0.01)
         assert hi == pytest.approx(0.1 * np.exp(b * half), rel=0.01)
-    qe = np.arange(60).reshape(10, 6)
+    qe = np.arange(60).reshape(10, 6) * 1000
     assert readings(qe) == "single"
     assert readings(np.concatenate([qe[:4], qe[:4], qe[4:6]])) == "repeated"  # 8 of 10
     assert readings(np.concatenate([qe, qe[:2]])) == "single"  # 4 of 12
+    # a real robot settles a count or two apart at a pose it reads again
+    wobble = np.concatenate([qe[:4], qe[:4] + np.array([2, -1, 0, 3, 0, -2]), qe[4:6]])
+    assert readings(wobble) == "repeated"

@@ -58,9 +58,10 @@ def add_sampling_arguments(p: argparse.ArgumentParser, default_samples: int = 15
                    help="stop after this many poses rejected in a row (default 500)")
     p.add_argument("--robot-minutes", type=MINUTES, default=None, metavar="MIN",
                    help="end the run, complete, where its next pose might not fit in this much "
-                        "robot time (its moves and the laser's longest read: the run never "
-                        "overruns it); default: no budget; with --resume: a new budget, "
-                        "counting every session")
+                        "robot time (its moves and the laser's longest read; on the real "
+                        "cell the hold while a plan is made counts too, and the wait for "
+                        "the last plan can overrun it); default: no budget; with --resume: "
+                        "a new budget, counting every session")
     p.add_argument("--start", choices=("here", "calibration", "home"), default="here",
                    help="move there before sampling (default: sample from where the robot is)")
     p.add_argument("--end", choices=("stay", "calibration", "home"), default="stay",

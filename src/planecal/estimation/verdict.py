@@ -43,12 +43,13 @@ BAND = (0.1, 0.9)
 # draws judge 5 poses by the samples, validate a cube about one of them). The band stated
 # is where AP fell, in half-widths of the draws' band (log scale) about its geometric
 # middle: its 10th and 90th percentiles over truths 300-919 (340 calibrations), separately
-# for runs that read their poses more than once (a planned list: AP's upper tail is shorter,
-# 90th percentile +0.64 against +1.11 with single readings; its band held 20 of 20 on
-# truths 900-919 with one pair of constants for both). On truths it was not chosen on:
-# docs/ERRORS.md
+# for runs that read their poses more than once (a planned list: AP's upper tail is
+# shorter; its band held 20 of 20 on truths 900-919 with one pair of constants for both):
+# -1.40 / +0.64 with repeated readings, -1.44 / +1.11 with single ones, rounded outward.
+# On truths it was not chosen on: docs/ERRORS.md
 CALIBRATED = {"single": (-1.45, 1.1), "repeated": (-1.4, 0.7)}
 REPEATED = 0.5  # the share of readings at a pose read more than once that makes a run "repeated"
+SAME_POSE = 16  # encoder counts on every joint within which two readings are at one pose
 NEAR = 5  # the poses the AP figure is judged at: the 5 nearest the samples' medoid
 GOOD_NOISE = 2.0  # the reference's residuals within this x the noise model: the band holds
 # a calibration is refused where a simpler level predicts the held-out samples significantly
@@ -118,10 +119,14 @@ def _draws(ref: Reference, params) -> tuple[np.ndarray, np.ndarray]:
 
 def readings(qe: np.ndarray) -> str:
     """How a run read its poses: "repeated" where at least ``REPEATED`` of its readings
-    are at a pose (the same encoder counts) read more than once, else "single"."""
-    _, inverse, n = np.unique(np.asarray(qe), axis=0, return_inverse=True,
-                              return_counts=True)
-    return "repeated" if np.mean(n[inverse.ravel()] > 1) >= REPEATED else "single"
+    are at a pose read more than once (another reading's counts within ``SAME_POSE`` on
+    every joint: a real robot settles a count or two apart), else "single"."""
+    from scipy.spatial import cKDTree
+    qe = np.asarray(qe, float)
+    pairs = cKDTree(qe).query_pairs(SAME_POSE, p=np.inf, output_type="ndarray")
+    again = np.zeros(len(qe), bool)
+    again[pairs.ravel()] = True
+    return "repeated" if len(qe) and np.mean(again) >= REPEATED else "single"
 
 
 def _band(ap: np.ndarray, read: str = "single") -> tuple[float, float]:

@@ -9,8 +9,9 @@ samples.
 
 So once the laser has read out of range on ``MISSES`` poses in a row (a few poses at the
 range's edge are the draw's margin; a streak is a cell the drawing does not place),
-each draw is aimed: its distance is drawn as the reading wanted and the sensor placed
-that much minus the plate's ``shift``, the median of what the laser read beyond the
+each draw at a random distance is aimed (a fixed distance, ``--fixed-distance-mm``, is
+what the run measures the cell at, and stays): its distance is drawn as the reading
+wanted and the sensor placed that much minus the plate's ``shift``, the median of what the laser read beyond the
 commanding model on that plate (its last ``WINDOW`` samples; on a plate not read yet, the
 median over every plate's). Until then nothing changes: a run whose laser never misses
 so is the run it always was.
@@ -46,8 +47,8 @@ class Shifts:
 
 @dataclass
 class Aim:
-    """A run's aiming state: whether the laser has read out of range on ``MISSES`` poses
-    in a row (``engaged``; ``streak``: how many so far), the last ``WINDOW`` readings'
+    """A run's aiming state: whether the laser has given up out of range on ``MISSES``
+    poses in a row, with no reading between (``engaged``; ``streak``: how many so far), the last ``WINDOW`` readings'
     excess over the commanding model per plate [m] and the shifts the next plan takes
     (``next``; None: the commanding model's distances)."""
     engaged: bool = False
@@ -55,13 +56,19 @@ class Aim:
     next: Shifts | None = None
     streak: int = 0
 
-    def read(self, plate: int, commanded_m: float, value_mm: float) -> None:
+    def read(self, plate: int, commanded_m: float | None, value_mm: float) -> None:
+        """A reading on ``plate`` where the commanding model put the surface at
+        ``commanded_m`` (None: not known, a planned list's pose): it ends a streak of
+        misses, and counts towards the plate's shift where the distance is known."""
         self.streak = 0
+        if commanded_m is None:
+            return
         while len(self.excess) <= plate:
             self.excess.append([])
         self.excess[plate] = (self.excess[plate] + [value_mm * 1e-3 - commanded_m])[-WINDOW:]
 
     def missed(self) -> None:
+        """A pose the laser gave up on out of range."""
         self.streak += 1
         self.engaged = self.engaged or self.streak >= MISSES
 

@@ -25,7 +25,9 @@ where it moved to); ``max_attempts`` rejections in a row give up the run. With
 
 A ``Budget`` of robot time ends the run complete where the next pose might not fit in it:
 its moves, detours included, and the laser's longest read (``LaserSettings.max_reads``:
-a read never takes more), so a run never overruns its budget.
+a read never takes more), so a run's moves and reads never overrun it. On the real cell
+the robot also holds while a plan is made (``idle``): that time counts as it passes, and
+the wait for the last plan can take a run past its budget by that wait.
 """
 from __future__ import annotations
 
@@ -190,16 +192,17 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
             tally.reason = (f"{plan.reason}: {tally.samples} of the {target} samples asked "
                             "for; the rest were rejected (see the counts)")
             return tally
-        if any(reject(kind, q, reason) for kind, q, reason in plan.rejections) or plan.q is None:
-            tally.status = "gave_up"
-            tally.reason = (f"{max_attempts} poses rejected in a row"
-                            if tally.in_a_row >= max_attempts else plan.reason)
-            return tally
-        if budget is not None and not budget.fits(plan):
+        if budget is not None and plan.q is not None and not budget.fits(plan):
+            # the plan is dropped whole: its draws are drawn again by a resume with more
             tally.status = "complete"
             tally.reason = (f"the robot-time budget of {budget.seconds / 60:g} min is spent "
                             f"(the next pose might not fit): {tally.samples} of the {target} "
                             "samples asked for")
+            return tally
+        if any(reject(kind, q, reason) for kind, q, reason in plan.rejections) or plan.q is None:
+            tally.status = "gave_up"
+            tally.reason = (f"{max_attempts} poses rejected in a row"
+                            if tally.in_a_row >= max_attempts else plan.reason)
             return tally
         cursor.rng_state = plan.rng_after
         back = route_back(plan)
@@ -222,8 +225,9 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
             continue
         tally.samples += 1
         tally.in_a_row = 0
-        if plan.pose is not None:  # a random draw (a pose list's are aimed before it runs)
-            cursor.aim.read(plan.plate, plan.pose.distance_m, got.laser.value_mm)
+        # a random draw's excess (a pose list's poses are aimed before it runs)
+        cursor.aim.read(plan.plate, None if plan.pose is None else plan.pose.distance_m,
+                        got.laser.value_mm)
         direction = (np.zeros(len(got.counts), np.int8) if got.direction is None
                      else got.direction)
         recorder.sample(tally.samples - 1, got.counts, got.laser.value_mm, plan, direction)

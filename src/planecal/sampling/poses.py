@@ -160,7 +160,9 @@ class PoseGenerator:
     def draw(self, rng: np.random.Generator, plate: int = 0, shift_m: float = 0.0) -> SensorPose:
         """A random pose on ``plate`` (module docstring), placed ``shift_m`` nearer the
         plate than the drawn distance: where the laser reads that much beyond the
-        commanding model there, it reads the drawn distance (``sampling.aim``)."""
+        commanding model there, it reads the drawn distance (``sampling.aim``). A fixed
+        distance is not shifted: it is what the run measures the cell's error at (live
+        validation, seed 8.2)."""
         s = self.settings
         F = self.frames[plate]
         size = self.scene.plates[plate].size
@@ -172,8 +174,7 @@ class PoseGenerator:
         if s.fixed_distance_mm is not None:
             d = s.fixed_distance_mm * 1e-3
         else:
-            d = rng.uniform(*s.distance_mm) * 1e-3
-        d -= shift_m
+            d = rng.uniform(*s.distance_mm) * 1e-3 - shift_m
         x_p, y_p, z_p, c = F[:3, 0], F[:3, 1], F[:3, 2], F[:3, 3]
         sin_t = np.sqrt(max(0.0, 1.0 - cos_t * cos_t))
         beam = -cos_t * z_p + sin_t * (np.cos(az) * x_p + np.sin(az) * y_p)

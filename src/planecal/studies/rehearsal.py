@@ -329,8 +329,10 @@ def staged_samples(scene, world, st: RehearsalSettings, seed: int, options=None,
         cal = calibrate(scene.robot, qe, d, nominal_params(scene), plate,
                         CalibrationSettings(level=AIM_LEVEL), direction, scene.references)
     except InputError as e:  # too few to calibrate the cell: the option that set them
+        cut = (f" (the first {len(qe)} within the budget of {rs.robot_minutes:g} robot "
+               "minutes)" if rs.robot_minutes is not None and len(qe) < aim_samples else "")
         raise InputError(f"--aim-samples {aim_samples}: the first run's calibration at "
-                         f"level {AIM_LEVEL} on {scene.name}: {e}") from None
+                         f"level {AIM_LEVEL} on {scene.name}{cut}: {e}") from None
     counts, plates, approach = pose_list(st.poses)
     aimed, _ = aim_counts(scene, counts, plates, None,
                           CommandModel(cal.params, scene.robot.qe0.copy()))
