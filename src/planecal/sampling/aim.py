@@ -11,10 +11,10 @@ So once the laser has read out of range on ``MISSES`` poses in a row (a few pose
 range's edge are the draw's margin; a streak is a cell the drawing does not place),
 each draw at a random distance is aimed (a fixed distance, ``--fixed-distance-mm``, is
 what the run measures the cell at, and stays): its distance is drawn as the reading
-wanted and the sensor placed that much minus the plate's ``shift``, the median of what the laser read beyond the
-commanding model on that plate (its last ``WINDOW`` samples; on a plate not read yet, the
-median over every plate's). Until then nothing changes: a run whose laser never misses
-so is the run it always was.
+wanted and the sensor placed that much minus the plate's ``shift``, the median of what
+the laser read beyond the commanding model on that plate (its last ``WINDOW`` samples; on
+a plate not read yet, the median over every plate's). Until then nothing changes: a run
+whose laser never misses so is the run it always was.
 
 The shifts a plan takes are those known when it could be planned ahead (``collect``: the
 background planner plans the next pose while this one is read), so planning ahead and
@@ -48,9 +48,9 @@ class Shifts:
 @dataclass
 class Aim:
     """A run's aiming state: whether the laser has given up out of range on ``MISSES``
-    poses in a row, with no reading between (``engaged``; ``streak``: how many so far), the last ``WINDOW`` readings'
-    excess over the commanding model per plate [m] and the shifts the next plan takes
-    (``next``; None: the commanding model's distances)."""
+    poses in a row, with no reading between (``engaged``; ``streak``: how many so far),
+    the last ``WINDOW`` readings' excess over the commanding model per plate [m] and the
+    shifts the next plan takes (``next``; None: the commanding model's distances)."""
     engaged: bool = False
     excess: list = field(default_factory=list)
     next: Shifts | None = None

@@ -168,9 +168,8 @@ def collect(planner: PlanSource, acquirer: Acquirer, recorder: Recorder, target:
             budget: Budget | None = None) -> Tally:
     """Sample until ``tally.samples`` reaches ``target``, ``max_attempts`` poses are
     rejected in a row or the ``budget`` is spent (module docstring). ``cursor`` and
-    ``tally`` are updated in place
-    (a stopped collection resumes from them). Exceptions (a dropped enable signal, a link
-    failure) propagate with cursor and tally current."""
+    ``tally`` are updated in place (a stopped collection resumes from them). Exceptions (a
+    dropped enable signal, a link failure) propagate with cursor and tally current."""
 
     def reject(kind, q, reason) -> bool:
         tally.rejected[kind] += 1

@@ -157,7 +157,8 @@ class PoseGenerator:
             return int(rng.integers(self.n_plates))
         return index % self.n_plates
 
-    def draw(self, rng: np.random.Generator, plate: int = 0, shift_m: float = 0.0) -> SensorPose:
+    def draw(self, rng: np.random.Generator, plate: int = 0,
+             shift_m: float = 0.0) -> SensorPose:
         """A random pose on ``plate`` (module docstring), placed ``shift_m`` nearer the
         plate than the drawn distance: where the laser reads that much beyond the
         commanding model there, it reads the drawn distance (``sampling.aim``). A fixed
