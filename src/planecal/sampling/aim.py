@@ -74,8 +74,8 @@ class Aim:
 
     def shifts(self) -> Shifts | None:
         """The shifts from what has been read (None: not engaged, or nothing read)."""
-        every = [e for plate in self.excess for e in plate]
-        if not self.engaged or not every:
+        every = [e for plate in self.excess for e in plate] if self.engaged else []
+        if not every:
             return None
         return Shifts(float(np.median(every)),
                       tuple(float(np.median(p)) if p else None for p in self.excess))

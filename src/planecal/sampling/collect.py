@@ -58,6 +58,15 @@ class Budget:
     def fits(self, plan: Plan) -> bool:
         return self.spent() + self.cost(plan) <= self.seconds
 
+    @classmethod
+    def of(cls, minutes: float | None, spent: Callable[[], float], clock, reads: int,
+           tick_s: float) -> "Budget | None":
+        """``minutes`` of robot time (None: no budget) for a collection through ``clock``
+        (``tour.Clock``): a plan may take its legs, dwell and ``reads`` laser reads."""
+        if minutes is None:
+            return None
+        return cls(60.0 * minutes, spent, lambda plan: clock.ticks_for(plan, reads) * tick_s)
+
 
 @dataclass
 class Acquired:

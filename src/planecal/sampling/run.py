@@ -283,10 +283,6 @@ class SamplingRun:
         self._account()
         return self.stats.robot_time_s
 
-    def _cost_s(self, plan: Plan) -> float:
-        """What ``plan`` may take at most [s]: its moves and the laser's longest read."""
-        return self._clock.ticks_for(plan, self.settings.laser.max_reads) * self.robot.tick_s
-
     # -- Recorder (the collect core's)
     def sample(self, index: int, counts: np.ndarray, d_mm: float, plan: Plan,
                direction: np.ndarray) -> None:
@@ -349,8 +345,8 @@ class SamplingRun:
             self._clock.counts = np.asarray(drv.commanded_counts, np.int64).copy()
             collect(self.planner, self._clock, self, s.samples, self._cursor, st,
                     s.max_attempts, background=bg, on_progress=self.progress,
-                    budget=None if s.robot_minutes is None
-                    else Budget(60.0 * s.robot_minutes, self._spent_s, self._cost_s))
+                    budget=Budget.of(s.robot_minutes, self._spent_s, self._clock,
+                                     s.laser.max_reads, self.robot.tick_s))
         except EnableDropped:
             st.status = "stopped"
             st.reason = getattr(drv.enable, "reason", None) or "enable signal dropped"

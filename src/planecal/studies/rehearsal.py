@@ -192,9 +192,8 @@ def _collect(scene, planner, twin, rs, seed: int, timed: bool = False, acq=None,
     acq = _acquirer(scene, twin, rs) if acq is None else acq
     clock = Clock(acq, twin.current_counts, rs.nominal_step_counts, rs.dwell_ticks)
     tick = float(scene.robot.tick_s)
-    budget = (None if rs.robot_minutes is None else
-              Budget(60.0 * rs.robot_minutes, lambda: spent_s + clock.ticks * tick,
-                     lambda plan: clock.ticks_for(plan, rs.laser.max_reads) * tick))
+    budget = Budget.of(rs.robot_minutes, lambda: spent_s + clock.ticks * tick, clock,
+                       rs.laser.max_reads, tick)
     collect(planner, clock, rec, rs.samples, cursor, tally, rs.max_attempts, budget=budget)
     if tally.status != "complete":
         raise RuntimeError(f"run with seed {seed}: {tally.reason}")
