@@ -245,3 +245,18 @@ def test_a_bar_left_open_on_a_closed_stream_fails_no_work(clock):
     clock.t += 5
     report(1, 4, "samples")  # no exception
     assert left.off and left not in P._OPEN
+
+
+def test_a_command_run_with_q_in_process_leaves_progress_on(tmp_path, capsys):
+    """``planecal.cli.main([..., "-q"])`` quiets that command only: a caller in the same
+    process (a script, the next test) keeps its progress (it stayed quiet before, and a
+    test after one such call saw none of its lines)."""
+    from planecal.base.progress import quiet
+    from planecal.cli import main
+    assert not quiet()
+    assert main(["rehearse", "--samples", "2", "--out", str(tmp_path / "r.tsv"), "-q"]) == 0
+    capsys.readouterr()
+    assert not quiet()
+    buf = io.StringIO()
+    Progress("samples", 1, stream=buf).step()
+    assert buf.getvalue().strip() == "samples 1/1"

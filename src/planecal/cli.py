@@ -323,7 +323,17 @@ def main(argv: list[str] | None = None) -> int:
     if not args.command:  # a usage error: one line and the pointer to --help
         print("planecal: error: a COMMAND is required (see planecal --help)", file=sys.stderr)
         return 2
+    from planecal.base.progress import quiet, set_quiet
+    was_quiet = quiet()
     _logging(args)
+    try:
+        return _command(args)
+    finally:  # -q is this command's: a caller of main in the same process keeps its own
+        set_quiet(was_quiet)
+
+
+def _command(args) -> int:
+    """The parsed command run, its errors said in one line (``main``)."""
     module = _module(args.command)
     from planecal.base.interrupts import exit_code, interrupt_on_signals, signal_name
     try:
